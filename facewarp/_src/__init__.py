@@ -1,0 +1,1 @@
+"""Implementation of facewarp. Nothing here is public API; import from :mod:`facewarp`."""
