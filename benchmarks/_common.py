@@ -1,0 +1,45 @@
+"""Helpers shared by the benchmarks: machine description, shared data folder, result files."""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def shared_dir() -> Path:
+    env = os.environ.get("FACEWARP_SHARED")
+    return Path(env) if env else Path(__file__).resolve().parents[1].parent / "shared"
+
+
+def machine(device: str = "cpu") -> dict:
+    import numpy as np
+    import warp as wp
+
+    info = {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "warp": wp.__version__,
+        "device": device,
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    if device.startswith("cuda"):
+        wp.init()
+        info["device_name"] = wp.get_device(device).name
+    return info
+
+
+def save(name: str, data: dict) -> Path:
+    from facewarp._src.fileio import write_json
+
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    path = RESULTS / f"{name}.json"
+    write_json(path, data)
+    return path

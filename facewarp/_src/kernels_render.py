@@ -1,0 +1,69 @@
+"""Warp kernels of the preview renderer (:mod:`facewarp._src.render`).
+
+One kernel: an orthographic ray cast, one ray per (supersampled) pixel, against a
+``wp.Mesh`` BVH, shaded with two-sided Lambert plus ambient light.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+
+# Shading of one hit (two-sided Lambert, smooth normals):
+#   n_s = u n_a + v n_b + (1 - u - v) n_c            (Warp's barycentric convention)
+#   n_s <- -n_s  if the ray hits the back of the triangle (n_g . d > 0), so a
+#                surface seen through a hole (eyes, mouth) is lit like its front
+#   c   = albedo * (ambient + diffuse * max(0, n_s . l))
+# The flip follows the geometric normal n_g, not n_s: near a silhouette an interpolated
+# normal may point slightly away from the viewer and must stay unlit rather than flip.
+@wp.kernel
+def _cast_rays(
+    # Scene:
+    mesh: wp.uint64,
+    indices: wp.array(dtype=wp.int32),
+    vertex_normals: wp.array(dtype=wp.vec3),
+    corner_colors: wp.array(dtype=wp.vec3),
+    # Camera:
+    origin: wp.vec3,
+    step_right: wp.vec3,
+    step_down: wp.vec3,
+    forward: wp.vec3,
+    max_depth: float,
+    # Lights:
+    light_dir: wp.vec3,
+    ambient: float,
+    diffuse: float,
+    background: wp.vec3,
+    # Image out:
+    color_out: wp.array2d(dtype=wp.vec3),
+    depth_out: wp.array2d(dtype=float),
+):
+    i, j = wp.tid()
+    start = origin + (float(j) + 0.5) * step_right + (float(i) + 0.5) * step_down
+    hit = wp.mesh_query_ray(mesh, start, forward, max_depth)
+    if not hit.result:
+        color_out[i, j] = background
+        depth_out[i, j] = max_depth
+        return
+
+    f = hit.face
+    u = hit.u
+    v = hit.v
+    w = 1.0 - u - v
+    a = indices[3 * f + 0]
+    b = indices[3 * f + 1]
+    c = indices[3 * f + 2]
+
+    n = u * vertex_normals[a] + v * vertex_normals[b] + w * vertex_normals[c]
+    n_len = wp.length(n)
+    if n_len > 1.0e-12:
+        n = n / n_len
+    else:
+        n = hit.normal
+    if wp.dot(hit.normal, forward) > 0.0:
+        n = -n
+
+    albedo = u * corner_colors[3 * f + 0] + v * corner_colors[3 * f + 1] + w * corner_colors[3 * f + 2]
+    shade = ambient + diffuse * wp.max(wp.dot(n, light_dir), 0.0)
+    color_out[i, j] = albedo * shade
+    depth_out[i, j] = hit.t

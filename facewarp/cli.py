@@ -1,0 +1,210 @@
+"""The ``facewarp`` command.
+
+Every error a user can cause ends as one line on stderr (``facewarp: error: ...``) and exit
+code 2; nothing below this module prints or exits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+from ._src.errors import FacewarpError
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2, like every other error
+        self.exit(EXIT_USAGE, f"facewarp: error: {message}\n")
+
+
+def _level(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer level, got {text!r}") from None
+    if not 0 <= v <= 4:
+        raise argparse.ArgumentTypeError(f"level must be 0..4, got {v}")
+    return v
+
+
+def _device(text: str) -> str:
+    t = text.strip().lower()
+    if t == "cpu" or t == "cuda" or (t.startswith("cuda:") and t[5:].isdigit()):
+        return t
+    raise argparse.ArgumentTypeError(f"expected cpu, cuda or cuda:N, got {text!r}")
+
+
+class _Progress:
+    """A tqdm bar on stderr over named steps (hidden when stderr is not a terminal or --json)."""
+
+    def __init__(self, total: int, desc: str, enabled: bool):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, desc=desc, disable=None if enabled else True, file=sys.stderr, leave=False)
+
+    def __call__(self, msg: str):
+        self.bar.set_postfix_str(msg)
+        self.bar.update(1)
+
+    def close(self):
+        self.bar.close()
+
+
+def _check_device(device: str) -> str:
+    if device.startswith("cuda"):
+        import warp as wp
+
+        wp.config.quiet = True
+        wp.init()
+        if wp.get_cuda_device_count() == 0:
+            raise FacewarpError(f"--device {device}: no CUDA device is available on this machine")
+        idx = int(device.split(":")[1]) if ":" in device else 0
+        if idx >= wp.get_cuda_device_count():
+            raise FacewarpError(f"--device {device}: only {wp.get_cuda_device_count()} CUDA device(s) present")
+    return device
+
+
+def _emit(args, data: dict, lines: list[str]):
+    if args.json:
+        print(json.dumps(data, indent=2))
+    else:
+        print("\n".join(lines))
+
+
+# ----------------------------------------------------------------------------- template
+def cmd_template_export(args):
+    from ._src.template import default_template
+    from ._src.template.export import export_template
+
+    t0 = time.perf_counter()
+    prog = _Progress(5 if not args.no_preview else 3, "template export", not args.json)
+    prog("building level %d" % args.level)
+    t = default_template(args.level)
+    written = export_template(t, args.out, previews=not args.no_preview, device=args.device, progress=prog)
+    if args.usd:
+        from usd_export import write_meshes_usd
+
+        meshes = {"skin": (t.vertices, t.faces), **t.parts}
+        written.append(write_meshes_usd(Path(args.out) / "template.usda", meshes))
+    prog.close()
+    data = {"out": str(args.out), "level": t.level, "vertex_count": t.vertex_count, "face_count": t.face_count,
+            "fdp_count": len(t.fdp), "files": [str(p) for p in written], "seconds": round(time.perf_counter() - t0, 3)}
+    _emit(args, data, [f"wrote {len(written)} files to {args.out} (level {t.level}: {t.vertex_count} vertices, "
+                       f"{t.face_count} faces, {len(t.fdp)} FDPs) in {data['seconds']:.1f} s"])
+
+
+def cmd_template_info(args):
+    from ._src.template import default_template
+    from ._src.template.export import template_summary
+
+    t = default_template(args.level)
+    s = template_summary(t)
+    bb = s["bounding_box_m"]
+    lines = [
+        f"default template, level {s['level']}",
+        f"  vertices {s['vertex_count']}, faces {s['face_count']} ({s['frontal_face_count']} in the frontal face)",
+        f"  FDPs {s['fdp_count']}, boundary loops {s['boundary_loops']} (neck, mouth, two eyes)",
+        f"  bounding box [m] min {[round(v, 4) for v in bb[0]]} max {[round(v, 4) for v in bb[1]]}",
+        f"  skin thickness factor {s['thickness_factor']} x Table 6.1",
+        "  regions (faces): " + ", ".join(f"{k} {v}" for k, v in s["regions"].items()),
+        "  rigid parts (vertices): " + ", ".join(f"{k} {v}" for k, v in s["parts"].items()),
+    ]
+    _emit(args, s, lines)
+
+
+# ----------------------------------------------------------------------------- inputs
+def cmd_mesh_check(args):
+    from ._src.mesh import load_mesh, mesh_report
+
+    m = load_mesh(args.mesh, units=args.units)
+    rep = mesh_report(m.vertices, m.faces)
+    rep["path"] = str(args.mesh)
+    rep["has_uv"] = m.uv is not None
+    lines = [f"{args.mesh}: " + ", ".join(f"{k} {v}" for k, v in rep.items() if k not in ("path", "bounding_box"))]
+    _emit(args, rep, lines)
+
+
+def cmd_landmarks_check(args):
+    from ._src.landmarks import FDP_CATALOGUE, fdp_sort_key, load_landmarks
+
+    lm = load_landmarks(args.landmarks, units=args.units)
+    ids = sorted(lm, key=fdp_sort_key)
+    data = {"path": str(args.landmarks), "count": len(ids), "fdps": {k: lm[k].tolist() for k in ids}}
+    lines = [f"{args.landmarks}: {len(ids)} FDPs"] + [
+        f"  {k:>5} {FDP_CATALOGUE[k].description:<45} {lm[k][0]:+.4f} {lm[k][1]:+.4f} {lm[k][2]:+.4f} m" for k in ids
+    ]
+    _emit(args, data, lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(
+        prog="facewarp",
+        description="Personalized, physically simulated faces (template head, adaptation, anatomy, physics).",
+        epilog="Units: the library works in metres; --units converts input files. Errors: one line, exit code 2.",
+    )
+    p.add_argument("--device", type=_device, default="cpu", help="Warp device: cpu (default), cuda or cuda:N")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON instead of text")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    t = sub.add_parser("template", help="the default template head authored in code")
+    tsub = t.add_subparsers(dest="template_command", metavar="ACTION", parser_class=_Parser)
+    tsub.required = True
+    e = tsub.add_parser("export", help="write the template (mesh, FDPs, regions, anatomy refs, previews) to a folder")
+    e.add_argument("--out", required=True, type=Path, help="output folder (created if needed)")
+    e.add_argument("--level", type=_level, default=0, help="resolution level 0..4 (0: ~3,400 vertices, x4 per level)")
+    e.add_argument("--no-preview", action="store_true", help="skip preview_front.png / preview_side.png")
+    e.add_argument("--usd", action="store_true", help="also write template.usda (skin and rigid parts)")
+    e.set_defaults(func=cmd_template_export)
+    i = tsub.add_parser("info", help="print counts, FDPs, regions and bounding box")
+    i.add_argument("--level", type=_level, default=0, help="resolution level 0..4")
+    i.set_defaults(func=cmd_template_info)
+
+    m = sub.add_parser("mesh", help="inspect input meshes")
+    msub = m.add_subparsers(dest="mesh_command", metavar="ACTION", parser_class=_Parser)
+    msub.required = True
+    c = msub.add_parser("check", help="load and validate a mesh; report degenerate faces, non-manifold edges, holes")
+    c.add_argument("mesh", type=Path, help="OBJ, PLY, STL, OFF, GLB or GLTF file")
+    c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
+    c.set_defaults(func=cmd_mesh_check)
+
+    lmp = sub.add_parser("landmarks", help="inspect FDP landmark files")
+    lsub = lmp.add_subparsers(dest="landmarks_command", metavar="ACTION", parser_class=_Parser)
+    lsub.required = True
+    c = lsub.add_parser("check", help="load and validate a landmark file (JSON or MeshLab .pp)")
+    c.add_argument("landmarks", type=Path, help='JSON {"3.7": [x, y, z], ...} or MeshLab picked points .pp')
+    c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
+    c.set_defaults(func=cmd_landmarks_check)
+
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help, or a usage error already printed as one line
+        return int(e.code or 0)
+    try:
+        _check_device(args.device)
+        args.func(args)
+    except FacewarpError as e:
+        print(f"facewarp: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("facewarp: interrupted", file=sys.stderr)
+        return 130
+    except OSError as e:
+        print(f"facewarp: error: {e.filename or ''}: {e.strerror or e}", file=sys.stderr)
+        return EXIT_USAGE
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,177 @@
+"""Tests of the preview renderer: small images (64 x 64) so the CPU kernel stays fast."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+
+from facewarp._src.errors import InputError
+from facewarp._src.render import colormap, render_mesh, render_views, save_png
+
+SIZE = 64
+
+
+def unit_sphere():
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    return np.asarray(sphere.vertices), np.asarray(sphere.faces)
+
+
+def luminance(image):
+    return image.astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+
+
+def test_front_sphere_is_a_disc_of_area_pi_r2(device):
+    V, F = unit_sphere()
+    margin = 0.1
+    on_white = render_mesh(V, F, width=SIZE, height=SIZE, margin=margin, device=device)
+    on_black = render_mesh(V, F, width=SIZE, height=SIZE, margin=margin, background=(0, 0, 0), device=device)
+    # Same surface colour on both backgrounds: the difference is the background's share.
+    alpha = 1.0 - (on_white.astype(np.float64) - on_black.astype(np.float64)).mean(axis=2) / 255.0
+    pixel = np.ptp(V[:, :2], axis=0).max() * (1.0 + 2.0 * margin) / SIZE  # metres per pixel
+    # The icosphere is inscribed in the unit sphere: its outline encloses slightly less than pi.
+    outline = trimesh.creation.icosphere(subdivisions=3).vertices
+    expected = np.pi * np.linalg.norm(outline[:, :2], axis=1).max() ** 2 / pixel**2
+    np.testing.assert_allclose(alpha.sum(), expected, rtol=0.03, err_msg="front view of a sphere is not a pi r^2 disc")
+
+    # Outside the disc only background.
+    rows, cols = np.mgrid[0:SIZE, 0:SIZE]
+    radius_px = (rows + 0.5 - SIZE / 2) ** 2 + (cols + 0.5 - SIZE / 2) ** 2
+    outside = radius_px > (1.0 / pixel + 1.5) ** 2
+    assert np.all(on_white[outside] == 255), "pixels outside the sphere are not background"
+    assert np.all(on_black[outside] == 0), "pixels outside the sphere are not background"
+
+    # Lit from the front: the centre is brighter than the rim.
+    lum = luminance(on_white)
+    centre = lum[SIZE // 2 - 2 : SIZE // 2 + 2, SIZE // 2 - 2 : SIZE // 2 + 2].mean()
+    rim = lum[(radius_px > (0.8 / pixel) ** 2) & (radius_px < (0.9 / pixel) ** 2)].mean()
+    assert centre > rim + 20.0, f"centre luminance {centre:.1f} not above rim {rim:.1f}"
+
+
+def test_views_are_not_mirrored(device):
+    V, F = unit_sphere()
+    centroid = V[F].mean(axis=1)
+    red, blue = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    mid = SIZE // 2
+
+    # Front: the subject's left (+x) is on the image's right, as when facing a person.
+    left_red = np.where(centroid[:, 0:1] > 0.0, red, blue)
+    image = render_mesh(V, F, view="front", width=SIZE, height=SIZE, face_colors=left_red, device=device)
+    assert image[mid, 3 * SIZE // 4, 0] > image[mid, 3 * SIZE // 4, 2], "front view: +x is not on the right"
+    assert image[mid, SIZE // 4, 2] > image[mid, SIZE // 4, 0], "front view: -x is not on the left"
+
+    # Up is up.
+    top_red = np.where(centroid[:, 1:2] > 0.0, red, blue)
+    image = render_mesh(V, F, view="front", width=SIZE, height=SIZE, face_colors=top_red, device=device)
+    assert image[SIZE // 4, mid, 0] > image[SIZE // 4, mid, 2], "front view: +y is not at the top"
+
+    # Side: the camera is at +x, the face (+z) points to the image's left.
+    face_red = np.where(centroid[:, 2:3] > 0.0, red, blue)
+    image = render_mesh(V, F, view="side", width=SIZE, height=SIZE, face_colors=face_red, device=device)
+    assert image[mid, SIZE // 4, 0] > image[mid, SIZE // 4, 2], "side view: +z is not on the left"
+
+
+def test_points_and_polylines_are_hidden_behind_the_surface(device):
+    V, F = unit_sphere()
+    s = np.sin(np.radians(40.0))
+    c = np.cos(np.radians(40.0))
+    front, back = [s, 0.0, c], [-s, 0.0, -c]  # project right and left of the centre
+    image = render_mesh(
+        V, F, width=SIZE, height=SIZE, points=np.array([front, back]), point_color=(0.0, 1.0, 0.0),
+        point_radius=2.0, device=device,
+    )
+    green = (image[..., 1] > 200) & (image[..., 0] < 80) & (image[..., 2] < 80)
+    cols = np.nonzero(green)[1]
+    assert cols.size > 0, "a visible point was not drawn"
+    assert np.all(cols > SIZE // 2), "a point behind the sphere was drawn"
+
+    t = np.linspace(0.0, 1.0, 20)[:, None]
+    above = np.hstack([0 * t - 0.8, 0 * t + 0.4, 0 * t]) + t * [1.6, 0.0, 0.0]  # a chord through the sphere
+    in_front = above + [0.0, -0.8, 1.0]
+    image = render_mesh(
+        V, F, width=SIZE, height=SIZE, polylines=[(above, (0.0, 1.0, 0.0)), (in_front, (1.0, 0.0, 1.0))],
+        line_width=2.0, device=device,
+    )
+    assert not np.any((image[..., 1] > 200) & (image[..., 0] < 80)), "a polyline inside the sphere was drawn"
+    assert np.any((image[..., 0] > 200) & (image[..., 2] > 200) & (image[..., 1] < 80)), "a polyline was not drawn"
+
+
+def test_extra_meshes_and_vertex_colors(device):
+    V, F = unit_sphere()
+    eye = trimesh.creation.icosphere(subdivisions=2, radius=0.3)
+    eye_V = np.asarray(eye.vertices) + [0.0, 0.0, 1.1]
+    colors = colormap(V[:, 1], -1.0, 1.0)
+    image = render_mesh(
+        V, F, width=SIZE, height=SIZE, vertex_colors=colors, extra_meshes=[(eye_V, eye.faces, (0.0, 1.0, 0.0))],
+        device=device,
+    )
+    mid = SIZE // 2
+    assert image[mid, mid, 1] > 2 * image[mid, mid, 0], "the extra mesh in front is not drawn"
+    top, bottom = image[SIZE // 5, mid].astype(int), image[4 * SIZE // 5, mid].astype(int)
+    assert top[0] > top[2] and bottom[2] > bottom[0], "vertex colours not interpolated (turbo: red top, blue bottom)"
+
+
+def test_device_matches_cpu(device):
+    if device == "cpu":
+        pytest.skip("compares a GPU with the CPU")
+    V, F = unit_sphere()
+    cpu = render_mesh(V, F, view="three_quarter", width=SIZE, height=SIZE, device="cpu").astype(int)
+    gpu = render_mesh(V, F, view="three_quarter", width=SIZE, height=SIZE, device=device).astype(int)
+    assert np.mean(np.abs(cpu - gpu)) < 1.0, f"{device} and CPU images differ"
+
+
+def test_render_mesh_rejects_bad_input():
+    V, F = unit_sphere()
+    with pytest.raises(InputError, match=r"F must have shape \(m, 3\), got \(5,\)"):
+        render_mesh(V, np.arange(5))
+    with pytest.raises(InputError, match="F indexes vertices"):
+        render_mesh(V, F + 1)
+    with pytest.raises(InputError, match="view must be one of"):
+        render_mesh(V, F, view="top")
+    with pytest.raises(InputError, match="vertex_colors must have shape"):
+        render_mesh(V, F, vertex_colors=np.zeros((3, 3)))
+
+
+def test_colormap_endpoints_clamping_and_nan():
+    rgb = colormap(np.array([-1.0, 0.0, 1.0, 2.0, np.nan]), 0.0, 1.0, "viridis")
+    np.testing.assert_allclose(rgb[1], np.array([68, 1, 84]) / 255.0, atol=1e-12, err_msg="viridis at vmin")
+    np.testing.assert_allclose(rgb[2], np.array([253, 231, 37]) / 255.0, atol=1e-12, err_msg="viridis at vmax")
+    np.testing.assert_allclose(rgb[0], rgb[1], err_msg="values below vmin are not clamped")
+    np.testing.assert_allclose(rgb[3], rgb[2], err_msg="values above vmax are not clamped")
+    np.testing.assert_allclose(rgb[4], [0.5, 0.5, 0.5], err_msg="NaN is not grey")
+
+    # Turbo (Du's polynomial): its constant terms at vmin, the coefficient sums (clipped) at vmax,
+    # green in the middle.
+    rgb = colormap(np.array([0.0, 0.5, 1.0]), 0.0, 1.0)
+    np.testing.assert_allclose(rgb[0], [0.13572138, 0.09140261, 0.10667330], atol=1e-7, err_msg="turbo at vmin")
+    assert rgb[1, 1] > 0.9 and rgb[1, 1] > rgb[1, 0] and rgb[1, 1] > rgb[1, 2], "turbo is not green in the middle"
+    np.testing.assert_allclose(rgb[2], [0.56585921, 0.05038886, 0.0], atol=1e-7, err_msg="turbo at vmax")
+    assert np.all((rgb >= 0.0) & (rgb <= 1.0))
+    assert colormap(np.array([3.0]), 3.0, 3.0).shape == (1, 3)
+
+
+def test_save_png_writes_atomically(tmp_path):
+    image = np.zeros((SIZE, SIZE, 3), dtype=np.uint8)
+    image[:, :, 0] = 200
+    plain = save_png(tmp_path / "plain.png", image)
+    decorated = save_png(tmp_path / "heat.png", image, title="heat map", colorbar=(0.0, 2.5, "E_d [mm]"))
+    with Image.open(plain) as png:
+        assert png.format == "PNG" and png.size == (SIZE, SIZE)
+        np.testing.assert_array_equal(np.asarray(png.convert("RGB")), image, err_msg="pixels changed on the way")
+    with Image.open(decorated) as png:
+        assert png.size[0] == SIZE and png.size[1] > SIZE, "title and colour bar add bands"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["heat.png", "plain.png"], "a temporary file was left"
+
+    with pytest.raises(InputError, match="does not exist"):
+        save_png(tmp_path / "missing" / "x.png", image)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["heat.png", "plain.png"]
+
+
+def test_render_views_writes_front_and_side(tmp_path):
+    V, F = unit_sphere()
+    paths = render_views(V, F, tmp_path / "sphere", width=32, height=32)
+    assert [p.rsplit("/", 1)[-1] for p in paths] == ["sphere_front.png", "sphere_side.png"]
+    for path in paths:
+        with Image.open(path) as png:
+            assert png.size == (32, 32)

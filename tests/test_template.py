@@ -1,0 +1,112 @@
+"""The default template head: topology, levels, FDPs, regions, thickness, likeness to a real face."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from facewarp import FDP_IDS, FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, default_template, mesh_report
+from facewarp._src.template.head import _build
+
+
+@pytest.fixture(scope="module")
+def t0():
+    return default_template(0)
+
+
+def test_level0_counts_and_topology(t0):
+    assert 3000 <= t0.vertex_count <= 3800, t0.vertex_count
+    rep = mesh_report(t0.vertices, t0.faces)
+    assert rep["non_manifold_edge_count"] == 0
+    assert rep["consistently_oriented"]
+    assert rep["component_count"] == 1
+    assert rep["degenerate_face_count"] == 0
+    # boundaries only where intended: the neck cut, the mouth slit, the two eyes
+    assert rep["boundary_loop_count"] == 4
+
+
+def test_outward_orientation(t0):
+    V, F = t0.vertices, t0.faces
+    # divergence theorem on the (open) head: the enclosed volume must be positive and head-sized
+    vol = np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6.0
+    assert 3e-3 < vol < 8e-3, vol  # m^3; an adult head and neck is about 4-5 litres
+
+
+@pytest.mark.parametrize("level", [1, 2, 3])
+def test_levels_are_4x_and_manifold(level):
+    lo, hi = default_template(level - 1), default_template(level)
+    ratio = hi.vertex_count / lo.vertex_count
+    assert 3.5 < ratio < 4.5, ratio
+    rep = mesh_report(hi.vertices, hi.faces)
+    assert rep["non_manifold_edge_count"] == 0 and rep["boundary_loop_count"] == 4
+    assert len(hi.fdp) == 84
+    # the same FDPs at every level, within the finer sampling of the surface
+    a, b = lo.landmarks(), hi.landmarks()
+    err = max(np.linalg.norm(a[k] - b[k]) for k in ("3.7", "3.12", "9.3", "2.1", "8.3"))
+    assert err < 3e-3, err
+
+
+def test_deterministic():
+    a = _build.__wrapped__(0)
+    b = _build.__wrapped__(0)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    np.testing.assert_array_equal(a.face_region, b.face_region)
+
+
+def test_fdps_and_convention(t0):
+    lm = t0.landmarks()
+    assert list(lm) == list(FDP_IDS) and len(lm) == 84
+    assert lm["3.7"][0] > 0.03 and lm["3.12"][0] < -0.03  # subject's left is +x
+    assert lm["3.7"][0] == pytest.approx(-lm["3.12"][0], abs=1e-4)
+    assert lm["9.3"][2] > lm["3.7"][2] + 0.03  # nose tip in front of the eyes
+    assert lm["2.1"][1] < lm["8.3"][1] < lm["9.3"][1] < lm["3.7"][1] < lm["11.1"][1]
+    assert lm["10.1"][0] > 0.06 and lm["10.2"][0] < -0.06  # ears on the sides
+    # the mouth slit separates the lips: 2.2 on the upper lip, 2.3 on the lower one
+    up = t0.face_region[t0.fdp["2.2"][1].face[0]]
+    dn = t0.face_region[t0.fdp["2.3"][1].face[0]]
+    assert REGIONS[up] == "upper_lip" and REGIONS[dn] == "lower_lip"
+    # pupils on the eyeballs, teeth points on the teeth
+    assert t0.fdp["3.5"][0] == "eye_L" and t0.fdp["9.8"][0] == "teeth_upper"
+
+
+def test_regions_and_frontal(t0):
+    present = {REGIONS[i] for i in np.unique(t0.face_region)}
+    assert present == set(REGIONS)
+    assert np.array_equal(t0.frontal, np.isin(t0.face_region, [REGIONS.index(r) for r in FRONTAL_REGIONS]))
+    assert 1500 < t0.frontal.sum() < 4000
+    c = t0.vertices[t0.faces].mean(1)
+    L, R = REGIONS.index("cheek_L"), REGIONS.index("cheek_R")
+    assert (c[t0.face_region == L, 0] > 0).all() and (c[t0.face_region == R, 0] < 0).all()
+
+
+def test_thickness_table_6_1(t0):
+    mm = 1e-3 * THICKNESS_FACTOR
+    forehead = np.unique(t0.faces[t0.face_region == REGIONS.index("forehead")])
+    cheek = np.unique(t0.faces[t0.face_region == REGIONS.index("cheek_L")])
+    only_fh = np.setdiff1d(forehead, t0.faces[t0.face_region != REGIONS.index("forehead")])
+    only_ch = np.setdiff1d(cheek, t0.faces[t0.face_region != REGIONS.index("cheek_L")])
+    np.testing.assert_allclose(t0.thickness[only_fh], 0.901 * mm)
+    np.testing.assert_allclose(t0.thickness[only_ch], 1.237 * mm)
+    # a boundary vertex averages its regions
+    assert t0.thickness.min() >= 0.569 * mm - 1e-12 and t0.thickness.max() <= 1.237 * mm + 1e-12
+    others = np.unique(t0.faces[~np.isin(t0.face_region, [REGIONS.index("forehead"), REGIONS.index("cheek_L")])])
+    mixed = np.setdiff1d(np.intersect1d(forehead, cheek), others)
+    assert len(mixed) > 0
+    np.testing.assert_allclose(t0.thickness[mixed], 0.5 * (0.901 + 1.237) * mm)
+
+
+def test_skull_and_condyles(t0):
+    assert (t0.skull_depth > t0.thickness).all()
+    assert 0.004 < np.median(t0.skull_depth) < 0.02
+    c = t0.condyles
+    assert c[0, 0] > 0 > c[1, 0] and 0.08 < np.linalg.norm(c[0] - c[1]) < 0.12
+
+
+def test_human_likeness_ict(ict_dir, t0):
+    from facewarp._src.template.likeness import human_likeness
+
+    r = human_likeness(t0, ict_dir)
+    print(f"\nhuman likeness: RMS {r['rms_m'] * 1e3:.2f} mm, median {r['median_m'] * 1e3:.2f} mm, "
+          f"p95 {r['p95_m'] * 1e3:.2f} mm over ICT face vertices 0-9408")
+    assert r["rms_m"] <= 6e-3
