@@ -85,6 +85,20 @@ def _pchip(knots):
     return PchipInterpolator(k[:, 0], k[:, 1], extrapolate=True)
 
 
+def _smooth_profile(knots, sigma=7.0):
+    """A C2 profile over y: the monotone cubic through ``knots`` smoothed by a Gaussian of
+    ``sigma`` [mm], so curvature has no kinks at the knots (no shading bands across rows)."""
+    from scipy.interpolate import CubicSpline
+    from scipy.ndimage import gaussian_filter1d
+
+    base = _pchip(knots)
+    ys = np.arange(-240.0, Y_VERTEX + 0.25, 0.25)
+    vals = gaussian_filter1d(base(ys), sigma / 0.25, mode="nearest")
+    top = ys > Y_VERTEX - 4 * sigma  # keep the closure at the vertex exact
+    vals[top] = base(ys[top])
+    return CubicSpline(ys, vals, extrapolate=True)
+
+
 def _bump(d2):
     """Smooth compact bump of a squared normalized distance: (1 - d2)^3 inside, 0 outside."""
     return np.clip(1.0 - d2, 0.0, None) ** 3
@@ -117,14 +131,14 @@ class HeadShape:
         # Section 1: slice profiles over y. Columns: y [mm], value [mm].
         # Half width of the slice at the axis (side of head); cranium eu-eu 151 -> 75.5,
         # narrowing to the jaw (go-go 97 -> 48.5) and the neck.
-        self._w = _pchip([
+        self._w = _smooth_profile([
             (-215, 68), (-165, 68), (-145, 64), (-125, 58), (-100, 56.5), (-80, 57), (-65, 58.5),
             (-50, 63), (-30, 69), (0, 74), (30, 77), (50, 77.5), (65, 77), (75, 75.5), (85, 72),
             (95, 67.5), (105, 61.7), (115, 51.4), (125, 37), (130, 25), (Y_VERTEX, 0.5),
         ])
         # Depth of the face in front of the axis at the midline, without nose, lips and chin
         # (those are features). Glabella at z = 103 (g-op 193 with op at -90).
-        self._df = _pchip([
+        self._df = _smooth_profile([
             (-215, 76), (-190, 72), (-165, 61.5), (-145, 63), (-125, 63), (-115, 60), (-108, 72),
             (-104, 86), (-95, 95), (-85, 93.6), (-75, 96.5), (-65, 101), (-55, 104), (-45, 102),
             (-35, 104), (-25, 100), (-15, 98), (-5, 96), (5, 94), (15, 96), (25, 102), (35, 103),
@@ -132,24 +146,24 @@ class HeadShape:
             (115, 62), (125, 39.4), (130, 25), (Y_VERTEX, 0.5),
         ])
         # Depth behind the axis (occiput; opisthocranion 90 behind the axis near y = 35).
-        self._db = _pchip([
+        self._db = _smooth_profile([
             (-215, 62), (-145, 64), (-125, 64), (-105, 69), (-85, 67), (-65, 65.5), (-45, 67),
             (-25, 73), (-5, 82), (15, 87.5), (35, 90), (55, 89), (75, 83), (95, 75), (105, 64),
             (115, 57), (125, 43), (130, 30), (Y_VERTEX, 0.5),
         ])
         # Axis offset: the neck sits behind the face.
-        self._zc = _pchip([
+        self._zc = _smooth_profile([
             (-215, -42), (-165, -40), (-145, -35), (-125, -23), (-110, -12), (-95, -3), (-80, 0),
             (Y_VERTEX, 0),
         ])
         # Superellipse exponent of the front half (2 = ellipse, larger = flatter face).
-        self._nf = _pchip([
+        self._nf = _smooth_profile([
             (-215, 2.0), (-125, 2.0), (-105, 1.6), (-90, 1.9), (-75, 2.3), (-40, 2.6), (0, 2.7),
             (30, 2.3), (60, 2.1), (90, 2.0), (Y_VERTEX, 2.0),
         ])
         self.eyes = (
-            _Eye(np.array([X_PUPIL, Y_EYE + 0.5, 85.0]), EYE_RADIUS),
-            _Eye(np.array([-X_PUPIL, Y_EYE + 0.5, 85.0]), EYE_RADIUS),
+            _Eye(np.array([X_PUPIL, Y_EYE + 0.5, 83.5]), EYE_RADIUS),
+            _Eye(np.array([-X_PUPIL, Y_EYE + 0.5, 83.5]), EYE_RADIUS),
         )
 
     # ------------------------------------------------------------------ Section 1: base
@@ -199,14 +213,14 @@ class HeadShape:
         out -= 4.0 * _bump(((ax - 6.0) / 3.5) ** 2 + ((y - (Y_SUBNASALE + 2.5)) / 2.5) ** 2)
 
         # Lips: upper lip (sn to sto) and lower lip (sto to the labiomental fold).
-        mouth_w = X_CH + 4.0
-        lat = np.clip(1.0 - (x / mouth_w) ** 2, 0.0, None) ** 0.8
+        mouth_w = X_CH + 6.0
+        lat = np.clip(1.0 - (x / mouth_w) ** 2, 0.0, None) ** 1.6
         upper = _pchip([
-            (Y_SUBNASALE, 0.0), (Y_SUBNASALE - 8, 5.0), (Y_STOMION + 8, 9.0), (Y_STOMION + 3, 9.0),
-            (Y_STOMION, 5.0),
+            (Y_SUBNASALE, 0.0), (Y_SUBNASALE - 6, 3.5), (Y_STOMION + 9, 6.5), (Y_STOMION + 7, 9.5),
+            (Y_STOMION + 3, 10.0), (Y_STOMION, 6.0),
         ])
         lower = _pchip([
-            (Y_STOMION, 5.0), (Y_STOMION - 4, 9.5), (Y_STOMION - 9, 8.5), (Y_STOMION - 16, 2.0),
+            (Y_STOMION, 6.0), (Y_STOMION - 4, 11.0), (Y_STOMION - 9, 10.0), (Y_STOMION - 14, 4.0),
             (Y_STOMION - 21, 0.0),
         ])
         lip = np.where(
