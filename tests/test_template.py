@@ -110,3 +110,33 @@ def test_human_likeness_ict(ict_dir, t0):
     print(f"\nhuman likeness: RMS {r['rms_m'] * 1e3:.2f} mm, median {r['median_m'] * 1e3:.2f} mm, "
           f"p95 {r['p95_m'] * 1e3:.2f} mm over ICT face vertices 0-9408")
     assert r["rms_m"] <= 6e-3
+
+
+def _edge_crossings(V, F):
+    """Edges that pierce a triangle they do not belong to (any self-intersection has one)."""
+    from facewarp import MeshQuery
+
+    E = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
+    a, b = V[E[:, 0]], V[E[:, 1]]
+    L = np.linalg.norm(b - a, axis=1)
+    d = (b - a) / L[:, None]
+    eps = 1e-3 * L.min()
+    q = MeshQuery(V, F)
+    hits = q.ray_cast(a + eps * d, d, max_dist=float(L.max()))
+    cross = hits.hit & (hits.t < L - 2 * eps)
+    # a hit on a triangle sharing a vertex with the edge is the fan around that vertex
+    tri = F[np.where(hits.face >= 0, hits.face, 0)]
+    shared = (tri[:, :, None] == E[:, None, :]).any((1, 2))
+    return int((cross & ~shared).sum())
+
+
+def test_edge_crossings_detects_intersection():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, -0.5], [0.3, 0.2, 0.5], [0.2, 0.3, 0.5]], float)
+    F = np.array([[0, 1, 2], [3, 4, 5]])
+    assert _edge_crossings(V, F) > 0
+
+
+@pytest.mark.parametrize("level", [0, 1])
+def test_no_self_intersections(level):
+    t = default_template(level)
+    assert _edge_crossings(t.vertices, t.faces) == 0
