@@ -142,6 +142,27 @@ def cmd_landmarks_check(args):
     _emit(args, data, lines)
 
 
+def cmd_adapt(args):
+    from ._src.adapt_io import adapt_files
+
+    prog = _Progress(4, "adapt", not args.json)
+    rep = adapt_files(args.scan, args.landmarks, args.out, template_dir=args.template, template_mesh=args.template_mesh,
+                      template_landmarks=args.template_landmarks, method=args.method, levels=args.levels,
+                      markers=args.markers, units=args.units, template_units=args.template_units,
+                      device=args.device, progress=prog)
+    prog.close()
+    last = rep["levels"][-1] if rep["levels"] else {}
+    d = rep["distance_to_scan_m"]
+    _emit(args, rep, [
+        f"adapted {rep['vertex_count']} template vertices to {args.scan} in {rep['seconds']:.2f} s ({rep['method']})",
+        f"  calibration FDPs: {', '.join(rep['calibration']['fdps_used'])}",
+        f"  levels {len(rep['levels'])}, final FPs {rep['fp_count']}, E_d {last.get('E_d', float('nan')):.3g} m^2",
+        f"  distance to scan: median {d['median'] * 1e3:.2f} mm, RMS {d['rms'] * 1e3:.2f} mm",
+        f"  wrote {args.out}/adapted.obj, adapted_scan_frame.obj, adapted_landmarks.json, report.json, "
+        "error_heatmap.png, error_curve.png",
+    ])
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="facewarp",
@@ -182,6 +203,19 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=cmd_landmarks_check)
 
+    a = sub.add_parser("adapt", help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)")
+    a.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
+    a.add_argument("--landmarks", required=True, type=Path, help="FDPs on the scan (JSON or .pp), in --units")
+    a.add_argument("--out", required=True, type=Path, help="output folder")
+    a.add_argument("--template", type=Path, help="template folder from `facewarp template export` (default: the built-in level 0)")
+    a.add_argument("--template-mesh", type=Path, help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
+    a.add_argument("--template-landmarks", type=Path, help="FDPs of --template-mesh (JSON or .pp)")
+    a.add_argument("--method", choices=["rbf", "csrbf", "multilevel"], default="multilevel")
+    a.add_argument("--levels", type=int, default=5, help="level limit (default 5)")
+    a.add_argument("--markers", type=Path, help="FDPs held out of training, for the marker error E_m")
+    a.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan and its landmarks")
+    a.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
+    a.set_defaults(func=cmd_adapt)
     return p
 
 
