@@ -1,0 +1,230 @@
+"""Warp kernels of the skin deformation model (thesis Sec. 6.4.2, 6.4.4), launched by :mod:`solver`.
+
+Every internal force is the negative gradient of a constraint energy ``E = 1/2 k C^2``
+(Eq. 6.4.2) with a dimensionless constraint C, so ``F_i = -k C dC/dx_i`` (Eq. 6.4.3). Forces
+are accumulated into one ``forces`` array with ``wp.atomic_add`` (elements share nodes).
+Units are SI (m, kg, s; stiffnesses in J), see :mod:`facewarp._src.model`.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+GUARD_NONE = 2147483647
+"""Sentinel of the guard array: no failure recorded (int32 max)."""
+
+
+@wp.func
+def _finite3(x: wp.vec3) -> bool:
+    return wp.isfinite(x[0]) and wp.isfinite(x[1]) and wp.isfinite(x[2])
+
+
+# Distance energy per unique tet edge (i, j), Eq. 6.4.4 with the stiffness of Eq. 6.4.6.
+#   d = x_i - x_j, l = |d|, n = d / l, C = (l - D0) / D0, dC/dx_i = n / D0 = -dC/dx_j.
+#   Eq. 6.4.6 makes the stiffness strain dependent, k(C) = (1 + C^2) k0, and Eq. 6.4.3 applies
+#   it as F_i = -k(C) C dC/dx_i. That force is the exact negative gradient of
+#       E(C) = k0 (C^2 / 2 + C^4 / 4)          (dE/dC = k0 (1 + C^2) C = k(C) C),
+#   which reduces to Eq. 6.4.4's 1/2 k0 C^2 at small strain. So
+#       F_i = -k0 (1 + C^2) C / D0 n,   F_j = -F_i.
+#   Damping, Eq. 6.4.5 applied to the spring: a dashpot on the relative velocity along the
+#   edge, v = (x - x_prev) / dt, F_i += -c ((v_i - v_j) . n) n, F_j -= the same. It acts only
+#   on stretching rates, so rigid motions are not damped; c = 0 switches it off.
+@wp.kernel
+def _edge_forces(
+    # Model:
+    edge_indices: wp.array(dtype=wp.vec2i),
+    edge_rest_length: wp.array(dtype=float),
+    edge_k0: wp.array(dtype=float),
+    edge_damping: float,
+    inv_dt: float,
+    # State in:
+    positions_in: wp.array(dtype=wp.vec3),
+    prev_positions_in: wp.array(dtype=wp.vec3),
+    # Forces out (accumulated):
+    forces_out: wp.array(dtype=wp.vec3),
+):
+    e = wp.tid()
+    i = edge_indices[e][0]
+    j = edge_indices[e][1]
+    xi = positions_in[i]
+    xj = positions_in[j]
+    d = xi - xj
+    l = wp.length(d)
+    if l <= 0.0:
+        return
+    n = d / l
+    d0 = edge_rest_length[e]
+    c = (l - d0) / d0
+    f = -edge_k0[e] * (1.0 + c * c) * c / d0 * n
+    if edge_damping > 0.0:
+        vi = (xi - prev_positions_in[i]) * inv_dt
+        vj = (xj - prev_positions_in[j]) * inv_dt
+        f = f - edge_damping * wp.dot(vi - vj, n) * n
+    wp.atomic_add(forces_out, i, f)
+    wp.atomic_sub(forces_out, j, f)
+
+
+# Area energy per unique tet face (i, j, k), Eq. 6.4.7: E = 1/2 k_area C^2, C = (A - A0) / A0.
+#   e1 = x_j - x_i, e2 = x_k - x_i, N = e1 x e2, A = |N| / 2, m = N / |N|.
+#   dA = 1/2 m . dN, and dN = de1 x e2 + e1 x de2, so with the triple product
+#   m . (de1 x e2) = de1 . (e2 x m) and m . (e1 x de2) = de2 . (m x e1):
+#       dA/dx_j = 1/2 e2 x m,   dA/dx_k = 1/2 m x e1,   dA/dx_i = -(dA/dx_j + dA/dx_k).
+#   F_a = -k_area C / A0 dA/dx_a (Eq. 6.4.3). A collapsed face (|N| = 0) has no direction
+#   and gets no force.
+@wp.kernel
+def _face_forces(
+    # Model:
+    face_indices: wp.array(dtype=wp.vec3i),
+    face_rest_area: wp.array(dtype=float),
+    k_area: float,
+    # State in:
+    positions_in: wp.array(dtype=wp.vec3),
+    # Forces out (accumulated):
+    forces_out: wp.array(dtype=wp.vec3),
+):
+    t = wp.tid()
+    i = face_indices[t][0]
+    j = face_indices[t][1]
+    k = face_indices[t][2]
+    xi = positions_in[i]
+    e1 = positions_in[j] - xi
+    e2 = positions_in[k] - xi
+    nn = wp.cross(e1, e2)
+    nl = wp.length(nn)
+    if nl <= 0.0:
+        return
+    m = nn / nl
+    a0 = face_rest_area[t]
+    c = (0.5 * nl - a0) / a0
+    s = -k_area * c / a0 * 0.5
+    fj = s * wp.cross(e2, m)
+    fk = s * wp.cross(m, e1)
+    wp.atomic_add(forces_out, j, fj)
+    wp.atomic_add(forces_out, k, fk)
+    wp.atomic_sub(forces_out, i, fj + fk)
+
+
+# Volume energy per tet (i, j, k, l), Eq. 6.4.8: E = 1/2 k_volume C^2, C = (V - V0) / V0 with
+#   the signed volume V = 1/6 e1 . (e2 x e3), e1 = x_j - x_i, e2 = x_k - x_i, e3 = x_l - x_i.
+#   V is trilinear in (e1, e2, e3), so (cyclic triple product)
+#       dV/dx_j = 1/6 e2 x e3,  dV/dx_k = 1/6 e3 x e1,  dV/dx_l = 1/6 e1 x e2,
+#       dV/dx_i = -(dV/dx_j + dV/dx_k + dV/dx_l).
+#   F_a = -k_volume C / V0 dV/dx_a (Eq. 6.4.3). The signed volume keeps pushing an inverted tet
+#   back (C < -1 still points towards V0 > 0).
+@wp.kernel
+def _tet_forces(
+    # Model:
+    tet_indices: wp.array(dtype=wp.vec4i),
+    tet_rest_volume: wp.array(dtype=float),
+    k_volume: float,
+    # State in:
+    positions_in: wp.array(dtype=wp.vec3),
+    # Forces out (accumulated):
+    forces_out: wp.array(dtype=wp.vec3),
+):
+    t = wp.tid()
+    i = tet_indices[t][0]
+    j = tet_indices[t][1]
+    k = tet_indices[t][2]
+    l = tet_indices[t][3]
+    xi = positions_in[i]
+    e1 = positions_in[j] - xi
+    e2 = positions_in[k] - xi
+    e3 = positions_in[l] - xi
+    v = wp.dot(e1, wp.cross(e2, e3)) / 6.0
+    v0 = tet_rest_volume[t]
+    c = (v - v0) / v0
+    s = -k_volume * c / v0 / 6.0
+    fj = s * wp.cross(e2, e3)
+    fk = s * wp.cross(e3, e1)
+    fl = s * wp.cross(e1, e2)
+    wp.atomic_add(forces_out, j, fj)
+    wp.atomic_add(forces_out, k, fk)
+    wp.atomic_add(forces_out, l, fl)
+    wp.atomic_sub(forces_out, i, fj + fk + fl)
+
+
+# Start of a substep: forces = the user's constant external force (Control.external_force);
+# muscle / jaw stages and the internal-force kernels then accumulate on top.
+@wp.kernel
+def _init_forces(
+    # Control:
+    external_force: wp.array(dtype=wp.vec3),
+    # Forces out:
+    forces_out: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    forces_out[i] = external_force[i]
+
+
+# Damped Verlet step, Eq. 6.4.10: x(t + dt) = 2 x(t) - x(t - dt) + dt^2 F / m, written as
+#   x' = x + (1 - damping) (x - x_prev) + dt^2 F / m,
+# where the (1 - damping) factor is Eq. 6.4.5's velocity damping -k_damping v with
+# k_damping = damping m / dt (x - x_prev = v dt). Held nodes feel a spring to their target,
+# F += -k_hold (x - target) (energy 1/2 k_hold |x - target|^2); fixed nodes are placed on
+# their target. Thread 0 also advances the device step counter used by the guard.
+@wp.kernel
+def _integrate_verlet(
+    # Model:
+    vertex_inv_mass: wp.array(dtype=float),
+    vertex_fixed: wp.array(dtype=wp.int32),
+    vertex_hold_stiffness: wp.array(dtype=float),
+    damping: float,
+    dt: float,
+    # Solver:
+    forces: wp.array(dtype=wp.vec3),
+    targets: wp.array(dtype=wp.vec3),
+    # State in:
+    positions_in: wp.array(dtype=wp.vec3),
+    prev_positions_in: wp.array(dtype=wp.vec3),
+    # State out:
+    positions_out: wp.array(dtype=wp.vec3),
+    prev_positions_out: wp.array(dtype=wp.vec3),
+    step_counter_out: wp.array(dtype=wp.int32),
+):
+    i = wp.tid()
+    if i == 0:
+        step_counter_out[0] = step_counter_out[0] + 1
+    x = positions_in[i]
+    target = targets[i]
+    if vertex_fixed[i] != 0:
+        x_new = target
+    else:
+        f = forces[i] - vertex_hold_stiffness[i] * (x - target)
+        x_new = x + (1.0 - damping) * (x - prev_positions_in[i]) + (dt * dt * vertex_inv_mass[i]) * f
+    positions_out[i] = x_new
+    prev_positions_out[i] = x
+
+
+# NaN / inversion guard (no host read): a tet with a non-finite node position, or with signed
+# volume <= 0 (its rest volume is > 0), is a failure. The first failing substep is kept in
+# guard[0] and the smallest code 2 tet + (0: NaN, 1: inverted) of that substep in guard[1];
+# later substeps leave both alone (guard[0] < step).
+@wp.kernel
+def _check_tets(
+    # Model:
+    tet_indices: wp.array(dtype=wp.vec4i),
+    step_counter: wp.array(dtype=wp.int32),
+    # State in:
+    positions_in: wp.array(dtype=wp.vec3),
+    # Guard out:
+    guard_out: wp.array(dtype=wp.int32),
+):
+    t = wp.tid()
+    s = step_counter[0]
+    if guard_out[0] < s:
+        return
+    x0 = positions_in[tet_indices[t][0]]
+    x1 = positions_in[tet_indices[t][1]]
+    x2 = positions_in[tet_indices[t][2]]
+    x3 = positions_in[tet_indices[t][3]]
+    code = int(-1)
+    if not (_finite3(x0) and _finite3(x1) and _finite3(x2) and _finite3(x3)):
+        code = 2 * t
+    else:
+        v = wp.dot(x1 - x0, wp.cross(x2 - x0, x3 - x0))
+        if not (v > 0.0):
+            code = 2 * t + 1
+    if code >= 0:
+        wp.atomic_min(guard_out, 0, s)
+        wp.atomic_min(guard_out, 1, code)
