@@ -1,0 +1,208 @@
+"""Warp kernels of the muscles (Sec. 6.3, 6.4.1) and the kinematic jaw (Sec. 6.4.3).
+
+Per substep, quasi-statically (Sec. 6.4.4):
+
+1. ``_muscle_controls``: every control point starts from its rest position moved by the jaw
+   (Eq. 6.4.9 amount) and contracts: a linear muscle's insertion and middle point move toward
+   its attachment by ``activation * max_contraction`` of their distance; a sphincter's points
+   move toward the ring centre.
+2. ``_muscle_anchors``: anchor points (Fig. 6.3) add the displacement of the linear-muscle
+   control points they are tied to (weights sum to 1 per anchor), so sphincters follow the
+   voluntary muscles that pull on them.
+3. ``_muscle_segments``: each segment's ellipsoid is rebuilt from its (rational) quadratic Bezier
+   curve: x along the chord (radius 1.05/2 of it), y perpendicular in the control-point plane,
+   z = x cross y; y and z radii scale by sqrt(rx0 / rx), so the volume
+   4/3 pi rx ry rz is preserved (incompressible muscle).
+4. ``_muscle_forces``: each skin attachment's point on its ellipsoid is re-evaluated from its
+   surface parameters (u, v) and the spring of Eq. 6.4.1,
+   ``f = k_m cos(theta) (|p_m - p_s| - l0) (p_m - p_s) / |p_m - p_s|``, with theta the angle
+   between the spring and the fibre, is added to the skin node.
+5. ``_jaw_targets``: held / fixed nodes carried by the jaw get the jaw-rotated rest position as
+   their target.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+
+@wp.func
+def _rotate_about(p: wp.vec3, pivot: wp.vec3, axis: wp.vec3, angle: float):
+    # Rodrigues' formula about the line (pivot, axis), axis of unit length.
+    q = p - pivot
+    c = wp.cos(angle)
+    s = wp.sin(angle)
+    return pivot + q * c + wp.cross(axis, q) * s + axis * (wp.dot(q, axis) * (1.0 - c))
+
+
+@wp.func
+def _jaw_move(p: wp.vec3, amount: float, pivot: wp.vec3, u_axis: wp.vec3, v_axis: wp.vec3, angles: wp.array(dtype=float)):
+    q = _rotate_about(p, pivot, u_axis, angles[0] * amount)
+    return _rotate_about(q, pivot, v_axis, angles[1] * amount)
+
+
+@wp.kernel
+def _muscle_controls(
+    # Model:
+    ctrl_rest: wp.array(dtype=wp.vec3),
+    ctrl_muscle: wp.array(dtype=wp.int32),
+    ctrl_pivot: wp.array(dtype=wp.int32),
+    ctrl_jaw: wp.array(dtype=float),
+    muscle_activation: wp.array(dtype=wp.int32),
+    muscle_contraction: wp.array(dtype=float),
+    muscle_center: wp.array(dtype=wp.vec3),
+    muscle_center_jaw: wp.array(dtype=float),
+    jaw_pivot: wp.vec3,
+    jaw_u: wp.vec3,
+    jaw_v: wp.vec3,
+    # Control:
+    activations: wp.array(dtype=float),
+    jaw_angles: wp.array(dtype=float),
+    # Out:
+    ctrl_jawed: wp.array(dtype=wp.vec3),
+    ctrl_out: wp.array(dtype=wp.vec3),
+):
+    p = wp.tid()
+    m = ctrl_muscle[p]
+    x = _jaw_move(ctrl_rest[p], ctrl_jaw[p], jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    ctrl_jawed[p] = x
+    a = wp.clamp(activations[muscle_activation[m]], 0.0, 1.0) * muscle_contraction[m]
+    piv = ctrl_pivot[p]
+    if piv == -2:  # attachment on the bone: does not contract
+        ctrl_out[p] = x
+        return
+    if piv == -1:  # sphincter: toward the (jaw-moved) ring centre
+        target = _jaw_move(muscle_center[m], muscle_center_jaw[m], jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    else:
+        target = _jaw_move(ctrl_rest[piv], ctrl_jaw[piv], jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    ctrl_out[p] = x + a * (target - x)
+
+
+@wp.kernel
+def _muscle_anchors(
+    # Model:
+    anchor_dst: wp.array(dtype=wp.int32),
+    anchor_src: wp.array(dtype=wp.int32),
+    anchor_weight: wp.array(dtype=float),
+    # In:
+    ctrl_jawed: wp.array(dtype=wp.vec3),
+    ctrl_contracted: wp.array(dtype=wp.vec3),
+    # Out (accumulated):
+    ctrl_out: wp.array(dtype=wp.vec3),
+):
+    k = wp.tid()
+    s = anchor_src[k]
+    wp.atomic_add(ctrl_out, anchor_dst[k], anchor_weight[k] * (ctrl_contracted[s] - ctrl_jawed[s]))
+
+
+@wp.func
+def _bezier(c0: wp.vec3, c1: wp.vec3, c2: wp.vec3, w: wp.vec3, t: float):
+    # Rational quadratic Bezier (weights 1, w1, 1 give circular arcs; all 1 is regular).
+    b0 = (1.0 - t) * (1.0 - t) * w[0]
+    b1 = 2.0 * t * (1.0 - t) * w[1]
+    b2 = t * t * w[2]
+    return (c0 * b0 + c1 * b1 + c2 * b2) / (b0 + b1 + b2)
+
+
+@wp.kernel
+def _muscle_segments(
+    # Model:
+    curve_ctrl: wp.array(dtype=wp.vec3i),
+    curve_weight: wp.array(dtype=wp.vec3),
+    curve_normal_rest: wp.array(dtype=wp.vec3),
+    seg_curve: wp.array(dtype=wp.int32),
+    seg_t: wp.array(dtype=wp.vec2),
+    seg_rest_radii: wp.array(dtype=wp.vec3),
+    # In:
+    ctrl: wp.array(dtype=wp.vec3),
+    # Out:
+    seg_center: wp.array(dtype=wp.vec3),
+    seg_frame: wp.array(dtype=wp.mat33),
+    seg_radii: wp.array(dtype=wp.vec3),
+):
+    s = wp.tid()
+    c = seg_curve[s]
+    idx = curve_ctrl[c]
+    c0 = ctrl[idx[0]]
+    c1 = ctrl[idx[1]]
+    c2 = ctrl[idx[2]]
+    w = curve_weight[c]
+    a = _bezier(c0, c1, c2, w, seg_t[s][0])
+    b = _bezier(c0, c1, c2, w, seg_t[s][1])
+    chord = b - a
+    length = wp.length(chord)
+    x = chord / wp.max(length, 1.0e-12)
+    n = wp.cross(c1 - c0, c2 - c0)
+    if wp.length(n) < 1.0e-12 * (wp.length(c1 - c0) * wp.length(c2 - c0) + 1.0e-30):
+        n = curve_normal_rest[c]  # straight curve: keep the rest plane
+    n = wp.normalize(n)
+    y = wp.cross(n, x)
+    y = wp.normalize(y)
+    z = wp.cross(x, y)
+    rx = 0.525 * length
+    r0 = seg_rest_radii[s]
+    scale = wp.sqrt(r0[0] / wp.max(rx, 1.0e-12))
+    seg_center[s] = 0.5 * (a + b)
+    seg_frame[s] = wp.matrix_from_cols(x, y, z)
+    seg_radii[s] = wp.vec3(rx, r0[1] * scale, r0[2] * scale)
+
+
+@wp.func
+def _ellipsoid_point(center: wp.vec3, frame: wp.mat33, radii: wp.vec3, u: float, v: float):
+    # u in [0, pi] runs along the fibre (x), v in [0, 2 pi) around it.
+    local = wp.vec3(radii[0] * wp.cos(u), radii[1] * wp.sin(u) * wp.cos(v), radii[2] * wp.sin(u) * wp.sin(v))
+    return center + frame * local
+
+
+@wp.kernel
+def _muscle_forces(
+    # Model:
+    att_node: wp.array(dtype=wp.int32),
+    att_seg: wp.array(dtype=wp.int32),
+    att_uv: wp.array(dtype=wp.vec2),
+    att_rest_length: wp.array(dtype=float),
+    att_stiffness: wp.array(dtype=float),
+    # In:
+    seg_center: wp.array(dtype=wp.vec3),
+    seg_frame: wp.array(dtype=wp.mat33),
+    seg_radii: wp.array(dtype=wp.vec3),
+    # State in:
+    positions_in: wp.array(dtype=wp.vec3),
+    # Out:
+    att_point_out: wp.array(dtype=wp.vec3),
+    forces_out: wp.array(dtype=wp.vec3),
+):
+    k = wp.tid()
+    s = att_seg[k]
+    F = seg_frame[s]
+    pm = _ellipsoid_point(seg_center[s], F, seg_radii[s], att_uv[k][0], att_uv[k][1])
+    att_point_out[k] = pm
+    i = att_node[k]
+    d = pm - positions_in[i]
+    length = wp.length(d)
+    if length <= 1.0e-12:
+        return
+    n = d / length
+    fibre = wp.vec3(F[0, 0], F[1, 0], F[2, 0])
+    cos_theta = wp.abs(wp.dot(n, fibre))
+    # Eq. 6.4.1: spring toward the muscle, scaled by the cosine of the spring-fibre angle.
+    wp.atomic_add(forces_out, i, att_stiffness[k] * cos_theta * (length - att_rest_length[k]) * n)
+
+
+@wp.kernel
+def _jaw_targets(
+    # Model:
+    jaw_node: wp.array(dtype=wp.int32),
+    jaw_amount: wp.array(dtype=float),
+    rest_positions: wp.array(dtype=wp.vec3),
+    jaw_pivot: wp.vec3,
+    jaw_u: wp.vec3,
+    jaw_v: wp.vec3,
+    # Control:
+    jaw_angles: wp.array(dtype=float),
+    # Out:
+    targets_out: wp.array(dtype=wp.vec3),
+):
+    k = wp.tid()
+    i = jaw_node[k]
+    targets_out[i] = _jaw_move(rest_positions[i], jaw_amount[k], jaw_pivot, jaw_u, jaw_v, jaw_angles)

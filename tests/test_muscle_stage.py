@@ -1,0 +1,135 @@
+"""Muscle and jaw stages: kernels against the NumPy reference, incompressibility, rest state."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from facewarp._src.jaw import JawKinematic
+from facewarp._src.model import ModelBuilder
+from facewarp._src.muscle_stage import MuscleRig, MuscleStage, JawStage, ellipsoid_point, ellipsoid_uv, rig_reference, segment_frames
+from facewarp._src.solver import SolverVerlet
+
+S2 = np.sqrt(0.5)
+
+
+def slab(n=4, h=0.01):
+    """A 2-layer slab of tets (n x n cells, h spacing) with outer layer on top (z = 0)."""
+    g = np.stack(np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij"), -1).reshape(-1, 2) * h
+    top = np.c_[g, np.zeros(len(g))]
+    bot = np.c_[g, np.full(len(g), -h)]
+    V = np.concatenate([top, bot])
+    m = (n + 1) ** 2
+    T = []
+    for i in range(n):
+        for j in range(n):
+            a, b, c, d = i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
+            cube = [a, b, c, d, a + m, b + m, c + m, d + m]
+            for t in ([0, 1, 3, 4], [1, 2, 3, 6], [1, 3, 4, 6], [3, 4, 6, 7], [1, 4, 5, 6]):
+                T.append([cube[k] for k in t])
+    T = np.array(T)
+    vol = np.einsum("ij,ij->i", V[T[:, 1]] - V[T[:, 0]], np.cross(V[T[:, 2]] - V[T[:, 0]], V[T[:, 3]] - V[T[:, 0]]))
+    T[vol < 0] = T[vol < 0][:, [0, 2, 1, 3]]
+    layer = np.r_[np.zeros(m, int), np.ones(m, int)]
+    return V, T, layer
+
+
+def small_rig(nodes, node_pos):
+    """One linear muscle along +x below the slab and a circular sphincter (4 rational arcs)."""
+    r = 0.012
+    c = np.array([0.02, 0.02, -0.02])
+    lin = np.array([[0.005, 0.02, -0.018], [0.02, 0.021, -0.019], [0.045, 0.02, -0.02]])
+    ring = np.array([c + r * np.array([np.cos(a), np.sin(a), 0]) * (1 if k % 2 == 0 else 1 / S2)
+                     for k, a in enumerate(np.arange(8) * np.pi / 4)])
+    ctrl = np.concatenate([lin, ring])
+    rig = MuscleRig(
+        names=["linear", "ring"], activation_index=np.array([0, 1]), contraction=np.array([0.3, 0.2]),
+        center=np.array([[0, 0, 0], c]), center_jaw=np.zeros(2),
+        ctrl_rest=ctrl, ctrl_muscle=np.array([0, 0, 0] + [1] * 8), ctrl_pivot=np.array([2, 2, -2] + [-1] * 8),
+        ctrl_jaw=np.zeros(11),
+        curve_ctrl=np.array([[0, 1, 2]] + [[3 + 2 * k, 3 + 2 * k + 1, 3 + (2 * k + 2) % 8] for k in range(4)]),
+        curve_weight=np.array([[1, 1, 1]] + [[1, S2, 1]] * 4, float),
+        seg_curve=np.array([0, 0, 0, 1, 2, 3, 4]),
+        seg_t=np.array([[0, 1 / 3], [1 / 3, 2 / 3], [2 / 3, 1], [0, 1], [0, 1], [0, 1], [0, 1]], float),
+        seg_rest_radii=np.zeros((7, 3)),
+        anchor_dst=np.array([3]), anchor_src=np.array([0]), anchor_weight=np.array([1.0]),
+    )
+    c0, f0, r0 = segment_frames(rig, rig.ctrl_rest)
+    rig.seg_rest_radii = np.c_[r0[:, 0], np.full(7, 0.003), np.full(7, 0.003)]
+    c0, f0, r0 = segment_frames(rig, rig.ctrl_rest)
+    seg = np.argmin(np.linalg.norm(node_pos[:, None] - c0[None], axis=-1), axis=1)
+    uv = ellipsoid_uv(c0[seg], f0[seg], r0[seg], node_pos)
+    pm = ellipsoid_point(c0[seg], f0[seg], r0[seg], uv)
+    rig.att_node, rig.att_seg, rig.att_uv = np.asarray(nodes), seg, uv
+    rig.att_rest_length = np.linalg.norm(pm - node_pos, axis=1)
+    rig.att_stiffness = np.full(len(nodes), 2e3)
+    return rig
+
+
+def test_rational_bezier_ring_is_a_circle():
+    V, T, layer = slab()
+    rig = small_rig([0], V[:1])
+    from facewarp._src.muscle_stage import _bezier_np
+
+    t = np.linspace(0, 1, 11)
+    for k in range(1, 5):
+        pts = _bezier_np(rig.ctrl_rest[rig.curve_ctrl[k]][None], rig.curve_weight[k][None], t)
+        np.testing.assert_allclose(np.linalg.norm(pts - rig.center[1], axis=1), 0.012, rtol=1e-12)
+
+
+def test_kernels_match_reference(device):
+    import warp as wp
+
+    V, T, layer = slab()
+    inner = np.where(layer == 1)[0]
+    rig = small_rig(inner, V[inner])
+    b = ModelBuilder(V, T, layer=layer, muscle_count=2)
+    model = b.finalize(device)
+    jaw = JawKinematic(np.array([0.02, 0.05, 0.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
+                       np.array([[0.03, 0, 0], [0.01, 0, 0]]), np.array([0.02, 0, 0]))
+    rig.ctrl_jaw = np.linspace(0, 1, 11)
+    stage = MuscleStage(rig, jaw, model.device)
+    control = model.control()
+    acts, angles = np.array([0.8, 0.5]), np.array([0.3, 0.05])
+    control.activations.assign(acts.astype(np.float32))
+    control.jaw_angles.assign(angles.astype(np.float32))
+    stage.update_geometry(control)
+    ctrl_ref, _ = rig_reference(rig, acts, jaw, angles)
+    np.testing.assert_allclose(stage.ctrl.numpy(), ctrl_ref, atol=2e-6, err_msg="control points")
+    c, f, r = segment_frames(rig, ctrl_ref)
+    np.testing.assert_allclose(stage.seg_radii.numpy(), r, rtol=1e-4, err_msg="radii")
+    np.testing.assert_allclose(stage.seg_center.numpy(), c, atol=2e-6, err_msg="centres")
+    # incompressible: every segment keeps its ellipsoid volume
+    r_rest = rig.seg_rest_radii
+    np.testing.assert_allclose(np.prod(r, 1), np.prod(r_rest, 1), rtol=1e-6)
+    assert (r[:3, 0] < r_rest[:3, 0]).all() and (r[:3, 1] > r_rest[:3, 1]).all()
+
+
+def test_rest_has_no_muscle_force_and_contraction_pulls(device):
+    V, T, layer = slab()
+    inner = np.where(layer == 1)[0]
+    rig = small_rig(inner, V[inner])
+    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    stage = MuscleStage(rig, None, model.device)
+    solver = SolverVerlet(model, stages=[stage])
+    state, control = model.state(), model.control()
+    f = solver.compute_forces(state, control, 1e-4).numpy()
+    assert np.abs(f).max() < 1e-3, "muscle springs at rest must be relaxed"
+    control.activations.assign(np.array([1.0, 0.0], np.float32))
+    f = solver.compute_forces(state, control, 1e-4).numpy()
+    # the linear muscle shortens toward its attachment at +x: attached nodes are pulled to +x
+    assert f[inner, 0].sum() > 0
+
+
+def test_jaw_stage_moves_targets(device):
+    V, T, layer = slab()
+    model = ModelBuilder(V, T, layer=layer, fixed=np.r_[np.zeros(25, bool), np.ones(25, bool)]).finalize(device)
+    jaw = JawKinematic(np.array([0.0, 0.0, 0.05]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
+                       np.array([[0.03, 0, 0], [0.01, 0, 0]]), np.array([0.02, 0, 0]))
+    nodes = np.arange(25, 50)
+    stage = JawStage(jaw, nodes, np.ones(25), model.rest_positions, model.device)
+    solver = SolverVerlet(model, stages=[stage])
+    state, out, control = model.state(), model.state(), model.control()
+    control.jaw_angles.assign(np.array([0.2, 0.0], np.float32))
+    solver.step(state, out, control, 1e-5)
+    np.testing.assert_allclose(out.positions.numpy()[nodes], jaw.apply(V[nodes], np.ones(25), 0.2), atol=1e-6)
