@@ -163,6 +163,42 @@ def cmd_adapt(args):
     ])
 
 
+def cmd_build(args):
+    from ._src.jobs import build_files
+
+    prog = _Progress(4, "build", not args.json)
+    q = build_files(args.head, args.out, layers=args.layers, device=args.device, progress=prog)
+    prog.close()
+    _emit(args, q, [
+        f"built anatomy of {args.head} into {args.out}: {q['tet_count']} tets, {q['inverted_count']} inverted, "
+        f"min dihedral {q.get('min_dihedral_deg', float('nan')):.1f} deg, conforming {q.get('conforming')}",
+        f"  {q['muscle_count']} muscles, attached skin nodes per muscle: min {q.get('min_attached_nodes', 0)}",
+        f"  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz",
+    ])
+
+
+def cmd_simulate(args):
+    from ._src.jobs import simulate_files
+
+    bar = None
+    if not args.json:
+        from tqdm import tqdm
+
+        bar = tqdm(total=int(round(args.seconds * args.fps)) + 1, desc="simulate", unit="frame", file=sys.stderr,
+                   disable=None, leave=False)
+    prog = (lambda k, n: bar.update(1)) if bar is not None else None
+    rep = simulate_files(args.head, args.expression, args.out, seconds=args.seconds, fps=args.fps,
+                         substeps=args.substeps, device=args.device, usd=args.usd, progress=prog)
+    if bar is not None:
+        bar.close()
+    _emit(args, rep, [
+        f"simulated {rep['expression']} for {rep['seconds']} s on {rep['device']}: {rep['frames']} frames x "
+        f"{rep['substeps']} substeps (dt {rep['dt_s']:.2e} s), {rep['nodes']} nodes, {rep['tets']} tets",
+        f"  {rep['steps_per_second']:.0f} simulated steps per second",
+        "  wrote " + ", ".join(rep["files"]),
+    ])
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="facewarp",
@@ -216,6 +252,23 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan and its landmarks")
     a.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
     a.set_defaults(func=cmd_adapt)
+
+    b = sub.add_parser("build", help="skin tetrahedra, muscles and boundary conditions of a head (Sec. 6.2-6.3)")
+    b.add_argument("head", help="a `template export` folder, an `adapt` output folder, or 'default[:LEVEL]'")
+    b.add_argument("--out", required=True, type=Path, help="output folder")
+    b.add_argument("--layers", type=int, default=1, help="tet layers through the skin (default 1)")
+    b.set_defaults(func=cmd_build)
+
+    s = sub.add_parser("simulate", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)")
+    s.add_argument("head", type=Path, help="a `facewarp build` output folder")
+    s.add_argument("--expression", required=True,
+                   help="smile, laugh, surprise, angry, sad (Table 6.4), 'sequence' (Fig. 6.16) or a sequence .json")
+    s.add_argument("--seconds", type=float, default=2.0, help="simulated time [s] (default 2)")
+    s.add_argument("--fps", type=float, default=30.0, help="frames per second (default 30)")
+    s.add_argument("--substeps", type=int, help="substeps per frame (default: from the stable time step)")
+    s.add_argument("--out", required=True, type=Path, help="output folder")
+    s.add_argument("--usd", action="store_true", help="also write frames.usda (time-sampled skin, eyes, teeth)")
+    s.set_defaults(func=cmd_simulate)
     return p
 
 

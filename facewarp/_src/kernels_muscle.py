@@ -206,3 +206,32 @@ def _jaw_targets(
     k = wp.tid()
     i = jaw_node[k]
     targets_out[i] = _jaw_move(rest_positions[i], jaw_amount[k], jaw_pivot, jaw_u, jaw_v, jaw_angles)
+
+
+# Sliding support of the inner sheet: the skin glides over the deeper tissue but does not sink
+# into it. A spring acts only along the node's rest normal n (carried by the jaw like the rest
+# position p0): F = -k_s ((x - p0) . n) n, the gradient of 1/2 k_s ((x - p0) . n)^2.
+@wp.kernel
+def _support_forces(
+    # Model:
+    support_node: wp.array(dtype=wp.int32),
+    support_normal: wp.array(dtype=wp.vec3),
+    support_jaw: wp.array(dtype=float),
+    support_stiffness: float,
+    rest_positions: wp.array(dtype=wp.vec3),
+    jaw_pivot: wp.vec3,
+    jaw_u: wp.vec3,
+    jaw_v: wp.vec3,
+    # Control:
+    jaw_angles: wp.array(dtype=float),
+    # State in:
+    positions_in: wp.array(dtype=wp.vec3),
+    # Out (accumulated):
+    forces_out: wp.array(dtype=wp.vec3),
+):
+    k = wp.tid()
+    i = support_node[k]
+    a = support_jaw[k]
+    p0 = _jaw_move(rest_positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    n = _jaw_move(support_normal[k], a, wp.vec3(0.0), jaw_u, jaw_v, jaw_angles)
+    wp.atomic_add(forces_out, i, -support_stiffness * wp.dot(positions_in[i] - p0, n) * n)

@@ -295,3 +295,36 @@ class JawStage:
         _wp().launch(self.km._jaw_targets, dim=self.count,
                      inputs=[self.nodes, self.amounts, self.rest, self.pivot, self.u, self.v, control.jaw_angles],
                      outputs=[targets], device=self.device)
+
+
+class SupportStage:
+    """Sliding support of free inner-sheet nodes along their rest normal (solver stage).
+
+    The inner sheet of the skin lies on deeper tissue: it may glide along it but not sink into
+    it or lift off it. Each node gets a spring of ``stiffness`` [N/m] acting only along its rest
+    normal (the extrusion direction), moved with the jaw by its Eq. 6.4.9 amount.
+    """
+
+    def __init__(self, jaw, nodes, normals, amounts, stiffness: float, rest_positions, device):
+        wp = _wp()
+        from . import kernels_muscle as km
+
+        self.km = km
+        self.device = device
+        self.count = len(nodes)
+        self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
+        n = np.asarray(normals, np.float64).reshape(-1, 3)
+        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        self.normals = wp.array(n.astype(np.float32), dtype=wp.vec3, device=device)
+        self.amounts = wp.array(np.asarray(amounts, np.float32), dtype=float, device=device)
+        self.stiffness = float(stiffness)
+        self.rest = rest_positions
+        self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+
+    def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
+        if self.count == 0:
+            return
+        _wp().launch(self.km._support_forces, dim=self.count,
+                     inputs=[self.nodes, self.normals, self.amounts, self.stiffness, self.rest, self.pivot, self.u,
+                             self.v, control.jaw_angles, state_in.positions],
+                     outputs=[forces], device=self.device)

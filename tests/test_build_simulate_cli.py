@@ -1,0 +1,61 @@
+"""`facewarp build` and `facewarp simulate` end to end, and their one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from facewarp.cli import main
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    out = tmp_path_factory.mktemp("build")
+    assert main(["--json", "build", "default", "--out", str(out)]) == 0
+    return out
+
+
+def test_build_outputs(built):
+    for name in ("tets.npz", "muscles.json", "anatomy.json", "anatomy.png", "face_rig.npz"):
+        assert (built / name).is_file(), name
+    q = json.loads((built / "anatomy.json").read_text())
+    assert q["inverted_count"] == 0 and q["conforming"] and q["muscle_count"] == 27
+    assert q["min_attached_nodes"] >= 5
+    z = np.load(built / "tets.npz")
+    assert z["vertices"].shape[1] == 3 and z["tets"].shape[1] == 4
+    assert set(np.unique(z["layer"])) == {0, 1} and (z["surface_vertex"] >= -1).all()
+    m = json.loads((built / "muscles.json").read_text())
+    names = set(m["muscles"])
+    assert {"zygomatic_major_L", "zygomatic_major_R", "orbicularis_oris", "orbicularis_oculi_L"} <= names
+
+
+def test_simulate_outputs(built, tmp_path, capsys):
+    out = tmp_path / "sim"
+    code = main(["--json", "simulate", str(built), "--expression", "smile", "--seconds", "0.2", "--fps", "20",
+                 "--out", str(out), "--usd"])
+    o, err = capsys.readouterr()
+    assert code == 0, err
+    rep = json.loads(o)
+    assert rep["steps_per_second"] > 0 and rep["frames"] == 5
+    z = np.load(out / "frames.npz")
+    assert z["points"].shape[0] == 5 and z["fdp_points"].shape == (5, 84, 3) and z["times"].shape == (5,)
+    assert len(z["fdp_ids"]) == 84
+    assert (out / "frames.png").is_file() and (out / "frames.usda").is_file()
+
+
+def test_errors(built, tmp_path, capsys):
+    cases = [
+        (["build", str(tmp_path / "nope"), "--out", str(tmp_path / "o")], "nope"),
+        (["simulate", str(built), "--expression", "grin", "--out", str(tmp_path / "o")], "grin"),
+        (["simulate", str(built), "--expression", "smile", "--seconds", "-1", "--out", str(tmp_path / "o")], "seconds"),
+        (["simulate", str(tmp_path), "--expression", "smile", "--out", str(tmp_path / "o")], "face_rig"),
+        (["simulate", str(built), "--expression", "smile", "--substeps", "1", "--out", str(tmp_path / "o")], "substeps"),
+    ]
+    for argv, needle in cases:
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert code == 2, (argv, err)
+        assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and needle in err, err
+    assert not (tmp_path / "o" / "frames.npz").exists()
