@@ -254,7 +254,9 @@ class HeadShape:
 
     # ------------------------------------------------------------------ eyes (lids hug them)
     def _eyeball_radius(self, phi, y, eye):
-        """Radial distance [mm] from the slice axis to the front of ``eye`` along phi, or NaN."""
+        """Radial distance [mm] from the slice axis to the front of ``eye`` along phi (NaN where
+        the ray misses it) and how squarely the ray meets it: the ray-sphere discriminant over
+        the squared radius, 0 at the silhouette, 1 through the centre."""
         zc = self.axis_z(y)
         d = np.stack([np.sin(phi), np.zeros_like(phi), np.cos(phi)], -1)
         o = np.stack([np.zeros_like(phi), y, zc], -1)
@@ -262,7 +264,8 @@ class HeadShape:
         b = np.sum(oc * d, -1)
         c = np.sum(oc * oc, -1) - eye.radius**2
         disc = b * b - c
-        return np.where(disc > 0, -b + np.sqrt(np.maximum(disc, 0.0)), np.nan)
+        dist = np.where(disc > 0, -b + np.sqrt(np.maximum(disc, 0.0)), np.nan)
+        return dist, np.clip(disc / eye.radius**2, 0.0, 1.0)
 
     def eye_weight(self, x, y):
         """1 where the lids lie on the eyeball, fading to 0 on the surrounding face."""
@@ -282,8 +285,12 @@ class HeadShape:
         x0 = r0 * np.sin(phi)
         z0 = self.axis_z(y) + r0 * np.cos(phi)
         r = r0 + self.features(phi, y, x0, z0)
-        lid = np.fmax(self._eyeball_radius(phi, y, self.eyes[0]), self._eyeball_radius(phi, y, self.eyes[1]))
-        we = self.eye_weight(x0, y) * (np.cos(phi) > 0.3)  # the eyes are on the front only
+        (l0, q0), (l1, q1) = (self._eyeball_radius(phi, y, e) for e in self.eyes)
+        lid = np.fmax(l0, l1)
+        # the lids lie on the eyeball only where the ray meets it squarely; toward its silhouette
+        # the weight fades to 0, so the surface stays continuous (no cliff, no fold)
+        square = _smoothstep(0.0, 0.35, np.maximum(q0, q1))
+        we = self.eye_weight(x0, y) * (np.cos(phi) > 0.3) * square  # the eyes are on the front only
         lid_r = np.where(np.isfinite(lid) & (lid > 0), lid + 1.2, r)
         return np.where(we > 0, (1 - we) * r + we * lid_r, r)
 
