@@ -223,6 +223,23 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--level", type=_level, default=0, help="resolution level 0..4")
     i.set_defaults(func=cmd_template_info)
 
+    def cmd_template_import_ict(args):
+        from ._src.template.ict import import_ict_files
+
+        prog = _Progress(5 if not args.no_preview else 4, "template import-ict", not args.json)
+        rep = import_ict_files(args.ict_dir, args.out, previews=not args.no_preview, device=args.device, progress=prog)
+        prog.close()
+        _emit(args, rep, [f"imported {args.ict_dir} into {args.out}: {rep['vertex_count']} vertices, {rep['face_count']} "
+                          f"faces ({rep['frontal_face_count']} frontal), {rep['fdp_count']} FDPs, parts "
+                          + ", ".join(f"{k} {v}" for k, v in rep["parts"].items())
+                          + f"; wrote {len(rep['files'])} files in {rep['seconds']:.1f} s"])
+
+    ic = tsub.add_parser("import-ict", help="make the ICT-FaceKit neutral head a full template (FDPs, regions, parts)")
+    ic.add_argument("ict_dir", type=Path, metavar="ICT_DIR", help="ICT-FaceKit folder with generic_neutral_mesh.obj")
+    ic.add_argument("--out", required=True, type=Path, help="output folder (created if needed)")
+    ic.add_argument("--no-preview", action="store_true", help="skip preview_front.png / preview_side.png")
+    ic.set_defaults(func=cmd_template_import_ict)
+
     m = sub.add_parser("mesh", help="inspect input meshes")
     msub = m.add_subparsers(dest="mesh_command", metavar="ACTION", parser_class=_Parser)
     msub.required = True

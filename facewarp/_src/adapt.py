@@ -445,6 +445,8 @@ def adapt(
         q[ok] = cp.points[ok]
         return q
 
+    n0_template = _FoldCheck(TV, TF)
+    folded0 = n0_template(Vk)  # folds the FDP level already made stay allowed
     best = (E, Vk.copy(), list(fields), len(fps))
     n_curv = int(curvature_points)
     csrbf_levels = 0
@@ -550,6 +552,9 @@ def adapt(
             sigma /= 2.0  # Eq. 4.5.7
             csrbf_levels += 1
         Vnew = TV + displacement(TV)
+        # fold guard: where the dense FPs of this level would fold the template's triangles,
+        # the vertices step back toward the previous level's shape
+        Vnew = _unfold(Vnew, best[1], TF, n0_template, folded0)
         de, em, E = errors(Vnew)
         rec = LevelRecord(level, kind, len(fps), new_feat, new_curv, sig_used, its, de.value, em, E, de.stats["rms"], time.perf_counter() - t0)
         if E > best[0]:
@@ -572,9 +577,19 @@ def adapt(
         ok = h.hit & (np.einsum("kd,kd->k", scan_N_face[np.maximum(h.face, 0)], Nk) > normal_agreement)
         Vp = Vk.copy()
         Vp[ok] = h.points[ok]
+        Vp = _unfold(Vp, Vk, TF, n0_template, folded0)
         de, em, E = errors(Vp)
         records.append(LevelRecord(records[-1].level + 1, "projection", len(fps), 0, 0, None, 0, de.value, em, E, de.stats["rms"], time.perf_counter() - t0))
         Vk = Vp
+
+    # -- 6. needle triangles: where the adapted surface squeezed a triangle flat (e.g. closed lips
+    # pressing the template's mouth corner), its vertices relax toward their neighbours' mean in
+    # the tangent plane and are put back on the scan; a flat triangle would make a flat tet
+    Vr = _relax_needles(Vk, TF, scan_q, n0_template, folded0, reject)
+    if Vr is not Vk:
+        Vk = Vr
+        de, em, E = errors(Vk)
+        records.append(LevelRecord(records[-1].level + 1, "relax", len(fps), 0, 0, None, 0, de.value, em, E, de.stats["rms"], 0.0))
 
     per_region = de.per_region if region is not None else {}
     Tinv = T.inverse()
@@ -590,6 +605,96 @@ def adapt(
         seconds=time.perf_counter() - t_start,
         per_region=per_region,
     )
+
+
+class _FoldCheck:
+    """Folds of a deformed template: faces turned by more than 90 degrees from their template
+    normal, and pairs of neighbouring faces whose dihedral angle closed to a crease sharper than
+    120 degrees (normals' cosine below -0.5) where the template had none."""
+
+    def __init__(self, V0: np.ndarray, F: np.ndarray):
+        self.F = F
+        self.V0 = V0
+        self.n0 = self._normals(V0)
+        E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+        fid = np.tile(np.arange(len(F)), 3)
+        key = np.sort(E, axis=1)
+        order = np.lexsort((key[:, 1], key[:, 0]))
+        ks, fs = key[order], fid[order]
+        same = np.all(ks[1:] == ks[:-1], axis=1)
+        self.pairs = np.stack([fs[:-1][same], fs[1:][same]], 1)
+        self.dot0 = np.einsum("kd,kd->k", self.n0[self.pairs[:, 0]], self.n0[self.pairs[:, 1]])
+
+    def _normals(self, V):
+        n = np.cross(V[self.F[:, 1]] - V[self.F[:, 0]], V[self.F[:, 2]] - V[self.F[:, 0]])
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    def __call__(self, V: np.ndarray) -> np.ndarray:
+        n = self._normals(V)
+        bad = np.einsum("kd,kd->k", n, self.n0) <= 0.0
+        d = np.einsum("kd,kd->k", n[self.pairs[:, 0]], n[self.pairs[:, 1]])
+        crease = (d < -0.5) & (self.dot0 >= -0.5)
+        bad[self.pairs[crease].ravel()] = True
+        return bad
+
+
+def _unfold(V: np.ndarray, V_safe: np.ndarray, F: np.ndarray, folds: _FoldCheck, allowed: np.ndarray, *, rounds: int = 20) -> np.ndarray:
+    """Move the vertices of newly folded faces back toward ``V_safe`` (halving their step each
+    round) until no face folds that did not fold in ``V_safe``; returns the repaired vertices."""
+    V = V.copy()
+    for _ in range(rounds):
+        bad = folds(V) & ~allowed
+        if not bad.any():
+            break
+        idx = np.unique(F[bad])
+        V[idx] = 0.5 * (V[idx] + V_safe[idx])
+    bad = folds(V) & ~allowed
+    if bad.any():
+        idx = np.unique(F[bad])
+        V[idx] = V_safe[idx]
+    return V
+
+
+NEEDLE_RATIO = 0.08
+"""A triangle whose height over its longest edge is below this is a needle (about 5 degrees)."""
+
+
+def _needles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    P = V[F]
+    e = np.linalg.norm(P - np.roll(P, 1, axis=1), axis=2).max(1)
+    A = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+    return 2.0 * A / np.maximum(e, 1e-300) < NEEDLE_RATIO * e
+
+
+def _relax_needles(V, F, scan_q, folds: _FoldCheck, allowed, reject, *, rounds: int = 10):
+    """Tangential relaxation of the vertices of needle triangles, re-projected onto the scan."""
+    bad = _needles(V, F) & ~_needles(folds_template_vertices(folds), F)
+    if not bad.any():
+        return V
+    n = len(V)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    E = np.concatenate([E, E[:, ::-1]])
+    deg = np.bincount(E[:, 0], minlength=n)
+    W = V.copy()
+    for _ in range(rounds):
+        idx = np.unique(F[_needles(W, F) & bad])
+        if not len(idx):
+            break
+        mean = np.zeros_like(W)
+        np.add.at(mean, E[:, 0], W[E[:, 1]])
+        mean = mean / np.maximum(deg, 1)[:, None]
+        N = vertex_normals(W, F)[idx]
+        step = mean[idx] - W[idx]
+        step -= np.einsum("kd,kd->k", step, N)[:, None] * N  # stay in the tangent plane
+        W[idx] += 0.5 * step
+        cp = scan_q.closest_point(W[idx], reject)
+        ok = cp.face >= 0
+        W[idx[ok]] = cp.points[ok]
+    return _unfold(W, V, F, folds, allowed)
+
+
+def folds_template_vertices(folds: _FoldCheck) -> np.ndarray:
+    return folds.V0
 
 
 def _face_normals_sub(V: np.ndarray, F: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -104,7 +104,8 @@ def render_previews(t: Template, out: Path, *, size: int = 800, device: str = "c
     for view in ("front", "side"):
         img = render_mesh(V, F, view=view, width=size, height=size, vertex_colors=C, device=device)
         p = out / f"preview_{view}.png"
-        save_png(p, img, title=f"facewarp default template, level {t.level} ({t.vertex_count} vertices)")
+        what = f"facewarp default template, level {t.level}" if t.level >= 0 else "facewarp imported template"
+        save_png(p, img, title=f"{what} ({t.vertex_count} vertices)")
         paths.append(p)
     return paths
 

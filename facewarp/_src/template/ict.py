@@ -9,18 +9,26 @@ Everything the pipeline needs besides the geometry is transferred from the defau
 (:func:`default_template` level 0) through the adaptation (Sec. 4.3-4.5), so nothing is labelled
 by hand:
 
-1. the default template (its head FDPs) is adapted to the ICT skin with the 12 FDPs both
-   heads have (:data:`ICT_FDP_VERTICES`), method multilevel; the adapted template is taken in
-   the ICT frame (``AdaptResult.vertices_scan_frame``, i.e. ``calibration.transform.inverse()``
-   applied to the adapted template);
-2. FDPs: the 12 known ones exactly at their ICT vertices; every other head FDP at the ICT skin
-   point closest to the adapted template's FDP; pupils (3.5, 3.6) at the front-most point of
-   the ICT eyeballs; teeth (9.8-9.11) on the ICT central incisors; tongue (6.1-6.4) on the
-   tongue of the ICT gums + tongue mesh;
-3. regions: each ICT face takes the region of the closest adapted-template face (by centroid);
-   frontal faces are those of :data:`FRONTAL_REGIONS`; thickness per vertex is Table 6.1 x
-   :data:`THICKNESS_FACTOR` averaged over the regions around the vertex (as for the default
-   template); skull depth is the adapted template's, interpolated at the closest point;
+1. the default template (its head FDPs) is adapted to the ICT skin, method multilevel, with
+   the FDPs known on ICT: the 12 of :data:`ICT_FDP_VERTICES`, the inner lip contour 2.4-2.9
+   (ICT's Multi-PIE landmarks 60-67, :data:`ICT_INNER_LIP_VERTICES`) and the lid margins
+   3.1-3.4 (top and bottom of ICT's eye openings at the pupils; without them the template's
+   eye openings end up about 5 mm below ICT's). The adapted template is taken in the ICT frame
+   (``AdaptResult.vertices_scan_frame``, i.e. ``calibration.transform.inverse()`` applied);
+2. FDPs: the known ones exactly at their ICT vertices; every other head FDP at the ICT skin
+   point closest to the adapted template's FDP, made mirror-symmetric (the ICT neutral head is
+   symmetric about x = 0, the adaptation not exactly) and with centre FDPs on the midline;
+   pupils (3.5, 3.6) at the front-most point of the ICT eyeballs; teeth (9.8-9.11) on the
+   ICT central incisors; tongue (6.1-6.4) on the tongue of the ICT gums + tongue mesh;
+3. regions: each ICT face takes the region of the closest adapted-template face (by centroid),
+   the faces at x < 0 then the mirrored region of their mirror face. Frontal faces are those
+   of :data:`FRONTAL_REGIONS` except where no usable skin layer can be extruded: the inside of
+   the closed mouth (behind the inner lip contour), the creases where the closed lips press
+   together at the corners, and faces whose skin-layer tets would be flatter than 0.2 mm (the
+   lid margins curling into the eye sockets, the nostril rims). Thickness per vertex is Table
+   6.1 x :data:`THICKNESS_FACTOR` averaged over the regions around the vertex (as for the
+   default template); skull depth is the adapted template's, interpolated at the closest point
+   (averaged with the mirror image's);
 4. condyles: the default template's, mapped by the least-squares similarity of the shared FDPs
    (template -> ICT);
 5. rigid parts (``eye_L``, ``eye_R``, ``teeth_upper``, ``teeth_lower``, ``tongue``) are the ICT
@@ -37,13 +45,21 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..geometry import face_normals
-from ..landmarks import FDP_IDS
+from ..geometry import vertex_normals
+from ..landmarks import FDP_CATALOGUE, FDP_IDS
 from ..mesh import SurfacePoints, closest_surface_points, load_mesh, mesh_report
 from .head import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, _vertex_thickness, default_template
 from .likeness import ICT_FDP_VERTICES
 
-__all__ = ["ICT_MESH", "ICT_SKIN_VERTICES", "ICT_PART_RANGES", "import_ict", "ict_import_report"]
+__all__ = [
+    "ICT_INNER_LIP_VERTICES",
+    "ICT_MESH",
+    "ICT_PART_RANGES",
+    "ICT_SKIN_VERTICES",
+    "ict_import_report",
+    "import_ict",
+    "import_ict_files",
+]
 
 ICT_MESH = "generic_neutral_mesh.obj"
 ICT_SKIN_VERTICES = 11248
@@ -71,8 +87,11 @@ _UPPER_CROWN = 10.0 * MM
 _LOWER_CROWN = 9.0 * MM
 _GUM_CLEARANCE = 5.0 * MM  # gums + tongue vertices farther than this from the teeth: not gums
 _MIDLINE = 3.0 * MM
-_INNER_UPPER_LIP = ("2.6", "2.7")
-_INNER_LOWER_LIP = ("2.8", "2.9")
+
+ICT_INNER_LIP_VERTICES = {"2.4": 6207, "2.5": 5702, "2.6": 6216, "2.7": 5711, "2.8": 6470, "2.9": 5966}
+"""Inner-lip FDPs -> ICT vertex: ICT's Multi-PIE 68 landmarks 60-67 (inner lip contour, kit README)."""
+_INNER_LIP_LOOP = (5702, 5711, 5533, 6216, 6207, 6470, 5517, 5966)
+"""The inner lip contour (Multi-PIE 60-67) in order around the closed mouth."""
 
 
 def _load_ict(ict_dir) -> tuple[np.ndarray, np.ndarray]:
@@ -103,6 +122,212 @@ def _vertex_point(F: np.ndarray, vertex: int) -> SurfacePoints:
     bary = np.zeros((1, 3))
     bary[0, cols[0]] = 1.0
     return SurfacePoints(np.array([rows[0]]), bary)
+
+
+def _lid_margin_vertices(V: np.ndarray, F: np.ndarray, parts: dict) -> dict[str, int]:
+    """ICT skin vertices of the lid-margin FDPs 3.1-3.4: the top and bottom of each eye opening.
+
+    The skin ends at the lid margins (one boundary loop per eye), as in the default template
+    whose 3.1-3.4 sit on its eye cut; they are taken on the loop at the pupil's x (the front-most
+    point of the eyeball), nearest vertex.
+    """
+    from ..geometry import boundary_vertices
+
+    b = np.flatnonzero(boundary_vertices(F, len(V)))
+    out = {}
+    for part, (up, dn) in (("eye_L", ("3.1", "3.3")), ("eye_R", ("3.2", "3.4"))):
+        E = parts[part][0]
+        c, front = E.mean(0), E[np.argmax(E[:, 2])]
+        near = b[(np.abs(V[b, 0] - c[0]) < 16.0 * MM) & (np.abs(V[b, 1] - c[1]) < 12.0 * MM) & (V[b, 2] > c[2])]
+        if len(near) < 8:
+            raise InputError(f"ICT skin: no eye opening found around the {part} eyeball")
+        for fid, above in ((up, True), (dn, False)):
+            half = near[(V[near, 1] > c[1]) if above else (V[near, 1] <= c[1])]
+            if len(half) == 0:
+                which = "upper" if above else "lower"
+                raise InputError(f"ICT skin: the eye opening around {part} has no {which} lid margin")
+            out[fid] = int(half[np.argmin(np.abs(V[half, 0] - front[0]))])
+    return out
+
+
+def _mouth_interior(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Faces of the ICT skin behind the lip contact line (inside the closed mouth), mask (m,).
+
+    The ICT mouth is closed and its skin runs on past the lips' contact into the mouth, where it
+    folds back on itself at the lip corners (no inward direction exists there, so no skin layer
+    can be extruded). The default template's mouth is cut open at the inner lip contour; here
+    the skin is cut along ICT's inner lip contour (shortest edge paths through Multi-PIE 60-67)
+    and the side holding the mouth's boundary loop is the interior.
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components, dijkstra
+
+    from ..geometry import boundary_vertices
+
+    n = len(V)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    Es = np.sort(E, axis=1)
+    Eu, inv = np.unique(Es, axis=0, return_inverse=True)
+    w = np.linalg.norm(V[Eu[:, 0]] - V[Eu[:, 1]], axis=1)
+    G = sp.coo_matrix((np.r_[w, w], (np.r_[Eu[:, 0], Eu[:, 1]], np.r_[Eu[:, 1], Eu[:, 0]])), shape=(n, n)).tocsr()
+    loop = list(_INNER_LIP_LOOP) + [_INNER_LIP_LOOP[0]]
+    _, pred = dijkstra(G, indices=loop[:-1], return_predecessors=True)
+    cut = set()
+    for k, (a, b) in enumerate(zip(loop[:-1], loop[1:])):
+        v = b
+        while v != a:
+            u = pred[k, v]
+            if u < 0:
+                raise InputError("ICT skin: the inner lip contour is not connected; not the ICT topology")
+            cut.add((min(u, v), max(u, v)))
+            v = u
+    m = len(F)
+    edge_id = inv.reshape(-1)  # edge of (face k mod m, side k // m)
+    face_of = np.tile(np.arange(m), 3)
+    is_cut = np.array([tuple(e) in cut for e in Eu.tolist()])
+    order = np.argsort(edge_id, kind="stable")
+    e_sorted, f_sorted = edge_id[order], face_of[order]
+    pair = np.flatnonzero((e_sorted[1:] == e_sorted[:-1]) & ~is_cut[e_sorted[1:]])
+    A = sp.coo_matrix((np.ones(len(pair)), (f_sorted[pair], f_sorted[pair + 1])), shape=(m, m))
+    nc, lab = connected_components(A, directed=False)
+    if nc != 2:
+        raise InputError(f"ICT skin: cutting along the inner lip contour gives {nc} pieces, expected 2")
+    small = int(np.argmin(np.bincount(lab)))
+    inside = lab == small
+    bv = boundary_vertices(F, n)
+    if not bv[F[inside]].any():
+        raise InputError("ICT skin: the mouth interior has no boundary loop; not the ICT topology")
+    return inside
+
+
+def _crease_faces(V: np.ndarray, F: np.ndarray, frontal: np.ndarray, *, min_cos: float = -0.5,
+                  rounds: int = 10) -> np.ndarray:
+    """Frontal faces around creases where the skin folds back on itself, mask (m,).
+
+    A vertex whose frontal triangles face opposite ways (two normals more than 120 degrees
+    apart) has no inward direction, so the skin layer cannot be extruded there. In the closed
+    ICT mouth this happens where the lips are pressed together at the corners, between the inner
+    and the outer lip corners. Those triangles are removed from the frontal face, repeatedly,
+    until no such vertex is left.
+    """
+    from ..geometry import face_normals
+
+    N = face_normals(V, F)
+    keep = frontal.copy()
+    for _ in range(rounds):
+        idx = np.flatnonzero(keep)
+        vf = np.stack([F[idx].ravel(), np.repeat(idx, 3)], 1)
+        vf = vf[np.argsort(vf[:, 0], kind="stable")]
+        starts = np.flatnonzero(np.r_[True, vf[1:, 0] != vf[:-1, 0]])
+        bad_faces = []
+        for a, b in zip(starts, np.r_[starts[1:], len(vf)]):
+            fs = vf[a:b, 1]
+            if len(fs) > 1:
+                n = N[fs]
+                if (n @ n.T).min() < min_cos:
+                    bad_faces.append(fs)
+        if not bad_faces:
+            break
+        keep[np.concatenate(bad_faces)] = False
+    return frontal & ~keep
+
+
+_MIRROR = np.array([-1.0, 1.0, 1.0])
+
+
+def _symmetrized(adapted: dict[str, np.ndarray], template: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """FDP positions made mirror-symmetric about x = 0 (the ICT neutral head is symmetric).
+
+    The adaptation is not exactly symmetric (its feature points are sampled one at a time), so
+    left and right FDPs would differ by a few millimetres: each left / right pair is replaced
+    by the mean of one and the mirror image of the other, centre FDPs get x = 0. Partners are
+    the FDPs of the other side nearest to each other's mirror image on the default template.
+    """
+    out = dict(adapted)
+    rights = [k for k in template if FDP_CATALOGUE[k].side == "right"]
+    for k in template:
+        side = FDP_CATALOGUE[k].side
+        if side == "center":
+            out[k] = adapted[k] * np.array([0.0, 1.0, 1.0])
+        elif side == "left" and rights:
+            r = min(rights, key=lambda j: np.linalg.norm(template[j] - template[k] * _MIRROR))
+            if np.linalg.norm(template[r] - template[k] * _MIRROR) < 2.0 * MM:
+                out[k] = 0.5 * (adapted[k] + adapted[r] * _MIRROR)
+                out[r] = out[k] * _MIRROR
+    return out
+
+
+def _symmetric_regions(V: np.ndarray, F: np.ndarray, region: np.ndarray, device: str) -> np.ndarray:
+    """Regions made mirror-symmetric: faces at x < 0 take the mirrored label of their mirror face."""
+    from ..geometry import closest_point
+
+    swap = np.array([REGIONS.index(r[:-1] + ("R" if r.endswith("_L") else "L")) if r[-2:] in ("_L", "_R") else i
+                     for i, r in enumerate(REGIONS)])
+    C = V[F].mean(1)
+    right = np.flatnonzero(C[:, 0] < 0)
+    mirror = closest_point(V, F, C[right] * _MIRROR, device=device).face
+    out = region.copy()
+    out[right] = swap[region[mirror]]
+    return out.astype(np.int16)
+
+
+def _midline_points(V: np.ndarray, F: np.ndarray, P: np.ndarray) -> list[SurfacePoints]:
+    """The closest points of P on the skin's midline (the edges with both ends at x = 0).
+
+    The closest skin point of a centre FDP may slide off the midline on a narrow ridge (the
+    nose); the ICT mesh has its midline as edges at x = 0 exactly, so centre FDPs are put there.
+    """
+    on = np.abs(V[:, 0]) < 1e-9
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    face_of = np.tile(np.arange(len(F)), 3)
+    col = np.repeat([0, 1, 2], len(F))
+    mid = np.flatnonzero(on[E].all(1))
+    if len(mid) == 0:
+        raise InputError("ICT skin: no midline edges at x = 0; not the ICT topology")
+    A, B = V[E[mid, 0]], V[E[mid, 1]]
+    D = B - A
+    out = []
+    for p in np.atleast_2d(P):
+        s = np.clip(np.einsum("ij,ij->i", p - A, D) / np.maximum(np.einsum("ij,ij->i", D, D), 1e-30), 0.0, 1.0)
+        k = int(np.argmin(np.linalg.norm(A + s[:, None] * D - p, axis=1)))
+        e = mid[k]
+        bary = np.zeros((1, 3))
+        bary[0, col[e]] = 1.0 - s[k]
+        bary[0, (col[e] + 1) % 3] = s[k]
+        out.append(SurfacePoints(np.array([face_of[e]]), bary))
+    return out
+
+
+_MIN_TET_HEIGHT = 0.2 * MM
+
+
+def _thin_faces(V: np.ndarray, F: np.ndarray, frontal: np.ndarray, thickness: np.ndarray, *,
+                rounds: int = 8) -> np.ndarray:
+    """Frontal faces whose skin-layer tets come out flatter than :data:`_MIN_TET_HEIGHT`, mask (m,).
+
+    Where the ICT skin curls round a thin edge (the lid margins run on into the eye sockets,
+    where the default template's lids end at its eye cut; the nostril rims) the skin layer's
+    depth is clamped to a fraction of a millimetre, and its tets get as flat as 5 um. The flattest tet sets the stable
+    time step of the simulation (``face.sliver_dt``), so those faces are left out of the frontal
+    face, repeatedly until every tet is at least :data:`_MIN_TET_HEIGHT` high (the default
+    template's flattest is about 0.35 mm).
+    """
+    from types import SimpleNamespace
+
+    from ..tissue import build_skin_layer
+
+    keep = frontal.copy()
+    for _ in range(rounds):
+        sl = build_skin_layer(SimpleNamespace(vertices=V, faces=F, frontal=keep, thickness=thickness))
+        a, b, c, d = (sl.vertices[sl.tets[:, i]] for i in range(4))
+        vol = np.abs(np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))) / 6.0
+        tris = ((a, b, c), (a, b, d), (a, c, d), (b, c, d))
+        area = np.max([np.linalg.norm(np.cross(q - p, r - p), axis=1) for p, q, r in tris], axis=0) / 2
+        bad = np.unique(sl.tet_face[3.0 * vol / np.maximum(area, 1e-30) < _MIN_TET_HEIGHT])
+        if not len(bad):
+            break
+        keep[bad] = False
+    return frontal & ~keep
 
 
 def _closest(V, F, P, device) -> list[SurfacePoints]:
@@ -162,7 +387,13 @@ def _internal_fdps(V_all: np.ndarray, parts: dict, device: str) -> dict[str, tup
     tip = mid[np.argmax(GV[mid, 2])]
     zc = GV[idx, 2].mean()
     body = mid[np.abs(GV[mid, 2] - zc) < 5.0 * MM]
-    top = (body if len(body) else mid)[np.argmax(GV[body if len(body) else mid, 1])]
+    body = body if len(body) else mid
+    # the piece also holds the palate above the tongue: keep the surface looking up (the mesh's
+    # orientation sign is fixed by the tip, whose normal must look forward)
+    N = vertex_normals(GV, GF)
+    sgn = 1.0 if N[tip, 2] >= 0 else -1.0
+    up = body[sgn * N[body, 1] > 0.5]
+    top = (up if len(up) else body)[np.argmax(GV[up if len(up) else body, 1])]
     upper = idx[GV[idx, 1] > np.median(GV[idx, 1])]
     left, right = upper[np.argmax(GV[upper, 0])], upper[np.argmin(GV[upper, 0])]
     sps = _closest(GV, GF, GV[[tip, top, left, right]], device)
@@ -171,7 +402,8 @@ def _internal_fdps(V_all: np.ndarray, parts: dict, device: str) -> dict[str, tup
     return out
 
 
-def import_ict(ict_dir: str | os.PathLike, *, levels: int = 3, device: str = "cpu", report: dict | None = None) -> Template:
+def import_ict(ict_dir: str | os.PathLike, *, levels: int = 3, device: str = "cpu",
+               report: dict | None = None) -> Template:
     """The ICT-FaceKit neutral head as a :class:`Template` (level -1), everything in metres.
 
     Args:
@@ -192,13 +424,17 @@ def import_ict(ict_dir: str | os.PathLike, *, levels: int = 3, device: str = "cp
     n = ICT_SKIN_VERTICES
     V, F = _sub_mesh(V_all, F_all, 0, n)
     if len(np.unique(F)) != n:
-        raise InputError(f"{ict_dir}: the ICT skin (vertices 0-{n - 1}) has unreferenced vertices; not the ICT topology")
+        raise InputError(f"{ict_dir}: the ICT skin (vertices 0-{n - 1}) has unreferenced vertices; "
+                         "not the ICT topology")
     rep = mesh_report(V, F)
 
-    # 1. adapt the default template to the ICT skin
+    parts = {name: _sub_mesh(V_all, F_all, a, b) for name, (a, b) in ICT_PART_RANGES.items()}
+
+    # 1. adapt the default template to the ICT skin on the FDPs known on ICT
     t = default_template(0)
     tlm = {k: v for k, v in t.landmarks().items() if t.fdp[k][0] == "head"}
-    ict_lm = {k: V[i] for k, i in ICT_FDP_VERTICES.items() if k in tlm}
+    exact = {**ICT_FDP_VERTICES, **ICT_INNER_LIP_VERTICES, **_lid_margin_vertices(V, F, parts)}
+    ict_lm = {k: V[i] for k, i in exact.items() if k in tlm}
     res = adapt(t.vertices, t.faces, tlm, V, F, ict_lm, method="multilevel", levels=levels,
                 region=_vertex_groups(t), device=device)
     AV = res.vertices_scan_frame  # = calibration.transform.inverse().apply(res.vertices)
@@ -206,19 +442,15 @@ def import_ict(ict_dir: str | os.PathLike, *, levels: int = 3, device: str = "cp
 
     # 2. FDPs
     fdp: dict[str, tuple[str, SurfacePoints]] = {}
-    for k, i in ICT_FDP_VERTICES.items():
+    for k, i in exact.items():
         fdp[k] = ("head", _vertex_point(F, i))
-    # inner-lip midpoints: the ICT mouth is closed, so the plain closest point may fall on the
-    # other lip; the upper ones go onto faces looking down, the lower ones onto faces looking up
-    fn = face_normals(V, F)
-    for ids, side in ((_INNER_UPPER_LIP, fn[:, 1] < 0), (_INNER_LOWER_LIP, fn[:, 1] > 0)):
-        sub = np.flatnonzero(side)
-        for k, sp in zip(ids, _closest(V, F[sub], np.array([adapted_lm[k] for k in ids]), device)):
-            fdp[k] = ("head", SurfacePoints(sub[sp.face], sp.bary))
     rest = [k for k in adapted_lm if k not in fdp]
-    for k, sp in zip(rest, _closest(V, F, np.array([adapted_lm[k] for k in rest]), device)):
+    sym_lm = _symmetrized(adapted_lm, tlm)
+    for k, sp in zip(rest, _closest(V, F, np.array([sym_lm[k] for k in rest]), device)):
         fdp[k] = ("head", sp)
-    parts = {name: _sub_mesh(V_all, F_all, a, b) for name, (a, b) in ICT_PART_RANGES.items()}
+    centre = [k for k in rest if FDP_CATALOGUE[k].side == "center"]
+    for k, sp in zip(centre, _midline_points(V, F, np.array([sym_lm[k] for k in centre]))):
+        fdp[k] = ("head", sp)
     fdp.update(_internal_fdps(V_all, parts, device))
     missing = set(FDP_IDS) - set(fdp)
     if missing:  # the default template has every FDP; this would be a bug here
@@ -228,10 +460,19 @@ def import_ict(ict_dir: str | os.PathLike, *, levels: int = 3, device: str = "cp
     # 3. regions, thickness, skull depth
     cp = closest_point(AV, t.faces, V[F].mean(1), device=device)
     region = np.asarray(t.face_region)[cp.face].astype(np.int16)
+    region = _symmetric_regions(V, F, region, device)
     frontal = np.isin(region, [REGIONS.index(r) for r in FRONTAL_REGIONS])
+    inside = _mouth_interior(V, F)
+    frontal[inside] = False  # the inner lips behind the closed mouth's contact line
+    creased = _crease_faces(V, F, frontal)
+    frontal[creased] = False  # the lips pressed together at the corners
     thickness = _vertex_thickness(F, region, n, THICKNESS_FACTOR)
+    thin = _thin_faces(V, F, frontal, thickness)
+    frontal[thin] = False  # the lid margins curling into the eye sockets, the nostril rims
     cv = closest_point(AV, t.faces, V, device=device)
     skull = np.einsum("kc,kc->k", cv.bary, np.asarray(t.skull_depth)[t.faces[cv.face]])
+    mv = closest_point(AV, t.faces, V * _MIRROR, device=device)  # the mirror image's depth
+    skull = 0.5 * (skull + np.einsum("kc,kc->k", mv.bary, np.asarray(t.skull_depth)[t.faces[mv.face]]))
 
     # 4. condyles: least-squares similarity template -> ICT on the shared FDPs
     ids = list(ict_lm)
@@ -278,3 +519,30 @@ def ict_import_report(t: Template) -> dict:
         "regions": {r: int(c) for r, c in zip(REGIONS, counts)},
         "parts": {k: len(v[0]) for k, v in t.parts.items()},
     }
+
+
+def import_ict_files(ict_dir, out, *, previews: bool = True, device: str = "cpu", progress=None) -> dict:
+    """Import the ICT head and write it as a template folder (:func:`export_template`).
+
+    Returns a JSON-ready summary (counts, written files, seconds).
+    """
+    import time
+
+    from .export import export_template
+
+    t0 = time.perf_counter()
+    step = progress or (lambda msg: None)
+    step("importing ICT-FaceKit")
+    diag: dict = {}
+    t = import_ict(ict_dir, device=device, report=diag)
+    written = export_template(t, out, previews=previews, device=device, progress=progress)
+    rep = ict_import_report(t)
+    rep.update({
+        "ict_dir": str(ict_dir),
+        "out": str(out),
+        "level": t.level,
+        "boundary_loops": diag["skin_mesh"]["boundary_loop_count"],
+        "files": [str(p) for p in written],
+        "seconds": round(time.perf_counter() - t0, 3),
+    })
+    return rep

@@ -1,0 +1,143 @@
+"""The ICT-FaceKit neutral head imported as a full template (issue 4, "Transfer and import").
+
+Needs the ICT-FaceKit data (``ict_dir`` fixture: skipped with the reason when it is absent).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from facewarp._src.errors import InputError
+from facewarp._src.landmarks import FDP_CATALOGUE, FDP_IDS
+from facewarp._src.mesh import load_mesh
+from facewarp._src.template import FRONTAL_REGIONS, REGIONS, default_template
+from facewarp._src.template.ict import ICT_INNER_LIP_VERTICES, ICT_PART_RANGES, ICT_SKIN_VERTICES, import_ict
+from facewarp._src.template.likeness import ICT_FDP_VERTICES
+
+
+@pytest.fixture(scope="module")
+def ict(ict_dir):
+    rep: dict = {}
+    return import_ict(ict_dir, report=rep), rep
+
+
+@pytest.fixture(scope="module")
+def ict_vertices(ict_dir):
+    return load_mesh(ict_dir / "generic_neutral_mesh.obj", units="cm").vertices
+
+
+def _area(V, F):
+    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+
+
+def test_mesh_and_parts(ict, ict_vertices):
+    t, rep = ict
+    assert t.level == -1
+    assert t.vertex_count == ICT_SKIN_VERTICES
+    np.testing.assert_array_equal(t.vertices, ict_vertices[:ICT_SKIN_VERTICES])  # ICT order kept, metres
+    assert rep["skin_mesh"]["non_manifold_edge_count"] == 0
+    assert rep["skin_mesh"]["boundary_loop_count"] == 4  # neck, mouth, two eyes
+    assert set(t.parts) == set(ICT_PART_RANGES)
+    for name, (a, b) in ICT_PART_RANGES.items():
+        V, F = t.parts[name]
+        assert len(V) == b - a and F.min() == 0 and F.max() == len(V) - 1
+    assert t.parts["eye_L"][0][:, 0].mean() > 0 > t.parts["eye_R"][0][:, 0].mean()  # left = +x
+    assert t.condyles[0, 0] > 0 > t.condyles[1, 0]
+    assert np.all((t.thickness > 0) & (t.skull_depth > t.thickness))
+
+
+def test_fdps(ict, ict_vertices):
+    t, _ = ict
+    assert list(t.fdp) == list(FDP_IDS) and len(t.fdp) == 84
+    lm = t.landmarks()
+    assert lm["3.7"][0] > 0 > lm["3.12"][0]
+    # the known FDPs sit exactly on their ICT vertices
+    for k, i in {**ICT_FDP_VERTICES, **ICT_INNER_LIP_VERTICES}.items():
+        assert t.fdp[k][0] == "head"
+        np.testing.assert_allclose(lm[k], ict_vertices[i], atol=1e-12, err_msg=k)
+    # the internal FDPs on their parts, the pupils in front of their eyeballs
+    assert t.fdp["3.5"][0] == "eye_L" and t.fdp["3.6"][0] == "eye_R"
+    assert lm["3.5"][0] > 0 > lm["3.6"][0]
+    assert {t.fdp[k][0] for k in ("9.8", "9.10")} == {"teeth_upper"}
+    assert {t.fdp[k][0] for k in ("9.9", "9.11")} == {"teeth_lower"}
+    assert {t.fdp[k][0] for k in ("6.1", "6.2", "6.3", "6.4")} == {"tongue"}
+    # crowns: top above the incisal edge (upper), edge above the bottom (lower); the upper
+    # incisors overlap the lower ones in front by a small overbite
+    assert lm["9.8"][1] > lm["9.10"][1] and lm["9.11"][1] > lm["9.9"][1]
+    assert abs(lm["9.10"][1] - lm["9.11"][1]) < 0.004 and lm["9.10"][2] > lm["9.11"][2]
+    assert lm["6.1"][2] > lm["6.2"][2] and lm["6.3"][0] > 0 > lm["6.4"][0]
+    # upper lid above the pupil above the lower lid
+    assert lm["3.1"][1] > lm["3.5"][1] > lm["3.3"][1]
+    # left / right FDPs mirror each other (the ICT neutral head is symmetric)
+    for k in FDP_IDS:
+        if FDP_CATALOGUE[k].side == "center" and t.fdp[k][0] == "head":
+            assert abs(lm[k][0]) < 1e-3, k
+    for a, b in (("8.7", "8.8"), ("2.11", "2.12"), ("10.1", "10.2"), ("5.3", "5.4"), ("3.13", "3.14")):
+        np.testing.assert_allclose(lm[a] * [-1, 1, 1], lm[b], atol=1e-3, err_msg=f"{a}/{b}")
+
+
+def test_regions_and_frontal(ict):
+    t, _ = ict
+    counts = np.bincount(t.face_region, minlength=len(REGIONS))
+    missing = [r for r, c in zip(REGIONS, counts) if c == 0]
+    assert not missing, f"regions without faces: {missing}"
+    frontal_ids = [REGIONS.index(r) for r in FRONTAL_REGIONS]
+    assert np.isin(t.face_region[t.frontal], frontal_ids).all()
+    # the frontal face covers about the same area as the default template's (same head size);
+    # what is left out of the frontal regions is the inside of the closed mouth
+    d = default_template(0)
+    ratio = _area(t.vertices, t.faces)[t.frontal].sum() / _area(d.vertices, d.faces)[d.frontal].sum()
+    assert 0.75 < ratio < 1.35, ratio
+    # left out of the frontal face: the inside of the closed mouth, the lip-corner creases and
+    # the lid margins curling into the eye sockets and the nostril rims; nothing else
+    left_out = np.isin(t.face_region, frontal_ids) & ~t.frontal
+    assert left_out.sum() < 0.15 * t.frontal.sum()
+    C = t.vertices[t.faces[left_out]].mean(1)
+    lm = t.landmarks()
+    near_mouth = np.abs(C[:, 1] - lm["2.2"][1]) < 0.01
+    near_eye = np.minimum(np.linalg.norm(C - lm["3.5"], axis=1), np.linalg.norm(C - lm["3.6"], axis=1)) < 0.03
+    near_nostrils = np.linalg.norm(C - lm["9.15"], axis=1) < 0.02
+    assert np.all(near_mouth | near_eye | near_nostrils)
+
+
+def test_anatomy_builds(ict):
+    from facewarp._src.anatomy import build_anatomy
+
+    t, _ = ict
+    q = build_anatomy(t, check_intersections=False).quality
+    assert q["inverted_count"] == 0
+    assert q["tet_count"] > 0 and q["conforming"]
+    # no sliver sets a tiny stable time step (the default template's flattest tet: ~0.35 mm)
+    assert q["min_dihedral_deg"] > 2.0
+    assert q["min_depth_m"] > 1e-4
+    attached = {k: v["attached_nodes"] for k, v in q["muscles"].items()}
+    assert len(attached) == 27
+    assert min(attached.values()) >= 5, attached
+
+
+def test_cli_import(ict_dir, tmp_path, capsys):
+    from facewarp.cli import main
+    from facewarp._src.template.export import load_template_dir
+
+    out = tmp_path / "ict"
+    assert main(["--json", "template", "import-ict", str(ict_dir), "--out", str(out), "--no-preview"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["vertex_count"] == ICT_SKIN_VERTICES and rep["fdp_count"] == 84 and rep["level"] == -1
+    t = load_template_dir(out)
+    assert t.level == -1 and len(t.fdp) == 84 and set(t.parts) == set(ICT_PART_RANGES)
+    assert not (out / "preview_front.png").exists()
+
+
+def test_bad_folder(tmp_path, capsys):
+    from facewarp.cli import main
+
+    with pytest.raises(InputError, match="no such directory"):
+        import_ict(tmp_path / "nope")
+    with pytest.raises(InputError, match="generic_neutral_mesh.obj is missing"):
+        import_ict(tmp_path)
+    assert main(["template", "import-ict", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("facewarp: error:") and "\n" not in err
