@@ -59,3 +59,23 @@ def test_errors(built, tmp_path, capsys):
         assert code == 2, (argv, err)
         assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and needle in err, err
     assert not (tmp_path / "o" / "frames.npz").exists()
+
+
+def test_build_rejects_mismatched_topology(tmp_path, capsys):
+    """An adapt output whose adapted.obj does not have its template's topology: one-line error."""
+    from facewarp import default_template, save_obj
+
+    t = default_template(0)
+    d = tmp_path / "adapt"
+    d.mkdir()
+    save_obj(d / "adapted.obj", t.vertices[:-10], t.faces[(t.faces < len(t.vertices) - 10).all(1)])
+    (d / "report.json").write_text(json.dumps({"template": "default template (level 0)"}))
+    code = main(["build", str(d), "--out", str(tmp_path / "b")])
+    err = capsys.readouterr().err
+    assert code == 2 and "topology" in err and len(err.strip().splitlines()) == 1
+    from facewarp._src.anatomy import build_anatomy
+    from facewarp._src.errors import InputError
+    from dataclasses import replace
+
+    with pytest.raises(InputError, match="topology"):
+        build_anatomy(replace(t, thickness=t.thickness[:-1]))

@@ -608,9 +608,13 @@ def adapt(
 
 
 class _FoldCheck:
-    """Folds of a deformed template: faces turned by more than 90 degrees from their template
-    normal, and pairs of neighbouring faces whose dihedral angle closed to a crease sharper than
-    120 degrees (normals' cosine below -0.5) where the template had none."""
+    """Folds of a deformed template: faces turned by more than 75 degrees from their template
+    normal, and pairs of neighbouring faces whose normals turned more than 100 degrees apart
+    (a crease sharper than 80 degrees) where the template had none. Such creases leave no
+    inward direction from which a skin layer can be extruded (Sec. 6.2)."""
+
+    TURN_COS = 0.26  # cos 75 deg
+    CREASE_COS = -0.17  # cos 100 deg
 
     def __init__(self, V0: np.ndarray, F: np.ndarray):
         self.F = F
@@ -631,9 +635,9 @@ class _FoldCheck:
 
     def __call__(self, V: np.ndarray) -> np.ndarray:
         n = self._normals(V)
-        bad = np.einsum("kd,kd->k", n, self.n0) <= 0.0
+        bad = np.einsum("kd,kd->k", n, self.n0) <= self.TURN_COS
         d = np.einsum("kd,kd->k", n[self.pairs[:, 0]], n[self.pairs[:, 1]])
-        crease = (d < -0.5) & (self.dot0 >= -0.5)
+        crease = (d < self.CREASE_COS) & (self.dot0 >= self.CREASE_COS)
         bad[self.pairs[crease].ravel()] = True
         return bad
 
