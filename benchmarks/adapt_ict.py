@@ -50,6 +50,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from benchmarks._common import shared_dir  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "benchmarks" / "results"
 
@@ -61,11 +63,6 @@ ICT_FDP = {
     "2.1": 966, "3.7": 3721, "3.12": 1507, "3.8": 1528, "3.11": 3742, "8.3": 6213,
     "8.4": 5708, "9.3": 4857, "8.1": 0, "8.2": 5518, "2.2": 5533, "2.3": 5517,
 }  # fmt: skip
-
-
-def shared_dir() -> Path:
-    env = os.environ.get("FACEWARP_SHARED")
-    return Path(env) if env else REPO.parent / "shared"
 
 
 def ict_dir() -> Path:

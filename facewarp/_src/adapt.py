@@ -672,7 +672,7 @@ def _needles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 def _relax_needles(V, F, scan_q, folds: _FoldCheck, allowed, reject, *, rounds: int = 10):
     """Tangential relaxation of the vertices of needle triangles, re-projected onto the scan."""
-    bad = _needles(V, F) & ~_needles(folds_template_vertices(folds), F)
+    bad = _needles(V, F) & ~_needles(folds.V0, F)
     if not bad.any():
         return V
     n = len(V)
@@ -695,10 +695,6 @@ def _relax_needles(V, F, scan_q, folds: _FoldCheck, allowed, reject, *, rounds: 
         ok = cp.face >= 0
         W[idx[ok]] = cp.points[ok]
     return _unfold(W, V, F, folds, allowed)
-
-
-def folds_template_vertices(folds: _FoldCheck) -> np.ndarray:
-    return folds.V0
 
 
 def _face_normals_sub(V: np.ndarray, F: np.ndarray, faces: np.ndarray) -> np.ndarray:

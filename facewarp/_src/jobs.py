@@ -142,14 +142,12 @@ def render_strip(frames, idx, *, size: int = 360, device: str = "cpu", view="fro
     c = P0[frames.faces].mean(1)
     keep = (c[:, 1] > lm0["2.1"][1] - 0.03) & (c[:, 2] > lm0["3.7"][2] - 0.06) & (c[:, 1] < lm0["11.1"][1] + 0.02)
     F = frames.faces[keep]
-    # vertex colours: skin, with the vermilion tinted (ellipse through the lip corners and 8.1 / 8.2)
-    sto = 0.5 * (lm0["2.2"] + lm0["2.3"])
-    half_w = 0.5 * abs(lm0["8.3"][0] - lm0["8.4"][0])
-    dy = P0[:, 1] - sto[1]
-    e = ((P0[:, 0] - sto[0]) / half_w) ** 2 + (dy / np.where(dy > 0, lm0["8.1"][1] - sto[1], sto[1] - lm0["8.2"][1])) ** 2
-    front = P0[:, 2] > sto[2] - 0.02
-    w = (np.clip((1.15 - e) / 0.3, 0, 1) * front)[:, None]
-    col = np.array([0.87, 0.72, 0.62]) * (1 - w) + np.array([0.78, 0.47, 0.45]) * w
+    # vertex colours: skin, with the vermilion tinted on the front of the face
+    from .template.export import LIPS, SKIN, vermilion_weight
+
+    front = P0[:, 2] > 0.5 * (lm0["2.2"][2] + lm0["2.3"][2]) - 0.02
+    w = vermilion_weight(P0, lm0, front)[:, None]
+    col = SKIN * (1 - w) + LIPS * w
     imgs = []
     for k in idx:
         extra = [(V[k], Fp, (0.96, 0.96, 0.94) if n.startswith(("eye", "teeth")) else (0.8, 0.45, 0.45))

@@ -56,6 +56,19 @@ TEETH = np.array([0.97, 0.95, 0.85])
 TONGUE = np.array([0.8, 0.42, 0.42])
 
 
+def vermilion_weight(V, lm: dict, mask=None) -> np.ndarray:
+    """Lip tint weight in [0, 1] per vertex of V (n, 3) [m]: an ellipse through the lip corners
+    (8.3, 8.4) and the lip midpoints (8.1, 8.2) around the stomion (mean of 2.2, 2.3), with a
+    soft edge; ``mask`` (n,) bool limits it to some vertices."""
+    sto = 0.5 * (lm["2.2"] + lm["2.3"])
+    half_w = 0.5 * abs(lm["8.3"][0] - lm["8.4"][0])
+    up, dn = lm["8.1"][1] - sto[1], sto[1] - lm["8.2"][1]
+    dy = V[:, 1] - sto[1]
+    e = ((V[:, 0] - sto[0]) / half_w) ** 2 + (dy / np.where(dy > 0, up, dn)) ** 2
+    w = np.clip((1.15 - e) / 0.3, 0.0, 1.0)
+    return w if mask is None else w * mask
+
+
 def colored_scene(t: Template) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Skin and rigid parts merged into one mesh with per-vertex colours for previews.
 
@@ -64,17 +77,10 @@ def colored_scene(t: Template) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     Vs, Fs, Cs = [t.vertices], [t.faces], []
     col = np.tile(SKIN, (t.vertex_count, 1))
-    # vermilion: an ellipse through the lip corners (8.3, 8.4) and the lip midpoints (8.1, 8.2)
-    lm = t.landmarks()
-    sto = 0.5 * (lm["2.2"] + lm["2.3"])
-    half_w = 0.5 * abs(lm["8.3"][0] - lm["8.4"][0])
-    up, dn = lm["8.1"][1] - sto[1], sto[1] - lm["8.2"][1]
-    dy = t.vertices[:, 1] - sto[1]
-    e = (((t.vertices[:, 0] - sto[0]) / half_w) ** 2 + (dy / np.where(dy > 0, up, dn)) ** 2)
     lip_ids = [REGIONS.index(r) for r in ("upper_lip", "lower_lip", "lip_corner_L", "lip_corner_R")]
     on_lips = np.zeros(t.vertex_count, bool)
     on_lips[np.unique(t.faces[np.isin(t.face_region, lip_ids)])] = True
-    wgt = np.clip((1.15 - e) / 0.3, 0.0, 1.0) * on_lips
+    wgt = vermilion_weight(t.vertices, t.landmarks(), on_lips)
     col = col * (1 - wgt[:, None]) + LIPS * wgt[:, None]
     Cs.append(col)
     off = t.vertex_count
