@@ -582,10 +582,10 @@ def adapt(
         records.append(LevelRecord(records[-1].level + 1, "projection", len(fps), 0, 0, None, 0, de.value, em, E, de.stats["rms"], time.perf_counter() - t0))
         Vk = Vp
 
-    # -- 6. needle triangles: where the adapted surface squeezed a triangle flat (e.g. closed lips
+    # -- 6. squeezed triangles: where the adapted surface squeezed a triangle flat (e.g. closed lips
     # pressing the template's mouth corner), its vertices relax toward their neighbours' mean in
     # the tangent plane and are put back on the scan; a flat triangle would make a flat tet
-    Vr = _relax_needles(Vk, TF, scan_q, n0_template, folded0, reject)
+    Vr = _relax_squeezed(Vk, TF, scan_q, n0_template, folded0, reject)
     if Vr is not Vk:
         Vk = Vr
         de, em, E = errors(Vk)
@@ -659,42 +659,84 @@ def _unfold(V: np.ndarray, V_safe: np.ndarray, F: np.ndarray, folds: _FoldCheck,
     return V
 
 
-NEEDLE_RATIO = 0.08
-"""A triangle whose height over its longest edge is below this is a needle (about 5 degrees)."""
+TRI_QUALITY_FLOOR = 0.3
+"""A triangle whose quality ``4 sqrt(3) area / sum(edge^2)`` (1 equilateral, 0 flat) is below this
+and below half its template quality is *squeezed* (e.g. a 150-degree cap, or a 10-degree needle)."""
 
 
-def _needles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    P = V[F]
-    e = np.linalg.norm(P - np.roll(P, 1, axis=1), axis=2).max(1)
-    A = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
-    return 2.0 * A / np.maximum(e, 1e-300) < NEEDLE_RATIO * e
+def _tri_quality(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    return _tri_quality_points(V[F])
 
 
-def _relax_needles(V, F, scan_q, folds: _FoldCheck, allowed, reject, *, rounds: int = 10):
-    """Tangential relaxation of the vertices of needle triangles, re-projected onto the scan."""
-    bad = _needles(V, F) & ~_needles(folds.V0, F)
-    if not bad.any():
+def _relax_squeezed(V, F, scan_q, folds: _FoldCheck, allowed, reject, *, rounds: int = 60):
+    """Tangential relaxation of squeezed triangles (see :data:`TRI_QUALITY_FLOOR`), on the scan.
+
+    Where the adapted surface squeezed triangles flat (closed lips pressing the template's mouth
+    corner, a crease of the nostril), their vertices and those vertices' neighbours step halfway
+    to their neighbours' mean in the tangent plane and are put back on the scan (closest point).
+    A step is kept only if it raises the smallest quality of the vertex's triangles, and a
+    round's steps are undone on any triangle they made worse than both its old quality and the
+    floor, so the relaxation never trades one flat triangle for another. A flat triangle makes a
+    flat tet in the skin layer (Sec. 6.2), and a flat tet sets the solver's step (Sec. 6.4.4).
+    """
+    q0 = _tri_quality(folds.V0, F)
+    target = np.minimum(TRI_QUALITY_FLOOR, 0.5 * q0)
+    if not (_tri_quality(V, F) < target).any():
         return V
     n = len(V)
     E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     E = np.concatenate([E, E[:, ::-1]])
     deg = np.bincount(E[:, 0], minlength=n)
+    vf = np.repeat(np.arange(len(F)), 3)  # vertex -> face incidence, as pairs
+    vv = F.ravel()
     W = V.copy()
     for _ in range(rounds):
-        idx = np.unique(F[_needles(W, F) & bad])
-        if not len(idx):
+        q = _tri_quality(W, F)
+        bad = q < target
+        if not bad.any():
             break
+        act = np.zeros(n, bool)
+        act[F[bad].ravel()] = True
+        act[E[act[E[:, 0]], 1]] = True  # and their one-ring
+        idx = np.flatnonzero(act)
         mean = np.zeros_like(W)
         np.add.at(mean, E[:, 0], W[E[:, 1]])
         mean = mean / np.maximum(deg, 1)[:, None]
         N = vertex_normals(W, F)[idx]
         step = mean[idx] - W[idx]
         step -= np.einsum("kd,kd->k", step, N)[:, None] * N  # stay in the tangent plane
-        W[idx] += 0.5 * step
-        cp = scan_q.closest_point(W[idx], reject)
+        C = W.copy()
+        C[idx] += 0.5 * step
+        cp = scan_q.closest_point(C[idx], reject)
         ok = cp.face >= 0
-        W[idx[ok]] = cp.points[ok]
+        C[idx[ok]] = cp.points[ok]
+        # keep a vertex's step if, with its neighbours where they were, its worst triangle improves
+        old_min = np.full(n, np.inf)
+        np.minimum.at(old_min, vv, q[vf])
+        new_min = np.full(n, np.inf)
+        for k in range(3):  # move one corner at a time
+            P = W[F]
+            P[:, k] = C[F[:, k]]
+            qk = _tri_quality_points(P)
+            np.minimum.at(new_min, F[:, k], qk)
+        keep = act & (new_min > old_min)
+        if not keep.any():
+            break
+        Wn = W.copy()
+        Wn[keep] = C[keep]
+        qn = _tri_quality(Wn, F)
+        worse = (qn < q) & (qn < target)
+        Wn[F[worse].ravel()] = W[F[worse].ravel()]
+        if np.array_equal(Wn, W):
+            break
+        W = Wn
     return _unfold(W, V, F, folds, allowed)
+
+
+def _tri_quality_points(P: np.ndarray) -> np.ndarray:
+    e2 = (np.linalg.norm(P - np.roll(P, 1, axis=1), axis=2) ** 2).sum(1)
+    A = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+    return 4.0 * np.sqrt(3.0) * A / np.maximum(e2, 1e-300)
 
 
 def _face_normals_sub(V: np.ndarray, F: np.ndarray, faces: np.ndarray) -> np.ndarray:

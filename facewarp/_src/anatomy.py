@@ -172,7 +172,8 @@ def slab_anatomy(
     return Anatomy(head=SlabHead(V, F), skin=skin, muscles=ms, quality=anatomy_report(skin, ms, check_intersections=False))
 
 
-def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=None, activation_index=None):
+def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=None, activation_index=None,
+               vertex_amount=None):
     """Pack muscles for the solver (:class:`facewarp._src.muscle_stage.MuscleRig`).
 
     Control points are numbered muscle by muscle in ``muscles.muscles`` order. Linear muscles:
@@ -187,7 +188,11 @@ def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=N
         jaw: A :class:`facewarp._src.jaw.JawKinematic`; with ``head`` (its ``face_region``),
             gives every control point the jaw amount (Eq. 6.4.9) of the region of its skin point
             (a ring centre takes the mean of its ring). Without it all amounts are 0.
-        head: The head the muscles were built on (needed with ``jaw``).
+        head: The head the muscles were built on (needed with ``jaw`` and ``vertex_amount``).
+        vertex_amount: Jaw amount per head vertex, shape (n,), float64 (the smoothed field
+            the skin nodes use, :func:`facewarp._src.face.face_rig_from_anatomy`); when given,
+            a control point takes the amount interpolated at its skin point instead of its
+            region's, so the muscles and the skin they pull turn with the jaw together.
         activation_index: Index into ``Control.activations`` per muscle (default 0..M-1).
 
     Returns:
@@ -214,7 +219,18 @@ def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=N
             center[i] = m.control_points[0::2].mean(0)
     ctrl_jaw = np.zeros(len(ctrl))
     center_jaw = np.zeros(M)
-    if jaw is not None:
+    if vertex_amount is not None:
+        if head is None:
+            raise InputError("muscle_rig: vertex_amount needs the head (its faces)")
+        va = np.asarray(vertex_amount, dtype=np.float64)
+        if va.shape != (len(head.vertices),):
+            raise InputError(f"muscle_rig: vertex_amount must have shape ({len(head.vertices)},), got {va.shape}")
+        for i, m in enumerate(ms):
+            sp_ = m.skin_points
+            ctrl_jaw[offs[i] : offs[i + 1]] = np.einsum("kj,kj->k", sp_.bary, va[np.asarray(head.faces)[sp_.face]])
+            if m.kind is not MuscleKind.LINEAR:
+                center_jaw[i] = ctrl_jaw[offs[i] : offs[i + 1]].mean()
+    elif jaw is not None:
         if head is None:
             raise InputError("muscle_rig: jaw amounts need the head (its face regions)")
         from .template import REGIONS

@@ -31,7 +31,7 @@ from .jaw import JawKinematic
 from .muscle_stage import MuscleRig
 from .template import REGIONS
 
-__all__ = ["FaceRig", "FaceSimulator", "Frames", "face_rig_from_anatomy", "load_face_rig", "save_face_rig",
+__all__ = ["FaceRig", "FaceSimulator", "Frames", "face_rig_from_anatomy", "load_face_rig", "node_jaw_amounts", "save_face_rig",
            "MUSCLE_STIFFNESS", "BONE_REGIONS", "save_frames_npz"]
 
 MUSCLE_STIFFNESS = 1.0e7
@@ -205,7 +205,7 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
     # --- muscles (packed by the anatomy stage, with Eq. 6.4.9 jaw amounts)
     from .anatomy import muscle_rig
 
-    rig = muscle_rig(ms, stiffness=muscle_stiffness, jaw=jaw, head=head)
+    rig = muscle_rig(ms, stiffness=muscle_stiffness, head=head, vertex_amount=v_amount)
     # a node tied to several muscles (the modiolus at the lip corner has five) shares k_m among
     # them, so no node is pulled by more than one muscle's stiffness in total
     per_node = np.bincount(rig.att_node, minlength=len(skin.vertices))
@@ -315,18 +315,19 @@ def _activation_vector(names: list[str], expr) -> np.ndarray:
     return out
 
 
-def sliver_dt(V, T, builder) -> float:
-    """Stable step [s] set by the flattest tet: the volume and area energies of Eq. 6.4.7-6.4.8
-    have a stiffness of about (k_volume + k_area) / h^2 on a tet of height h (its volume over
-    its largest face), so ``dt <= 0.5 h sqrt(m / (k_volume + k_area))`` (half the explicit limit
-    1 / omega). On most meshes the edge limit of :func:`solver.stable_dt` is the smaller."""
-    V = np.asarray(V, float)
-    a, b, c, d = (V[T[:, i]] for i in range(4))
-    vol = np.abs(np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))) / 6.0
-    areas = [0.5 * np.linalg.norm(np.cross(q - p, r - p), axis=1) for p, q, r in ((a, b, c), (a, b, d), (a, c, d), (b, c, d))]
-    h = 3.0 * vol / np.maximum(np.max(areas, axis=0), 1e-30)
-    k = max(builder.k_volume + builder.k_area, 1e-30)
-    return float(0.5 * h.min() * np.sqrt(builder.mass.min() / k))
+def node_jaw_amounts(fr: FaceRig) -> np.ndarray:
+    """Eq. 6.4.9 jaw amount of every tet node, shape (p,), float64: that of the head vertex the
+    node lies on or under (sheets are stored one after another, node ``l * q + i`` below outer
+    node ``i``). Rigs without ``vertex_jaw`` give the held and supported nodes' amounts only."""
+    n = len(fr.nodes)
+    out = np.zeros(n)
+    q = int((fr.layer == 0).sum())
+    if fr.vertex_jaw is not None and q and n % q == 0 and (fr.surface_vertex[:q] >= 0).all():
+        out = np.asarray(fr.vertex_jaw, np.float64)[fr.surface_vertex[np.arange(n) % q]]
+    else:
+        out[fr.jaw_nodes] = fr.jaw_amount
+        out[fr.support_nodes] = fr.support_amount
+    return out
 
 
 class FaceSimulator:
@@ -340,18 +341,22 @@ class FaceSimulator:
     CONTROL_CHUNKS = 16
 
     def __init__(self, fr: FaceRig, *, device: str = "cpu", dt: float | None = None, substeps: int | None = None,
-                 fps: float = 30.0, support_stiffness: float | None = None, edge_damping: float = EDGE_DAMPING):
+                 fps: float = 30.0, support_stiffness: float | None = None, edge_damping: float = EDGE_DAMPING,
+                 mass_scaling: bool = True):
         import warp as wp
 
         from .model import ModelBuilder
-        from .muscle_stage import JawStage, MuscleStage, SupportStage
-        from .solver import SolverVerlet, stable_dt
+        from .muscle_stage import CarryStage, JawStage, MuscleStage, SupportStage
+        from .solver import MASS_SCALING_QUANTILE, SolverVerlet, scale_masses
 
         self.fr = fr
         self.fps = float(fps)
         builder = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held,
                                muscle_count=len(fr.rig.names), edge_damping=edge_damping)
-        dt_safe = min(stable_dt(builder), sliver_dt(fr.nodes, fr.tets, builder))
+        # the substep: the 2 % of nodes with the smallest own limit (short edges, flat tets in
+        # creases of adapted heads) get the mass that lifts them to it (selective mass scaling)
+        dt_safe, self.added_mass_fraction = scale_masses(
+            builder, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0)
         frame_dt = 1.0 / self.fps
         if substeps is None:
             substeps = int(np.ceil(frame_dt / (dt or dt_safe)))
@@ -363,13 +368,16 @@ class FaceSimulator:
         self.model = builder.finalize(device)
         self.device = self.model.device
         self.jaw = fr.jaw
-        self.muscles = MuscleStage(fr.rig, self.jaw, self.device)
         self.jaw_stage = JawStage(self.jaw, fr.jaw_nodes, fr.jaw_amount, self.model.rest_positions, self.device)
         k_support = float(self.model.vertex_hold_stiffness.numpy().max()) if fr.held.any() else 0.0
         self.support = SupportStage(self.jaw, fr.support_nodes, fr.support_normal, fr.support_amount,
                                     support_stiffness if support_stiffness is not None else k_support,
                                     self.model.rest_positions, self.device)
-        self.solver = SolverVerlet(self.model, stages=[self.jaw_stage, self.support, self.muscles])
+        node_jaw = node_jaw_amounts(fr)
+        self.muscles = MuscleStage(fr.rig, self.jaw, self.device, node_amount=node_jaw)
+        carried = np.flatnonzero((node_jaw > 0) & ~fr.fixed)
+        self.carry = CarryStage(self.jaw, carried, node_jaw[carried], self.device)
+        self.solver = SolverVerlet(self.model, stages=[self.carry, self.jaw_stage, self.support, self.muscles])
         self.state = self.model.state()
         self.scratch = self.model.state()
         self.control = self.model.control()

@@ -19,6 +19,9 @@ Per substep, quasi-statically (Sec. 6.4.4):
    between the spring and the fibre, is added to the skin node.
 5. ``_jaw_targets``: held / fixed nodes carried by the jaw get the jaw-rotated rest position as
    their target.
+6. ``_jaw_carry`` / ``_jaw_remember``: the free nodes of the jaw regions move with the change
+   of the jaw angles since the last substep (positions and previous positions alike, so no
+   velocity is injected), by their Eq. 6.4.9 amount.
 """
 
 from __future__ import annotations
@@ -162,6 +165,12 @@ def _muscle_forces(
     att_uv: wp.array(dtype=wp.vec2),
     att_rest_length: wp.array(dtype=float),
     att_stiffness: wp.array(dtype=float),
+    att_jaw_shift: wp.array(dtype=float),
+    jaw_pivot: wp.vec3,
+    jaw_u: wp.vec3,
+    jaw_v: wp.vec3,
+    # Control:
+    jaw_angles: wp.array(dtype=float),
     # In:
     seg_center: wp.array(dtype=wp.vec3),
     seg_frame: wp.array(dtype=wp.mat33),
@@ -176,6 +185,11 @@ def _muscle_forces(
     s = att_seg[k]
     F = seg_frame[s]
     pm = _ellipsoid_point(seg_center[s], F, seg_radii[s], att_uv[k][0], att_uv[k][1])
+    # the muscle point turned with the jaw by the muscle's amount there; the node by its own:
+    # the difference (a_node - a_muscle) theta is turned in, so the jaw alone strains no spring
+    shift = att_jaw_shift[k]
+    if shift != 0.0:
+        pm = _jaw_move(pm, shift, jaw_pivot, jaw_u, jaw_v, jaw_angles)
     att_point_out[k] = pm
     i = att_node[k]
     d = pm - positions_in[i]
@@ -235,3 +249,44 @@ def _support_forces(
     p0 = _jaw_move(rest_positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
     n = _jaw_move(support_normal[k], a, wp.vec3(0.0), jaw_u, jaw_v, jaw_angles)
     wp.atomic_add(forces_out, i, -support_stiffness * wp.dot(positions_in[i] - p0, n) * n)
+
+
+@wp.func
+def _jaw_unmove(p: wp.vec3, amount: float, pivot: wp.vec3, u_axis: wp.vec3, v_axis: wp.vec3, angles: wp.array(dtype=float)):
+    # inverse of _jaw_move: undo the v rotation, then the u rotation
+    q = _rotate_about(p, pivot, v_axis, -angles[1] * amount)
+    return _rotate_about(q, pivot, u_axis, -angles[0] * amount)
+
+
+@wp.kernel
+def _jaw_carry(
+    # Model:
+    carry_node: wp.array(dtype=wp.int32),
+    carry_jaw: wp.array(dtype=float),
+    jaw_pivot: wp.vec3,
+    jaw_u: wp.vec3,
+    jaw_v: wp.vec3,
+    # Control:
+    jaw_angles: wp.array(dtype=float),
+    # Stage state (angles of the last substep):
+    jaw_prev: wp.array(dtype=float),
+    # State in (moved in place):
+    positions: wp.array(dtype=wp.vec3),
+    prev_positions: wp.array(dtype=wp.vec3),
+):
+    # Eq. 6.4.9 applied to the mass points: x <- J(a theta) J(a theta_prev)^-1 x
+    if jaw_angles[0] == jaw_prev[0] and jaw_angles[1] == jaw_prev[1]:
+        return
+    k = wp.tid()
+    i = carry_node[k]
+    a = carry_jaw[k]
+    x = _jaw_unmove(positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_prev)
+    positions[i] = _jaw_move(x, a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    y = _jaw_unmove(prev_positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_prev)
+    prev_positions[i] = _jaw_move(y, a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
+
+
+@wp.kernel
+def _jaw_remember(jaw_angles: wp.array(dtype=float), jaw_prev: wp.array(dtype=float)):
+    jaw_prev[0] = jaw_angles[0]
+    jaw_prev[1] = jaw_angles[1]

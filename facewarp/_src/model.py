@@ -126,9 +126,11 @@ class ModelBuilder:
         k_area: Area stiffness [J] of Eq. 6.4.7. Default 7.5 (Table 6.3).
         k_volume: Volume stiffness [J] of Eq. 6.4.8. Default 7.5 (Table 6.3).
         hold_stiffness: Spring stiffness [N/m] pulling each ``held`` node to its target.
-            Default (None): four times the stiffest rest edge spring, ``4 max(k0 / D0^2)``
-            (6e5 N/m for 1 cm outer edges), stiff against the tissue yet within the stable
-            step of :func:`facewarp._src.solver.stable_dt`.
+            Default (None): four times the 98th percentile of the rest edge springs,
+            ``4 k0 / D0^2`` (6e5 N/m for 1 cm outer edges), stiff against the tissue yet within
+            the stable step of :func:`facewarp._src.solver.stable_dt`. The percentile keeps a
+            few very short edges (a crease of an adapted head) from stiffening every hold;
+            :func:`facewarp._src.solver.scale_masses` takes care of those edges' own nodes.
         muscle_count: Number of muscle activations in :class:`Control`. Default 0.
 
     Raises:
@@ -240,7 +242,7 @@ class ModelBuilder:
         A0 = 0.5 * np.linalg.norm(np.cross(V32[Fc[:, 1]] - V32[Fc[:, 0]], V32[Fc[:, 2]] - V32[Fc[:, 0]]), axis=1)
 
         if hold_stiffness is None:
-            hold_stiffness = 4.0 * float(np.max(k0 / D0**2))
+            hold_stiffness = 4.0 * float(np.quantile(k0 / D0**2, 0.98))
         if not (np.isfinite(hold_stiffness) and hold_stiffness >= 0.0):
             raise InputError(f"hold_stiffness must be a finite value >= 0 [N/m], got {hold_stiffness}")
 

@@ -16,7 +16,7 @@ import numpy as np
 from .errors import InputError
 from .model import Model
 
-__all__ = ["MuscleRig", "MuscleStage", "JawStage", "ellipsoid_uv", "rig_reference"]
+__all__ = ["CarryStage", "MuscleRig", "MuscleStage", "JawStage", "SupportStage", "ellipsoid_uv", "rig_reference"]
 
 PIVOT_CENTER = -1  # a sphincter point contracts toward its ring centre
 PIVOT_FIXED = -2  # a linear muscle's attachment on the bone does not contract
@@ -78,6 +78,19 @@ class MuscleRig:
     @property
     def muscle_count(self) -> int:
         return len(self.names)
+
+    def attachment_jaw(self) -> np.ndarray:
+        """Jaw amount of the muscle at each attachment, shape (K,), float64: the control points'
+        amounts blended with the rational Bezier basis of the attachment's curve at the middle of
+        its segment (the amount by which that part of the muscle turns with the jaw)."""
+        if len(self.att_node) == 0:
+            return np.zeros(0)
+        seg = np.asarray(self.att_seg)
+        c = np.asarray(self.seg_curve)[seg]
+        t = np.asarray(self.seg_t, np.float64)[seg].mean(1)
+        b = np.stack([(1 - t) ** 2, 2 * t * (1 - t), t * t], 1) * np.asarray(self.curve_weight, np.float64)[c]
+        b /= b.sum(1, keepdims=True)
+        return np.einsum("kj,kj->k", b, np.asarray(self.ctrl_jaw, np.float64)[np.asarray(self.curve_ctrl)[c]])
 
     def curve_normals(self) -> np.ndarray:
         """Unit normals of each curve's control-point plane at rest, shape (C, 3)."""
@@ -195,7 +208,10 @@ class MuscleStage:
         att_point: Current attachment points on the ellipsoids [m], shape (K,), wp.vec3.
     """
 
-    def __init__(self, rig: MuscleRig, jaw, device):
+    def __init__(self, rig: MuscleRig, jaw, device, node_amount=None):
+        """``node_amount`` (vertex_count,): the jaw amount (Eq. 6.4.9) of every tet node; with it,
+        each spring's muscle end turns with the jaw by its node's amount rather than by the
+        muscle's (:meth:`MuscleRig.attachment_jaw`), so opening the jaw alone pulls no node."""
         wp = _wp()
         from . import kernels_muscle as km
 
@@ -227,6 +243,10 @@ class MuscleStage:
         self.att_uv = f32(rig.att_uv, wp.vec2)
         self.att_rest_length = f32(rig.att_rest_length)
         self.att_stiffness = f32(rig.att_stiffness)
+        shift = np.zeros(len(rig.att_node))
+        if node_amount is not None and len(rig.att_node):
+            shift = np.asarray(node_amount, np.float64)[rig.att_node] - rig.attachment_jaw()
+        self.att_jaw_shift = f32(shift)
         P, S, K = len(rig.ctrl_rest), len(rig.seg_curve), len(rig.att_node)
         self.ctrl_jawed = wp.zeros(P, dtype=wp.vec3, device=device)
         self.ctrl_contracted = wp.zeros(P, dtype=wp.vec3, device=device)
@@ -269,6 +289,7 @@ class MuscleStage:
         if len(self.rig.att_node):
             wp.launch(self.km._muscle_forces, dim=len(self.rig.att_node),
                       inputs=[self.att_node, self.att_seg, self.att_uv, self.att_rest_length, self.att_stiffness,
+                              self.att_jaw_shift, self.jaw_pivot, self.jaw_u, self.jaw_v, control.jaw_angles,
                               self.seg_center, self.seg_frame, self.seg_radii, state_in.positions],
                       outputs=[self.att_point, forces], device=self.device)
 
@@ -295,6 +316,46 @@ class JawStage:
         _wp().launch(self.km._jaw_targets, dim=self.count,
                      inputs=[self.nodes, self.amounts, self.rest, self.pivot, self.u, self.v, control.jaw_angles],
                      outputs=[targets], device=self.device)
+
+
+class CarryStage:
+    """Carries the free mass points of the jaw regions with the jaw (Eq. 6.4.9; solver stage).
+
+    Sec. 6.4.3 applies the jaw rotation to the *mass points* of the lip-corner, upper-lip,
+    lower-lip and bottom-face regions with their non-uniform amount. Each substep in which the
+    jaw angles changed, every carried node (and its previous position, so that no velocity is
+    injected) moves by ``J(a theta) J(a theta_prev)^-1``; the skin forces then only answer the
+    strain of the amount field, not the whole rigid swing. Without it the thin skin layer of a
+    lower lip is dragged by the chin (amount 1) over its own inner sheet (amount ~0.5) and
+    inverts at a 30 degree jaw angle. The last angles live on the device (no host round trip);
+    :meth:`reset` sets them back to the rest pose.
+    """
+
+    def __init__(self, jaw, nodes, amounts, device):
+        wp = _wp()
+        from . import kernels_muscle as km
+
+        self.km = km
+        self.device = device
+        keep = np.asarray(amounts) > 0
+        self.count = int(keep.sum())
+        self.nodes = wp.array(np.asarray(nodes)[keep].astype(np.int32), dtype=wp.int32, device=device)
+        self.amounts = wp.array(np.asarray(amounts)[keep].astype(np.float32), dtype=float, device=device)
+        self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+        self.prev = wp.zeros(2, dtype=float, device=device)
+
+    def reset(self, angles=(0.0, 0.0)) -> None:
+        """Set the remembered jaw angles [rad] (those the state's positions correspond to)."""
+        self.prev.assign(np.asarray(angles, np.float32))
+
+    def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
+        if self.count == 0:
+            return
+        wp = _wp()
+        wp.launch(self.km._jaw_carry, dim=self.count,
+                  inputs=[self.nodes, self.amounts, self.pivot, self.u, self.v, control.jaw_angles, self.prev],
+                  outputs=[state_in.positions, state_in.prev_positions], device=self.device)
+        wp.launch(self.km._jaw_remember, dim=1, inputs=[control.jaw_angles], outputs=[self.prev], device=self.device)
 
 
 class SupportStage:

@@ -36,7 +36,8 @@ from . import kernels_tissue as kt
 from .errors import SimulationError
 from .model import Control, Model, State, _warp
 
-__all__ = ["DT_STABLE_1CM", "SolverStage", "SolverVerlet", "simulate", "stable_dt"]
+__all__ = ["DT_STABLE_1CM", "MASS_SCALING_QUANTILE", "SolverStage", "SolverVerlet", "node_stable_dt", "scale_masses",
+           "simulate", "stable_dt"]
 
 DT_STABLE_1CM = 0.6e-3
 """Largest step [s] found stable for a 1 cm tet with the Table 6.3 defaults: one regular
@@ -71,12 +72,85 @@ def stable_dt(model_or_builder, *, safety: float = 0.5) -> float:
     return float(safety * DT_STABLE_1CM * (d0.min() / 0.01) * np.sqrt(mass.min() / 0.5) * np.sqrt(15.0 / k))
 
 
+MASS_SCALING_QUANTILE = 0.02
+"""Fraction of nodes whose own stable step may lie below the chosen substep; those nodes get
+the extra mass that brings them up to it (:func:`scale_masses`)."""
+
+
+def node_stable_dt(builder, *, safety: float = 0.5) -> np.ndarray:
+    """The stable step [s] each node allows, shape (n,), float64.
+
+    Two limits per node, the smaller wins:
+
+    * edges: :func:`stable_dt`'s rule with the node's shortest incident edge and its own mass
+      (an edge of rest length D0 is a spring k0 / D0^2);
+    * flat tets: the volume and area energies of Eq. 6.4.7-6.4.8 have a stiffness of about
+      (k_volume + k_area) / h^2 on a tet of height h (its volume over its largest face), so
+      ``dt <= 0.5 h sqrt(m / (k_volume + k_area))`` (half the explicit limit 1 / omega) over the
+      node's tets.
+
+    Args:
+        builder: a :class:`~facewarp._src.model.ModelBuilder`.
+        safety: fraction of the measured single-tet limit (as :func:`stable_dt`).
+    """
+    V, T, m = builder.vertices, builder.tets, builder.mass
+    n = len(V)
+    k = max(float(builder.edge_k0.max()), 1e-30)
+    E, d0 = builder.edges, builder.edge_rest_lengths
+    dmin = np.full(n, np.inf)
+    np.minimum.at(dmin, E[:, 0], d0)
+    np.minimum.at(dmin, E[:, 1], d0)
+    dt = safety * DT_STABLE_1CM * (dmin / 0.01) * np.sqrt(m / 0.5) * np.sqrt(15.0 / k)
+    a, b, c, d = (V[T[:, i]] for i in range(4))
+    vol = np.abs(np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))) / 6.0
+    areas = [0.5 * np.linalg.norm(np.cross(q - p, r - p), axis=1) for p, q, r in ((a, b, c), (a, b, d), (a, c, d), (b, c, d))]
+    h = 3.0 * vol / np.maximum(np.max(areas, axis=0), 1e-30)
+    hmin = np.full(n, np.inf)
+    for i in range(4):
+        np.minimum.at(hmin, T[:, i], h)
+    kf = max(builder.k_volume + builder.k_area, 1e-30)
+    return np.minimum(dt, 0.5 * hmin * np.sqrt(m / kf))
+
+
+def scale_masses(builder, *, quantile: float = MASS_SCALING_QUANTILE, safety: float = 0.5) -> tuple[float, float]:
+    """Selective mass scaling: choose the substep and add mass where a node is below it.
+
+    The substep is the ``quantile`` of :func:`node_stable_dt` over the free nodes; a node that
+    allows less (a short edge or a flat tet: on adapted heads these sit in sharp creases of the
+    lips and nostrils) gets its mass raised by ``(dt / dt_node)^2``, which raises its own limit
+    to dt. The change is written into ``builder.mass``; only the inertia of those few nodes
+    changes, which the quasi-static expressions (slow muscle activations, damped skin) do not
+    feel. ``quantile = 0`` leaves the masses alone and returns the smallest limit.
+
+    Args:
+        builder: a :class:`~facewarp._src.model.ModelBuilder` (its ``mass`` is updated).
+        quantile: fraction of the free nodes that may get extra mass, in [0, 0.5].
+        safety: as :func:`stable_dt`.
+
+    Returns:
+        ``(dt, added)``: the substep [s] and the added mass as a fraction of the total.
+    """
+    if not 0.0 <= quantile <= 0.5:
+        raise ValueError(f"quantile must lie in [0, 0.5], got {quantile}")
+    dtn = node_stable_dt(builder, safety=safety)
+    free = ~builder.fixed
+    if not free.any():
+        return float(dtn.min()), 0.0
+    dt = float(np.quantile(dtn[free], quantile)) if quantile > 0 else float(dtn[free].min())
+    factor = np.where(free, np.maximum(1.0, (dt / dtn) ** 2), 1.0)
+    total = float(builder.mass.sum())
+    builder.mass = builder.mass * factor
+    return dt, float(builder.mass.sum() / total - 1.0)
+
+
 class SolverStage(Protocol):
     """A stage that adds external forces or moves kinematic targets each substep.
 
     Muscles (Eq. 6.4.1) accumulate spring forces into ``forces``; the jaw (Eq. 6.4.9) writes
     the targets of the nodes it carries (fixed nodes are placed on their target, held nodes
-    are pulled to it). ``apply`` may only launch kernels: no allocation, no host read.
+    are pulled to it), and its carry stage moves the free jaw-region nodes kinematically, in
+    place in ``state_in`` (both position buffers, before any force is computed). ``apply`` may
+    only launch kernels: no allocation, no host read.
     """
 
     def apply(
@@ -92,7 +166,7 @@ class SolverStage(Protocol):
 
         Args:
             model: the tissue model.
-            state_in: positions at t and t - dt (read only).
+            state_in: positions at t and t - dt (read only, except a kinematic carry).
             control: activations, jaw angles (read only).
             dt: substep [s].
             forces: forces [N] to accumulate into (wp.atomic_add), shape (vertex_count,),

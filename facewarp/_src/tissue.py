@@ -41,6 +41,12 @@ for any head, so nothing has to be redefined per head:
    a still inverted tet may go down to a tenth of the smallest depth. A vertex whose triangles
    face opposite ways (the skin folded over itself) has no inward direction at all: that is an
    error in the input surface and is reported as such.
+5. Where crossing directions still leave flat tets (mean ratio below
+   :data:`TET_QUALITY_FLOOR`, typically in a crease an adaptation pressed into the lips or
+   nostrils), the inner sheet is relaxed toward a parallel copy of the skin,
+   ``mean_j (P_j + X_i - X_j)``, one node at a time and only where the node's worst tet improves.
+   Flat tets matter twice: they invert first under load, and their stiff volume and area
+   response sets the explicit step of the solver (:func:`facewarp._src.solver.node_stable_dt`).
 
 Clamping rather than predefining the topology (the thesis's choice) keeps the build automatic
 for every head with the template's topology, and leaves the tet count and the node numbering
@@ -68,6 +74,7 @@ __all__ = [
     "split_prisms",
     "tet_conformity",
     "tet_dihedral_angles",
+    "tet_mean_ratio",
     "tet_quality",
     "tet_volumes",
     "build_skin_layer",
@@ -451,6 +458,114 @@ def _visible_directions(n: np.ndarray, X: np.ndarray, Fl: np.ndarray, *, min_cos
     return n
 
 
+TET_QUALITY_FLOOR = 0.15
+"""Mean-ratio quality (:func:`tet_mean_ratio`) below which step 5 of the extrusion relaxes a
+tet's inner nodes (a regular tet has 1; the prisms of a flat skin patch 0.3-0.6)."""
+
+
+def tet_mean_ratio(V, T) -> np.ndarray:
+    """Mean-ratio quality ``12 (3 |vol|)^(2/3) / sum(edge^2)`` of each tet: 1 for a regular
+    tet, toward 0 for a flat one (sliver, cap, needle, wedge), scale invariant.
+
+    Args:
+        V: Vertex positions [m], shape (n, 3), float64.
+        T: Tetrahedra, shape (k, 4), int64.
+
+    Returns:
+        Quality, shape (k,), float64, in [0, 1]; negative for an inverted tet.
+    """
+    V, T = _check_VT(V, T)
+    vol = tet_volumes(V, T)
+    P = V[T]
+    e2 = sum(np.sum((P[:, j] - P[:, i]) ** 2, axis=1) for i, j in _TET_EDGES)
+    return np.sign(vol) * 12.0 * np.cbrt(3.0 * np.abs(vol)) ** 2 / np.maximum(e2, 1e-300)
+
+
+_STEPS = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1) if (a, b, c) != (0, 0, 0)], float)
+_STEPS /= np.linalg.norm(_STEPS, axis=1, keepdims=True)
+
+
+def _relax_inner_sheet(X, Fl, d, d_inward, build, A, *, d_max, sweeps: int):
+    """Step 5 of :func:`extrude_skin_layer`: a hill climb of the inner-sheet nodes under tets of
+    mean ratio below :data:`TET_QUALITY_FLOOR` (and of their inner neighbours).
+
+    Each node tries a parallel copy of the skin, ``mean_j (P_j + X_i - X_j)`` over its
+    neighbours j, and 26 steps of its own radius (a quarter of its depth at first, halved when
+    nothing helps) and takes the candidate that most raises the worst quality of its tets
+    (neighbours where they were). Candidates must stay on the inner side of the skin (within
+    60 deg of the node's old direction) and no deeper than the requested thickness. A round's
+    steps are undone on any tet they made worse than both before and the floor."""
+    p = len(X)
+    Ac = A.tocoo()
+    ii, jj = Ac.row, Ac.col
+    deg = np.bincount(ii, minlength=p).astype(float)
+    P, T, prism = build(d, d_inward)
+    inner_of = np.full(len(P), -1)
+    inner_of[len(P) - p:] = np.arange(p)  # the inner sheet is the last block of nodes
+    radius = 0.25 * d.copy()
+
+    def node_min_quality(C, act):
+        """Worst quality of each active node's tets with only that node at C (others at P)."""
+        off = C - X
+        dc = np.linalg.norm(off, axis=1)
+        dir_c = off / np.maximum(dc, 1e-300)[:, None]
+        ok = act & (np.einsum("ij,ij->i", dir_c, d_inward) > 0.5) & (dc <= d_max) & (dc > 0)
+        out = np.full(p, np.inf)
+        for k in range(4):
+            own = inner_of[T[:, k]]
+            sel = np.flatnonzero((own >= 0) & ok[np.maximum(own, 0)])
+            if not len(sel):
+                continue
+            v = own[sel]
+            Q = P[T[sel]]
+            frac = np.linalg.norm(Q[:, k] - X[v], axis=1) / np.maximum(d[v], 1e-300)  # the node's sheet
+            Q[:, k] = X[v] + (frac * dc[v])[:, None] * dir_c[v]
+            e2 = sum(np.sum((Q[:, b] - Q[:, a]) ** 2, axis=1) for a, b in _TET_EDGES)
+            vol = np.einsum("ij,ij->i", np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]), Q[:, 3] - Q[:, 0]) / 6
+            np.minimum.at(out, v, np.sign(vol) * 12.0 * np.cbrt(3.0 * np.abs(vol)) ** 2 / np.maximum(e2, 1e-300))
+        out[~ok] = -np.inf
+        return out, dc, dir_c
+
+    for _ in range(sweeps):
+        Pin = X + d[:, None] * d_inward
+        q = tet_mean_ratio(P, T)
+        bad = q < TET_QUALITY_FLOOR
+        if not bad.any():
+            break
+        act = np.zeros(p, bool)
+        act[np.unique(Fl[prism[bad]])] = True
+        act[jj[act[ii]]] = True
+        old_min = np.full(p, np.inf)
+        for k in range(4):
+            own = inner_of[T[:, k]]
+            sel = np.flatnonzero(own >= 0)
+            np.minimum.at(old_min, own[sel], q[sel])
+        parallel = np.zeros((p, 3))
+        np.add.at(parallel, ii, Pin[jj] + X[ii] - X[jj])
+        parallel /= np.maximum(deg, 1)[:, None]
+        best, best_d, best_u = old_min.copy(), d.copy(), d_inward.copy()
+        for C in [parallel] + [Pin + radius[:, None] * s for s in _STEPS]:
+            m, dc, uc = node_min_quality(C, act)
+            better = m > best
+            best[better], best_d[better], best_u[better] = m[better], dc[better], uc[better]
+        keep = act & (best > old_min)
+        radius[act & ~keep] *= 0.5
+        if not keep.any():
+            if (radius[act] < 1e-3 * d[act]).all():
+                break
+            continue
+        dn, un = d.copy(), d_inward.copy()
+        dn[keep], un[keep] = best_d[keep], best_u[keep]
+        Pn, _, _ = build(dn, un)
+        qn = tet_mean_ratio(Pn, T)
+        worse = (qn < q) & (qn < TET_QUALITY_FLOOR)
+        back = np.unique(Fl[prism[worse]])
+        dn[back], un[back] = d[back], d_inward[back]
+        d, d_inward = dn, un
+        P, T, prism = build(d, d_inward)
+    return d, d_inward
+
+
 def extrude_skin_layer(
     V,
     F,
@@ -464,6 +579,7 @@ def extrude_skin_layer(
     min_fraction: float = 0.2,
     min_volume_ratio: float = 0.02,
     max_sweeps: int = 60,
+    relax_sweeps: int = 30,
     face_index=None,
 ) -> SkinLayer:
     """Extrude a triangle patch inward into a conforming tet layer (Sec. 6.2, Fig. 6.2).
@@ -485,6 +601,8 @@ def extrude_skin_layer(
         min_volume_ratio: A tet smaller than this fraction of its prism's volume / 3 makes its
             skin vertices shallower.
         max_sweeps: Sweeps of the clamp loops.
+        relax_sweeps: Sweeps of the inner-sheet relaxation (step 5 of the module docstring);
+            0 turns it off.
         face_index: Names of F's rows in error messages (e.g. their head triangle indices).
 
     Returns:
@@ -571,8 +689,9 @@ def extrude_skin_layer(
         d = new
 
     # 4. build, and shrink around inverted / flat tets
-    def build(d):
-        P = np.concatenate([X + (l / layers) * d[:, None] * d_inward for l in range(layers + 1)])
+    def build(d, u=None):
+        u = d_inward if u is None else u
+        P = np.concatenate([X + (l / layers) * d[:, None] * u for l in range(layers + 1)])
         T_list, prism_list = [], []
         for l in range(layers):
             Tl, pr = split_prisms(Fl + l * p, Fl + (l + 1) * p, key=np.tile(np.arange(p), layers + 1))
@@ -607,6 +726,12 @@ def extrude_skin_layer(
             d_inward[sel] = m / np.linalg.norm(m, axis=1, keepdims=True)
             d_inward = -_visible_directions(-d_inward, X, Fl)
         P, T, prism = build(d)
+
+    # 5. flat tets left by crossing directions (creases of adapted heads): the inner sheet is
+    # relaxed toward a parallel copy of the skin, one node at a time where that helps
+    if relax_sweeps > 0:
+        d, d_inward = _relax_inner_sheet(X, Fl, d, d_inward, build, A, d_max=t, sweeps=relax_sweeps)
+        P, T, prism = build(d, d_inward)
     vol = tet_volumes(P, T)
     if (vol <= 0).any():
         k = int(np.flatnonzero(vol <= 0)[0])

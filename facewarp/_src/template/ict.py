@@ -308,7 +308,7 @@ def _thin_faces(V: np.ndarray, F: np.ndarray, frontal: np.ndarray, thickness: np
     Where the ICT skin curls round a thin edge (the lid margins run on into the eye sockets,
     where the default template's lids end at its eye cut; the nostril rims) the skin layer's
     depth is clamped to a fraction of a millimetre, and its tets get as flat as 5 um. The flattest tet sets the stable
-    time step of the simulation (``face.sliver_dt``), so those faces are left out of the frontal
+    time step of the simulation (``solver.node_stable_dt``), so those faces are left out of the frontal
     face, repeatedly until every tet is at least :data:`_MIN_TET_HEIGHT` high (the default
     template's flattest is about 0.35 mm).
     """
