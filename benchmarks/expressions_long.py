@@ -1,11 +1,12 @@
 """All Table 6.4 presets and the Fig. 6.16 sequence for 10 simulated seconds each: no NaN, no inverted tet.
 
-    python -m benchmarks.expressions_long [--device cpu|cuda] [--seconds 10] [--head default|BUILD_DIR]
+    python -m benchmarks.expressions_long [--device cpu|cuda] [--seconds 10] [--head default|BUILD_DIR] [--name NAME]
 
 Each expression ramps up, holds and releases within the run; the solver's guard checks every frame
 for NaN and inverted tets (a failure is recorded with the step and tet it names). Writes
-benchmarks/results/expressions_long_<device>.json and a frame strip per expression to
-benchmarks/results/expressions/<name>_<device>.png.
+benchmarks/results/expressions_long_<device>[_<NAME>].json and a frame strip per expression to
+benchmarks/results/expressions/[<NAME>_]<expression>_<device>.png (NAME defaults to the build folder's
+parent, e.g. identity001 for .../identity001/build; nothing for the default template).
 """
 
 from __future__ import annotations
@@ -25,12 +26,13 @@ def main():
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--head", default="default")
+    ap.add_argument("--name", help="tag of the head in the output names")
     ap.add_argument("--expressions", nargs="+", default=["smile", "laugh", "surprise", "angry", "sad", "sequence"])
     args = ap.parse_args()
     from facewarp._src.anatomy import build_anatomy
     from facewarp._src.errors import SimulationError
     from facewarp._src.face import FaceSimulator, face_rig_from_anatomy, load_face_rig
-    from facewarp._src.jobs import _timeline, load_head, render_strip
+    from facewarp._src.jobs import _timeline, displacement_max, load_head, render_strip
     from facewarp._src.render import save_png
 
     if Path(args.head, "face_rig.npz").is_file():
@@ -41,10 +43,13 @@ def main():
     outdir = RESULTS / "expressions"
     outdir.mkdir(parents=True, exist_ok=True)
     tag = args.device.split(":")[0]
+    head_name = args.name or ("" if args.head == "default" else Path(args.head).resolve().parent.name)
+    prefix = f"{head_name}_" if head_name else ""
     for name in args.expressions:
         sim = FaceSimulator(fr, device=args.device, fps=args.fps)
         t0 = time.perf_counter()
-        row = {"expression": name, "seconds_simulated": args.seconds, "substeps": sim.substeps, "dt_s": sim.dt}
+        row = {"expression": name, "seconds_simulated": args.seconds, "substeps": sim.substeps, "dt_s": sim.dt,
+               "added_mass_fraction": sim.added_mass_fraction}
         try:
             frames = sim.run(_timeline(name, args.seconds), args.seconds)
             row.update(ok=True, nan_count=int((~np.isfinite(frames.points)).sum()), inverted_count=0,
@@ -57,14 +62,18 @@ def main():
                                          if moved[peak, i] > 5e-4}
             nf = len(frames.times)
             idx = np.unique(np.r_[0, np.linspace(0, nf - 1, 6).round().astype(int), peak])
-            save_png(outdir / f"{name}_{tag}.png", render_strip(frames, idx, device=args.device),
-                     title=f"{name} ({args.device}): " + ", ".join(f"{frames.times[k]:.1f} s" for k in idx))
+            hmax = displacement_max(frames, idx)
+            save_png(outdir / f"{prefix}{name}_{tag}.png", render_strip(frames, idx, device=args.device, heat_max=hmax),
+                     title=f"{prefix}{name} ({args.device}): " + ", ".join(f"{frames.times[k]:.1f} s" for k in idx),
+                     colorbar=(0.0, hmax * 1e3, "displacement from rest [mm]"))
         except SimulationError as e:
             row.update(ok=False, error=str(e))
         row["wall_seconds"] = time.perf_counter() - t0
         print(row if not row.get("ok") else {k: v for k, v in row.items() if k != "peak_fdp_motion_mm"}, flush=True)
         rows.append(row)
-    print("wrote", save(f"expressions_long_{tag}", {"machine": machine(args.device), "runs": rows}))
+    out = f"expressions_long_{tag}" + (f"_{head_name}" if head_name else "")
+    print("wrote", save(out, {"machine": machine(args.device), "head": args.head, "tets": int(len(fr.tets)),
+                              "all_ok": all(r.get("ok") for r in rows), "runs": rows}))
 
 
 if __name__ == "__main__":

@@ -77,3 +77,36 @@ def test_jaw_moves_chin_down_and_back(rig):
     t_low = frames.parts["teeth_lower"][0]
     assert np.abs(t_low[-1] - t_low[0]).max() > 5e-3
     assert np.abs(frames.parts["eye_L"][0][-1] - frames.parts["eye_L"][0][0]).max() == 0
+
+
+def _laugh_steps(rig, device, steps=1000, chunks=10):
+    """``steps`` substeps of the laugh preset (muscles and jaw) ramped in over ``chunks``."""
+    from facewarp._src.expressions import preset as table_preset
+    from facewarp._src.face import _activation_vector
+
+    sim = FaceSimulator(rig, device=device)
+    e = table_preset("laugh")
+    a = _activation_vector(rig.rig.names, e)
+    for k in range(1, chunks + 1):
+        sim.control.activations.assign(a * (k / chunks))
+        sim.control.jaw_angles.assign(np.array([e.jaw_u * k / chunks, 0.0], np.float32))
+        sim.advance(steps // chunks)
+    sim.solver.check(sim.state)
+    return sim.state.positions.numpy().astype(np.float64)
+
+
+def test_steps_are_deterministic(rig):
+    # elements write their own force slots and nodes add them in a fixed order: no atomics
+    a, b = _laugh_steps(rig, "cpu", 200), _laugh_steps(rig, "cpu", 200)
+    assert np.array_equal(a, b)
+
+
+def test_cpu_and_cuda_agree_after_1000_steps(rig):
+    from conftest import warp_devices
+
+    if "cuda:0" not in warp_devices():
+        pytest.skip("compares a GPU with the CPU")
+    x_cpu, x_gpu = _laugh_steps(rig, "cpu"), _laugh_steps(rig, "cuda:0")
+    moved = np.linalg.norm(x_cpu - rig.nodes, axis=1).max()
+    diff = np.linalg.norm(x_cpu - x_gpu, axis=1).max()
+    assert moved > 1e-3 and diff <= 1e-4 * moved, (diff, moved)

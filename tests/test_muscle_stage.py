@@ -133,3 +133,57 @@ def test_jaw_stage_moves_targets(device):
     control.jaw_angles.assign(np.array([0.2, 0.0], np.float32))
     solver.step(state, out, control, 1e-5)
     np.testing.assert_allclose(out.positions.numpy()[nodes], jaw.apply(V[nodes], np.ones(25), 0.2), atol=1e-6)
+
+
+def test_carry_stage_moves_nodes_rigidly_without_velocity(device):
+    from facewarp._src.muscle_stage import CarryStage
+
+    V, T, layer = slab()
+    model = ModelBuilder(V, T, layer=layer).finalize(device)
+    jaw = JawKinematic(np.array([0.0, 0.0, 0.05]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
+                       np.array([[0.03, 0, 0], [0.01, 0, 0]]), np.array([0.02, 0, 0]))
+    nodes = np.arange(len(V))
+    stage = CarryStage(jaw, nodes, np.ones(len(V)), model.device)
+    solver = SolverVerlet(model, stages=[stage])
+    state, out, control = model.state(), model.state(), model.control()
+    control.jaw_angles.assign(np.array([0.2, 0.03], np.float32))
+    f = solver.compute_forces(state, control, 1e-5).numpy()  # carries state in place, then forces
+    target = jaw.apply(V, np.ones(len(V)), 0.2, 0.03)
+    np.testing.assert_allclose(state.positions.numpy(), target, atol=2e-6)
+    np.testing.assert_allclose(state.prev_positions.numpy(), target, atol=2e-6)  # no velocity injected
+    assert np.abs(f).max() < 1e-2, "a rigid carry strains nothing"
+    solver.step(state, out, control, 1e-5)  # same angles: no further carry, the slab stays put
+    np.testing.assert_allclose(out.positions.numpy(), target, atol=2e-6)
+    stage.reset()
+    assert np.all(stage.prev.numpy() == 0)
+
+
+def test_jaw_alone_strains_no_muscle_spring(device):
+    # each spring's muscle end turns with its node's jaw amount: a jaw rotation of the whole rig
+    # (nodes carried by their amounts, muscles by theirs) leaves the springs at rest length
+    V, T, layer = slab()
+    inner = np.where(layer == 1)[0]
+    rig = small_rig(inner, V[inner])
+    rig.ctrl_jaw = np.full(11, 0.5)
+    rig.center_jaw = np.full(2, 0.5)
+    node_amount = np.linspace(0.2, 0.9, len(V))
+    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    jaw = JawKinematic(np.array([0.02, 0.05, 0.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
+                       np.array([[0.03, 0, 0], [0.01, 0, 0]]), np.array([0.02, 0, 0]))
+    np.testing.assert_allclose(rig.attachment_jaw(), 0.5)
+    stage = MuscleStage(rig, jaw, model.device, node_amount=node_amount)
+    solver = SolverVerlet(model, stages=[stage])
+    state, control = model.state(), model.control()
+    control.jaw_angles.assign(np.array([0.4, 0.0], np.float32))
+    X = jaw.apply(V, node_amount, 0.4, 0.0)
+    state.positions.assign(X.astype(np.float32))
+    state.prev_positions.assign(X.astype(np.float32))
+    solver.forces.zero_()
+    stage.apply(model, state, control, 1e-5, solver.forces, solver.targets)
+    f = np.abs(solver.forces.numpy()).max()
+    # without the shift the same pose pulls the nodes hard
+    stage0 = MuscleStage(rig, jaw, model.device)
+    solver.forces.zero_()
+    stage0.apply(model, state, control, 1e-5, solver.forces, solver.targets)
+    f0 = np.abs(solver.forces.numpy()).max()
+    assert f < 0.02 * f0 and f0 > 1.0, (f, f0)

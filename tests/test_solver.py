@@ -513,3 +513,29 @@ def test_stable_dt_one_centimetre_tet(device):
         simulate(model, state, model.control(), 2.0e-3, 100, frames=10)
     assert stable_dt(b) == pytest.approx(0.5 * DT_STABLE_1CM)
     assert stable_dt(ModelBuilder(V * 0.5, T)) == pytest.approx(0.25 * DT_STABLE_1CM)
+
+
+def test_node_stable_dt_and_selective_mass_scaling():
+    from facewarp._src.solver import node_stable_dt, scale_masses
+
+    V, T = grid_tets(4, 4, 1)
+    V = V.copy()
+    # flatten one interior top node toward its bottom neighbour: one short edge, flat tets
+    top = np.flatnonzero(np.isclose(V[:, 2], CM) & np.isclose(V[:, 0], 2 * CM) & np.isclose(V[:, 1], 2 * CM))[0]
+    V[top, 2] = 0.1 * CM
+    b = ModelBuilder(V, T)
+    dtn = node_stable_dt(b)
+    assert dtn.argmin() == top or np.isclose(V[dtn.argmin(), 0], 2 * CM)
+    b_ref = ModelBuilder(*grid_tets(4, 4, 1))
+    assert node_stable_dt(b_ref).min() == pytest.approx(stable_dt(b_ref), rel=0.3)  # both the edge rule
+    m0 = b.mass.copy()
+    dt, added = scale_masses(b, quantile=0.1)
+    assert dt == pytest.approx(np.quantile(dtn, 0.1))
+    scaled = b.mass > m0
+    assert scaled.any() and (dtn[scaled] < dt).all() and not scaled[dtn >= dt].any()
+    # every node now allows dt, and the added mass is what the scaled nodes needed
+    assert node_stable_dt(b).min() == pytest.approx(dt, rel=1e-9)
+    assert added == pytest.approx(b.mass.sum() / m0.sum() - 1)
+    b2 = ModelBuilder(V, T)
+    dt0, added0 = scale_masses(b2, quantile=0.0)
+    assert added0 == 0.0 and dt0 == pytest.approx(dtn.min())

@@ -152,3 +152,18 @@ def test_template_two_layers():
     assert sorted(set(sl.layer.tolist())) == [0, 1, 2]
     mid = sl.layer == 1
     np.testing.assert_allclose(sl.depth[mid], 0.5 * sl.depth[sl.layer == 2])
+
+
+def test_tet_mean_ratio_regular_flat_inverted():
+    from facewarp._src.tissue import tet_mean_ratio
+
+    V = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float)
+    T = np.array([[0, 1, 2, 3]])
+    if ts.tet_volumes(V, T)[0] < 0:
+        T = T[:, [0, 2, 1, 3]]
+    assert tet_mean_ratio(V, T)[0] == pytest.approx(1.0)
+    flat = V.copy()
+    flat[3] = 0.5 * (flat[0] + flat[1]) + 1e-3 * (flat[3] - flat[0])
+    assert 0 < tet_mean_ratio(flat, T)[0] < 0.05
+    assert tet_mean_ratio(V, T[:, [0, 2, 1, 3]])[0] == pytest.approx(-1.0)
+    assert tet_mean_ratio(2.5 * V, T)[0] == pytest.approx(1.0)  # scale invariant

@@ -17,7 +17,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["load_head", "build_files", "simulate_files", "render_strip"]
+__all__ = ["load_head", "build_files", "simulate_files", "render_strip", "displacement_max"]
 
 
 def _head_from_adapt_dir(path: Path):
@@ -131,10 +131,15 @@ def _timeline(expression: str, seconds: float):
     raise InputError(f"--expression {expression!r}: not a preset ({', '.join(PRESETS)}), 'sequence', or a sequence .json file")
 
 
-def render_strip(frames, idx, *, size: int = 360, device: str = "cpu", view="front") -> np.ndarray:
+def render_strip(frames, idx, *, size: int = 360, device: str = "cpu", view="front",
+                 heat_max: float | None = None) -> np.ndarray:
     """Renders of the face (cropped below the chin and behind the ears) for frames ``idx``,
-    side by side, with eyes and teeth; the lips (between FDPs 8.1, 8.2 and the corners) tinted."""
-    from .render import render_mesh
+    side by side, with eyes and teeth; the lips (between FDPs 8.1, 8.2 and the corners) tinted.
+
+    With ``heat_max`` [m], a second row shows each frame's displacement from frame 0 as a
+    heat map from 0 to ``heat_max`` (turbo), which makes a few millimetres of motion visible.
+    """
+    from .render import colormap, render_mesh
 
     P0 = frames.points[0]
     ids = list(map(str, frames.fdp_ids))
@@ -148,13 +153,27 @@ def render_strip(frames, idx, *, size: int = 360, device: str = "cpu", view="fro
     front = P0[:, 2] > 0.5 * (lm0["2.2"][2] + lm0["2.3"][2]) - 0.02
     w = vermilion_weight(P0, lm0, front)[:, None]
     col = SKIN * (1 - w) + LIPS * w
-    imgs = []
+    extra_of = lambda k: [(V[k], Fp, (0.96, 0.96, 0.94) if n.startswith(("eye", "teeth")) else (0.8, 0.45, 0.45))  # noqa: E731
+                          for n, (V, Fp) in frames.parts.items()]
+    row = [render_mesh(frames.points[k], F, view=view, width=size, height=size, vertex_colors=col,
+                       extra_meshes=extra_of(k), device=device) for k in idx]
+    img = np.concatenate(row, axis=1)
+    if heat_max is None:
+        return img
+    heat = []
     for k in idx:
-        extra = [(V[k], Fp, (0.96, 0.96, 0.94) if n.startswith(("eye", "teeth")) else (0.8, 0.45, 0.45))
-                 for n, (V, Fp) in frames.parts.items()]
-        imgs.append(render_mesh(frames.points[k], F, view=view, width=size, height=size, vertex_colors=col,
-                                extra_meshes=extra, device=device))
-    return np.concatenate(imgs, axis=1)
+        d = np.linalg.norm(frames.points[k] - P0, axis=1)
+        heat.append(render_mesh(frames.points[k], F, view=view, width=size, height=size,
+                                vertex_colors=colormap(d, 0.0, max(float(heat_max), 1e-9)),
+                                extra_meshes=extra_of(k), device=device))
+    return np.concatenate([img, np.concatenate(heat, axis=1)], axis=0)
+
+
+def displacement_max(frames, idx) -> float:
+    """Largest displacement [m] of a head vertex from frame 0 over frames ``idx`` (the heat
+    map's top, rounded up to a whole millimetre)."""
+    d = max(float(np.linalg.norm(frames.points[k] - frames.points[0], axis=1).max()) for k in idx)
+    return max(1e-3, float(np.ceil(d * 1e3)) * 1e-3)
 
 
 def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps: float = 30.0,
@@ -180,9 +199,11 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
     save_frames_npz(out / "frames.npz", frames)
     nf = len(frames.times)
     idx = np.unique(np.linspace(0, nf - 1, min(6, nf)).round().astype(int))
-    strip = render_strip(frames, idx, device=device)
+    hmax = displacement_max(frames, idx)
+    strip = render_strip(frames, idx, device=device, heat_max=hmax)
     labels = ", ".join(f"{frames.times[k]:.2f} s" for k in idx)
-    save_png(out / "frames.png", strip, title=f"{Path(str(expression)).name}: {labels}")
+    save_png(out / "frames.png", strip, title=f"{Path(str(expression)).name}: {labels}",
+             colorbar=(0.0, hmax * 1e3, "displacement from rest [mm]"))
     written = ["frames.npz", "frames.png"]
     if usd:
         from usd_export import write_meshes_usd

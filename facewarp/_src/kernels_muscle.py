@@ -83,8 +83,9 @@ def _muscle_controls(
 
 @wp.kernel
 def _muscle_anchors(
-    # Model:
-    anchor_dst: wp.array(dtype=wp.int32),
+    # Model (anchors grouped by destination: dst_unique[k] takes anchors start[k] .. start[k+1]-1):
+    dst_unique: wp.array(dtype=wp.int32),
+    start: wp.array(dtype=wp.int32),
     anchor_src: wp.array(dtype=wp.int32),
     anchor_weight: wp.array(dtype=float),
     # In:
@@ -94,8 +95,12 @@ def _muscle_anchors(
     ctrl_out: wp.array(dtype=wp.vec3),
 ):
     k = wp.tid()
-    s = anchor_src[k]
-    wp.atomic_add(ctrl_out, anchor_dst[k], anchor_weight[k] * (ctrl_contracted[s] - ctrl_jawed[s]))
+    d = wp.vec3(0.0)
+    for a in range(start[k], start[k + 1]):
+        s = anchor_src[a]
+        d = d + anchor_weight[a] * (ctrl_contracted[s] - ctrl_jawed[s])
+    i = dst_unique[k]
+    ctrl_out[i] = ctrl_out[i] + d
 
 
 @wp.func
@@ -179,9 +184,10 @@ def _muscle_forces(
     positions_in: wp.array(dtype=wp.vec3),
     # Out:
     att_point_out: wp.array(dtype=wp.vec3),
-    forces_out: wp.array(dtype=wp.vec3),
+    att_force_out: wp.array(dtype=wp.vec3),
 ):
     k = wp.tid()
+    att_force_out[k] = wp.vec3(0.0)
     s = att_seg[k]
     F = seg_frame[s]
     pm = _ellipsoid_point(seg_center[s], F, seg_radii[s], att_uv[k][0], att_uv[k][1])
@@ -200,7 +206,25 @@ def _muscle_forces(
     fibre = wp.vec3(F[0, 0], F[1, 0], F[2, 0])
     cos_theta = wp.abs(wp.dot(n, fibre))
     # Eq. 6.4.1: spring toward the muscle, scaled by the cosine of the spring-fibre angle.
-    wp.atomic_add(forces_out, i, att_stiffness[k] * cos_theta * (length - att_rest_length[k]) * n)
+    att_force_out[k] = att_stiffness[k] * cos_theta * (length - att_rest_length[k]) * n
+
+
+@wp.kernel
+def _muscle_gather(
+    node: wp.array(dtype=wp.int32),
+    start: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
+    att_force: wp.array(dtype=wp.vec3),
+    # In / out:
+    forces: wp.array(dtype=wp.vec3),
+):
+    # each attached node adds its springs in a fixed order (deterministic, no atomics)
+    k = wp.tid()
+    f = wp.vec3(0.0)
+    for s in range(start[k], start[k + 1]):
+        f = f + att_force[order[s]]
+    i = node[k]
+    forces[i] = forces[i] + f
 
 
 @wp.kernel

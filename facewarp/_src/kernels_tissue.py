@@ -1,8 +1,10 @@
 """Warp kernels of the skin deformation model (thesis Sec. 6.4.2, 6.4.4), launched by :mod:`solver`.
 
 Every internal force is the negative gradient of a constraint energy ``E = 1/2 k C^2``
-(Eq. 6.4.2) with a dimensionless constraint C, so ``F_i = -k C dC/dx_i`` (Eq. 6.4.3). Forces
-are accumulated into one ``forces`` array with ``wp.atomic_add`` (elements share nodes).
+(Eq. 6.4.2) with a dimensionless constraint C, so ``F_i = -k C dC/dx_i`` (Eq. 6.4.3). Each
+element writes the force on each of its corners into its own *slot* (no atomics); ``_gather``
+then adds every node's slots in a fixed order (``Model.node_slots``), which makes a step
+deterministic and the CPU and CUDA sums the same.
 Units are SI (m, kg, s; stiffnesses in J), see :mod:`facewarp._src.model`.
 """
 
@@ -40,10 +42,12 @@ def _edge_forces(
     # State in:
     positions_in: wp.array(dtype=wp.vec3),
     prev_positions_in: wp.array(dtype=wp.vec3),
-    # Forces out (accumulated):
-    forces_out: wp.array(dtype=wp.vec3),
+    # Out: corner forces, slots 2e (i) and 2e + 1 (j)
+    slots_out: wp.array(dtype=wp.vec3),
 ):
     e = wp.tid()
+    slots_out[2 * e] = wp.vec3(0.0)
+    slots_out[2 * e + 1] = wp.vec3(0.0)
     i = edge_indices[e][0]
     j = edge_indices[e][1]
     xi = positions_in[i]
@@ -60,8 +64,8 @@ def _edge_forces(
         vi = (xi - prev_positions_in[i]) * inv_dt
         vj = (xj - prev_positions_in[j]) * inv_dt
         f = f - edge_damping * wp.dot(vi - vj, n) * n
-    wp.atomic_add(forces_out, i, f)
-    wp.atomic_sub(forces_out, j, f)
+    slots_out[2 * e] = f
+    slots_out[2 * e + 1] = -f
 
 
 # Area energy per unique tet face (i, j, k), Eq. 6.4.7: E = 1/2 k_area C^2, C = (A - A0) / A0.
@@ -77,12 +81,17 @@ def _face_forces(
     face_indices: wp.array(dtype=wp.vec3i),
     face_rest_area: wp.array(dtype=float),
     k_area: float,
+    slot_offset: int,
     # State in:
     positions_in: wp.array(dtype=wp.vec3),
-    # Forces out (accumulated):
-    forces_out: wp.array(dtype=wp.vec3),
+    # Out: corner forces, slots offset + 3t + (0, 1, 2)
+    slots_out: wp.array(dtype=wp.vec3),
 ):
     t = wp.tid()
+    o = slot_offset + 3 * t
+    slots_out[o] = wp.vec3(0.0)
+    slots_out[o + 1] = wp.vec3(0.0)
+    slots_out[o + 2] = wp.vec3(0.0)
     i = face_indices[t][0]
     j = face_indices[t][1]
     k = face_indices[t][2]
@@ -99,9 +108,9 @@ def _face_forces(
     s = -k_area * c / a0 * 0.5
     fj = s * wp.cross(e2, m)
     fk = s * wp.cross(m, e1)
-    wp.atomic_add(forces_out, j, fj)
-    wp.atomic_add(forces_out, k, fk)
-    wp.atomic_sub(forces_out, i, fj + fk)
+    slots_out[o] = -(fj + fk)
+    slots_out[o + 1] = fj
+    slots_out[o + 2] = fk
 
 
 # Volume energy per tet (i, j, k, l), Eq. 6.4.8: E = 1/2 k_volume C^2, C = (V - V0) / V0 with
@@ -117,12 +126,14 @@ def _tet_forces(
     tet_indices: wp.array(dtype=wp.vec4i),
     tet_rest_volume: wp.array(dtype=float),
     k_volume: float,
+    slot_offset: int,
     # State in:
     positions_in: wp.array(dtype=wp.vec3),
-    # Forces out (accumulated):
-    forces_out: wp.array(dtype=wp.vec3),
+    # Out: corner forces, slots offset + 4t + (0..3)
+    slots_out: wp.array(dtype=wp.vec3),
 ):
     t = wp.tid()
+    o = slot_offset + 4 * t
     i = tet_indices[t][0]
     j = tet_indices[t][1]
     k = tet_indices[t][2]
@@ -138,10 +149,27 @@ def _tet_forces(
     fj = s * wp.cross(e2, e3)
     fk = s * wp.cross(e3, e1)
     fl = s * wp.cross(e1, e2)
-    wp.atomic_add(forces_out, j, fj)
-    wp.atomic_add(forces_out, k, fk)
-    wp.atomic_add(forces_out, l, fl)
-    wp.atomic_sub(forces_out, i, fj + fk + fl)
+    slots_out[o] = -(fj + fk + fl)
+    slots_out[o + 1] = fj
+    slots_out[o + 2] = fk
+    slots_out[o + 3] = fl
+
+
+# Each node adds its element slots, in the fixed ascending order of Model.node_slots, to the
+# forces of the stages.
+@wp.kernel
+def _gather(
+    node_slot_start: wp.array(dtype=wp.int32),
+    node_slots: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.vec3),
+    # In / out:
+    forces: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    f = wp.vec3(0.0)
+    for s in range(node_slot_start[i], node_slot_start[i + 1]):
+        f = f + slots[node_slots[s]]
+    forces[i] = forces[i] + f
 
 
 # Start of a substep: forces = the user's constant external force (Control.external_force);

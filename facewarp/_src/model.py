@@ -286,6 +286,10 @@ class ModelBuilder:
             return wp.array(np.ascontiguousarray(a, dtype=np.int32), dtype=dtype, device=dev)
 
         inv_mass = np.where(self.fixed, 0.0, 1.0 / self.mass)
+        # force slots: edge e -> 2e (i), 2e+1 (j); face f -> 2E + 3f + (0, 1, 2); tet t -> 2E + 3F + 4t + (0..3)
+        slot_node = np.concatenate([self.edges.ravel(), self.faces.ravel(), self.tets.ravel()])
+        order = np.argsort(slot_node, kind="stable")
+        start = np.searchsorted(slot_node[order], np.arange(len(self.vertices) + 1))
         return Model(
             device=dev,
             vertex_count=len(self.vertices),
@@ -307,6 +311,9 @@ class ModelBuilder:
             face_rest_area=f32(self.face_rest_areas),
             tet_indices=i32(self.tets, wp.vec4i),
             tet_rest_volume=f32(self.tet_rest_volumes),
+            slot_count=len(slot_node),
+            node_slot_start=i32(start),
+            node_slots=i32(order),
             k_area=self.k_area,
             k_volume=self.k_volume,
             damping=self.damping,
@@ -368,6 +375,16 @@ class Model:
     """Tets (i, j, k, l) with positive signed volume; shape (tet_count,), wp.vec4i (int32)."""
     tet_rest_volume: object
     """Rest signed volume V0 [m^3] (Eq. 6.4.8), > 0; shape (tet_count,), float32."""
+
+    slot_count: int
+    """Number of per-element force slots: 2 per edge, 3 per face, 4 per tet (edges first)."""
+    node_slot_start: object
+    """CSR start of each node's slots in :attr:`node_slots`, shape (vertex_count + 1,), int32."""
+    node_slots: object
+    """Force slots of each node, ascending, shape (slot_count,), int32. The elements write their
+    corner forces into their own slots and each node sums its slots in this fixed order, so the
+    forces are bit-for-bit reproducible run to run and the same sums on CPU and CUDA (atomic
+    adds would add in whatever order threads arrive)."""
 
     k_area: float
     """Area stiffness [J] (Eq. 6.4.7, Table 6.3: 7.5)."""

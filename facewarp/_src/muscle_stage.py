@@ -235,9 +235,13 @@ class MuscleStage:
         self.seg_curve = i32(rig.seg_curve)
         self.seg_t = f32(rig.seg_t, wp.vec2)
         self.seg_rest_radii = f32(rig.seg_rest_radii, wp.vec3)
-        self.anchor_dst = i32(rig.anchor_dst)
-        self.anchor_src = i32(rig.anchor_src)
-        self.anchor_weight = f32(rig.anchor_weight)
+        ad = np.asarray(rig.anchor_dst, np.int64)
+        a_order = np.argsort(ad, kind="stable")
+        dst_u = np.unique(ad)
+        self.anchor_dst_unique = i32(dst_u)
+        self.anchor_start = i32(np.searchsorted(ad[a_order], np.r_[dst_u, np.iinfo(np.int64).max]))
+        self.anchor_src = i32(np.asarray(rig.anchor_src)[a_order])
+        self.anchor_weight = f32(np.asarray(rig.anchor_weight)[a_order])
         self.att_node = i32(rig.att_node)
         self.att_seg = i32(rig.att_seg)
         self.att_uv = f32(rig.att_uv, wp.vec2)
@@ -247,6 +251,13 @@ class MuscleStage:
         if node_amount is not None and len(rig.att_node):
             shift = np.asarray(node_amount, np.float64)[rig.att_node] - rig.attachment_jaw()
         self.att_jaw_shift = f32(shift)
+        an = np.asarray(rig.att_node, np.int64)
+        order = np.argsort(an, kind="stable")
+        nodes_u = np.unique(an)
+        self.att_nodes_unique = i32(nodes_u)
+        self.att_node_start = i32(np.searchsorted(an[order], np.r_[nodes_u, np.iinfo(np.int64).max]))
+        self.att_order = i32(order)
+        self.att_force = wp.zeros(len(an), dtype=wp.vec3, device=device)
         P, S, K = len(rig.ctrl_rest), len(rig.seg_curve), len(rig.att_node)
         self.ctrl_jawed = wp.zeros(P, dtype=wp.vec3, device=device)
         self.ctrl_contracted = wp.zeros(P, dtype=wp.vec3, device=device)
@@ -274,8 +285,9 @@ class MuscleStage:
                   outputs=[self.ctrl_jawed, self.ctrl_contracted], device=self.device)
         wp.copy(self.ctrl, self.ctrl_contracted)
         if len(self.rig.anchor_dst):
-            wp.launch(km._muscle_anchors, dim=len(self.rig.anchor_dst),
-                      inputs=[self.anchor_dst, self.anchor_src, self.anchor_weight, self.ctrl_jawed, self.ctrl_contracted],
+            wp.launch(km._muscle_anchors, dim=len(self.anchor_dst_unique),
+                      inputs=[self.anchor_dst_unique, self.anchor_start, self.anchor_src, self.anchor_weight,
+                              self.ctrl_jawed, self.ctrl_contracted],
                       outputs=[self.ctrl], device=self.device)
         if len(self.rig.seg_curve):
             wp.launch(km._muscle_segments, dim=len(self.rig.seg_curve),
@@ -291,7 +303,10 @@ class MuscleStage:
                       inputs=[self.att_node, self.att_seg, self.att_uv, self.att_rest_length, self.att_stiffness,
                               self.att_jaw_shift, self.jaw_pivot, self.jaw_u, self.jaw_v, control.jaw_angles,
                               self.seg_center, self.seg_frame, self.seg_radii, state_in.positions],
-                      outputs=[self.att_point, forces], device=self.device)
+                      outputs=[self.att_point, self.att_force], device=self.device)
+            wp.launch(self.km._muscle_gather, dim=len(self.att_nodes_unique),
+                      inputs=[self.att_nodes_unique, self.att_node_start, self.att_order, self.att_force],
+                      outputs=[forces], device=self.device)
 
 
 class JawStage:

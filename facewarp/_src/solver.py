@@ -199,6 +199,7 @@ class SolverVerlet:
         self.stages = list(stages)
         n = model.vertex_count
         self.forces = wp.zeros(n, dtype=wp.vec3, device=self.device)
+        self.slots = wp.zeros(model.slot_count, dtype=wp.vec3, device=self.device)
         self.targets = wp.clone(model.rest_positions)
         self.step_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.guard = wp.array([kt.GUARD_NONE, kt.GUARD_NONE], dtype=wp.int32, device=self.device)
@@ -233,25 +234,29 @@ class SolverVerlet:
                 state_in.positions,
                 state_in.prev_positions,
             ],
-            outputs=[self.forces],
+            outputs=[self.slots],
             device=self.device,
         )
+        # area / volume slots stay zero (as allocated) when their stiffness is 0
         if m.k_area > 0.0:
             wp.launch(
                 kt._face_forces,
                 dim=m.face_count,
-                inputs=[m.face_indices, m.face_rest_area, m.k_area, state_in.positions],
-                outputs=[self.forces],
+                inputs=[m.face_indices, m.face_rest_area, m.k_area, 2 * m.edge_count, state_in.positions],
+                outputs=[self.slots],
                 device=self.device,
             )
         if m.k_volume > 0.0:
             wp.launch(
                 kt._tet_forces,
                 dim=m.tet_count,
-                inputs=[m.tet_indices, m.tet_rest_volume, m.k_volume, state_in.positions],
-                outputs=[self.forces],
+                inputs=[m.tet_indices, m.tet_rest_volume, m.k_volume, 2 * m.edge_count + 3 * m.face_count,
+                        state_in.positions],
+                outputs=[self.slots],
                 device=self.device,
             )
+        wp.launch(kt._gather, dim=m.vertex_count, inputs=[m.node_slot_start, m.node_slots, self.slots],
+                  outputs=[self.forces], device=self.device)
         return self.forces
 
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
