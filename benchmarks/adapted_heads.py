@@ -5,7 +5,8 @@
 For each identity: a scan-like target (new tessellation, noise, holes, random pose, mm; see
 benchmarks/adapt_ict.py), `facewarp adapt` with the default template, `facewarp build` on the
 adapted head (Sec. 6.6: regions, surface points and definitions reused, tets re-extruded), and the
-anatomy quality: inverted tets (must be 0), conformity, smallest attachment count. ``--keep`` keeps
+anatomy quality: inverted tets (must be 0), conformity, smallest attachment count, and the solver's
+substep with and without selective mass scaling (solver.scale_masses) and the mass it adds. ``--keep`` keeps
 the adapt/build folders (e.g. to simulate one of them). Writes benchmarks/results/adapted_heads.json.
 """
 
@@ -52,11 +53,20 @@ def main():
         t1 = time.perf_counter()
         q = build_files(case / "adapt", case / "build")
         t2 = time.perf_counter()
+        from facewarp._src.face import load_face_rig
+        from facewarp._src.model import ModelBuilder
+        from facewarp._src.solver import node_stable_dt, scale_masses
+
+        fr = load_face_rig(case / "build")
+        b = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held)
+        dt_min = float(node_stable_dt(b)[~b.fixed].min())
+        dt, added = scale_masses(b)
         row = {"identity": k, "adapt_seconds": t1 - t0, "build_seconds": t2 - t1,
                "distance_to_scan_median_mm": rep["distance_to_scan_m"]["median"] * 1e3,
                "tets": q["tet_count"], "inverted": q["inverted_count"], "conforming": q["conforming"],
                "min_dihedral_deg": q["min_dihedral_deg"], "min_attached_nodes": q["min_attached_nodes"],
-               "boundary_intersections": q.get("boundary_intersection_count")}
+               "boundary_intersections": q.get("boundary_intersection_count"),
+               "substep_s": dt, "substep_without_mass_scaling_s": dt_min, "added_mass_fraction": added}
         print(row, flush=True)
         rows.append(row)
     ok = all(r["inverted"] == 0 and r["conforming"] for r in rows)

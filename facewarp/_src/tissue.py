@@ -493,8 +493,10 @@ def _relax_inner_sheet(X, Fl, d, d_inward, build, A, *, d_max, sweeps: int):
     neighbours j, and 26 steps of its own radius (a quarter of its depth at first, halved when
     nothing helps) and takes the candidate that most raises the worst quality of its tets
     (neighbours where they were). Candidates must stay on the inner side of the skin (within
-    60 deg of the node's old direction) and no deeper than the requested thickness. A round's
-    steps are undone on any tet they made worse than both before and the floor."""
+    60 deg of the node's old direction) and no deeper than the requested thickness. Only nodes
+    whose gain beats all their neighbours' move in a round, so no tet has two moving corners;
+    a move is undone if any of its tets (intermediate sheets included) ends below the worst
+    quality the node had before."""
     p = len(X)
     Ac = A.tocoo()
     ii, jj = Ac.row, Ac.col
@@ -548,8 +550,13 @@ def _relax_inner_sheet(X, Fl, d, d_inward, build, A, *, d_max, sweeps: int):
             m, dc, uc = node_min_quality(C, act)
             better = m > best
             best[better], best_d[better], best_u[better] = m[better], dc[better], uc[better]
-        keep = act & (best > old_min)
-        radius[act & ~keep] *= 0.5
+        gain = np.where(act & (best > old_min), best - old_min, 0.0)
+        radius[act & (gain == 0)] *= 0.5
+        # move an independent set: a node whose gain beats all its neighbours' (no tet then has two
+        # moving nodes, so each node's judged quality is exactly what it gets)
+        nb_max = np.zeros(p)
+        np.maximum.at(nb_max, ii, gain[jj])
+        keep = (gain > 0) & (gain > nb_max)
         if not keep.any():
             if (radius[act] < 1e-3 * d[act]).all():
                 break
@@ -558,7 +565,9 @@ def _relax_inner_sheet(X, Fl, d, d_inward, build, A, *, d_max, sweeps: int):
         dn[keep], un[keep] = best_d[keep], best_u[keep]
         Pn, _, _ = build(dn, un)
         qn = tet_mean_ratio(Pn, T)
-        worse = (qn < q) & (qn < TET_QUALITY_FLOOR)
+        # undo a move that left any of its tets below the worst quality the node had before
+        floor_t = np.where(keep, old_min, np.inf)[Fl[prism]].min(1)
+        worse = (qn < q) & (qn < floor_t)
         back = np.unique(Fl[prism[worse]])
         dn[back], un[back] = d[back], d_inward[back]
         d, d_inward = dn, un
