@@ -36,7 +36,11 @@ __all__ = ["FaceRig", "FaceSimulator", "Frames", "face_rig_from_anatomy", "load_
 
 MUSCLE_STIFFNESS = 1.0e7
 """Default muscle spring stiffness k_m of Eq. 6.4.1 [N/m] in the solver's unit system (node mass
-0.5, Table 6.3): chosen so that the Table 6.4 presets move the lip corners by several mm."""
+0.5, Table 6.3), shared by the springs on a node: chosen so that the Table 6.4 presets move the
+lip corners and brows by several mm. It is 3-10 times the tissue's own ``k0 / D0^2`` at level 0,
+so the inner sheet follows the muscles almost kinematically; 2e6 would spare the thin lip corner
+of some scan-adapted heads (ICT identity 002, angry) but leaves the brows of the default head
+too weak to rise against an opening jaw (surprise)."""
 
 JAW_SMOOTHING = 0.02
 """Length [m] over which the jaw amount of Eq. 6.4.9 is smoothed across region borders."""

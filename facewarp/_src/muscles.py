@@ -310,12 +310,15 @@ class MuscleAttachment:
         return len(self.nodes)
 
 
-def attach_nodes(X, ell: Ellipsoids, lam: float, phi: float, *, candidates=None) -> MuscleAttachment:
+def attach_nodes(X, ell: Ellipsoids, lam: float, phi: float, *, candidates=None, directions=None) -> MuscleAttachment:
     """Connect nodes to a muscle's ellipsoids (Fig. 6.4).
 
     For each node x: the nearest surface point p over all segments; x connects when
     ``|x - p| < lam`` and ``theta < phi``, theta the angle between ``x - p`` and the plane
-    normal to the segment's fibre axis.
+    normal to the segment's fibre axis. With ``directions``, x must also lie on the skin side
+    of the muscle, ``(p - x) . direction > 0``: on a head whose skin is thinner than the muscle
+    depth (the lips of an adapted scan) part of a muscle can lie in or above the skin layer, and
+    a spring from there would pull its inner node out through the skin.
 
     Args:
         X: Node positions [m], shape (p, 3).
@@ -323,6 +326,7 @@ def attach_nodes(X, ell: Ellipsoids, lam: float, phi: float, *, candidates=None)
         lam: Distance threshold lambda [m].
         phi: Angle threshold [rad].
         candidates: Node indices to test (default all).
+        directions: Unit inward (skin to deep) direction of every node, shape (p, 3).
 
     Returns:
         :class:`MuscleAttachment` with indices into X.
@@ -338,6 +342,8 @@ def attach_nodes(X, ell: Ellipsoids, lam: float, phi: float, *, candidates=None)
     best_s = np.zeros(len(idx), np.int64)
     best_uv = np.zeros((len(idx), 2))
     best_sin = np.zeros(len(idx))
+    best_deeper = np.ones(len(idx), bool)
+    D = None if directions is None else np.asarray(directions, dtype=np.float64)[idx]
     for k in range(s):
         Y = (P - ell.centers[k]) @ ell.axes[k].T  # local coordinates
         Xl, d, uv = closest_point_on_ellipsoid(Y, ell.radii[k])
@@ -349,8 +355,11 @@ def attach_nodes(X, ell: Ellipsoids, lam: float, phi: float, *, candidates=None)
         best_s[better] = k
         best_uv[better] = uv[better]
         best_sin[better] = sin_t[better]
+        if D is not None:
+            deeper = np.einsum("ij,ij->i", conn @ ell.axes[k], D) < 0  # world x - p against inward
+            best_deeper[better] = deeper[better]
     theta = np.arcsin(np.clip(best_sin, 0.0, 1.0))
-    ok = (best_d < lam) & (theta < phi)
+    ok = (best_d < lam) & (theta < phi) & best_deeper
     return MuscleAttachment(idx[ok], best_s[ok], best_uv[ok], best_d[ok], theta[ok])
 
 
@@ -649,7 +658,8 @@ def build_muscles(template, skin_layer=None, *, defs=None, placements=None) -> M
             for c, rr in zip(e.centers, reach):
                 cand.update(tree.query_ball_point(c, rr))
             cand = inner[np.array(sorted(cand), dtype=np.int64)] if cand else np.zeros(0, np.int64)
-            mu.attachment = attach_nodes(skin_layer.vertices, e, mu.lam, mu.phi, candidates=cand)
+            mu.attachment = attach_nodes(skin_layer.vertices, e, mu.lam, mu.phi, candidates=cand,
+                                         directions=skin_layer.direction)
     return MuscleSet(muscles=muscles, anchors=anchors, defaults=dict(dflt))
 
 
