@@ -101,6 +101,15 @@ def test_attachment_search_analytic():
     # the surface point from (u, v) is where the connection starts
     P = mu.ellipsoid_points(ell.centers[a.segment], ell.axes[a.segment], ell.radii[a.segment], a.uv)
     np.testing.assert_allclose(np.linalg.norm(X[a.nodes] - P, axis=1), a.rest_length, atol=1e-9)
+    # with inward directions -y (skin above the muscle at +y), a node below the muscle (its
+    # spring would pull it up through the skin) is not attached; a rotated frame agrees
+    down = np.tile([0.0, -1.0, 0.0], (len(X), 1))
+    b = mu.attach_nodes(X, ell, lam=0.005, phi=np.deg2rad(60), directions=down)
+    assert b.nodes.tolist() == [0]
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
+    ell_r = mu.Ellipsoids(centers=ell.centers, axes=(R @ ell.axes[0].T).T[None], radii=ell.radii, curve=ell.curve, t=ell.t)
+    c = mu.attach_nodes(X @ R.T, ell_r, lam=0.005, phi=np.deg2rad(60), directions=down @ R.T)
+    assert c.nodes.tolist() == [0]
 
 
 def test_segment_ellipsoids_frame_and_taper():
