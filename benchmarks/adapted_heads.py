@@ -35,7 +35,10 @@ def main():
         return
     from facewarp._src.jobs import build_files
     from facewarp._src.adapt_io import adapt_files
+    from facewarp._src.face import load_face_rig
     from facewarp._src.mesh import load_mesh, save_obj
+    from facewarp._src.model import ModelBuilder
+    from facewarp._src.solver import node_stable_dt, scale_masses
 
     _, F, _ = load_ict(d)
     rows = []
@@ -53,10 +56,6 @@ def main():
         t1 = time.perf_counter()
         q = build_files(case / "adapt", case / "build")
         t2 = time.perf_counter()
-        from facewarp._src.face import load_face_rig
-        from facewarp._src.model import ModelBuilder
-        from facewarp._src.solver import node_stable_dt, scale_masses
-
         fr = load_face_rig(case / "build")
         b = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held)
         dt_min = float(node_stable_dt(b)[~b.fixed].min())

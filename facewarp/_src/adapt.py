@@ -714,8 +714,9 @@ def _relax_squeezed(V, F, scan_q, folds: _FoldCheck, allowed, reject, *, rounds:
         old_min = np.full(n, np.inf)
         np.minimum.at(old_min, vv, q[vf])
         new_min = np.full(n, np.inf)
+        PW = W[F]
         for k in range(3):  # move one corner at a time
-            P = W[F]
+            P = PW.copy()
             P[:, k] = C[F[:, k]]
             qk = _tri_quality_points(P)
             np.minimum.at(new_min, F[:, k], qk)

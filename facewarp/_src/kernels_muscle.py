@@ -210,24 +210,6 @@ def _muscle_forces(
 
 
 @wp.kernel
-def _muscle_gather(
-    node: wp.array(dtype=wp.int32),
-    start: wp.array(dtype=wp.int32),
-    order: wp.array(dtype=wp.int32),
-    att_force: wp.array(dtype=wp.vec3),
-    # In / out:
-    forces: wp.array(dtype=wp.vec3),
-):
-    # each attached node adds its springs in a fixed order (deterministic, no atomics)
-    k = wp.tid()
-    f = wp.vec3(0.0)
-    for s in range(start[k], start[k + 1]):
-        f = f + att_force[order[s]]
-    i = node[k]
-    forces[i] = forces[i] + f
-
-
-@wp.kernel
 def _jaw_targets(
     # Model:
     jaw_node: wp.array(dtype=wp.int32),

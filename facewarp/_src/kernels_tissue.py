@@ -155,20 +155,24 @@ def _tet_forces(
     slots_out[o + 3] = fl
 
 
-# Each node adds its element slots, in the fixed ascending order of Model.node_slots, to the
-# forces of the stages.
+# Each node adds its slots, in a fixed order, to the forces of the stages (deterministic, no
+# atomics): node[k] takes slots[order[start[k]]] .. slots[order[start[k + 1] - 1]]. The solver
+# gathers the element slots of every node (Model.node_slots); the muscle stage gathers the springs
+# of its attached nodes.
 @wp.kernel
 def _gather(
-    node_slot_start: wp.array(dtype=wp.int32),
-    node_slots: wp.array(dtype=wp.int32),
+    node: wp.array(dtype=wp.int32),
+    start: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
     slots: wp.array(dtype=wp.vec3),
     # In / out:
     forces: wp.array(dtype=wp.vec3),
 ):
-    i = wp.tid()
+    k = wp.tid()
     f = wp.vec3(0.0)
-    for s in range(node_slot_start[i], node_slot_start[i + 1]):
-        f = f + slots[node_slots[s]]
+    for s in range(start[k], start[k + 1]):
+        f = f + slots[order[s]]
+    i = node[k]
     forces[i] = forces[i] + f
 
 

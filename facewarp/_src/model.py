@@ -103,6 +103,25 @@ def _vertex_array(a, n: int, name: str, dtype) -> np.ndarray:
     return a.astype(dtype)
 
 
+def group_indices(keys, groups=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR grouping for the deterministic gathers: the entries of each group in ascending order.
+
+    Args:
+        keys: Group of each entry, shape (k,), int.
+        groups: The groups to list, ascending, shape (g,) (default: the distinct keys); a group
+            with no entry gets an empty range.
+
+    Returns:
+        ``(groups, start, order)``: group ``j`` owns entries ``order[start[j]:start[j + 1]]``;
+        shapes (g,), (g + 1,), (k,), int64.
+    """
+    keys = np.asarray(keys, dtype=np.int64)
+    groups = np.unique(keys) if groups is None else np.asarray(groups, dtype=np.int64)
+    order = np.argsort(keys, kind="stable")
+    start = np.searchsorted(keys[order], groups, side="left")
+    return groups, np.r_[start, len(keys)], order
+
+
 class ModelBuilder:
     """Validates a tet mesh and derives the elements of the deformation model (Sec. 6.4).
 
@@ -288,8 +307,7 @@ class ModelBuilder:
         inv_mass = np.where(self.fixed, 0.0, 1.0 / self.mass)
         # force slots: edge e -> 2e (i), 2e+1 (j); face f -> 2E + 3f + (0, 1, 2); tet t -> 2E + 3F + 4t + (0..3)
         slot_node = np.concatenate([self.edges.ravel(), self.faces.ravel(), self.tets.ravel()])
-        order = np.argsort(slot_node, kind="stable")
-        start = np.searchsorted(slot_node[order], np.arange(len(self.vertices) + 1))
+        _, start, order = group_indices(slot_node, np.arange(len(self.vertices)))
         return Model(
             device=dev,
             vertex_count=len(self.vertices),

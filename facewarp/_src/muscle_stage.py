@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
-from .model import Model
+from .model import Model, group_indices
 
 __all__ = ["CarryStage", "MuscleRig", "MuscleStage", "JawStage", "SupportStage", "ellipsoid_uv", "rig_reference"]
 
@@ -214,9 +214,11 @@ class MuscleStage:
         muscle's (:meth:`MuscleRig.attachment_jaw`), so opening the jaw alone pulls no node."""
         wp = _wp()
         from . import kernels_muscle as km
+        from . import kernels_tissue as kt
 
         rig.validate()
         self.km = km
+        self.kt = kt
         self.rig = rig
         self.device = device
         f32 = lambda a, dt=float: wp.array(np.ascontiguousarray(a, dtype=np.float32), dtype=dt, device=device)  # noqa: E731
@@ -235,11 +237,9 @@ class MuscleStage:
         self.seg_curve = i32(rig.seg_curve)
         self.seg_t = f32(rig.seg_t, wp.vec2)
         self.seg_rest_radii = f32(rig.seg_rest_radii, wp.vec3)
-        ad = np.asarray(rig.anchor_dst, np.int64)
-        a_order = np.argsort(ad, kind="stable")
-        dst_u = np.unique(ad)
+        dst_u, a_start, a_order = group_indices(rig.anchor_dst)
         self.anchor_dst_unique = i32(dst_u)
-        self.anchor_start = i32(np.searchsorted(ad[a_order], np.r_[dst_u, np.iinfo(np.int64).max]))
+        self.anchor_start = i32(a_start)
         self.anchor_src = i32(np.asarray(rig.anchor_src)[a_order])
         self.anchor_weight = f32(np.asarray(rig.anchor_weight)[a_order])
         self.att_node = i32(rig.att_node)
@@ -251,13 +251,11 @@ class MuscleStage:
         if node_amount is not None and len(rig.att_node):
             shift = np.asarray(node_amount, np.float64)[rig.att_node] - rig.attachment_jaw()
         self.att_jaw_shift = f32(shift)
-        an = np.asarray(rig.att_node, np.int64)
-        order = np.argsort(an, kind="stable")
-        nodes_u = np.unique(an)
+        nodes_u, n_start, order = group_indices(rig.att_node)
         self.att_nodes_unique = i32(nodes_u)
-        self.att_node_start = i32(np.searchsorted(an[order], np.r_[nodes_u, np.iinfo(np.int64).max]))
+        self.att_node_start = i32(n_start)
         self.att_order = i32(order)
-        self.att_force = wp.zeros(len(an), dtype=wp.vec3, device=device)
+        self.att_force = wp.zeros(len(order), dtype=wp.vec3, device=device)
         P, S, K = len(rig.ctrl_rest), len(rig.seg_curve), len(rig.att_node)
         self.ctrl_jawed = wp.zeros(P, dtype=wp.vec3, device=device)
         self.ctrl_contracted = wp.zeros(P, dtype=wp.vec3, device=device)
@@ -304,7 +302,7 @@ class MuscleStage:
                               self.att_jaw_shift, self.jaw_pivot, self.jaw_u, self.jaw_v, control.jaw_angles,
                               self.seg_center, self.seg_frame, self.seg_radii, state_in.positions],
                       outputs=[self.att_point, self.att_force], device=self.device)
-            wp.launch(self.km._muscle_gather, dim=len(self.att_nodes_unique),
+            wp.launch(self.kt._gather, dim=len(self.att_nodes_unique),
                       inputs=[self.att_nodes_unique, self.att_node_start, self.att_order, self.att_force],
                       outputs=[forces], device=self.device)
 

@@ -68,8 +68,14 @@ def stable_dt(model_or_builder, *, safety: float = 0.5) -> float:
         d0 = model_or_builder.edge_rest_lengths
         mass = model_or_builder.mass
         k0 = model_or_builder.edge_k0
-    k = max(float(k0.max()), 1e-30)
-    return float(safety * DT_STABLE_1CM * (d0.min() / 0.01) * np.sqrt(mass.min() / 0.5) * np.sqrt(15.0 / k))
+    return float(_edge_dt(d0.min(), mass.min(), float(k0.max()), safety))
+
+
+def _edge_dt(d0, mass, k0_max: float, safety: float):
+    """The edge rule of :func:`stable_dt`: ``safety * DT_STABLE_1CM`` scaled by edge length,
+    node mass and the stiffest k0 (scalars or arrays)."""
+    k = max(k0_max, 1e-30)
+    return safety * DT_STABLE_1CM * (d0 / 0.01) * np.sqrt(mass / 0.5) * np.sqrt(15.0 / k)
 
 
 MASS_SCALING_QUANTILE = 0.02
@@ -95,12 +101,11 @@ def node_stable_dt(builder, *, safety: float = 0.5) -> np.ndarray:
     """
     V, T, m = builder.vertices, builder.tets, builder.mass
     n = len(V)
-    k = max(float(builder.edge_k0.max()), 1e-30)
     E, d0 = builder.edges, builder.edge_rest_lengths
     dmin = np.full(n, np.inf)
     np.minimum.at(dmin, E[:, 0], d0)
     np.minimum.at(dmin, E[:, 1], d0)
-    dt = safety * DT_STABLE_1CM * (dmin / 0.01) * np.sqrt(m / 0.5) * np.sqrt(15.0 / k)
+    dt = _edge_dt(dmin, m, float(builder.edge_k0.max()), safety)
     a, b, c, d = (V[T[:, i]] for i in range(4))
     vol = np.abs(np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))) / 6.0
     areas = [0.5 * np.linalg.norm(np.cross(q - p, r - p), axis=1) for p, q, r in ((a, b, c), (a, b, d), (a, c, d), (b, c, d))]
@@ -200,6 +205,7 @@ class SolverVerlet:
         n = model.vertex_count
         self.forces = wp.zeros(n, dtype=wp.vec3, device=self.device)
         self.slots = wp.zeros(model.slot_count, dtype=wp.vec3, device=self.device)
+        self.nodes = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
         self.targets = wp.clone(model.rest_positions)
         self.step_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.guard = wp.array([kt.GUARD_NONE, kt.GUARD_NONE], dtype=wp.int32, device=self.device)
@@ -255,7 +261,7 @@ class SolverVerlet:
                 outputs=[self.slots],
                 device=self.device,
             )
-        wp.launch(kt._gather, dim=m.vertex_count, inputs=[m.node_slot_start, m.node_slots, self.slots],
+        wp.launch(kt._gather, dim=m.vertex_count, inputs=[self.nodes, m.node_slot_start, m.node_slots, self.slots],
                   outputs=[self.forces], device=self.device)
         return self.forces
 

@@ -43,8 +43,9 @@ for any head, so nothing has to be redefined per head:
    error in the input surface and is reported as such.
 5. Where crossing directions still leave flat tets (mean ratio below
    :data:`TET_QUALITY_FLOOR`, typically in a crease an adaptation pressed into the lips or
-   nostrils), the inner sheet is relaxed toward a parallel copy of the skin,
-   ``mean_j (P_j + X_i - X_j)``, one node at a time and only where the node's worst tet improves.
+   nostrils), the inner-sheet nodes there hill-climb: each tries a parallel copy of the skin,
+   ``mean_j (P_j + X_i - X_j)``, and small steps around its place, and moves only where its worst
+   tet improves (:func:`_relax_inner_sheet`).
    Flat tets matter twice: they invert first under load, and their stiff volume and area
    response sets the explicit step of the solver (:func:`facewarp._src.solver.node_stable_dt`).
 
@@ -475,9 +476,13 @@ def tet_mean_ratio(V, T) -> np.ndarray:
         Quality, shape (k,), float64, in [0, 1]; negative for an inverted tet.
     """
     V, T = _check_VT(V, T)
-    vol = tet_volumes(V, T)
-    P = V[T]
-    e2 = sum(np.sum((P[:, j] - P[:, i]) ** 2, axis=1) for i, j in _TET_EDGES)
+    return _mean_ratio(V[T])
+
+
+def _mean_ratio(Q: np.ndarray) -> np.ndarray:
+    """:func:`tet_mean_ratio` of tets given by their corners, shape (k, 4, 3)."""
+    vol = np.einsum("ij,ij->i", np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]), Q[:, 3] - Q[:, 0]) / 6.0
+    e2 = sum(np.sum((Q[:, j] - Q[:, i]) ** 2, axis=1) for i, j in _TET_EDGES)
     return np.sign(vol) * 12.0 * np.cbrt(3.0 * np.abs(vol)) ** 2 / np.maximum(e2, 1e-300)
 
 
@@ -485,7 +490,7 @@ _STEPS = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-
 _STEPS /= np.linalg.norm(_STEPS, axis=1, keepdims=True)
 
 
-def _relax_inner_sheet(X, Fl, d, d_inward, build, A, *, d_max, sweeps: int):
+def _relax_inner_sheet(X, Fl, d, d_inward, sheets, T, prism, A, *, d_max, sweeps: int):
     """Step 5 of :func:`extrude_skin_layer`: a hill climb of the inner-sheet nodes under tets of
     mean ratio below :data:`TET_QUALITY_FLOOR` (and of their inner neighbours).
 
@@ -501,7 +506,7 @@ def _relax_inner_sheet(X, Fl, d, d_inward, build, A, *, d_max, sweeps: int):
     Ac = A.tocoo()
     ii, jj = Ac.row, Ac.col
     deg = np.bincount(ii, minlength=p).astype(float)
-    P, T, prism = build(d, d_inward)
+    P = sheets(d, d_inward)
     inner_of = np.full(len(P), -1)
     inner_of[len(P) - p:] = np.arange(p)  # the inner sheet is the last block of nodes
     radius = 0.25 * d.copy()
@@ -522,9 +527,7 @@ def _relax_inner_sheet(X, Fl, d, d_inward, build, A, *, d_max, sweeps: int):
             Q = P[T[sel]]
             frac = np.linalg.norm(Q[:, k] - X[v], axis=1) / np.maximum(d[v], 1e-300)  # the node's sheet
             Q[:, k] = X[v] + (frac * dc[v])[:, None] * dir_c[v]
-            e2 = sum(np.sum((Q[:, b] - Q[:, a]) ** 2, axis=1) for a, b in _TET_EDGES)
-            vol = np.einsum("ij,ij->i", np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]), Q[:, 3] - Q[:, 0]) / 6
-            np.minimum.at(out, v, np.sign(vol) * 12.0 * np.cbrt(3.0 * np.abs(vol)) ** 2 / np.maximum(e2, 1e-300))
+            np.minimum.at(out, v, _mean_ratio(Q))
         out[~ok] = -np.inf
         return out, dc, dir_c
 
@@ -563,7 +566,7 @@ def _relax_inner_sheet(X, Fl, d, d_inward, build, A, *, d_max, sweeps: int):
             continue
         dn, un = d.copy(), d_inward.copy()
         dn[keep], un[keep] = best_d[keep], best_u[keep]
-        Pn, _, _ = build(dn, un)
+        Pn = sheets(dn, un)
         qn = tet_mean_ratio(Pn, T)
         # undo a move that left any of its tets below the worst quality the node had before
         floor_t = np.where(keep, old_min, np.inf)[Fl[prism]].min(1)
@@ -571,7 +574,7 @@ def _relax_inner_sheet(X, Fl, d, d_inward, build, A, *, d_max, sweeps: int):
         back = np.unique(Fl[prism[worse]])
         dn[back], un[back] = d[back], d_inward[back]
         d, d_inward = dn, un
-        P, T, prism = build(d, d_inward)
+        P = sheets(d, d_inward)
     return d, d_inward
 
 
@@ -698,18 +701,20 @@ def extrude_skin_layer(
         d = new
 
     # 4. build, and shrink around inverted / flat tets
-    def build(d, u=None):
+    # the tets depend on the numbering only; the depths and directions place the sheets
+    T_list, prism_list = [], []
+    for l in range(layers):
+        Tl, pr = split_prisms(Fl + l * p, Fl + (l + 1) * p, key=np.tile(np.arange(p), layers + 1))
+        T_list.append(Tl)
+        prism_list.append(pr)
+    T, prism = np.concatenate(T_list), np.concatenate(prism_list)
+
+    def sheets(d, u=None):
         u = d_inward if u is None else u
-        P = np.concatenate([X + (l / layers) * d[:, None] * u for l in range(layers + 1)])
-        T_list, prism_list = [], []
-        for l in range(layers):
-            Tl, pr = split_prisms(Fl + l * p, Fl + (l + 1) * p, key=np.tile(np.arange(p), layers + 1))
-            T_list.append(Tl)
-            prism_list.append(pr)
-        return P, np.concatenate(T_list), np.concatenate(prism_list)
+        return np.concatenate([X + (l / layers) * d[:, None] * u for l in range(layers + 1)])
 
     area2 = np.linalg.norm(np.cross(X[Fl[:, 1]] - X[Fl[:, 0]], X[Fl[:, 2]] - X[Fl[:, 0]]), axis=1)
-    P, T, prism = build(d)
+    P = sheets(d)
     for _ in range(max_sweeps):
         vol = tet_volumes(P, T)
         ref = area2[prism] / 2 * d[Fl[prism]].mean(1) / layers / 3
@@ -734,13 +739,13 @@ def extrude_skin_layer(
             m = d_inward[sel] + (A[sel] @ d_inward)
             d_inward[sel] = m / np.linalg.norm(m, axis=1, keepdims=True)
             d_inward = -_visible_directions(-d_inward, X, Fl)
-        P, T, prism = build(d)
+        P = sheets(d)
 
     # 5. flat tets left by crossing directions (creases of adapted heads): the inner sheet is
     # relaxed toward a parallel copy of the skin, one node at a time where that helps
     if relax_sweeps > 0:
-        d, d_inward = _relax_inner_sheet(X, Fl, d, d_inward, build, A, d_max=t, sweeps=relax_sweeps)
-        P, T, prism = build(d, d_inward)
+        d, d_inward = _relax_inner_sheet(X, Fl, d, d_inward, sheets, T, prism, A, d_max=t, sweeps=relax_sweeps)
+        P = sheets(d, d_inward)
     vol = tet_volumes(P, T)
     if (vol <= 0).any():
         k = int(np.flatnonzero(vol <= 0)[0])
