@@ -37,7 +37,7 @@ def machine(device: str = "cpu") -> dict:
 
 
 def save(name: str, data: dict) -> Path:
-    from facewarp._src.fileio import write_json
+    from facewarp._src.core.fileio import write_json
 
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = RESULTS / f"{name}.json"

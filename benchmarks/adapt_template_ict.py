@@ -43,7 +43,7 @@ TARGET_MEDIAN_MM = 0.5
 
 def load_template():
     from facewarp import default_template
-    from facewarp._src.adapt_io import _vertex_groups
+    from facewarp._src.jobs.adapt import _vertex_groups
 
     t = default_template(0)
     lm = {k: v for k, v in t.landmarks().items() if t.fdp[k][0] == "head"}
@@ -52,9 +52,9 @@ def load_template():
 
 
 def run_case(k: int, t, tlm, face, groups, SF_ict, *, levels: int, method: str, save_dir: Path | None = None) -> dict:
-    from facewarp._src.adapt import adapt
-    from facewarp._src.mesh import load_mesh, unit_scale
-    from facewarp._src.metrics import distance_error
+    from facewarp._src.adapt.pipeline import adapt
+    from facewarp._src.geometry.mesh import load_mesh, unit_scale
+    from facewarp._src.adapt.metrics import distance_error
 
     truth = load_mesh(ict_dir() / f"identity{k:03d}.obj", units="cm").vertices[:HEAD_VERTS]
     SV_mm, SF, pose = make_scan(truth, SF_ict, seed=1000 + k)
@@ -91,7 +91,7 @@ def run_case(k: int, t, tlm, face, groups, SF_ict, *, levels: int, method: str, 
         "levels": [r.to_dict() for r in res.levels],
     }
     if save_dir is not None:  # the adapted head and the scan, for heat maps
-        from facewarp._src.mesh import save_obj
+        from facewarp._src.geometry.mesh import save_obj
 
         save_dir.mkdir(parents=True, exist_ok=True)
         save_obj(save_dir / f"adapted_{k:03d}.obj", res.vertices_scan_frame / mm, t.faces)
@@ -152,7 +152,7 @@ def main(argv=None) -> int:
     _, SF_ict, _ = load_ict(d)
     t, tlm, face, groups = load_template()
 
-    from facewarp._src.adapt import adapt
+    from facewarp._src.adapt.pipeline import adapt
 
     adapt(t.vertices, t.faces, tlm, t.vertices * 1.02, t.faces, {f: v * 1.02 for f, v in tlm.items()}, levels=1)  # warm-up
 

@@ -33,12 +33,12 @@ def main():
     if not (d / "generic_neutral_mesh.obj").is_file():
         print(f"ICT-FaceKit data not found at {d}: nothing to measure")
         return
-    from facewarp._src.jobs import build_files
-    from facewarp._src.adapt_io import adapt_files
-    from facewarp._src.face import load_face_rig
-    from facewarp._src.mesh import load_mesh, save_obj
-    from facewarp._src.model import ModelBuilder
-    from facewarp._src.solver import node_stable_dt, scale_masses
+    from facewarp._src.jobs.files import build_files
+    from facewarp._src.jobs.adapt import adapt_files
+    from facewarp._src.sim.face import load_face_rig
+    from facewarp._src.geometry.mesh import load_mesh, save_obj
+    from facewarp._src.physics.model import ModelBuilder
+    from facewarp._src.physics.solvers.verlet import node_stable_dt, scale_masses
 
     _, F, _ = load_ict(d)
     rows = []

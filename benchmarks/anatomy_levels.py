@@ -18,8 +18,8 @@ def main():
     ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2, 3])
     args = ap.parse_args()
     from facewarp import default_template
-    from facewarp._src.anatomy import build_anatomy
-    from facewarp._src.errors import InputError
+    from facewarp._src.anatomy.build import build_anatomy
+    from facewarp._src.core.errors import InputError
 
     rows = []
     for lv in args.levels:

@@ -29,11 +29,11 @@ def main():
     ap.add_argument("--name", help="tag of the head in the output names")
     ap.add_argument("--expressions", nargs="+", default=["smile", "laugh", "surprise", "angry", "sad", "sequence"])
     args = ap.parse_args()
-    from facewarp._src.anatomy import build_anatomy
-    from facewarp._src.errors import SimulationError
-    from facewarp._src.face import FaceSimulator, face_rig_from_anatomy, load_face_rig
-    from facewarp._src.jobs import _timeline, displacement_max, load_head, render_strip
-    from facewarp._src.render import save_png
+    from facewarp._src.anatomy.build import build_anatomy
+    from facewarp._src.core.errors import SimulationError
+    from facewarp._src.sim.face import FaceSimulator, face_rig_from_anatomy, load_face_rig
+    from facewarp._src.jobs.files import _timeline, displacement_max, load_head, render_strip
+    from facewarp._src.present.render import save_png
 
     if Path(args.head, "face_rig.npz").is_file():
         fr = load_face_rig(args.head)

@@ -21,9 +21,9 @@ from benchmarks._common import machine, save
 
 def _sim(level: int, device: str, ramp: int = 20, chunk: int = 100, expression: str = "smile"):
     from facewarp import default_template
-    from facewarp._src.anatomy import build_anatomy
+    from facewarp._src.anatomy.build import build_anatomy
     from facewarp._src.expressions import preset
-    from facewarp._src.face import FaceSimulator, _activation_vector, face_rig_from_anatomy
+    from facewarp._src.sim.face import FaceSimulator, _activation_vector, face_rig_from_anatomy
 
     fr = face_rig_from_anatomy(build_anatomy(default_template(level), check_intersections=False))
     sim = FaceSimulator(fr, device=device)
@@ -76,7 +76,7 @@ def main():
     ap.add_argument("--parity", action="store_true")
     args = ap.parse_args()
     rows = []
-    from facewarp._src.errors import SimulationError
+    from facewarp._src.core.errors import SimulationError
 
     for lv in args.levels:
         try:

@@ -1,56 +1,118 @@
 """facewarp: personalized, physically simulated faces.
 
-Public API (everything else lives in :mod:`facewarp._src` and may change):
+The pipeline, in the order data flows (thesis chapters 4-6):
 
-- meshes and files: :func:`load_mesh`, :func:`save_obj`, :func:`mesh_report`, :class:`Mesh`,
-  :class:`SurfacePoints`, :func:`closest_surface_points`;
-- MPEG-4 feature points: :data:`FDP_CATALOGUE`, :data:`FDP_IDS`, :func:`fapu`,
-  :func:`load_landmarks`, :func:`save_landmarks_json`;
-- geometry: :func:`vertex_normals`, :func:`mean_curvature`, :class:`MeshQuery`;
-- the default template: :func:`default_template`, :class:`Template`, :data:`REGIONS`,
-  :func:`export_template`, :func:`load_template_dir`;
-- pictures: :func:`render_mesh`, :func:`save_png`, :func:`colormap`.
+1. a head: :func:`default_template` (authored in code, levels 0-4), :func:`load_head` (a template
+   folder, an ``adapt`` output, ``"default:LEVEL"``), :func:`import_ict`;
+2. adaptation to a range scan: :func:`adapt` (FDP calibration, global RBF, multi-level CSRBF);
+3. anatomy: :func:`build_anatomy` (skin tetrahedra, Bezier muscles), or :func:`build_face`
+   which also packs the solver inputs (:class:`FaceRig`);
+4. simulation: :class:`FaceSimulator` (``set_activations``, ``set_jaw``, ``step``, ``reset``,
+   ``surface``, ``fdp``) and expressions (:func:`preset`, :class:`Timeline`, ...);
+5. output: :class:`Frames`, :func:`save_frames_npz`, pictures (:func:`render_mesh`, ...), and
+   the ``usd_export`` package.
 
-Units are SI inside (metres); convert at file edges with ``units=``.
+Lower level, after Newton's layout: :class:`ModelBuilder` -> :class:`Model` / :class:`State` /
+:class:`Control` -> :class:`SolverVerlet` with its stages. Detailed free functions live in the
+public submodules :mod:`facewarp.geometry`, :mod:`facewarp.adaptation`, :mod:`facewarp.anatomy`,
+:mod:`facewarp.physics` and :mod:`facewarp.render`. Everything under ``facewarp._src`` is
+private and may change.
+
+Units are SI inside (metres, seconds, radians); convert at file edges with ``units=``. Names
+are imported lazily, so ``import facewarp`` is fast and Warp starts only when first used.
 """
 
-from ._src.errors import FacewarpError, InputError, SimulationError
-from ._src.geometry import MeshQuery, mean_curvature, vertex_normals
-from ._src.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
-from ._src.mesh import Mesh, SurfacePoints, closest_surface_points, load_mesh, mesh_report, save_obj
-from ._src.render import colormap, render_mesh, save_png
-from ._src.template import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, default_template
-from ._src.template.export import export_template, load_template_dir
+from __future__ import annotations
 
-__version__ = "0.1.0"
+import importlib
+from typing import TYPE_CHECKING
 
-__all__ = [
-    "FDP_CATALOGUE",
-    "FDP_IDS",
-    "FRONTAL_REGIONS",
-    "REGIONS",
-    "THICKNESS_FACTOR",
-    "FacewarpError",
-    "InputError",
-    "Mesh",
-    "MeshQuery",
-    "SimulationError",
-    "SurfacePoints",
-    "Template",
-    "__version__",
-    "closest_surface_points",
-    "colormap",
-    "default_template",
-    "export_template",
-    "fapu",
-    "load_landmarks",
-    "load_mesh",
-    "load_template_dir",
-    "mean_curvature",
-    "mesh_report",
-    "render_mesh",
-    "save_landmarks_json",
-    "save_obj",
-    "save_png",
-    "vertex_normals",
-]
+__version__ = "0.2.0"
+
+# public name -> private module that defines it
+_NAMES = {
+    # errors
+    "FacewarpError": "core.errors", "InputError": "core.errors", "SimulationError": "core.errors",
+    # meshes, geometry, landmarks
+    "Mesh": "geometry.mesh", "SurfacePoints": "geometry.mesh", "closest_surface_points": "geometry.mesh",
+    "load_mesh": "geometry.mesh", "mesh_report": "geometry.mesh", "save_obj": "geometry.mesh",
+    "MeshQuery": "geometry.surface", "mean_curvature": "geometry.surface", "vertex_normals": "geometry.surface",
+    "FDP_CATALOGUE": "geometry.landmarks", "FDP_IDS": "geometry.landmarks", "fapu": "geometry.landmarks",
+    "load_landmarks": "geometry.landmarks", "save_landmarks_json": "geometry.landmarks",
+    "Similarity": "geometry.similarity", "fit_similarity": "geometry.similarity",
+    # heads
+    "FRONTAL_REGIONS": "template.head", "REGIONS": "template.head", "THICKNESS_FACTOR": "template.head",
+    "Template": "template.head", "default_template": "template.head", "load_template_dir": "template.files",
+    "save_template": "template.files", "export_template": "jobs.template", "import_ict": "importers.ict",
+    "load_head": "adapt.transfer",
+    # adaptation
+    "adapt": "adapt.pipeline", "AdaptResult": "adapt.pipeline", "calibrate": "adapt.calibrate",
+    "Calibration": "adapt.calibrate", "distance_error": "adapt.metrics", "vertex_error": "adapt.metrics",
+    # anatomy
+    "Anatomy": "anatomy.build", "build_anatomy": "anatomy.build", "write_anatomy": "anatomy.build",
+    "JawKinematic": "anatomy.jaw",
+    # expressions
+    "MUSCLES": "expressions", "PRESETS": "expressions", "Expression": "expressions", "Segment": "expressions",
+    "Timeline": "expressions", "blend": "expressions", "load_sequence": "expressions", "preset": "expressions",
+    "thesis_sequence": "expressions", "timeline_for": "expressions", "timeline_from_spec": "expressions",
+    # simulation
+    "FaceRig": "physics.face_rig", "build_face": "physics.face_rig", "face_rig_from_anatomy": "physics.face_rig",
+    "load_face_rig": "physics.face_rig", "save_face_rig": "physics.face_rig",
+    "FaceSimulator": "sim.simulator", "Frames": "sim.simulator", "save_frames_npz": "sim.simulator",
+    # lower level
+    "ModelBuilder": "physics.model", "Model": "physics.model", "State": "physics.model", "Control": "physics.model",
+    "SolverVerlet": "physics.solvers.verlet", "SolverStage": "physics.solvers.verlet",
+    "MuscleRig": "physics.muscle_stage", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
+    "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
+    # pictures
+    "colormap": "present.render", "render_mesh": "present.render", "save_png": "present.render",
+    "render_strip": "present.strips", "render_anatomy": "present.anatomy", "render_previews": "present.template",
+}
+
+_SUBMODULES = ("geometry", "adaptation", "anatomy", "physics", "render")
+
+__all__ = sorted([*_NAMES, "__version__"])
+
+
+def __getattr__(name: str):
+    if name in _NAMES:
+        value = getattr(importlib.import_module(f"._src.{_NAMES[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    if name in _SUBMODULES:
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'facewarp' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *_NAMES, *_SUBMODULES])
+
+
+if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
+    from ._src.adapt.calibrate import Calibration, calibrate
+    from ._src.adapt.metrics import distance_error, vertex_error
+    from ._src.adapt.pipeline import AdaptResult, adapt
+    from ._src.adapt.transfer import load_head
+    from ._src.anatomy.build import Anatomy, build_anatomy, write_anatomy
+    from ._src.anatomy.jaw import JawKinematic
+    from ._src.core.errors import FacewarpError, InputError, SimulationError
+    from ._src.coupling.kinematic import CarryStage, JawStage
+    from ._src.expressions import (MUSCLES, PRESETS, Expression, Segment, Timeline, blend, load_sequence, preset,
+                                   thesis_sequence, timeline_for, timeline_from_spec)
+    from ._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
+    from ._src.geometry.mesh import Mesh, SurfacePoints, closest_surface_points, load_mesh, mesh_report, save_obj
+    from ._src.geometry.similarity import Similarity, fit_similarity
+    from ._src.geometry.surface import MeshQuery, mean_curvature, vertex_normals
+    from ._src.importers.ict import import_ict
+    from ._src.jobs.template import export_template
+    from ._src.physics.face_rig import FaceRig, build_face, face_rig_from_anatomy, load_face_rig, save_face_rig
+    from ._src.physics.model import Control, Model, ModelBuilder, State
+    from ._src.physics.muscle_stage import MuscleRig, MuscleStage, SupportStage
+    from ._src.physics.solvers.verlet import SolverStage, SolverVerlet
+    from ._src.present.anatomy import render_anatomy
+    from ._src.present.render import colormap, render_mesh, save_png
+    from ._src.present.strips import render_strip
+    from ._src.present.template import render_previews
+    from ._src.sim.simulator import FaceSimulator, Frames, save_frames_npz
+    from ._src.template.files import load_template_dir, save_template
+    from ._src.template.head import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, default_template

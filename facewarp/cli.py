@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from ._src.errors import FacewarpError
+from ._src.core.errors import FacewarpError
 
 EXIT_USAGE = 2
 
@@ -80,7 +80,7 @@ def _emit(args, data: dict, lines: list[str]):
 # ----------------------------------------------------------------------------- template
 def cmd_template_export(args):
     from ._src.template import default_template
-    from ._src.template.export import export_template
+    from ._src.jobs.template import export_template
 
     t0 = time.perf_counter()
     prog = _Progress(5 if not args.no_preview else 3, "template export", not args.json)
@@ -101,7 +101,7 @@ def cmd_template_export(args):
 
 def cmd_template_info(args):
     from ._src.template import default_template
-    from ._src.template.export import template_summary
+    from ._src.template.files import template_summary
 
     t = default_template(args.level)
     s = template_summary(t)
@@ -120,7 +120,7 @@ def cmd_template_info(args):
 
 # ----------------------------------------------------------------------------- inputs
 def cmd_mesh_check(args):
-    from ._src.mesh import load_mesh, mesh_report
+    from ._src.geometry.mesh import load_mesh, mesh_report
 
     m = load_mesh(args.mesh, units=args.units)
     rep = mesh_report(m.vertices, m.faces)
@@ -131,7 +131,7 @@ def cmd_mesh_check(args):
 
 
 def cmd_landmarks_check(args):
-    from ._src.landmarks import FDP_CATALOGUE, fdp_sort_key, load_landmarks
+    from ._src.geometry.landmarks import FDP_CATALOGUE, fdp_sort_key, load_landmarks
 
     lm = load_landmarks(args.landmarks, units=args.units)
     ids = sorted(lm, key=fdp_sort_key)
@@ -143,7 +143,7 @@ def cmd_landmarks_check(args):
 
 
 def cmd_adapt(args):
-    from ._src.adapt_io import adapt_files
+    from ._src.jobs.adapt import adapt_files
 
     prog = _Progress(4, "adapt", not args.json)
     rep = adapt_files(args.scan, args.landmarks, args.out, template_dir=args.template, template_mesh=args.template_mesh,
@@ -164,7 +164,7 @@ def cmd_adapt(args):
 
 
 def cmd_build(args):
-    from ._src.jobs import build_files
+    from ._src.jobs.face import build_files
 
     prog = _Progress(4, "build", not args.json)
     q = build_files(args.head, args.out, layers=args.layers, device=args.device, progress=prog)
@@ -178,7 +178,7 @@ def cmd_build(args):
 
 
 def cmd_simulate(args):
-    from ._src.jobs import simulate_files
+    from ._src.jobs.face import simulate_files
 
     bar = None
     if not args.json:
@@ -224,7 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.set_defaults(func=cmd_template_info)
 
     def cmd_template_import_ict(args):
-        from ._src.template.ict import import_ict_files
+        from ._src.jobs.template import import_ict_files
 
         prog = _Progress(5 if not args.no_preview else 4, "template import-ict", not args.json)
         rep = import_ict_files(args.ict_dir, args.out, previews=not args.no_preview, device=args.device, progress=prog)

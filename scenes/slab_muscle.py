@@ -22,11 +22,11 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from facewarp._src.model import ModelBuilder
-from facewarp._src.muscle_stage import MuscleRig, MuscleStage, ellipsoid_point, ellipsoid_uv, segment_frames
-from facewarp._src.render import colormap, render_mesh, save_png
-from facewarp._src.solver import SolverVerlet, simulate, stable_dt
-from facewarp._src.tissue import split_prisms
+from facewarp._src.physics.model import ModelBuilder
+from facewarp._src.physics.muscle_stage import MuscleRig, MuscleStage, ellipsoid_point, ellipsoid_uv, segment_frames
+from facewarp._src.present.render import colormap, render_mesh, save_png
+from facewarp._src.physics.solvers.verlet import SolverVerlet, simulate, stable_dt
+from facewarp._src.anatomy.tissue import split_prisms
 
 
 def make_slab(n: int, size: float, thickness: float):

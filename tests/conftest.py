@@ -29,7 +29,7 @@ def warp_devices() -> list[str]:
     """Warp devices to run device tests on: "cpu" always, "cuda:0" when a GPU is present."""
     devices = ["cpu"]
     try:
-        from facewarp._src.geometry import _warp
+        from facewarp._src.geometry.surface import _warp
 
         if _warp().get_cuda_device_count() > 0:
             devices.append("cuda:0")

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from facewarp._src.adapt import adapt
-from facewarp._src.calibrate import Similarity
-from facewarp._src.errors import InputError
-from facewarp._src.rigid import eye_transform, fit_part_transform, transfer_uv
+from facewarp._src.adapt.pipeline import adapt
+from facewarp._src.adapt.calibrate import Similarity
+from facewarp._src.core.errors import InputError
+from facewarp._src.adapt.transfer import eye_transform, fit_part_transform, transfer_uv
 
 DIRS = {
     "2.1": (0, -0.9, 0.45), "3.7": (0.55, 0.25, 0.8), "3.12": (-0.55, 0.25, 0.8), "3.11": (0.2, 0.25, 0.95),

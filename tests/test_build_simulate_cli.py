@@ -73,8 +73,8 @@ def test_build_rejects_mismatched_topology(tmp_path, capsys):
     code = main(["build", str(d), "--out", str(tmp_path / "b")])
     err = capsys.readouterr().err
     assert code == 2 and "topology" in err and len(err.strip().splitlines()) == 1
-    from facewarp._src.anatomy import build_anatomy
-    from facewarp._src.errors import InputError
+    from facewarp._src.anatomy.build import build_anatomy
+    from facewarp._src.core.errors import InputError
     from dataclasses import replace
 
     with pytest.raises(InputError, match="topology"):

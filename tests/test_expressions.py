@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from facewarp._src.errors import InputError
+from facewarp._src.core.errors import InputError
 from facewarp._src.expressions import MUSCLES, PRESETS, Segment, Timeline, blend, load_sequence, preset, thesis_sequence
 
 

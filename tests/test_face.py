@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from facewarp import default_template
-from facewarp._src.anatomy import build_anatomy
+from facewarp._src.anatomy.build import build_anatomy
 from facewarp._src.expressions import Expression, Segment, Timeline, timeline_for
-from facewarp._src.face import FaceSimulator, face_rig_from_anatomy, load_face_rig, save_face_rig
+from facewarp._src.sim.face import FaceSimulator, face_rig_from_anatomy, load_face_rig, save_face_rig
 
 SECONDS = 0.4
 
@@ -82,7 +82,7 @@ def test_jaw_moves_chin_down_and_back(rig):
 def _laugh_steps(rig, device, steps=1000, chunks=10):
     """``steps`` substeps of the laugh preset (muscles and jaw) ramped in over ``chunks``."""
     from facewarp._src.expressions import preset as table_preset
-    from facewarp._src.face import _activation_vector
+    from facewarp._src.sim.face import _activation_vector
 
     sim = FaceSimulator(rig, device=device)
     e = table_preset("laugh")

@@ -7,8 +7,8 @@ import pytest
 import trimesh
 from trimesh.ray.ray_triangle import RayMeshIntersector
 
-from facewarp._src import geometry
-from facewarp._src.errors import InputError
+from facewarp._src.geometry import surface as geometry
+from facewarp._src.core.errors import InputError
 
 # ----------------------------------------------------------------------------------------
 # fixtures

@@ -10,11 +10,11 @@ import json
 import numpy as np
 import pytest
 
-from facewarp._src.errors import InputError
-from facewarp._src.landmarks import FDP_CATALOGUE, FDP_IDS
-from facewarp._src.mesh import load_mesh
+from facewarp._src.core.errors import InputError
+from facewarp._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS
+from facewarp._src.geometry.mesh import load_mesh
 from facewarp._src.template import FRONTAL_REGIONS, REGIONS, default_template
-from facewarp._src.template.ict import ICT_INNER_LIP_VERTICES, ICT_PART_RANGES, ICT_SKIN_VERTICES, import_ict
+from facewarp._src.importers.ict import ICT_INNER_LIP_VERTICES, ICT_PART_RANGES, ICT_SKIN_VERTICES, import_ict
 from facewarp._src.template.likeness import ICT_FDP_VERTICES
 
 
@@ -104,7 +104,7 @@ def test_regions_and_frontal(ict):
 
 
 def test_anatomy_builds(ict):
-    from facewarp._src.anatomy import build_anatomy
+    from facewarp._src.anatomy.build import build_anatomy
 
     t, _ = ict
     q = build_anatomy(t, check_intersections=False).quality
@@ -120,7 +120,7 @@ def test_anatomy_builds(ict):
 
 def test_cli_import(ict_dir, tmp_path, capsys):
     from facewarp.cli import main
-    from facewarp._src.template.export import load_template_dir
+    from facewarp._src.template.files import load_template_dir
 
     out = tmp_path / "ict"
     assert main(["--json", "template", "import-ict", str(ict_dir), "--out", str(out), "--no-preview"]) == 0

@@ -8,9 +8,9 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from facewarp._src.errors import InputError
-from facewarp._src.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
-from facewarp._src.mesh import load_mesh
+from facewarp._src.core.errors import InputError
+from facewarp._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
+from facewarp._src.geometry.mesh import load_mesh
 
 # ----------------------------------------------------------------------------------------
 # catalogue

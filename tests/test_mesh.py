@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from facewarp._src.errors import InputError
-from facewarp._src.fileio import atomic_write, write_json
-from facewarp._src.mesh import (
+from facewarp._src.core.errors import InputError
+from facewarp._src.core.fileio import atomic_write, write_json
+from facewarp._src.geometry.mesh import (
     Mesh,
     SurfacePoints,
     closest_surface_points,

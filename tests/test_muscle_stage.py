@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facewarp._src.jaw import JawKinematic
-from facewarp._src.model import ModelBuilder
-from facewarp._src.muscle_stage import MuscleRig, MuscleStage, JawStage, ellipsoid_point, ellipsoid_uv, rig_reference, segment_frames
-from facewarp._src.solver import SolverVerlet
+from facewarp._src.anatomy.jaw import JawKinematic
+from facewarp._src.physics.model import ModelBuilder
+from facewarp._src.physics.muscle_stage import MuscleRig, MuscleStage, JawStage, ellipsoid_point, ellipsoid_uv, rig_reference, segment_frames
+from facewarp._src.physics.solvers.verlet import SolverVerlet
 
 S2 = np.sqrt(0.5)
 
@@ -69,7 +69,7 @@ def small_rig(nodes, node_pos):
 def test_rational_bezier_ring_is_a_circle():
     V, T, layer = slab()
     rig = small_rig([0], V[:1])
-    from facewarp._src.muscle_stage import _bezier_np
+    from facewarp._src.physics.muscle_stage import _bezier_np
 
     t = np.linspace(0, 1, 11)
     for k in range(1, 5):
@@ -136,7 +136,7 @@ def test_jaw_stage_moves_targets(device):
 
 
 def test_carry_stage_moves_nodes_rigidly_without_velocity(device):
-    from facewarp._src.muscle_stage import CarryStage
+    from facewarp._src.physics.muscle_stage import CarryStage
 
     V, T, layer = slab()
     model = ModelBuilder(V, T, layer=layer).finalize(device)

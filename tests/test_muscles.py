@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import facewarp
-from facewarp._src import muscles as mu
-from facewarp._src import tissue as ts
+from facewarp._src.anatomy import muscles as mu
+from facewarp._src.anatomy import tissue as ts
 
 
 @pytest.fixture(scope="module")
@@ -181,7 +181,7 @@ def test_placements_reuse_and_json(head0, tmp_path):
     for a, b in zip(ms.muscles, again.muscles):
         np.testing.assert_allclose(a.control_points, b.control_points)
         np.testing.assert_array_equal(a.attachment.nodes, b.attachment.nodes)
-    from facewarp._src.fileio import write_json
+    from facewarp._src.core.fileio import write_json
 
     write_json(tmp_path / "muscles.json", mu.muscles_to_json(ms))
     d = json.loads((tmp_path / "muscles.json").read_text())
@@ -203,7 +203,7 @@ def test_bad_definitions(tmp_path, head0):
 def test_build_and_write_anatomy(tmp_path):
     import dataclasses
 
-    from facewarp._src.anatomy import build_anatomy, write_anatomy
+    from facewarp._src.anatomy.build import build_anatomy, write_anatomy
 
     t = facewarp.default_template(0)
     a = build_anatomy(t)
@@ -224,7 +224,7 @@ def test_build_and_write_anatomy(tmp_path):
 
 
 def test_slab_scene():
-    from facewarp._src.anatomy import slab_anatomy
+    from facewarp._src.anatomy.build import slab_anatomy
 
     a = slab_anatomy(cells=20, size=0.02, muscle_length=0.012)
     q = a.quality
@@ -238,9 +238,9 @@ def test_slab_scene():
 
 
 def test_muscle_rig_matches_segments(head0):
-    from facewarp._src.anatomy import muscle_rig
-    from facewarp._src.jaw import JawKinematic
-    from facewarp._src.muscle_stage import rig_reference, segment_frames
+    from facewarp._src.anatomy.build import muscle_rig
+    from facewarp._src.anatomy.jaw import JawKinematic
+    from facewarp._src.physics.muscle_stage import rig_reference, segment_frames
 
     t, sl, ms = head0
     jaw = JawKinematic.from_landmarks(t.condyles, t.landmarks())
@@ -268,7 +268,7 @@ def test_transfer_to_a_reshaped_head(head0):
     # Sec. 6.6: same topology, another shape -> tets re-extruded, muscles reuse their skin points
     import dataclasses
 
-    from facewarp._src.anatomy import build_anatomy
+    from facewarp._src.anatomy.build import build_anatomy
 
     t, _, ms = head0
     V = t.vertices * [1.06, 0.95, 1.03]

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 import warp as wp
 
-from facewarp._src.errors import InputError, SimulationError
-from facewarp._src.model import EDGE_CROSS, EDGE_INNER, EDGE_OUTER, ModelBuilder, signed_volumes
-from facewarp._src.solver import DT_STABLE_1CM, SolverVerlet, simulate, stable_dt
+from facewarp._src.core.errors import InputError, SimulationError
+from facewarp._src.physics.model import EDGE_CROSS, EDGE_INNER, EDGE_OUTER, ModelBuilder, signed_volumes
+from facewarp._src.physics.solvers.verlet import DT_STABLE_1CM, SolverVerlet, simulate, stable_dt
 
 CM = 0.01
 
@@ -516,7 +516,7 @@ def test_stable_dt_one_centimetre_tet(device):
 
 
 def test_node_stable_dt_and_selective_mass_scaling():
-    from facewarp._src.solver import node_stable_dt, scale_masses
+    from facewarp._src.physics.solvers.verlet import node_stable_dt, scale_masses
 
     V, T = grid_tets(4, 4, 1)
     V = V.copy()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import facewarp
-from facewarp._src import tissue as ts
+from facewarp._src.anatomy import tissue as ts
 
 
 def grid_sheet(n: int = 4, size: float = 0.01, *, bump: float = 0.0):
@@ -155,7 +155,7 @@ def test_template_two_layers():
 
 
 def test_tet_mean_ratio_regular_flat_inverted():
-    from facewarp._src.tissue import tet_mean_ratio
+    from facewarp._src.anatomy.tissue import tet_mean_ratio
 
     V = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float)
     T = np.array([[0, 1, 2, 3]])

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .core.errors import InputError
 
 __all__ = [
     "MUSCLES",
@@ -35,6 +35,7 @@ __all__ = [
     "preset",
     "thesis_sequence",
     "timeline_for",
+    "timeline_from_spec",
 ]
 
 MUSCLES: tuple[str, ...] = (
@@ -245,3 +246,25 @@ def load_sequence(path: str | os.PathLike) -> Timeline:
         segs.append(Segment(expr, _num(src, s, "start", 0.0), _num(src, s, "attack", 0.3), _num(src, s, "hold", 1.0),
                             _num(src, s, "release", 0.3), _num(src, s, "weight", 1.0)))
     return Timeline(segs)
+
+
+def timeline_from_spec(expression: str, seconds: float) -> Timeline:
+    """The timeline of ``expression`` over ``seconds`` [s].
+
+    Args:
+        expression: A preset name (:data:`PRESETS`; attack and release of up to 0.3 s, held in
+            between), ``"sequence"`` (the Fig. 6.16 sequence spread over the time) or the path
+            of a sequence ``.json`` file (:func:`load_sequence`).
+        seconds: Length of the animation [s], > 0.
+    """
+    if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
+        raise InputError(f"seconds: expected a positive finite number, got {seconds!r}")
+    if expression in PRESETS:
+        ramp = min(0.3, seconds / 4)
+        return timeline_for(expression, attack=ramp, hold=max(seconds - 2 * ramp - 0.1, 0.0), release=ramp, start=0.05)
+    if expression == "sequence":
+        return thesis_sequence(each=max(seconds / 5 + 0.3, 0.8))
+    p = Path(expression)
+    if p.suffix.lower() == ".json" or p.exists():
+        return load_sequence(p)
+    raise InputError(f"expression {expression!r}: not a preset ({', '.join(PRESETS)}), 'sequence', or a sequence .json file")

@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
-from ..geometry import vertex_normals
-from ..landmarks import FDP_IDS
-from ..mesh import SurfacePoints, closest_surface_points
+from ..core.errors import InputError
+from ..geometry.surface import vertex_normals
+from ..geometry.landmarks import FDP_IDS
+from ..geometry.mesh import SurfacePoints, closest_surface_points
 from . import shape as S
 from .build import CUTS, build_raw_head
 

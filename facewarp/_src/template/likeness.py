@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..calibrate import fit_similarity
-from ..errors import InputError
-from ..geometry import closest_point
-from ..mesh import load_mesh
+from ..geometry.similarity import fit_similarity
+from ..core.errors import InputError
+from ..geometry.surface import closest_point
+from ..geometry.mesh import load_mesh
 
 __all__ = ["ICT_FDP_VERTICES", "ICT_FACE_VERTICES", "human_likeness"]
 

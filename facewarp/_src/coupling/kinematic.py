@@ -1,0 +1,75 @@
+"""The kinematic jaw as solver stages (Eq. 6.4.9): held-node targets and the carry of the
+jaw regions' mass points. The MuJoCo jaw body will sit behind the same stage interface."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.warp import get_warp
+from ..physics.model import Model
+
+__all__ = ["CarryStage", "JawStage"]
+
+
+class JawStage:
+    """Moves the targets of the jaw-carried held nodes (Eq. 6.4.9) each substep (solver stage)."""
+
+    def __init__(self, jaw, nodes, amounts, rest_positions, device):
+        wp = get_warp()
+        from ..physics import kernels_muscle as km
+
+        self.km = km
+        self.device = device
+        keep = np.asarray(amounts) > 0
+        self.count = int(keep.sum())
+        self.nodes = wp.array(np.asarray(nodes)[keep].astype(np.int32), dtype=wp.int32, device=device)
+        self.amounts = wp.array(np.asarray(amounts)[keep].astype(np.float32), dtype=float, device=device)
+        self.rest = rest_positions
+        self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+
+    def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
+        if self.count == 0:
+            return
+        get_warp().launch(self.km._jaw_targets, dim=self.count,
+                     inputs=[self.nodes, self.amounts, self.rest, self.pivot, self.u, self.v, control.jaw_angles],
+                     outputs=[targets], device=self.device)
+
+
+class CarryStage:
+    """Carries the free mass points of the jaw regions with the jaw (Eq. 6.4.9; solver stage).
+
+    Sec. 6.4.3 applies the jaw rotation to the *mass points* of the lip-corner, upper-lip,
+    lower-lip and bottom-face regions with their non-uniform amount. Each substep in which the
+    jaw angles changed, every carried node (and its previous position, so that no velocity is
+    injected) moves by ``J(a theta) J(a theta_prev)^-1``; the skin forces then only answer the
+    strain of the amount field, not the whole rigid swing. Without it the thin skin layer of a
+    lower lip is dragged by the chin (amount 1) over its own inner sheet (amount ~0.5) and
+    inverts at a 30 degree jaw angle. The last angles live on the device (no host round trip);
+    :meth:`reset` sets them back to the rest pose.
+    """
+
+    def __init__(self, jaw, nodes, amounts, device):
+        wp = get_warp()
+        from ..physics import kernels_muscle as km
+
+        self.km = km
+        self.device = device
+        keep = np.asarray(amounts) > 0
+        self.count = int(keep.sum())
+        self.nodes = wp.array(np.asarray(nodes)[keep].astype(np.int32), dtype=wp.int32, device=device)
+        self.amounts = wp.array(np.asarray(amounts)[keep].astype(np.float32), dtype=float, device=device)
+        self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+        self.prev = wp.zeros(2, dtype=float, device=device)
+
+    def reset(self, angles=(0.0, 0.0)) -> None:
+        """Set the remembered jaw angles [rad] (those the state's positions correspond to)."""
+        self.prev.assign(np.asarray(angles, np.float32))
+
+    def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
+        if self.count == 0:
+            return
+        wp = get_warp()
+        wp.launch(self.km._jaw_carry, dim=self.count,
+                  inputs=[self.nodes, self.amounts, self.pivot, self.u, self.v, control.jaw_angles, self.prev],
+                  outputs=[state_in.positions, state_in.prev_positions], device=self.device)
+        wp.launch(self.km._jaw_remember, dim=1, inputs=[control.jaw_angles], outputs=[self.prev], device=self.device)

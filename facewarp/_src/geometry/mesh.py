@@ -1,0 +1,502 @@
+"""Mesh import/export, validation, a topology report, and points stored on a surface.
+
+Everything inside facewarp is in metres; ``units`` converts at the file boundary.
+
+OBJ files are read by our own reader, which keeps the vertices exactly in file order (the
+``v`` lines), so that vertex indices published for a model (landmarks, regions) stay valid.
+trimesh's OBJ loader splits vertices at UV seams and reorders them, so it is not used for
+OBJ. Other formats (PLY, STL, OFF, GLB, GLTF) go through ``trimesh.load(process=False)``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import InputError
+from ..core.fileio import atomic_write
+
+__all__ = [
+    "MESH_SUFFIXES",
+    "UNITS",
+    "Mesh",
+    "SurfacePoints",
+    "closest_surface_points",
+    "load_mesh",
+    "mesh_report",
+    "save_obj",
+    "unit_scale",
+]
+
+UNITS: dict[str, float] = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+"""Length of one file unit in metres."""
+
+MESH_SUFFIXES: tuple[str, ...] = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+"""File suffixes :func:`load_mesh` reads."""
+
+DEGENERATE_AREA = 1e-14
+"""Triangles smaller than this [m^2] are counted as degenerate by :func:`mesh_report`."""
+
+
+def unit_scale(units: str) -> float:
+    """Metres per file unit: 1e-3 for "mm", 1e-2 for "cm", 1.0 for "m".
+
+    Raises:
+        InputError: ``units`` is not one of :data:`UNITS`.
+    """
+    try:
+        return UNITS[units]
+    except (KeyError, TypeError):
+        raise InputError(f"units: unknown unit {units!r}, expected one of {', '.join(UNITS)}") from None
+
+
+@dataclass
+class Mesh:
+    """A triangle mesh in metres.
+
+    Attributes:
+        vertices: Vertex positions [m], shape (n, 3), float64; in file order for OBJ.
+        faces: Triangles (polygons fan-triangulated), shape (m, 3), int64.
+        uv: Per-vertex texture coordinates, shape (n, 2), float64 (dimensionless), or None
+            when the file has none or a vertex carries several (UV seams).
+        name: A label, by default the file's stem.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray | None = None
+    name: str = ""
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def face_count(self) -> int:
+        return len(self.faces)
+
+
+# ----------------------------------------------------------------------------------------
+# loading
+
+
+def _check_file(path: Path) -> None:
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, expected a file")
+    try:
+        size = path.stat().st_size
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror})") from None
+    if size == 0:
+        raise InputError(f"{path}: file is empty")
+
+
+def load_mesh(path: str | os.PathLike, *, units: str = "m") -> Mesh:
+    """Read a triangle mesh and convert it to metres.
+
+    OBJ: vertices in ``v``-line order; polygons fan-triangulated in file order (polygon
+    ``(a, b, c, d)`` becomes ``(a, b, c), (a, c, d)``); negative (relative) indices
+    resolved; ``vt`` kept as per-vertex UV when every vertex uses a single UV value, else
+    ``uv=None`` (vertices in no face then get UV (0, 0)). Lines other than ``v``, ``vt`` and
+    ``f`` are ignored. PLY, STL, OFF, GLB, GLTF: ``trimesh.load(..., process=False,
+    force="mesh")``; a scene with several geometries is concatenated (transforms applied).
+
+    Args:
+        path: Mesh file; the format is chosen by its suffix (:data:`MESH_SUFFIXES`).
+        units: Unit of the file's coordinates: "mm", "cm" or "m".
+
+    Returns:
+        The :class:`Mesh`, vertices in metres.
+
+    Raises:
+        InputError: Missing path, a folder, an empty file, an unsupported or unreadable
+            file, a non-finite coordinate, no faces, or a face index out of range. The
+            one-line message starts with the path.
+    """
+    scale = unit_scale(units)
+    path = Path(path)
+    _check_file(path)
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        expected = ", ".join(MESH_SUFFIXES)
+        raise InputError(f"{path}: unsupported mesh format {suffix or '(no suffix)'!r}, expected one of {expected}")
+    if suffix == ".obj":
+        V, F, uv = _read_obj(path)
+    else:
+        V, F, uv = _read_trimesh(path)
+    _validate(path, V, F)
+    if uv is not None and (uv.shape != (len(V), 2) or not np.isfinite(uv).all()):
+        uv = None
+    return Mesh(vertices=V * scale, faces=F, uv=uv, name=path.stem)
+
+
+def _validate(path: Path, V: np.ndarray, F: np.ndarray) -> None:
+    if len(V) == 0:
+        raise InputError(f"{path}: no vertices")
+    bad = ~np.isfinite(V).all(axis=1)
+    if bad.any():
+        raise InputError(f"{path}: vertex {int(np.flatnonzero(bad)[0])} has a non-finite coordinate")
+    if len(F) == 0:
+        raise InputError(f"{path}: no faces")
+    out = (F < 0) | (F >= len(V))
+    if out.any():
+        f = int(np.flatnonzero(out.any(axis=1))[0])
+        v = int(F[f][out[f]][0])
+        raise InputError(f"{path}: face {f} refers to vertex {v}, but there are {len(V)} vertices (0-based)")
+
+
+def _parse_floats(path: Path, lines: list[str], what: str, width: int) -> np.ndarray:
+    """Parse the first ``width`` numbers of each line into an (len(lines), width) array."""
+    if not lines:
+        return np.zeros((0, width))
+    rows = [s.split() for s in lines]
+    lengths = np.fromiter((len(r) for r in rows), dtype=np.int64, count=len(rows))
+    try:
+        if (lengths == width).all():
+            return np.array([x for r in rows for x in r], dtype=np.float64).reshape(-1, width)
+        short = np.flatnonzero(lengths < width)
+        if len(short) and not (what == "vt" and lengths[short].min() >= 1):
+            line, got = int(short[0]) + 1, int(lengths[short[0]])
+            raise InputError(f"{path}: {what} line {line} has {got} numbers, expected {width}")
+        return np.array([(r + ["0"] * width)[:width] for r in rows], dtype=np.float64)
+    except ValueError as e:
+        if isinstance(e, InputError):
+            raise
+        raise InputError(f"{path}: could not parse a {what} line ({e})") from None
+
+
+def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror})") from None
+
+    v_lines: list[str] = []
+    vt_lines: list[str] = []
+    f_lines: list[str] = []
+    f_v_seen: list[int] = []  # vertices declared before each face (for negative indices)
+    f_vt_seen: list[int] = []
+    for line in text.splitlines():
+        if not line or line[0] not in "vf \t":
+            continue
+        parts = line.split(None, 1)
+        if not parts:
+            continue
+        key = parts[0]
+        rest = parts[1] if len(parts) > 1 else ""
+        if key == "v":
+            v_lines.append(rest)
+        elif key == "vt":
+            vt_lines.append(rest)
+        elif key == "f":
+            f_lines.append(rest)
+            f_v_seen.append(len(v_lines))
+            f_vt_seen.append(len(vt_lines))
+
+    V = _parse_floats(path, v_lines, "v", 3)
+    VT = _parse_floats(path, vt_lines, "vt", 2)
+    if len(V) == 0:
+        raise InputError(f"{path}: no vertices (not an OBJ file?)")
+    if not f_lines:
+        raise InputError(f"{path}: no faces")
+
+    face_tokens = [s.split() for s in f_lines]
+    counts = np.fromiter((len(t) for t in face_tokens), dtype=np.int64, count=len(face_tokens))
+    if (counts < 3).any():
+        p = int(np.flatnonzero(counts < 3)[0])
+        raise InputError(f"{path}: face {p} has {int(counts[p])} vertices, expected at least 3")
+    tokens = [t for ts in face_tokens for t in ts]
+    try:
+        if not any("/" in t for t in tokens):
+            vi = np.array(tokens, dtype=np.int64)
+            ti = None
+        else:
+            split = [t.split("/") for t in tokens]
+            vi = np.array([s[0] for s in split], dtype=np.int64)
+            if all(len(s) > 1 and s[1] for s in split):
+                ti = np.array([s[1] for s in split], dtype=np.int64)
+            else:
+                ti = None
+    except ValueError as e:
+        raise InputError(f"{path}: could not parse a face line ({e})") from None
+
+    poly = np.repeat(np.arange(len(counts)), counts)  # polygon of each corner
+    vi = _resolve(path, vi, np.asarray(f_v_seen, np.int64)[poly], len(V), "vertex", poly)
+    if ti is not None:
+        ti = _resolve(path, ti, np.asarray(f_vt_seen, np.int64)[poly], len(VT), "texture coordinate", poly)
+
+    # fan triangulation, triangles in polygon order
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    ntri = counts - 2
+    tri_poly = np.repeat(np.arange(len(counts)), ntri)
+    local = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
+    c0 = start[tri_poly]
+    c1 = c0 + local
+    corners = np.stack([c0, c1, c1 + 1], axis=1)
+    F = vi[corners]
+
+    uv = None
+    if ti is not None and len(VT):
+        uv_v = np.zeros((len(V), 2))
+        uv_v[vi] = VT[ti]
+        if np.array_equal(uv_v[vi], VT[ti]):
+            uv = uv_v
+    return V, F, uv
+
+
+def _resolve(path: Path, idx: np.ndarray, seen: np.ndarray, total: int, what: str, poly: np.ndarray) -> np.ndarray:
+    """OBJ indices -> 0-based: positive ones are 1-based over the whole file, negative ones
+    count back from the last element declared before the face."""
+    out = np.where(idx > 0, idx - 1, seen + idx)
+    bad = (idx == 0) | (out < 0) | (out >= total)
+    if bad.any():
+        c = int(np.flatnonzero(bad)[0])
+        avail = f"{total} in the file" if idx[c] >= 0 else f"{int(seen[c])} declared before it"
+        raise InputError(f"{path}: face {int(poly[c])} refers to {what} {int(idx[c])}, but there are {avail}")
+    return out
+
+
+def _read_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    import trimesh
+
+    try:
+        loaded = trimesh.load(str(path), process=False, force="mesh")
+    except Exception as e:  # trimesh raises many types for bad files
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(f"{path}: cannot read as {path.suffix.lower()[1:].upper()} ({msg})") from None
+    if isinstance(loaded, trimesh.Scene):  # force="mesh" on an empty scene
+        geoms = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
+        if not geoms:
+            raise InputError(f"{path}: no faces")
+        loaded = trimesh.util.concatenate(geoms)
+    if not isinstance(loaded, trimesh.Trimesh):
+        raise InputError(f"{path}: no faces (got a {type(loaded).__name__})")
+    V = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
+    F = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
+    if len(F) == 0:
+        raise InputError(f"{path}: no faces")
+    uv = None
+    visual = getattr(loaded, "visual", None)
+    if visual is not None and getattr(visual, "kind", None) == "texture":
+        tuv = getattr(visual, "uv", None)
+        if tuv is not None:
+            tuv = np.asarray(tuv, dtype=np.float64)
+            if tuv.shape == (len(V), 2):
+                uv = tuv.copy()
+    return V, F, uv
+
+
+# ----------------------------------------------------------------------------------------
+# report
+
+
+def mesh_report(V, F) -> dict:
+    """Topology and quality figures of a triangle mesh, for reporting (nothing fails).
+
+    Args:
+        V: Vertex positions [m], shape (n, 3), float64.
+        F: Triangles, shape (m, 3), int64.
+
+    Returns:
+        A JSON-serialisable dict:
+
+        - ``vertex_count``, ``face_count``, ``edge_count`` (undirected edges);
+        - ``unreferenced_vertex_count``: vertices in no triangle;
+        - ``degenerate_face_count``: triangles with area < 1e-14 m^2 (or a repeated vertex);
+        - ``non_manifold_edge_count``: edges used by more than two triangles;
+        - ``boundary_edge_count``: edges used by exactly one triangle;
+        - ``boundary_loop_count``: closed loops of boundary edges, counted as the cycle rank
+          ``E - V + C`` of the boundary-edge graph (a loop through a vertex twice, as at a
+          bow-tie vertex, counts as two loops);
+        - ``component_count``: connected components of triangles sharing vertices;
+        - ``consistently_oriented``: every directed edge occurs at most once (neighbouring
+          triangles list their shared edge in opposite directions);
+        - ``bbox_min``, ``bbox_max``: bounding box corners [m], lists of 3 floats, over all
+          vertices.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from .surface import _check_VF, face_areas
+
+    V, F = _check_VF(V, F)
+    n = len(V)
+    report: dict = {"vertex_count": n, "face_count": len(F)}
+
+    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    directed = directed[directed[:, 0] != directed[:, 1]]  # collapsed edges of degenerate faces
+    undirected = np.sort(directed, axis=1)
+    edges, edge_use = np.unique(undirected, axis=0, return_counts=True)
+    report["edge_count"] = len(edges)
+
+    referenced = np.zeros(n, dtype=bool)
+    referenced[F.ravel()] = True
+    report["unreferenced_vertex_count"] = int((~referenced).sum())
+
+    repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    report["degenerate_face_count"] = int(((face_areas(V, F) < DEGENERATE_AREA) | repeated).sum())
+    report["non_manifold_edge_count"] = int((edge_use > 2).sum())
+
+    boundary = edges[edge_use == 1]
+    report["boundary_edge_count"] = len(boundary)
+    if len(boundary):
+        bv, inverse = np.unique(boundary.ravel(), return_inverse=True)
+        inverse = inverse.reshape(-1, 2)
+        g = coo_matrix((np.ones(len(boundary)), (inverse[:, 0], inverse[:, 1])), shape=(len(bv), len(bv)))
+        c, _ = connected_components(g, directed=False)
+        report["boundary_loop_count"] = int(len(boundary) - len(bv) + c)
+    else:
+        report["boundary_loop_count"] = 0
+
+    if len(edges):
+        g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+        _, labels = connected_components(g, directed=False)
+        report["component_count"] = len(np.unique(labels[referenced]))
+    else:
+        report["component_count"] = int(len(np.unique(F[:, 0]))) if len(F) else 0
+
+    report["consistently_oriented"] = bool(len(np.unique(directed, axis=0)) == len(directed))
+    if n:
+        report["bbox_min"] = V.min(axis=0).tolist()
+        report["bbox_max"] = V.max(axis=0).tolist()
+    else:
+        report["bbox_min"] = report["bbox_max"] = None
+    return report
+
+
+# ----------------------------------------------------------------------------------------
+# writing
+
+
+def save_obj(path: str | os.PathLike, V, F, *, uv=None, units: str = "m") -> None:
+    """Write a triangle mesh as OBJ, atomically (temporary file, then rename).
+
+    Args:
+        path: Destination ``.obj`` file; its folder must exist.
+        V: Vertex positions [m], shape (n, 3), float64; written divided by the unit.
+        F: Triangles, shape (m, 3), int64 (0-based; written 1-based).
+        uv: Optional per-vertex texture coordinates, shape (n, 2), float64; written as
+            one ``vt`` per vertex, faces as ``f a/a b/b c/c``.
+        units: Unit of the written coordinates: "mm", "cm" or "m".
+    """
+    from .surface import _check_VF
+
+    scale = unit_scale(units)
+    V, F = _check_VF(V, F)
+    if uv is not None:
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.shape != (len(V), 2):
+            raise ValueError(f"uv must have shape ({len(V)}, 2), got {uv.shape}")
+    with atomic_write(path, "w") as f:
+        f.write(f"# facewarp OBJ: {len(V)} vertices, {len(F)} triangles, units {units}\n")
+        np.savetxt(f, V / scale, fmt="v %.10g %.10g %.10g")
+        if uv is None:
+            np.savetxt(f, F + 1, fmt="f %d %d %d")
+        else:
+            np.savetxt(f, uv, fmt="vt %.10g %.10g")
+            G = F + 1
+            np.savetxt(f, np.repeat(G, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+
+
+# ----------------------------------------------------------------------------------------
+# points on a surface
+
+
+@dataclass
+class SurfacePoints:
+    """Points stored on a triangle mesh as (face, barycentric weights).
+
+    They follow the surface when it deforms (same topology): :meth:`positions` evaluates
+    them on any vertex positions.
+
+    Attributes:
+        face: Triangle index of each point, shape (k,), int64.
+        bary: Barycentric weights for ``F[face]``'s three vertices in that order, summing to
+            1, shape (k, 3), float64 (dimensionless).
+    """
+
+    face: np.ndarray
+    bary: np.ndarray
+
+    def __post_init__(self):
+        self.face = np.asarray(self.face, dtype=np.int64).reshape(-1)
+        self.bary = np.asarray(self.bary, dtype=np.float64).reshape(-1, 3)
+        if len(self.face) != len(self.bary):
+            raise ValueError(f"face and bary must have the same length, got {len(self.face)} and {len(self.bary)}")
+
+    def __len__(self) -> int:
+        return len(self.face)
+
+    def positions(self, V, F) -> np.ndarray:
+        """Positions of the points on the mesh (V, F).
+
+        Args:
+            V: Vertex positions [m], shape (n, 3), float64.
+            F: Triangles, shape (m, 3), int64.
+
+        Returns:
+            Positions [m], shape (k, 3), float64.
+        """
+        V = np.asarray(V, dtype=np.float64)
+        F = np.asarray(F, dtype=np.int64)
+        if len(self.face) and (self.face.min() < 0 or self.face.max() >= len(F)):
+            raise ValueError(f"face indices {self.face.min()}..{self.face.max()} out of range for {len(F)} faces")
+        return np.einsum("kc,kcd->kd", self.bary, V[F[self.face]])
+
+    def to_dict(self) -> dict:
+        """Plain dict ``{"face": [int, ...], "bary": [[w0, w1, w2], ...]}`` (JSON-ready)."""
+        return {"face": self.face.tolist(), "bary": self.bary.tolist()}
+
+    @classmethod
+    def from_dict(cls, d, *, source: str = "surface points") -> SurfacePoints:
+        """Inverse of :meth:`to_dict`.
+
+        Args:
+            d: ``{"face": [...], "bary": [[w0, w1, w2], ...]}``.
+            source: Name of the input for error messages (e.g. the file path).
+
+        Raises:
+            InputError: Missing keys, wrong shapes, non-integer faces, negative faces, or
+                non-finite weights.
+        """
+        if not isinstance(d, dict) or "face" not in d or "bary" not in d:
+            raise InputError(f"{source}: expected an object with 'face' and 'bary'")
+        try:
+            face_raw = np.asarray(d["face"])
+            bary = np.asarray(d["bary"], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"{source}: 'face' must be integers and 'bary' rows of 3 numbers") from None
+        if face_raw.ndim != 1 or (face_raw.size and not np.issubdtype(face_raw.dtype, np.integer)):
+            raise InputError(f"{source}: 'face' must be a list of integers")
+        if bary.shape != (len(face_raw), 3):
+            raise InputError(f"{source}: 'bary' must have shape ({len(face_raw)}, 3), got {bary.shape}")
+        if face_raw.size and face_raw.min() < 0:
+            raise InputError(f"{source}: face index {int(face_raw.min())} is negative")
+        if not np.isfinite(bary).all():
+            raise InputError(f"{source}: 'bary' has a non-finite weight")
+        return cls(face=face_raw.astype(np.int64), bary=bary)
+
+
+def closest_surface_points(V, F, P, *, device: str = "cpu") -> SurfacePoints:
+    """Project points onto the mesh: the closest surface point of each (see geometry.closest_point).
+
+    Args:
+        V: Vertex positions [m], shape (n, 3), float64.
+        F: Triangles, shape (m, 3), int64.
+        P: Points [m], shape (k, 3), float64.
+        device: Warp device for the BVH query.
+
+    Returns:
+        :class:`SurfacePoints` of the k closest points.
+    """
+    from .surface import closest_point
+
+    res = closest_point(V, F, P, device=device)
+    if (res.face < 0).any():  # only possible if every face is degenerate
+        raise ValueError("no closest point found (all triangles degenerate?)")
+    return SurfacePoints(face=res.face, bary=res.bary)

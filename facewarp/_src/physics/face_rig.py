@@ -1,0 +1,416 @@
+"""A head packed for the solver: boundary conditions, jaw amounts and muscles (NumPy, SI).
+
+:class:`FaceRig` packs everything the solver needs and is what ``facewarp build`` saves
+(``face_rig.npz``) and ``facewarp simulate`` loads; :func:`face_rig_from_anatomy` makes it
+from an :class:`~facewarp._src.anatomy.build.Anatomy` and :func:`muscle_rig` packs the muscles.
+
+Boundary conditions (Sec. 6.2, 6.4): only the frontal face is simulated. Skin nodes on the
+frontal region's border (outer and inner sheet) are fixed. Inner-sheet nodes of the regions over
+bone (:data:`BONE_REGIONS`: forehead, nose, chin, bottom face) that are not attached to a muscle
+are held by stiff springs at their rest position, which the jaw moves for the jaw regions
+(Eq. 6.4.9 amounts). Cheeks, lips and lids glide over soft tissue, teeth and eyeballs and are
+free, as are the nodes attached to muscles and the whole outer sheet.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import InputError
+from ..core.fileio import atomic_write
+from ..anatomy.jaw import JawKinematic
+from .muscle_stage import PIVOT_CENTER, PIVOT_FIXED, MuscleRig
+from ..template import REGIONS
+
+__all__ = ["BONE_REGIONS", "MUSCLE_STIFFNESS", "FaceRig", "build_face", "face_rig_from_anatomy", "load_face_rig", "muscle_rig",
+           "node_jaw_amounts", "save_face_rig"]
+
+MUSCLE_STIFFNESS = 1.0e7
+"""Default muscle spring stiffness k_m of Eq. 6.4.1 [N/m] in the solver's unit system (node mass
+0.5, Table 6.3), shared by the springs on a node: chosen so that the Table 6.4 presets move the
+lip corners and brows by several mm. It is 3-10 times the tissue's own ``k0 / D0^2`` at level 0,
+so the inner sheet follows the muscles almost kinematically; 2e6 would spare the thin lip corner
+of some scan-adapted heads (ICT identity 002, angry) but leaves the brows of the default head
+too weak to rise against an opening jaw (surprise)."""
+
+JAW_SMOOTHING = 0.02
+"""Length [m] over which the jaw amount of Eq. 6.4.9 is smoothed across region borders."""
+
+EDGE_DAMPING = 500.0
+"""Dashpot along every tet edge [N s/m] (Eq. 6.4.5 on the relative velocity). Table 6.3's
+per-substep damping alone leaves the stiff skin ringing for many periods when the jaw moves the
+held nodes; about a quarter of the edges' critical damping 2 sqrt(k0 / D0^2 m) calms it without
+slowing rigid motion (and stays far below the explicit limit 2 m / dt)."""
+
+BONE_REGIONS = ("nose", "chin", "bottom_face")
+"""Regions whose inner sheet lies on bone and is held (unless attached to a muscle)."""
+
+
+@dataclass
+class FaceRig:
+    """Solver inputs of one head (NumPy; metres).
+
+    Attributes:
+        head_vertices (n, 3), head_faces (m, 3): the skin mesh of the head.
+        nodes (p, 3), tets (k, 4), layer (p,) 0 outer / 1 inner, surface_vertex (p,): tet mesh.
+        fixed (p,) bool, held (p,) bool: boundary conditions (see the module doc).
+        jaw_nodes (j,), jaw_amount (j,): held nodes carried by the jaw and their amount.
+        support_nodes (s,), support_normal (s, 3), support_amount (s,): free inner-sheet nodes
+            with a sliding support along their rest normal, and their jaw amount.
+        jaw_pivot (3,), jaw_u (3,), jaw_v (3,), lip_corners (2, 3), mouth_center (3,).
+        rig: the packed muscles; muscle_names (M,) instance names.
+        fdp_ids (84,), fdp_part (84,), fdp_face (84,), fdp_bary (84, 3): FDP surface points.
+        vertex_jaw (n,): jaw amount of every head vertex; the head vertices outside the tet mesh
+            follow the jaw kinematically with it (the neck under the chin).
+        parts: rigid part name -> (V, F); part_jaw: name -> jaw amount (1 lower teeth, tongue).
+        level: template level (or -1).
+    """
+
+    head_vertices: np.ndarray
+    head_faces: np.ndarray
+    nodes: np.ndarray
+    tets: np.ndarray
+    layer: np.ndarray
+    surface_vertex: np.ndarray
+    fixed: np.ndarray
+    held: np.ndarray
+    jaw_nodes: np.ndarray
+    jaw_amount: np.ndarray
+    support_nodes: np.ndarray
+    support_normal: np.ndarray
+    support_amount: np.ndarray
+    jaw_pivot: np.ndarray
+    jaw_u: np.ndarray
+    jaw_v: np.ndarray
+    lip_corners: np.ndarray
+    mouth_center: np.ndarray
+    rig: MuscleRig
+    fdp_ids: np.ndarray
+    fdp_part: np.ndarray
+    fdp_face: np.ndarray
+    fdp_bary: np.ndarray
+    vertex_jaw: np.ndarray | None = None
+    parts: dict = field(default_factory=dict)
+    part_jaw: dict = field(default_factory=dict)
+    level: int = -1
+
+    @property
+    def jaw(self) -> JawKinematic:
+        return JawKinematic(self.jaw_pivot, self.jaw_u, self.jaw_v, self.lip_corners, self.mouth_center)
+
+    @property
+    def muscle_names(self) -> list[str]:
+        return list(self.rig.names)
+
+
+# ------------------------------------------------------------------------------------ building
+def _vertex_region_amounts(head, jaw: JawKinematic) -> np.ndarray:
+    """Jaw amount per head vertex (Eq. 6.4.9).
+
+    On the frontal face: the mean over the vertex's incident faces of their region's amount.
+    The neck below the mandible is not simulated but must follow an opening jaw, or the skin
+    under the chin would be crushed against a still neck: there the amount is the harmonic
+    (uniform-Laplacian) interpolation between the frontal face's values and 0 on the rest of
+    the head (scalp, ears, the neck cut).
+    """
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    F = head.faces
+    n = len(head.vertices)
+    names = np.asarray(REGIONS)[head.face_region]
+    P = head.vertices[F].reshape(-1, 3)
+    amt = jaw.amounts(P, np.repeat(names, 3))
+    s = np.bincount(F.ravel(), weights=amt, minlength=n)
+    c = np.bincount(F.ravel(), minlength=n)
+    out = s / np.maximum(c, 1)
+    neck_faces = names == "neck"
+    neck_v = np.zeros(n, bool)
+    neck_v[np.unique(F[neck_faces])] = True
+    known = np.zeros(n, bool)
+    known[np.unique(F[~neck_faces])] = True  # frontal face keeps its values; scalp/ears are 0
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n)).tocsr()
+    A = ((A + A.T) > 0).astype(float)
+    deg = np.asarray(A.sum(1)).ravel()
+    L = sp.diags(deg) - A
+    from ..geometry.surface import boundary_vertices
+
+    cut = np.zeros(n, bool)
+    cut[boundary_vertices(F, n)] = True
+    cut &= neck_v & (head.vertices[:, 1] < np.percentile(head.vertices[neck_v, 1], 20))
+    out[cut] = 0.0
+    # the neck faces took 0 in the mean above: border vertices keep only the frontal values
+    frontal_only = np.bincount(F[~neck_faces].ravel(), weights=amt.reshape(-1, 3)[~neck_faces].ravel(), minlength=n)
+    cf = np.bincount(F[~neck_faces].ravel(), minlength=n)
+    border = known & neck_v
+    out[border] = frontal_only[border] / np.maximum(cf[border], 1)
+    free = neck_v & ~known & ~cut
+    if free.any():
+        fixed_idx = np.where(~free)[0]
+        free_idx = np.where(free)[0]
+        rhs = -L[free_idx][:, fixed_idx] @ out[fixed_idx]
+        out[free_idx] = spla.spsolve(L[free_idx][:, free_idx].tocsc(), rhs)
+    # Region borders make the amounts jump by up to 1 across one edge, which would shear the
+    # thin skin layer when the jaw turns by tens of degrees. One implicit diffusion step
+    # (I + t L) u = u0 with t = (smoothing length / mean edge length)^2 spreads each jump over
+    # about JAW_SMOOTHING metres, whatever the mesh resolution.
+    h = float(np.mean(np.linalg.norm(head.vertices[E[:, 0]] - head.vertices[E[:, 1]], axis=1)))
+    t = (JAW_SMOOTHING / h) ** 2
+    keep = cut
+    M = (sp.identity(n) + t * L).tolil()
+    for i in np.where(keep)[0]:
+        M.rows[i], M.data[i] = [i], [1.0]
+    out = spla.spsolve(M.tocsc(), out)
+    return np.clip(out, 0.0, 1.0)
+
+
+def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS) -> FaceRig:
+    """Pack an :class:`~facewarp._src.anatomy.Anatomy` for the solver."""
+    head, skin, ms = anatomy.head, anatomy.skin, anatomy.muscles
+    lm = head.landmarks()
+    jaw = JawKinematic.from_landmarks(head.condyles, lm)
+    v_amount = _vertex_region_amounts(head, jaw)
+
+    # --- boundary conditions
+    frontal_v = np.zeros(len(head.vertices), bool)
+    frontal_v[np.unique(head.faces[head.frontal])] = True
+    other_v = np.zeros(len(head.vertices), bool)
+    other_v[np.unique(head.faces[~head.frontal])] = True
+    border_v = frontal_v & other_v
+    src = skin.source_vertex
+    fixed = border_v[src]
+    inner = skin.layer == skin.layer.max()
+    attached = np.zeros(len(skin.vertices), bool)
+    for m in ms.muscles:
+        if m.attachment is not None:
+            attached[m.attachment.nodes] = True
+    # over bone: the forehead (frontal bone), nose (nasal bone and cartilage), chin and the bottom
+    # face (mandible); the cheeks (buccal space), lips and lids glide freely over soft tissue,
+    # teeth and eyeballs
+    bone_ids = [REGIONS.index(r) for r in BONE_REGIONS]
+    Ff = head.faces.ravel()
+    on_bone = np.bincount(Ff, weights=np.repeat(np.isin(head.face_region, bone_ids), 3).astype(float),
+                          minlength=len(head.vertices)) / np.maximum(np.bincount(Ff, minlength=len(head.vertices)), 1)
+    held = inner & ~attached & ~fixed & (on_bone[src] >= 0.5)
+    jaw_amount_node = v_amount[src]
+    jaw_nodes = np.where((held | fixed) & (jaw_amount_node > 0))[0]
+    support_nodes = np.where(inner & ~held & ~fixed)[0]
+
+    # --- muscles (packed by the anatomy stage, with Eq. 6.4.9 jaw amounts)
+    rig = muscle_rig(ms, stiffness=muscle_stiffness, head=head, vertex_amount=v_amount)
+    # a node tied to several muscles (the modiolus at the lip corner has five) shares k_m among
+    # them, so no node is pulled by more than one muscle's stiffness in total
+    per_node = np.bincount(rig.att_node, minlength=len(skin.vertices))
+    rig.att_stiffness = rig.att_stiffness / np.maximum(per_node[rig.att_node], 1)
+
+    ids = list(head.fdp)
+    parts = dict(getattr(head, "parts", {}) or {})
+    part_jaw = {k: (1.0 if k in ("teeth_lower", "tongue") else 0.0) for k in parts}
+    layer = (skin.layer > 0).astype(np.int32)
+    return FaceRig(
+        head_vertices=np.asarray(head.vertices, float), head_faces=np.asarray(head.faces), nodes=skin.vertices,
+        tets=skin.tets, layer=layer, surface_vertex=skin.surface_vertex, fixed=fixed, held=held,
+        jaw_nodes=jaw_nodes, jaw_amount=jaw_amount_node[jaw_nodes], support_nodes=support_nodes,
+        support_normal=skin.direction[support_nodes], support_amount=jaw_amount_node[support_nodes], jaw_pivot=jaw.pivot, jaw_u=jaw.u_axis,
+        jaw_v=jaw.v_axis, lip_corners=jaw.lip_corners, mouth_center=jaw.mouth_center, rig=rig,
+        fdp_ids=np.array(ids), fdp_part=np.array([head.fdp[i][0] for i in ids]),
+        fdp_face=np.array([int(head.fdp[i][1].face[0]) for i in ids]),
+        fdp_bary=np.array([head.fdp[i][1].bary[0] for i in ids]), parts=parts, part_jaw=part_jaw,
+        vertex_jaw=v_amount,
+        level=int(getattr(head, "level", -1)),
+    )
+
+
+_RIG_FIELDS = ("activation_index", "contraction", "center", "center_jaw", "ctrl_rest", "ctrl_muscle", "ctrl_pivot",
+               "ctrl_jaw", "curve_ctrl", "curve_weight", "seg_curve", "seg_t", "seg_rest_radii", "anchor_dst",
+               "anchor_src", "anchor_weight", "att_node", "att_seg", "att_uv", "att_rest_length", "att_stiffness")
+_FACE_FIELDS = ("head_vertices", "head_faces", "nodes", "tets", "layer", "surface_vertex", "fixed", "held", "jaw_nodes",
+                "jaw_amount", "support_nodes", "support_normal", "support_amount", "jaw_pivot", "jaw_u", "jaw_v", "lip_corners", "mouth_center", "fdp_ids", "fdp_part",
+                "fdp_face", "fdp_bary", "vertex_jaw")
+
+
+def save_face_rig(path, fr: FaceRig) -> Path:
+    """Write ``fr`` to one ``.npz`` file atomically."""
+    arrays = {k: getattr(fr, k) for k in _FACE_FIELDS}
+    arrays.update({f"rig_{k}": getattr(fr.rig, k) for k in _RIG_FIELDS})
+    arrays["rig_names"] = np.array(fr.rig.names)
+    arrays["level"] = np.array(fr.level)
+    arrays["part_names"] = np.array(list(fr.parts))
+    for k, (V, F) in fr.parts.items():
+        arrays[f"part_{k}_V"], arrays[f"part_{k}_F"] = V, F
+        arrays[f"part_{k}_jaw"] = np.array(fr.part_jaw.get(k, 0.0))
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    with atomic_write(path, "wb", encoding=None) as f:
+        f.write(buf.getvalue())
+    return Path(path)
+
+
+def load_face_rig(path) -> FaceRig:
+    """Read a file written by :func:`save_face_rig` (a ``facewarp build`` output)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "face_rig.npz"
+    if not path.is_file():
+        raise InputError(f"{path}: not found (HEAD must be a `facewarp build` output folder)")
+    try:
+        z = np.load(path, allow_pickle=False)
+        rig = MuscleRig(names=[str(n) for n in z["rig_names"]], **{k: z[f"rig_{k}"] for k in _RIG_FIELDS})
+        parts = {str(k): (z[f"part_{k}_V"], z[f"part_{k}_F"]) for k in z["part_names"]}
+        part_jaw = {str(k): float(z[f"part_{k}_jaw"]) for k in z["part_names"]}
+        return FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]),
+                       **{k: z[k] for k in _FACE_FIELDS})
+    except (KeyError, ValueError, OSError) as e:
+        raise InputError(f"{path}: not a facewarp face rig ({e})") from None
+
+
+def node_jaw_amounts(fr: FaceRig) -> np.ndarray:
+    """Eq. 6.4.9 jaw amount of every tet node, shape (p,), float64: that of the head vertex the
+    node lies on or under (sheets are stored one after another, node ``l * q + i`` below outer
+    node ``i``). Rigs without ``vertex_jaw`` give the held and supported nodes' amounts only."""
+    n = len(fr.nodes)
+    out = np.zeros(n)
+    q = int((fr.layer == 0).sum())
+    if fr.vertex_jaw is not None and q and n % q == 0 and (fr.surface_vertex[:q] >= 0).all():
+        out = np.asarray(fr.vertex_jaw, np.float64)[fr.surface_vertex[np.arange(n) % q]]
+    else:
+        out[fr.jaw_nodes] = fr.jaw_amount
+        out[fr.support_nodes] = fr.support_amount
+    return out
+
+
+def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=None, activation_index=None,
+               vertex_amount=None):
+    """Pack muscles for the solver (:class:`facewarp._src.muscle_stage.MuscleRig`).
+
+    Control points are numbered muscle by muscle in ``muscles.muscles`` order. Linear muscles:
+    the insertion and the middle point contract toward the attachment, which stays on the bone
+    (Sec. 6.4.1); sphincters contract toward their ring centre (mean of the 4 on-curve points).
+    Each anchor (Fig. 6.3) moves its sphincter control point by the mean displacement of its
+    linear insertions.
+
+    Args:
+        muscles: Built muscles (with segments and attachments).
+        stiffness: Muscle spring stiffness k_m of every attachment [N/m] (Eq. 6.4.1).
+        jaw: A :class:`facewarp._src.jaw.JawKinematic`; with ``head`` (its ``face_region``),
+            gives every control point the jaw amount (Eq. 6.4.9) of the region of its skin point
+            (a ring centre takes the mean of its ring). Without it all amounts are 0.
+        head: The head the muscles were built on (needed with ``jaw`` and ``vertex_amount``).
+        vertex_amount: Jaw amount per head vertex, shape (n,), float64 (the smoothed field
+            the skin nodes use, :func:`facewarp._src.face.face_rig_from_anatomy`); when given,
+            a control point takes the amount interpolated at its skin point instead of its
+            region's, so the muscles and the skin they pull turn with the jaw together.
+        activation_index: Index into ``Control.activations`` per muscle (default 0..M-1).
+
+    Returns:
+        A validated ``MuscleRig``.
+    """
+    from ..anatomy.muscles import MuscleKind
+
+    ms = muscles.muscles
+    M = len(ms)
+    offs = np.cumsum([0] + [len(m.control_points) for m in ms])
+    coffs = np.cumsum([0] + [len(m.curves) for m in ms])
+    soffs = np.cumsum([0] + [len(m.segments) for m in ms])
+    ctrl = np.concatenate([m.control_points for m in ms]) if M else np.zeros((0, 3))
+    ctrl_muscle = np.repeat(np.arange(M), np.diff(offs))
+    pivot = np.empty(len(ctrl), dtype=np.int64)
+    center = np.zeros((M, 3))
+    for i, m in enumerate(ms):
+        o = offs[i]
+        if m.kind is MuscleKind.LINEAR:
+            pivot[o : o + 3] = [o + 2, o + 2, PIVOT_FIXED]
+        else:
+            pivot[o : offs[i + 1]] = PIVOT_CENTER
+            center[i] = m.control_points[0::2].mean(0)
+    ctrl_jaw = np.zeros(len(ctrl))
+    center_jaw = np.zeros(M)
+    if vertex_amount is not None:
+        if head is None:
+            raise InputError("muscle_rig: vertex_amount needs the head (its faces)")
+        va = np.asarray(vertex_amount, dtype=np.float64)
+        if va.shape != (len(head.vertices),):
+            raise InputError(f"muscle_rig: vertex_amount must have shape ({len(head.vertices)},), got {va.shape}")
+        for i, m in enumerate(ms):
+            sp_ = m.skin_points
+            ctrl_jaw[offs[i] : offs[i + 1]] = np.einsum("kj,kj->k", sp_.bary, va[np.asarray(head.faces)[sp_.face]])
+            if m.kind is not MuscleKind.LINEAR:
+                center_jaw[i] = ctrl_jaw[offs[i] : offs[i + 1]].mean()
+    elif jaw is not None:
+        if head is None:
+            raise InputError("muscle_rig: jaw amounts need the head (its face regions)")
+        from ..template import REGIONS
+
+        for i, m in enumerate(ms):
+            regions = [REGIONS[r] for r in np.asarray(head.face_region)[m.skin_points.face]]
+            ctrl_jaw[offs[i] : offs[i + 1]] = jaw.amounts(m.skin_points.positions(head.vertices, head.faces), regions)
+            if m.kind is not MuscleKind.LINEAR:
+                center_jaw[i] = ctrl_jaw[offs[i] : offs[i + 1]].mean()
+    curve_ctrl = np.concatenate([m.curves + offs[i] for i, m in enumerate(ms)]) if M else np.zeros((0, 3), int)
+    curve_weight = np.concatenate([m.weights[m.curves] for m in ms]) if M else np.zeros((0, 3))
+    seg_curve = np.concatenate([m.segments.curve + coffs[i] for i, m in enumerate(ms)]) if M else np.zeros(0, int)
+    seg_t = np.concatenate([m.segments.t for m in ms]) if M else np.zeros((0, 2))
+    seg_radii = np.concatenate([m.segments.radii for m in ms]) if M else np.zeros((0, 3))
+    by = {m.name: i for i, m in enumerate(ms)}
+    dst, src, wgt = [], [], []
+    for a in muscles.anchors:
+        (sph, k), *ins = a.members
+        for name, j in ins:
+            dst.append(offs[by[sph]] + k)
+            src.append(offs[by[name]] + j)
+            wgt.append(1.0 / len(ins))
+    att = [m.attachment for m in ms]
+    if any(a is None for a in att):
+        raise InputError("muscle_rig: build the muscles with a skin layer first (no attachments)")
+    rig = MuscleRig(
+        names=[m.name for m in ms],
+        activation_index=np.arange(M) if activation_index is None else np.asarray(activation_index, dtype=np.int64),
+        contraction=np.array([m.contraction for m in ms], dtype=np.float64),
+        center=center,
+        center_jaw=center_jaw,
+        ctrl_rest=ctrl,
+        ctrl_muscle=ctrl_muscle,
+        ctrl_pivot=pivot,
+        ctrl_jaw=ctrl_jaw,
+        curve_ctrl=curve_ctrl.astype(np.int64),
+        curve_weight=curve_weight,
+        seg_curve=seg_curve.astype(np.int64),
+        seg_t=seg_t,
+        seg_rest_radii=seg_radii,
+        anchor_dst=np.asarray(dst, dtype=np.int64),
+        anchor_src=np.asarray(src, dtype=np.int64),
+        anchor_weight=np.asarray(wgt, dtype=np.float64),
+        att_node=np.concatenate([a.nodes for a in att]).astype(np.int64) if M else np.zeros(0, int),
+        att_seg=np.concatenate([a.segment + soffs[i] for i, a in enumerate(att)]).astype(np.int64) if M else np.zeros(0, int),
+        att_uv=np.concatenate([a.uv for a in att]) if M else np.zeros((0, 2)),
+        att_rest_length=np.concatenate([a.rest_length for a in att]) if M else np.zeros(0),
+        att_stiffness=np.full(sum(len(a) for a in att), float(stiffness)),
+    )
+    rig.validate()
+    return rig
+
+
+def build_face(head, *, layers: int = 1, muscle_stiffness: float = MUSCLE_STIFFNESS) -> FaceRig:
+    """Anatomy (skin tets, muscles; Sec. 6.2-6.3) and solver inputs of a head in one call.
+
+    Args:
+        head: A :class:`~facewarp.Template` (:func:`~facewarp.default_template`,
+            :func:`~facewarp.load_head`) or anything with the template's data.
+        layers: Tet layers through the skin, >= 1.
+        muscle_stiffness: Muscle spring stiffness k_m of Eq. 6.4.1 [N/m].
+
+    Returns:
+        The :class:`FaceRig`, ready for :class:`~facewarp.FaceSimulator`.
+    """
+    from ..anatomy.build import build_anatomy
+
+    if not (isinstance(muscle_stiffness, (int, float)) and np.isfinite(muscle_stiffness) and muscle_stiffness > 0):
+        raise InputError(f"muscle_stiffness: expected a positive number [N/m], got {muscle_stiffness!r}")
+    return face_rig_from_anatomy(build_anatomy(head, layers=layers), muscle_stiffness=muscle_stiffness)

@@ -1,0 +1,335 @@
+"""Muscles and jaw as solver stages: packed arrays on the device and the kernels that use them.
+
+:class:`MuscleRig` is the host-side (NumPy, SI) packing of any set of muscles: control points,
+(rational) quadratic Bezier curves, ellipsoid segments, anchors and skin attachments. The
+anatomy module fills it (:func:`facewarp._src.anatomy.muscle_rig`); tests build small rigs by
+hand. :class:`MuscleStage` and :class:`JawStage` follow the solver's stage protocol: each
+substep they only launch kernels (no allocation, no host read), so a frame can be captured.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.warp import get_warp
+from ..core.errors import InputError
+from .model import Model, group_indices
+
+__all__ = ["MuscleRig", "MuscleStage", "SupportStage", "ellipsoid_uv", "rig_reference"]
+
+PIVOT_CENTER = -1  # a sphincter point contracts toward its ring centre
+PIVOT_FIXED = -2  # a linear muscle's attachment on the bone does not contract
+
+
+@dataclass
+class MuscleRig:
+    """Muscles packed for the kernels (all NumPy; positions in metres).
+
+    Attributes:
+        names: Muscle instance names (e.g. ``zygomatic_major_L``), length M.
+        activation_index: Index into ``Control.activations`` per muscle, shape (M,), int.
+        contraction: Largest relative shortening at activation 1, shape (M,), float.
+        center: Ring centre of sphincters (unused for linear muscles) [m], shape (M, 3).
+        center_jaw: Jaw amount of the ring centre, shape (M,), float.
+        ctrl_rest: Rest positions of all control points [m], shape (P, 3), float.
+        ctrl_muscle: Owning muscle of each control point, shape (P,), int.
+        ctrl_pivot: Control point each point contracts toward, or -1 (ring centre) / -2
+            (attachment, does not contract), shape (P,), int.
+        ctrl_jaw: Jaw amount (Eq. 6.4.9) of each control point, shape (P,), float.
+        curve_ctrl: Control point indices of each quadratic curve, shape (C, 3), int.
+        curve_weight: Rational weights of each curve (1, w, 1), shape (C, 3), float.
+        seg_curve: Curve of each segment, shape (S,), int.
+        seg_t: Curve parameter range of each segment, shape (S, 2), float.
+        seg_rest_radii: Ellipsoid radii at rest (x, y, z) [m], shape (S, 3), float.
+        anchor_dst, anchor_src, anchor_weight: Anchor ties (Fig. 6.3): sphincter control
+            point ``dst`` adds ``weight`` times the displacement of control point ``src``,
+            shape (A,) each.
+        att_node: Skin node of each attachment, shape (K,), int.
+        att_seg: Segment of each attachment, shape (K,), int.
+        att_uv: Ellipsoid surface parameters (u along the fibre, v around it), shape (K, 2).
+        att_rest_length: Spring rest length l0 [m], shape (K,).
+        att_stiffness: Spring stiffness k_m [N/m], shape (K,).
+    """
+
+    names: list
+    activation_index: np.ndarray
+    contraction: np.ndarray
+    center: np.ndarray
+    center_jaw: np.ndarray
+    ctrl_rest: np.ndarray
+    ctrl_muscle: np.ndarray
+    ctrl_pivot: np.ndarray
+    ctrl_jaw: np.ndarray
+    curve_ctrl: np.ndarray
+    curve_weight: np.ndarray
+    seg_curve: np.ndarray
+    seg_t: np.ndarray
+    seg_rest_radii: np.ndarray
+    anchor_dst: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    anchor_src: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    anchor_weight: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    att_node: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    att_seg: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    att_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    att_rest_length: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    att_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def muscle_count(self) -> int:
+        return len(self.names)
+
+    def attachment_jaw(self) -> np.ndarray:
+        """Jaw amount of the muscle at each attachment, shape (K,), float64: the control points'
+        amounts blended with the rational Bezier basis of the attachment's curve at the middle of
+        its segment (the amount by which that part of the muscle turns with the jaw)."""
+        if len(self.att_node) == 0:
+            return np.zeros(0)
+        seg = np.asarray(self.att_seg)
+        c = np.asarray(self.seg_curve)[seg]
+        t = np.asarray(self.seg_t, np.float64)[seg].mean(1)
+        b = np.stack([(1 - t) ** 2, 2 * t * (1 - t), t * t], 1) * np.asarray(self.curve_weight, np.float64)[c]
+        b /= b.sum(1, keepdims=True)
+        return np.einsum("kj,kj->k", b, np.asarray(self.ctrl_jaw, np.float64)[np.asarray(self.curve_ctrl)[c]])
+
+    def curve_normals(self) -> np.ndarray:
+        """Unit normals of each curve's control-point plane at rest, shape (C, 3)."""
+        c = self.ctrl_rest[self.curve_ctrl]
+        n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+        bad = np.linalg.norm(n, axis=1) < 1e-12
+        # a straight curve: any normal perpendicular to it
+        t = c[:, 2] - c[:, 0]
+        alt = np.cross(t, np.where(np.abs(t[:, [1]]) < 0.9 * np.linalg.norm(t, axis=1, keepdims=True), [0, 1, 0], [1, 0, 0]))
+        n = np.where(bad[:, None], alt, n)
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+    def validate(self) -> None:
+        P, M, C, S = len(self.ctrl_rest), len(self.names), len(self.curve_ctrl), len(self.seg_curve)
+        checks = [
+            (self.ctrl_muscle, M, "ctrl_muscle"), (self.curve_ctrl.ravel(), P, "curve_ctrl"),
+            (self.seg_curve, C, "seg_curve"), (self.att_seg, S, "att_seg"),
+            (self.anchor_dst, P, "anchor_dst"), (self.anchor_src, P, "anchor_src"),
+        ]
+        for a, n, name in checks:
+            if len(a) and (a.min() < 0 or a.max() >= n):
+                raise InputError(f"muscle rig: {name} index out of range 0..{n - 1}")
+        piv = self.ctrl_pivot
+        if len(piv) and (piv.min() < -2 or piv.max() >= P):
+            raise InputError("muscle rig: ctrl_pivot out of range")
+        if not np.all(np.isfinite(self.ctrl_rest)):
+            raise InputError("muscle rig: non-finite control point")
+
+
+# ---------------------------------------------------------------------------------------- host math
+def _bezier_np(c, w, t):
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    b0 = (1 - t) ** 2 * w[..., 0:1]
+    b1 = 2 * t * (1 - t) * w[..., 1:2]
+    b2 = t**2 * w[..., 2:3]
+    return (c[..., 0, :] * b0 + c[..., 1, :] * b1 + c[..., 2, :] * b2) / (b0 + b1 + b2)
+
+
+def segment_frames(rig: MuscleRig, ctrl: np.ndarray):
+    """NumPy reference of ``_muscle_segments``: centres (S, 3), frames (S, 3, 3) with columns
+    x, y, z, radii (S, 3) for control point positions ``ctrl`` (P, 3)."""
+    c = ctrl[rig.curve_ctrl[rig.seg_curve]]
+    w = rig.curve_weight[rig.seg_curve]
+    a = _bezier_np(c, w, rig.seg_t[:, 0])
+    b = _bezier_np(c, w, rig.seg_t[:, 1])
+    chord = b - a
+    length = np.linalg.norm(chord, axis=1)
+    x = chord / np.maximum(length, 1e-12)[:, None]
+    n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    small = np.linalg.norm(n, axis=1) < 1e-12 * (np.linalg.norm(c[:, 1] - c[:, 0], axis=1) * np.linalg.norm(c[:, 2] - c[:, 0], axis=1) + 1e-30)
+    n = np.where(small[:, None], rig.curve_normals()[rig.seg_curve], n)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    y = np.cross(n, x)
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    z = np.cross(x, y)
+    rx = 0.525 * length
+    r0 = rig.seg_rest_radii
+    s = np.sqrt(r0[:, 0] / np.maximum(rx, 1e-12))
+    radii = np.stack([rx, r0[:, 1] * s, r0[:, 2] * s], 1)
+    return 0.5 * (a + b), np.stack([x, y, z], axis=2), radii
+
+
+def ellipsoid_point(center, frame, radii, uv):
+    u, v = uv[..., 0], uv[..., 1]
+    local = np.stack([radii[..., 0] * np.cos(u), radii[..., 1] * np.sin(u) * np.cos(v), radii[..., 2] * np.sin(u) * np.sin(v)], -1)
+    return center + np.einsum("...ij,...j->...i", frame, local)
+
+
+def ellipsoid_uv(center, frame, radii, P):
+    """Surface parameters (u, v) of the ellipsoid point nearest (approximately: along the
+    scaled radial line) to P (k, 3); returns (k, 2)."""
+    local = np.einsum("...ji,...j->...i", frame, P - center) / radii
+    local /= np.maximum(np.linalg.norm(local, axis=-1, keepdims=True), 1e-12)
+    u = np.arccos(np.clip(local[..., 0], -1, 1))
+    v = np.arctan2(local[..., 2], local[..., 1])
+    return np.stack([u, v], -1)
+
+
+def rig_reference(rig: MuscleRig, activations, jaw=None, jaw_angles=(0.0, 0.0)):
+    """NumPy reference of the whole muscle stage: (control points (P, 3), attachment points
+    (K, 3)). ``jaw`` is a :class:`facewarp._src.jaw.JawKinematic` or None."""
+    from ..anatomy.jaw import jaw_rotation
+
+    acts = np.asarray(activations, dtype=np.float64)
+    if jaw is not None:
+        jawed = jaw_rotation(rig.ctrl_rest, rig.ctrl_jaw, jaw.pivot, jaw.u_axis, jaw.v_axis, *jaw_angles)
+        centers = jaw_rotation(rig.center, rig.center_jaw, jaw.pivot, jaw.u_axis, jaw.v_axis, *jaw_angles)
+    else:
+        jawed, centers = rig.ctrl_rest.copy(), rig.center.copy()
+    a = np.clip(acts[rig.activation_index[rig.ctrl_muscle]], 0, 1) * rig.contraction[rig.ctrl_muscle]
+    piv = rig.ctrl_pivot
+    target = np.where((piv == PIVOT_CENTER)[:, None], centers[rig.ctrl_muscle], jawed[np.maximum(piv, 0)])
+    out = np.where((piv == PIVOT_FIXED)[:, None], jawed, jawed + a[:, None] * (target - jawed))
+    contracted = out.copy()
+    for d, s, w in zip(rig.anchor_dst, rig.anchor_src, rig.anchor_weight):
+        out[d] += w * (contracted[s] - jawed[s])
+    c, f, r = segment_frames(rig, out)
+    pts = ellipsoid_point(c[rig.att_seg], f[rig.att_seg], r[rig.att_seg], rig.att_uv)
+    return out, pts
+
+
+# ---------------------------------------------------------------------------------------- stages
+class MuscleStage:
+    """Adds the muscle springs of Eq. 6.4.1 each substep (solver stage).
+
+    Attributes (device arrays, written every substep, readable between frames):
+        ctrl: Current control points [m], shape (P,), wp.vec3.
+        seg_center, seg_frame, seg_radii: Current ellipsoids.
+        att_point: Current attachment points on the ellipsoids [m], shape (K,), wp.vec3.
+    """
+
+    def __init__(self, rig: MuscleRig, jaw, device, node_amount=None):
+        """``node_amount`` (vertex_count,): the jaw amount (Eq. 6.4.9) of every tet node; with it,
+        each spring's muscle end turns with the jaw by its node's amount rather than by the
+        muscle's (:meth:`MuscleRig.attachment_jaw`), so opening the jaw alone pulls no node."""
+        wp = get_warp()
+        from . import kernels_muscle as km
+        from . import kernels_tissue as kt
+
+        rig.validate()
+        self.km = km
+        self.kt = kt
+        self.rig = rig
+        self.device = device
+        f32 = lambda a, dt=float: wp.array(np.ascontiguousarray(a, dtype=np.float32), dtype=dt, device=device)  # noqa: E731
+        i32 = lambda a, dt=wp.int32: wp.array(np.ascontiguousarray(a, dtype=np.int32), dtype=dt, device=device)  # noqa: E731
+        self.ctrl_rest = f32(rig.ctrl_rest, wp.vec3)
+        self.ctrl_muscle = i32(rig.ctrl_muscle)
+        self.ctrl_pivot = i32(rig.ctrl_pivot)
+        self.ctrl_jaw = f32(rig.ctrl_jaw)
+        self.muscle_activation = i32(rig.activation_index)
+        self.muscle_contraction = f32(rig.contraction)
+        self.muscle_center = f32(rig.center, wp.vec3)
+        self.muscle_center_jaw = f32(rig.center_jaw)
+        self.curve_ctrl = i32(rig.curve_ctrl, wp.vec3i)
+        self.curve_weight = f32(rig.curve_weight, wp.vec3)
+        self.curve_normal = f32(rig.curve_normals(), wp.vec3)
+        self.seg_curve = i32(rig.seg_curve)
+        self.seg_t = f32(rig.seg_t, wp.vec2)
+        self.seg_rest_radii = f32(rig.seg_rest_radii, wp.vec3)
+        dst_u, a_start, a_order = group_indices(rig.anchor_dst)
+        self.anchor_dst_unique = i32(dst_u)
+        self.anchor_start = i32(a_start)
+        self.anchor_src = i32(np.asarray(rig.anchor_src)[a_order])
+        self.anchor_weight = f32(np.asarray(rig.anchor_weight)[a_order])
+        self.att_node = i32(rig.att_node)
+        self.att_seg = i32(rig.att_seg)
+        self.att_uv = f32(rig.att_uv, wp.vec2)
+        self.att_rest_length = f32(rig.att_rest_length)
+        self.att_stiffness = f32(rig.att_stiffness)
+        shift = np.zeros(len(rig.att_node))
+        if node_amount is not None and len(rig.att_node):
+            shift = np.asarray(node_amount, np.float64)[rig.att_node] - rig.attachment_jaw()
+        self.att_jaw_shift = f32(shift)
+        nodes_u, n_start, order = group_indices(rig.att_node)
+        self.att_nodes_unique = i32(nodes_u)
+        self.att_node_start = i32(n_start)
+        self.att_order = i32(order)
+        self.att_force = wp.zeros(len(order), dtype=wp.vec3, device=device)
+        P, S, K = len(rig.ctrl_rest), len(rig.seg_curve), len(rig.att_node)
+        self.ctrl_jawed = wp.zeros(P, dtype=wp.vec3, device=device)
+        self.ctrl_contracted = wp.zeros(P, dtype=wp.vec3, device=device)
+        self.ctrl = wp.zeros(P, dtype=wp.vec3, device=device)
+        self.seg_center = wp.zeros(S, dtype=wp.vec3, device=device)
+        self.seg_frame = wp.zeros(S, dtype=wp.mat33, device=device)
+        self.seg_radii = wp.zeros(S, dtype=wp.vec3, device=device)
+        self.att_point = wp.zeros(K, dtype=wp.vec3, device=device)
+        if jaw is not None:
+            self.jaw_pivot, self.jaw_u, self.jaw_v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+        else:
+            self.jaw_pivot, self.jaw_u, self.jaw_v = wp.vec3(0.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0)
+
+    def update_geometry(self, control) -> None:
+        """Control points and ellipsoids for ``control`` (kernels 1-3 of the module doc)."""
+        wp = get_warp()
+        km = self.km
+        P = len(self.rig.ctrl_rest)
+        if P == 0:
+            return
+        wp.launch(km._muscle_controls, dim=P,
+                  inputs=[self.ctrl_rest, self.ctrl_muscle, self.ctrl_pivot, self.ctrl_jaw, self.muscle_activation,
+                          self.muscle_contraction, self.muscle_center, self.muscle_center_jaw, self.jaw_pivot,
+                          self.jaw_u, self.jaw_v, control.activations, control.jaw_angles],
+                  outputs=[self.ctrl_jawed, self.ctrl_contracted], device=self.device)
+        wp.copy(self.ctrl, self.ctrl_contracted)
+        if len(self.rig.anchor_dst):
+            wp.launch(km._muscle_anchors, dim=len(self.anchor_dst_unique),
+                      inputs=[self.anchor_dst_unique, self.anchor_start, self.anchor_src, self.anchor_weight,
+                              self.ctrl_jawed, self.ctrl_contracted],
+                      outputs=[self.ctrl], device=self.device)
+        if len(self.rig.seg_curve):
+            wp.launch(km._muscle_segments, dim=len(self.rig.seg_curve),
+                      inputs=[self.curve_ctrl, self.curve_weight, self.curve_normal, self.seg_curve, self.seg_t,
+                              self.seg_rest_radii, self.ctrl],
+                      outputs=[self.seg_center, self.seg_frame, self.seg_radii], device=self.device)
+
+    def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
+        wp = get_warp()
+        self.update_geometry(control)
+        if len(self.rig.att_node):
+            wp.launch(self.km._muscle_forces, dim=len(self.rig.att_node),
+                      inputs=[self.att_node, self.att_seg, self.att_uv, self.att_rest_length, self.att_stiffness,
+                              self.att_jaw_shift, self.jaw_pivot, self.jaw_u, self.jaw_v, control.jaw_angles,
+                              self.seg_center, self.seg_frame, self.seg_radii, state_in.positions],
+                      outputs=[self.att_point, self.att_force], device=self.device)
+            wp.launch(self.kt._gather, dim=len(self.att_nodes_unique),
+                      inputs=[self.att_nodes_unique, self.att_node_start, self.att_order, self.att_force],
+                      outputs=[forces], device=self.device)
+
+
+class SupportStage:
+    """Sliding support of free inner-sheet nodes along their rest normal (solver stage).
+
+    The inner sheet of the skin lies on deeper tissue: it may glide along it but not sink into
+    it or lift off it. Each node gets a spring of ``stiffness`` [N/m] acting only along its rest
+    normal (the extrusion direction), moved with the jaw by its Eq. 6.4.9 amount.
+    """
+
+    def __init__(self, jaw, nodes, normals, amounts, stiffness: float, rest_positions, device):
+        wp = get_warp()
+        from . import kernels_muscle as km
+
+        self.km = km
+        self.device = device
+        self.count = len(nodes)
+        self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
+        n = np.asarray(normals, np.float64).reshape(-1, 3)
+        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        self.normals = wp.array(n.astype(np.float32), dtype=wp.vec3, device=device)
+        self.amounts = wp.array(np.asarray(amounts, np.float32), dtype=float, device=device)
+        self.stiffness = float(stiffness)
+        self.rest = rest_positions
+        self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+
+    def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
+        if self.count == 0:
+            return
+        get_warp().launch(self.km._support_forces, dim=self.count,
+                     inputs=[self.nodes, self.normals, self.amounts, self.stiffness, self.rest, self.pivot, self.u,
+                             self.v, control.jaw_angles, state_in.positions],
+                     outputs=[forces], device=self.device)

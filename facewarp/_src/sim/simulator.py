@@ -1,0 +1,414 @@
+"""The face simulator: a :class:`~facewarp._src.physics.face_rig.FaceRig` on a device, stepped
+by a user's loop or by an expression timeline, and the frame stream the exporters consume.
+
+:class:`FaceSimulator` makes the Model, the solver with its muscle, support and jaw stages,
+and keeps the controls (muscle activations, jaw angles); :class:`Frames` is what
+:meth:`FaceSimulator.run` records.
+"""
+
+from __future__ import annotations
+
+import io
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.errors import InputError
+from ..core.fileio import atomic_write
+from ..core.warp import get_warp
+from ..expressions import MUSCLES, Timeline
+from ..physics.face_rig import EDGE_DAMPING, FaceRig, node_jaw_amounts
+
+__all__ = ["FaceSimulator", "Frames", "save_frames_npz"]
+
+
+# ------------------------------------------------------------------------------------ frames
+@dataclass
+class Frames:
+    """The frame stream of a simulation (what exporters consume).
+
+    Attributes:
+        times: Frame times [s], shape (f,).
+        points: Head surface vertices [m], shape (f, n, 3), float32.
+        faces: Head triangles, shape (m, 3).
+        fdp_ids: FDP ids, shape (84,).
+        fdp_points: FDP positions [m], shape (f, 84, 3).
+        parts: Rigid part name -> (frames (f, k, 3), faces (l, 3)).
+        muscle_names: Muscle instance names (M,).
+        muscle_curves: Muscle fibre polylines [m], shape (f, M, samples, 3) (closed rings for
+            sphincters repeat their first point).
+        activations: Activations per frame, shape (f, M); jaw: (f, 2) [rad].
+        steps_per_second: Simulated substeps per wall-clock second.
+    """
+
+    times: np.ndarray
+    points: np.ndarray
+    faces: np.ndarray
+    fdp_ids: np.ndarray
+    fdp_points: np.ndarray
+    parts: dict
+    muscle_names: list
+    muscle_curves: np.ndarray
+    activations: np.ndarray
+    jaw: np.ndarray
+    steps_per_second: float = 0.0
+    substeps: int = 0
+    dt: float = 0.0
+
+
+def _unit_value(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected a number in [0, 1], got {value!r}") from None
+    if not (np.isfinite(v) and 0.0 <= v <= 1.0):
+        raise InputError(f"{name}: expected a value in [0, 1], got {value!r}")
+    return v
+
+
+def _activation_vector(names: list[str], expr) -> np.ndarray:
+    out = np.zeros(len(names), np.float32)
+    for i, n in enumerate(names):
+        side = n[-1] if n.endswith(("_L", "_R")) else None
+        base = n[:-2] if side else n
+        out[i] = expr.activation(base, side) if base in MUSCLES else 0.0
+    return out
+
+
+class FaceSimulator:
+    """A simulated face: Model + solver + muscle, support and jaw stages for one
+    :class:`~facewarp.FaceRig` on one device.
+
+    Step it in your own loop (:meth:`set_activations`, :meth:`set_jaw`, :meth:`step` or
+    :meth:`advance`, then :meth:`surface`, :meth:`positions` or :meth:`fdp`; :meth:`reset`
+    goes back to rest), or play a :class:`~facewarp.Timeline` with :meth:`run`. Controls
+    change once per step and ramp linearly across it in :attr:`CONTROL_CHUNKS` pieces, each a
+    run of substeps with no host round trip inside (a replayed CUDA graph on the GPU).
+
+    Args:
+        fr: The face rig (:func:`~facewarp.build_face` or :func:`~facewarp.load_face_rig`).
+        device: Warp device, ``"cpu"`` or ``"cuda[:N]"``.
+        dt: Substep [s]; default the stable step of the rig.
+        substeps: Substeps per frame (overrides ``dt``).
+        fps: Frames per second of :meth:`step` / :meth:`run`.
+    """
+
+    CONTROL_CHUNKS = 16
+
+    def __init__(self, fr: FaceRig, *, device: str = "cpu", dt: float | None = None, substeps: int | None = None,
+                 fps: float = 30.0, support_stiffness: float | None = None, edge_damping: float = EDGE_DAMPING,
+                 mass_scaling: bool = True):
+        wp = get_warp()
+        from ..physics.model import ModelBuilder
+        from ..coupling.kinematic import CarryStage, JawStage
+        from ..physics.muscle_stage import MuscleStage, SupportStage
+        from ..physics.solvers.verlet import MASS_SCALING_QUANTILE, SolverVerlet, scale_masses
+
+        self.fr = fr
+        self.fps = float(fps)
+        builder = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held,
+                               muscle_count=len(fr.rig.names), edge_damping=edge_damping)
+        # the substep: the 2 % of nodes with the smallest own limit (short edges, flat tets in
+        # creases of adapted heads) get the mass that lifts them to it (selective mass scaling)
+        dt_safe, self.added_mass_fraction = scale_masses(
+            builder, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0)
+        frame_dt = 1.0 / self.fps
+        if substeps is None:
+            substeps = int(np.ceil(frame_dt / (dt or dt_safe)))
+        self.substeps = int(substeps)
+        self.dt = frame_dt / self.substeps
+        if self.dt > 2.0 * dt_safe:
+            raise InputError(f"--substeps {substeps}: dt {self.dt:.2e} s is above twice the stable step "
+                             f"{dt_safe:.2e} s; use at least {int(np.ceil(frame_dt / (2 * dt_safe)))} substeps")
+        self.model = builder.finalize(device)
+        self.device = self.model.device
+        self.jaw = fr.jaw
+        self.jaw_stage = JawStage(self.jaw, fr.jaw_nodes, fr.jaw_amount, self.model.rest_positions, self.device)
+        k_support = float(self.model.vertex_hold_stiffness.numpy().max()) if fr.held.any() else 0.0
+        self.support = SupportStage(self.jaw, fr.support_nodes, fr.support_normal, fr.support_amount,
+                                    support_stiffness if support_stiffness is not None else k_support,
+                                    self.model.rest_positions, self.device)
+        node_jaw = node_jaw_amounts(fr)
+        self.muscles = MuscleStage(fr.rig, self.jaw, self.device, node_amount=node_jaw)
+        carried = np.flatnonzero((node_jaw > 0) & ~fr.fixed)
+        self.carry = CarryStage(self.jaw, carried, node_jaw[carried], self.device)
+        self.solver = SolverVerlet(self.model, stages=[self.carry, self.jaw_stage, self.support, self.muscles])
+        self.state = self.model.state()
+        self.scratch = self.model.state()
+        self.control = self.model.control()
+        self.use_graph = bool(self.device.is_cuda)
+        self._graphs: dict[int, object] = {}
+        self._wp = wp
+        # head surface <- outer nodes
+        sv = fr.surface_vertex
+        self.node_of_vertex = np.where(sv >= 0)[0]
+        self.vertex_of_node = sv[self.node_of_vertex]
+        self.reset()
+
+    # ------------------------------------------------------------------------------ controls
+    @property
+    def muscle_names(self) -> list[str]:
+        """Muscle instance names, in the order of :meth:`set_activations` arrays (M,)."""
+        return list(self.fr.rig.names)
+
+    @property
+    def time(self) -> float:
+        """Simulated time [s] since the last :meth:`reset`."""
+        return self._steps_taken * self.dt
+
+    def activation_vector(self, activations) -> np.ndarray:
+        """Activations as the (M,) float32 array the solver reads.
+
+        Args:
+            activations: An :class:`~facewarp.Expression`, a dict muscle name -> value in [0, 1]
+                (an instance name such as ``"zygomatic_major_L"``, or a Table 6.2 name such as
+                ``"zygomatic_major"`` for both sides; missing muscles are 0), or an array (M,)
+                in :attr:`muscle_names` order.
+
+        Raises:
+            InputError: unknown muscle, wrong length, or a value outside [0, 1] (NaN included).
+        """
+        names = self.fr.rig.names
+        if hasattr(activations, "activation") and hasattr(activations, "jaw_u"):
+            return _activation_vector(names, activations)
+        if isinstance(activations, dict):
+            out = np.zeros(len(names), np.float32)
+            for key, value in activations.items():
+                hit = [i for i, n in enumerate(names) if n == key or (n.endswith(("_L", "_R")) and n[:-2] == key)]
+                if not hit:
+                    raise InputError(f"activations: unknown muscle {key!r} (known: {', '.join(sorted(set(names)))})")
+                v = _unit_value(f"activations[{key!r}]", value)
+                out[hit] = v
+            return out
+        a = np.asarray(activations, dtype=np.float64)
+        if a.shape != (len(names),):
+            raise InputError(f"activations: expected a dict or an array of shape ({len(names)},), got shape {a.shape}")
+        bad = np.flatnonzero(~np.isfinite(a) | (a < 0.0) | (a > 1.0))
+        if len(bad):
+            raise InputError(f"activations: {names[bad[0]]} is {a[bad[0]]!r}, expected a value in [0, 1]")
+        return a.astype(np.float32)
+
+    def set_activations(self, activations) -> None:
+        """Set the muscle activations reached at the end of the next :meth:`step` (they ramp
+        linearly from the current ones over the step). See :meth:`activation_vector`."""
+        self._target_a = self.activation_vector(activations)
+
+    def set_jaw(self, opening: float, side: float = 0.0) -> None:
+        """Set the jaw angles [rad] reached at the end of the next :meth:`step`.
+
+        Args:
+            opening: Rotation about the condyle u-axis (Sec. 6.4.3), 0..60 deg in radians.
+            side: Rotation about the vertical v-axis, within +-5 deg in radians.
+
+        Raises:
+            InputError: a non-finite angle or one outside its range.
+        """
+        from ..expressions import JAW_U_MAX, JAW_V_MAX
+
+        u, v = float(opening), float(side)
+        if not (np.isfinite(u) and -1e-9 <= u <= JAW_U_MAX + 1e-9):
+            raise InputError(f"jaw opening: expected 0..{JAW_U_MAX:.4f} rad (0..60 deg), got {opening!r}")
+        if not (np.isfinite(v) and abs(v) <= JAW_V_MAX + 1e-9):
+            raise InputError(f"jaw side: expected within +-{JAW_V_MAX:.4f} rad (+-5 deg), got {side!r}")
+        self._target_j = np.array([max(u, 0.0), v], np.float32)
+
+    def reset(self) -> None:
+        """Back to rest: positions, velocities, activations and jaw at zero, time 0."""
+        for s in (self.state, self.scratch):  # in place: captured CUDA graphs stay valid
+            s.positions.assign(self.model.rest_positions)
+            s.prev_positions.assign(self.model.rest_positions)
+        self.control.activations.zero_()
+        self.control.jaw_angles.zero_()
+        self.carry.reset()
+        self.solver.reset()
+        self._a = np.zeros(len(self.fr.rig.names), np.float32)
+        self._j = np.zeros(2, np.float32)
+        self._target_a, self._target_j = self._a.copy(), self._j.copy()
+        self._steps_taken = 0
+
+    # ------------------------------------------------------------------------------ stepping
+    def step(self, dt: float | None = None) -> None:
+        """Advance by ``dt`` [s] (default one frame, ``1 / fps``), in whole substeps.
+
+        The controls set since the last step ramp linearly from their old to their new
+        values across the step (a jump would jolt the held nodes). Raises
+        :class:`~facewarp.SimulationError` if a substep produced a NaN or an inverted tet.
+
+        Raises:
+            InputError: ``dt`` not positive and finite.
+        """
+        if dt is None:
+            n = self.substeps
+        else:
+            if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+                raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
+            n = max(1, int(round(float(dt) / self.dt)))
+        chunks = max(1, min(n, self.CONTROL_CHUNKS))
+        bounds = np.linspace(0, n, chunks + 1).round().astype(int)
+        a0, j0 = self._a, self._j
+        for c in range(chunks):
+            w = (c + 1) / chunks
+            self.control.activations.assign((1 - w) * a0 + w * self._target_a)
+            self.control.jaw_angles.assign((1 - w) * j0 + w * self._target_j)
+            self._run_substeps(int(bounds[c + 1] - bounds[c]))
+        self._a, self._j = self._target_a.copy(), self._target_j.copy()
+        self._steps_taken += n
+        self.solver.check(self.state)
+
+    def advance(self, frames: int = 1) -> None:
+        """Advance ``frames`` frames of ``1 / fps`` with the current controls."""
+        if not (isinstance(frames, (int, np.integer)) and frames >= 0):
+            raise InputError(f"frames: expected a whole number >= 0, got {frames!r}")
+        for _ in range(int(frames)):
+            self.step()
+
+    def _run_substeps(self, n: int) -> None:
+        """``n`` substeps with the current control; on CUDA a replayed graph (one per n)."""
+        if n <= 0:
+            return
+        if not self.use_graph:
+            self._substeps(n)
+            return
+        g = self._graphs.get(n)
+        if g is None:
+            with self._wp.ScopedCapture(device=self.device) as cap:
+                self._substeps(n)
+            g = self._graphs[n] = cap.graph
+        self._wp.capture_launch(g)
+
+    def _substeps(self, n: int) -> None:
+        for s in range(n):
+            src, dst = (self.state, self.scratch) if s % 2 == 0 else (self.scratch, self.state)
+            self.solver.step(src, dst, self.control, self.dt)
+        if n % 2 == 1:
+            self.state.assign(self.scratch)
+
+    # ------------------------------------------------------------------------------ results
+    def positions(self) -> np.ndarray:
+        """Tet node positions [m], shape (p, 3), float64 (a host copy; see :attr:`positions_wp`)."""
+        return self.state.positions.numpy().astype(np.float64)
+
+    @property
+    def positions_wp(self):
+        """Tet node positions [m] on the device, shape (p,), ``wp.vec3`` (no copy; valid until
+        the next step)."""
+        return self.state.positions
+
+    def surface(self, X: np.ndarray | None = None, jaw_angles=None) -> np.ndarray:
+        """Head vertices [m], shape (n, 3), float64: the simulated outer nodes written in, the
+        rest of the head moved kinematically by the jaw (its per-vertex amount).
+
+        Args:
+            X: Node positions (p, 3) [m]; default the current state.
+            jaw_angles: (u, v) [rad]; default the current jaw.
+        """
+        fr = self.fr
+        X = self.positions() if X is None else X
+        ja = self._j if jaw_angles is None else jaw_angles
+        V = fr.head_vertices.copy()
+        if fr.vertex_jaw is not None and (ja[0] or ja[1]):
+            m = fr.vertex_jaw > 0
+            V[m] = self.jaw.apply(V[m], fr.vertex_jaw[m], float(ja[0]), float(ja[1]))
+        V[self.vertex_of_node] = X[self.node_of_vertex]
+        return V
+
+    def fdp(self, fdp_id: str) -> np.ndarray:
+        """Current position [m] of one FDP (e.g. ``"2.1"``, the chin), shape (3,), float64."""
+        ids = [str(k) for k in self.fr.fdp_ids]
+        if str(fdp_id) not in ids:
+            raise InputError(f"fdp_id: {fdp_id!r} is not an FDP of this head")
+        return self.fdp_points()[ids.index(str(fdp_id))]
+
+    def fdp_points(self) -> np.ndarray:
+        """Current positions [m] of all FDPs, shape (84, 3), float64 (order: ``rig.fdp_ids``)."""
+        V = self.surface()
+        parts = self._parts_now(self._j)
+        return self._fdp_points(V[None], {k: P[None] for k, P in parts.items()})[0].astype(np.float64)
+
+    def _parts_now(self, j) -> dict:
+        fr = self.fr
+        out = {}
+        for name, (V, _) in fr.parts.items():
+            amt = fr.part_jaw.get(name, 0.0)
+            out[name] = self.jaw.apply(V, np.full(len(V), amt), float(j[0]), float(j[1])) if amt else V
+        return out
+
+    def run(self, timeline: Timeline, seconds: float, *, progress=None, curve_samples: int = 24) -> Frames:
+        """Simulate ``seconds`` of ``timeline`` from rest (it calls :meth:`reset`); one frame
+        every 1/fps s, frame 0 at rest."""
+        if not (isinstance(seconds, (int, float)) and np.isfinite(seconds) and seconds > 0):
+            raise InputError(f"seconds: expected a positive number, got {seconds!r}")
+        fr = self.fr
+        self.reset()
+        nf = int(round(seconds * self.fps)) + 1
+        times = np.arange(nf) / self.fps
+        names = fr.rig.names
+        pts = np.zeros((nf, len(fr.head_vertices), 3), np.float32)
+        acts = np.zeros((nf, len(names)), np.float32)
+        jaws = np.zeros((nf, 2), np.float32)
+        curves = np.zeros((nf, len(names), curve_samples, 3), np.float32)
+        parts_frames = {k: np.zeros((nf, len(V), 3), np.float32) for k, (V, _) in fr.parts.items()}
+        t0 = time.perf_counter()
+        e0 = timeline.sample(0.0)
+        self._a = self._target_a = _activation_vector(names, e0)
+        self._j = self._target_j = np.array([e0.jaw_u, e0.jaw_v], np.float32)
+        for k, t in enumerate(times):
+            if k > 0:
+                e = timeline.sample(float(t))
+                self._target_a = _activation_vector(names, e)
+                self._target_j = np.array([e.jaw_u, e.jaw_v], np.float32)
+                self.step()
+            pts[k] = self.surface()
+            acts[k], jaws[k] = self._a, self._j
+            curves[k] = self._curves(curve_samples)
+            for name, P in self._parts_now(self._j).items():
+                parts_frames[name][k] = P
+            if progress:
+                progress(k, nf)
+        wall = time.perf_counter() - t0
+        fdp = self._fdp_points(pts, parts_frames)
+        return Frames(times, pts, fr.head_faces, fr.fdp_ids, fdp,
+                      {k: (v, fr.parts[k][1]) for k, v in parts_frames.items()}, list(names), curves, acts, jaws,
+                      self._steps_taken / max(wall, 1e-9), self.substeps, self.dt)
+
+    def _curves(self, samples: int) -> np.ndarray:
+        from ..physics.muscle_stage import _bezier_np
+
+        rig = self.fr.rig
+        ctrl = self.muscles.ctrl.numpy().astype(np.float64)
+        out = np.zeros((len(rig.names), samples, 3))
+        curve_m = rig.ctrl_muscle[rig.curve_ctrl[:, 0]]
+        for m in range(len(rig.names)):
+            cs = np.where(curve_m == m)[0]
+            per = max(2, samples // len(cs))
+            seq = [_bezier_np(ctrl[rig.curve_ctrl[c]][None], rig.curve_weight[c][None], np.linspace(0, 1, per)) for c in cs]
+            P = np.concatenate(seq)
+            idx = np.linspace(0, len(P) - 1, samples).round().astype(int)
+            out[m] = P[idx]
+        return out
+
+    def _fdp_points(self, pts, parts_frames) -> np.ndarray:
+        fr = self.fr
+        out = np.zeros((len(pts), len(fr.fdp_ids), 3), np.float32)
+        for i, (part, f, b) in enumerate(zip(fr.fdp_part, fr.fdp_face, fr.fdp_bary)):
+            if part == "head":
+                tri = fr.head_faces[f]
+                out[:, i] = np.einsum("k,fkd->fd", b, pts[:, tri])
+            else:
+                V = parts_frames[str(part)]
+                tri = fr.parts[str(part)][1][f]
+                out[:, i] = np.einsum("k,fkd->fd", b, V[:, tri])
+        return out
+
+
+def save_frames_npz(path, frames: Frames) -> Path:
+    """``frames.npz``: points (f, n, 3) [m], times (f,), fdp_ids (84,), fdp_points (f, 84, 3), faces,
+    activations (f, M), muscle_names (M,), jaw (f, 2) [rad], muscle_curves (f, M, s, 3)."""
+    buf = io.BytesIO()
+    np.savez_compressed(buf, points=frames.points, times=frames.times, fdp_ids=frames.fdp_ids,
+                        fdp_points=frames.fdp_points, faces=frames.faces, activations=frames.activations,
+                        muscle_names=np.array(frames.muscle_names), jaw=frames.jaw, muscle_curves=frames.muscle_curves)
+    with atomic_write(path, "wb", encoding=None) as f:
+        f.write(buf.getvalue())
+    return Path(path)

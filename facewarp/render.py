@@ -1,0 +1,27 @@
+"""Pictures: the headless Warp ray-cast renderer, colour maps, frame strips, anatomy and template previews (public).
+
+Re-exports of ``facewarp._src``; see each name's docstring for shapes and units."""
+
+from __future__ import annotations
+
+from ._src.present.strips import (  # noqa: F401
+    displacement_max,
+    render_strip,
+)
+from ._src.present.anatomy import (  # noqa: F401
+    render_anatomy,
+)
+from ._src.present.template import (  # noqa: F401
+    LIPS,
+    SKIN,
+    TEETH,
+    TONGUE,
+    colored_scene,
+    render_previews,
+    vermilion_weight,
+)
+from ._src.present.plot import (  # noqa: F401
+    line_chart,
+)
+
+__all__ = ["LIPS", "SKIN", "TEETH", "TONGUE", "colored_scene", "displacement_max", "line_chart", "render_anatomy", "render_previews", "render_strip", "vermilion_weight"]
