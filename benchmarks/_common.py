@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import sys
@@ -36,10 +37,17 @@ def machine(device: str = "cpu") -> dict:
     return info
 
 
-def save(name: str, data: dict) -> Path:
-    from facewarp._src.core.fileio import write_json
+def _plain(obj):
+    """JSON form of NumPy arrays and scalars (``tolist``) and of paths (``str``)."""
+    return obj.tolist() if hasattr(obj, "tolist") else str(obj)
 
+
+def save(name: str, data: dict) -> Path:
+    """Write ``benchmarks/results/<name>.json`` (NaN and infinity are refused: not JSON)."""
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = RESULTS / f"{name}.json"
-    write_json(path, data)
+    text = json.dumps(data, indent=2, default=_plain, allow_nan=False) + "\n"
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)  # a failed run leaves the old results
     return path

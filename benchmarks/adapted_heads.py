@@ -6,19 +6,19 @@ For each identity: a scan-like target (new tessellation, noise, holes, random po
 benchmarks/adapt_ict.py), `facewarp adapt` with the default template, `facewarp build` on the
 adapted head (Sec. 6.6: regions, surface points and definitions reused, tets re-extruded), and the
 anatomy quality: inverted tets (must be 0), conformity, smallest attachment count, and the solver's
-substep with and without selective mass scaling (solver.scale_masses) and the mass it adds. ``--keep`` keeps
+substep with and without selective mass scaling (facewarp.physics.scale_masses) and the mass it adds. ``--keep`` keeps
 the adapt/build folders (e.g. to simulate one of them). Writes benchmarks/results/adapted_heads.json.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import tempfile
 import time
 from pathlib import Path
-
-import numpy as np
 
 from benchmarks._common import machine, save
 from benchmarks.adapt_ict import ICT_FDP, ict_dir, load_ict, make_scan
@@ -33,12 +33,15 @@ def main():
     if not (d / "generic_neutral_mesh.obj").is_file():
         print(f"ICT-FaceKit data not found at {d}: nothing to measure")
         return
-    from facewarp._src.jobs.files import build_files
-    from facewarp._src.jobs.adapt import adapt_files
-    from facewarp._src.sim.face import load_face_rig
-    from facewarp._src.geometry.mesh import load_mesh, save_obj
-    from facewarp._src.physics.model import ModelBuilder
-    from facewarp._src.physics.solvers.verlet import node_stable_dt, scale_masses
+    from facewarp import ModelBuilder, load_face_rig, load_mesh, save_obj
+    from facewarp.cli import main as facewarp_cli
+    from facewarp.physics import node_stable_dt, scale_masses
+
+    def cli(*argv):  # `facewarp ...`; the results are the files it writes
+        with contextlib.redirect_stdout(io.StringIO()):
+            code = facewarp_cli([str(a) for a in argv])
+        if code != 0:
+            raise SystemExit(f"facewarp {' '.join(map(str, argv))} failed with exit code {code}")
 
     _, F, _ = load_ict(d)
     rows = []
@@ -52,9 +55,12 @@ def main():
         lm = {fid: (1000.0 * V[i] @ pose[0].T + pose[1]).tolist() for fid, i in ICT_FDP.items()}
         (case / "scan_landmarks.json").write_text(json.dumps(lm))
         t0 = time.perf_counter()
-        rep = adapt_files(case / "scan.obj", case / "scan_landmarks.json", case / "adapt", units="mm")
+        cli("adapt", case / "scan.obj", "--landmarks", case / "scan_landmarks.json", "--out", case / "adapt",
+            "--units", "mm")
+        rep = json.loads((case / "adapt" / "report.json").read_text())
         t1 = time.perf_counter()
-        q = build_files(case / "adapt", case / "build")
+        cli("build", case / "adapt", "--out", case / "build")
+        q = json.loads((case / "build" / "anatomy.json").read_text())
         t2 = time.perf_counter()
         fr = load_face_rig(case / "build")
         b = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held)

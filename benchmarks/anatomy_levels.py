@@ -17,9 +17,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2, 3])
     args = ap.parse_args()
-    from facewarp import default_template
-    from facewarp._src.anatomy.build import build_anatomy
-    from facewarp._src.core.errors import InputError
+    from facewarp import InputError, build_anatomy, default_template
 
     rows = []
     for lv in args.levels:

@@ -15,7 +15,7 @@ The pipeline, in the order data flows (thesis chapters 4-6):
 Lower level, after Newton's layout: :class:`ModelBuilder` -> :class:`Model` / :class:`State` /
 :class:`Control` -> :class:`SolverVerlet` with its stages. Detailed free functions live in the
 public submodules :mod:`facewarp.geometry`, :mod:`facewarp.adaptation`, :mod:`facewarp.anatomy`,
-:mod:`facewarp.physics` and :mod:`facewarp.render`. Everything under ``facewarp._src`` is
+:mod:`facewarp.physics`, :mod:`facewarp.coupling` and :mod:`facewarp.render`. Everything under ``facewarp._src`` is
 private and may change.
 
 Units are SI inside (metres, seconds, radians); convert at file edges with ``units=``. Names
@@ -44,7 +44,10 @@ _NAMES = {
     "FRONTAL_REGIONS": "template.head", "REGIONS": "template.head", "THICKNESS_FACTOR": "template.head",
     "Template": "template.head", "default_template": "template.head", "load_template_dir": "template.files",
     "save_template": "template.files", "export_template": "jobs.template", "import_ict": "importers.ict",
-    "load_head": "adapt.transfer",
+    "load_head": "adapt.transfer", "human_likeness": "template.likeness",
+    # the ICT-FaceKit layout (vertex ranges and the FDPs on its vertices)
+    "ICT_FDP_VERTICES": "template.likeness", "ICT_INNER_LIP_VERTICES": "importers.ict",
+    "ICT_PART_RANGES": "importers.ict", "ICT_SKIN_VERTICES": "importers.ict",
     # adaptation
     "adapt": "adapt.pipeline", "AdaptResult": "adapt.pipeline", "calibrate": "adapt.calibrate",
     "Calibration": "adapt.calibrate", "distance_error": "adapt.metrics", "vertex_error": "adapt.metrics",
@@ -64,12 +67,15 @@ _NAMES = {
     "SolverVerlet": "physics.solvers.verlet", "SolverStage": "physics.solvers.verlet",
     "MuscleRig": "physics.muscle_stage", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
+    # MuJoCo coupling, moving head
+    "MujocoJaw": "coupling.mujoco", "HeadPose": "coupling.head_pose", "head_mjcf": "coupling.mjcf",
+    "write_head_mjcf": "coupling.mjcf",
     # pictures
     "colormap": "present.render", "render_mesh": "present.render", "save_png": "present.render",
     "render_strip": "present.strips", "render_anatomy": "present.anatomy", "render_previews": "present.template",
 }
 
-_SUBMODULES = ("geometry", "adaptation", "anatomy", "physics", "render")
+_SUBMODULES = ("geometry", "adaptation", "anatomy", "physics", "coupling", "render")
 
 __all__ = sorted([*_NAMES, "__version__"])
 
@@ -96,14 +102,17 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.anatomy.build import Anatomy, build_anatomy, write_anatomy
     from ._src.anatomy.jaw import JawKinematic
     from ._src.core.errors import FacewarpError, InputError, SimulationError
+    from ._src.coupling.head_pose import HeadPose
     from ._src.coupling.kinematic import CarryStage, JawStage
+    from ._src.coupling.mjcf import head_mjcf, write_head_mjcf
+    from ._src.coupling.mujoco import MujocoJaw
     from ._src.expressions import (MUSCLES, PRESETS, Expression, Segment, Timeline, blend, load_sequence, preset,
                                    thesis_sequence, timeline_for, timeline_from_spec)
     from ._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
     from ._src.geometry.mesh import Mesh, SurfacePoints, closest_surface_points, load_mesh, mesh_report, save_obj
     from ._src.geometry.similarity import Similarity, fit_similarity
     from ._src.geometry.surface import MeshQuery, mean_curvature, vertex_normals
-    from ._src.importers.ict import import_ict
+    from ._src.importers.ict import ICT_INNER_LIP_VERTICES, ICT_PART_RANGES, ICT_SKIN_VERTICES, import_ict
     from ._src.jobs.template import export_template
     from ._src.physics.face_rig import FaceRig, build_face, face_rig_from_anatomy, load_face_rig, save_face_rig
     from ._src.physics.model import Control, Model, ModelBuilder, State
@@ -116,3 +125,4 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.sim.simulator import FaceSimulator, Frames, save_frames_npz
     from ._src.template.files import load_template_dir, save_template
     from ._src.template.head import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, default_template
+    from ._src.template.likeness import ICT_FDP_VERTICES, human_likeness

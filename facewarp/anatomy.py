@@ -1,42 +1,67 @@
 """Anatomy (thesis Sec. 6.2-6.3, 6.4.3): skin tetrahedra, Bezier muscles, jaw kinematics (public).
 
+- tet mesh quality: :func:`tet_volumes`, :func:`tet_dihedral_angles`, :func:`tet_mean_ratio`,
+  :func:`tet_conformity`, :func:`boundary_faces`, :func:`boundary_self_intersections`,
+  :func:`tet_quality`;
+- the skin layer (Sec. 6.2): :func:`split_prisms` (Fig. 6.2), :func:`extrude_skin_layer`,
+  :func:`build_skin_layer`, :func:`skin_layer_quality`, :class:`SkinLayer`;
+- muscle fibres and segments (Sec. 6.3): :func:`bezier_quadratic`, :func:`arc_length_params`,
+  :class:`Ellipsoids`, :func:`segment_ellipsoids`, :func:`ellipsoid_points`,
+  :func:`closest_point_on_ellipsoid`, :func:`ellipsoid_radii_for_length`;
+- skin attachment (Fig. 6.4): :func:`attach_nodes`, :class:`MuscleAttachment`;
+- the muscles of a head: :func:`load_muscle_defs`, :func:`build_muscles`, :class:`MuscleSet`,
+  :class:`Muscle`, :class:`Anchor`, :func:`make_linear_muscle`, :func:`muscles_to_json`;
+- the whole anatomy: :func:`build_anatomy`, :func:`write_anatomy`, :func:`slab_anatomy`;
+- the kinematic jaw (Sec. 6.4.3): :class:`JawKinematic`, :func:`rotate_about`.
+
 Re-exports of ``facewarp._src``; see each name's docstring for shapes and units."""
 
 from __future__ import annotations
 
-from ._src.anatomy.tissue import (  # noqa: F401
-    SkinLayer,
+from ._src.anatomy.tet_quality import (  # noqa: F401
     boundary_faces,
     boundary_self_intersections,
-    extrude_skin_layer,
-    split_prisms,
     tet_conformity,
     tet_dihedral_angles,
     tet_mean_ratio,
     tet_quality,
     tet_volumes,
+)
+from ._src.anatomy.extrude import (  # noqa: F401
+    TET_QUALITY_FLOOR,
+    split_prisms,
+)
+from ._src.anatomy.tissue import (  # noqa: F401
+    SkinLayer,
     build_skin_layer,
+    extrude_skin_layer,
     skin_layer_quality,
+)
+from ._src.anatomy.bezier import (  # noqa: F401
+    arc_length_params,
+    bezier_quadratic,
+)
+from ._src.anatomy.ellipsoids import (  # noqa: F401
+    Ellipsoids,
+    closest_point_on_ellipsoid,
+    ellipsoid_points,
+    ellipsoid_radii_for_length,
+    segment_ellipsoids,
+)
+from ._src.anatomy.attach import (  # noqa: F401
+    MuscleAttachment,
+    attach_nodes,
 )
 from ._src.anatomy.muscles import (  # noqa: F401
     DEFAULT_MUSCLE_DEFS,
     Anchor,
-    Ellipsoids,
     Muscle,
-    MuscleAttachment,
     MuscleKind,
     MuscleSet,
-    arc_length_params,
-    attach_nodes,
-    bezier_quadratic,
     build_muscles,
-    closest_point_on_ellipsoid,
-    ellipsoid_points,
-    ellipsoid_radii_for_length,
     load_muscle_defs,
     make_linear_muscle,
     muscles_to_json,
-    segment_ellipsoids,
 )
 from ._src.anatomy.build import (  # noqa: F401
     Anatomy,
@@ -54,4 +79,11 @@ from ._src.anatomy.jaw import (  # noqa: F401
     rotate_about,
 )
 
-__all__ = ["Anatomy", "Anchor", "DEFAULT_MUSCLE_DEFS", "Ellipsoids", "JAW_REGIONS", "JawKinematic", "Muscle", "MuscleAttachment", "MuscleKind", "MuscleSet", "SkinLayer", "SlabHead", "anatomy_report", "arc_length_params", "attach_nodes", "bezier_quadratic", "boundary_faces", "boundary_self_intersections", "build_anatomy", "build_muscles", "build_skin_layer", "check_head", "closest_point_on_ellipsoid", "ellipsoid_points", "ellipsoid_radii_for_length", "extrude_skin_layer", "jaw_rotation", "load_muscle_defs", "make_linear_muscle", "muscles_to_json", "rotate_about", "segment_ellipsoids", "skin_layer_quality", "slab_anatomy", "split_prisms", "tet_conformity", "tet_dihedral_angles", "tet_mean_ratio", "tet_quality", "tet_volumes", "write_anatomy"]
+__all__ = ["Anatomy", "Anchor", "DEFAULT_MUSCLE_DEFS", "Ellipsoids", "JAW_REGIONS", "JawKinematic", "Muscle",
+           "MuscleAttachment", "MuscleKind", "MuscleSet", "SkinLayer", "SlabHead", "TET_QUALITY_FLOOR",
+           "anatomy_report", "arc_length_params", "attach_nodes", "bezier_quadratic", "boundary_faces",
+           "boundary_self_intersections", "build_anatomy", "build_muscles", "build_skin_layer", "check_head",
+           "closest_point_on_ellipsoid", "ellipsoid_points", "ellipsoid_radii_for_length", "extrude_skin_layer",
+           "jaw_rotation", "load_muscle_defs", "make_linear_muscle", "muscles_to_json", "rotate_about",
+           "segment_ellipsoids", "skin_layer_quality", "slab_anatomy", "split_prisms", "tet_conformity",
+           "tet_dihedral_angles", "tet_mean_ratio", "tet_quality", "tet_volumes", "write_anatomy"]

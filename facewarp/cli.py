@@ -1,13 +1,20 @@
-"""The ``facewarp`` command.
+"""The ``facewarp`` command: argument parsing and printing only (the work is in ``_src.jobs``).
 
-Every error a user can cause ends as one line on stderr (``facewarp: error: ...``) and exit
-code 2; nothing below this module prints or exits.
+Streams: results go to stdout (text, or exactly one JSON document with ``--json``); progress
+bars, Warp's messages (``--verbose``) and errors go to stderr. Every error a user can cause
+ends as one line ``facewarp: error: ...`` on stderr and exit code 2; an internal error is one
+line too (exit code 1; ``--verbose`` shows its traceback). Numbers are checked while the
+arguments are parsed, before any work. Nothing is imported at module level but the error types,
+so ``facewarp --help`` starts in a fraction of a second; nothing below this module prints or
+exits.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import math
 import os
 import sys
 import time
@@ -16,21 +23,54 @@ from pathlib import Path
 from ._src.core.errors import FacewarpError
 
 EXIT_USAGE = 2
+EXIT_INTERNAL = 1
+EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, as if killed by it
+
+MAX_TEMPLATE_LEVEL = 4  # facewarp._src.template.head.MAX_LEVEL (a test keeps them equal)
 
 
 class _Parser(argparse.ArgumentParser):
+    """One-line usage errors; an epilog can be made only when the help is shown (``epilog_factory``),
+    so that building the parser imports nothing heavy."""
+
+    def __init__(self, *args, epilog_factory=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._epilog_factory = epilog_factory
+
+    def format_help(self):
+        if self._epilog_factory is not None:
+            self.epilog, self._epilog_factory = self._epilog_factory(), None
+        return super().format_help()
+
     def error(self, message):  # one line, exit 2, like every other error
         self.exit(EXIT_USAGE, f"facewarp: error: {message}\n")
 
 
-def _level(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer level, got {text!r}") from None
-    if not 0 <= v <= 4:
-        raise argparse.ArgumentTypeError(f"level must be 0..4, got {v}")
-    return v
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the line breaks of epilogs (the sequence file schema)."""
+
+
+# ----------------------------------------------------------------------------- argument types
+def _number(parse, ok, expected: str):
+    """An argparse ``type=``: ``parse(text)`` must succeed and satisfy ``ok``, else the usage
+    error "argument --flag: expected <expected>, got 'text'"."""
+
+    def check(text: str):
+        try:
+            v = parse(text)
+        except ValueError:
+            v = None
+        if v is None or not ok(v):
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+        return v
+
+    return check
+
+
+_finite_positive = _number(float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
+_positive_int = _number(int, lambda v: v >= 1, "a whole number >= 1")
+_level = _number(int, lambda v: 0 <= v <= MAX_TEMPLATE_LEVEL, f"a level 0..{MAX_TEMPLATE_LEVEL}")
 
 
 def _device(text: str) -> str:
@@ -40,6 +80,7 @@ def _device(text: str) -> str:
     raise argparse.ArgumentTypeError(f"expected cpu, cuda or cuda:N, got {text!r}")
 
 
+# ----------------------------------------------------------------------------- output
 class _Progress:
     """A tqdm bar on stderr over named steps (hidden when stderr is not a terminal or --json)."""
 
@@ -56,33 +97,77 @@ class _Progress:
         self.bar.close()
 
 
-def _check_device(device: str) -> str:
-    if device.startswith("cuda"):
-        import warp as wp
+class _FrameBar:
+    """A tqdm bar on stderr over simulated frames, made at the first frame (the count is known then)."""
 
-        wp.config.quiet = True
-        wp.init()
-        if wp.get_cuda_device_count() == 0:
-            raise FacewarpError(f"--device {device}: no CUDA device is available on this machine")
-        idx = int(device.split(":")[1]) if ":" in device else 0
-        if idx >= wp.get_cuda_device_count():
-            raise FacewarpError(f"--device {device}: only {wp.get_cuda_device_count()} CUDA device(s) present")
-    return device
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.bar = None
+
+    def __call__(self, k: int, n: int):
+        if not self.enabled:
+            return
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=n, desc="simulate", unit="frame", file=sys.stderr, disable=None, leave=False)
+        self.bar.update(1)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _jsonable(o):
+    """``o`` with numpy scalars/arrays as Python numbers/lists, paths as strings and non-finite
+    floats as null (strict JSON has no NaN or Infinity)."""
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, bool) or o is None or isinstance(o, (int, str)):
+        return o
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, os.PathLike):
+        return os.fspath(o)
+    if hasattr(o, "tolist"):  # numpy scalar or array
+        return _jsonable(o.tolist())
+    return str(o)
 
 
 def _emit(args, data: dict, lines: list[str]):
+    """The command's result on stdout: one JSON document (``--json``) or text lines."""
+    out = args.stdout
     if args.json:
-        print(json.dumps(data, indent=2))
+        out.write(json.dumps(_jsonable(data), indent=2, allow_nan=False) + "\n")
     else:
-        print("\n".join(lines))
+        out.write("\n".join(lines) + "\n")
+    out.flush()
+
+
+def _check_device(device: str) -> str:
+    if device.startswith("cuda"):
+        from ._src.core.warp import get_warp
+
+        wp = get_warp()
+        n = wp.get_cuda_device_count()
+        if n == 0:
+            raise FacewarpError(f"--device {device}: no CUDA device is available on this machine")
+        idx = int(device.split(":")[1]) if ":" in device else 0
+        if idx >= n:
+            raise FacewarpError(f"--device {device}: only {n} CUDA device(s) present (cuda:0..cuda:{n - 1})")
+    return device
 
 
 # ----------------------------------------------------------------------------- template
 def cmd_template_export(args):
-    from ._src.template import default_template
+    from ._src.jobs.checks import check_out_dir
     from ._src.jobs.template import export_template
+    from ._src.template import default_template
 
     t0 = time.perf_counter()
+    check_out_dir(args.out)
     prog = _Progress(5 if not args.no_preview else 3, "template export", not args.json)
     prog("building level %d" % args.level)
     t = default_template(args.level)
@@ -118,6 +203,18 @@ def cmd_template_info(args):
     _emit(args, s, lines)
 
 
+def cmd_template_import_ict(args):
+    from ._src.jobs.template import import_ict_files
+
+    prog = _Progress(5 if not args.no_preview else 4, "template import-ict", not args.json)
+    rep = import_ict_files(args.ict_dir, args.out, previews=not args.no_preview, device=args.device, progress=prog)
+    prog.close()
+    _emit(args, rep, [f"imported {args.ict_dir} into {args.out}: {rep['vertex_count']} vertices, {rep['face_count']} "
+                      f"faces ({rep['frontal_face_count']} frontal), {rep['fdp_count']} FDPs, parts "
+                      + ", ".join(f"{k} {v}" for k, v in rep["parts"].items())
+                      + f"; wrote {len(rep['files'])} files in {rep['seconds']:.1f} s"])
+
+
 # ----------------------------------------------------------------------------- inputs
 def cmd_mesh_check(args):
     from ._src.geometry.mesh import load_mesh, mesh_report
@@ -142,9 +239,25 @@ def cmd_landmarks_check(args):
     _emit(args, data, lines)
 
 
+# ----------------------------------------------------------------------------- adapt, build, simulate
+def _refinement_summary(levels: list[dict], requested: int) -> str:
+    """'FDP level + 3 of 5 refinement levels (level 5 raised E and was undone)'."""
+    refine = [r for r in levels if r.get("level", 0) >= 2 and r.get("kind") in ("rbf", "csrbf")]
+    kept = [r for r in refine if r.get("accepted", True)]
+    undone = [r for r in refine if not r.get("accepted", True)]
+    text = f"FDP level + {len(kept)} of {requested} refinement levels"
+    if undone:
+        text += f" (level {undone[0]['level']} raised the error E and was undone)"
+    return text
+
+
 def cmd_adapt(args):
     from ._src.jobs.adapt import adapt_files
 
+    if args.template_mesh is not None and args.template is not None:
+        raise FacewarpError("give --template or --template-mesh, not both")
+    if (args.template_mesh is None) != (args.template_landmarks is None):
+        raise FacewarpError("--template-mesh and --template-landmarks go together (a mesh and its FDPs)")
     prog = _Progress(4, "adapt", not args.json)
     rep = adapt_files(args.scan, args.landmarks, args.out, template_dir=args.template, template_mesh=args.template_mesh,
                       template_landmarks=args.template_landmarks, method=args.method, levels=args.levels,
@@ -156,7 +269,8 @@ def cmd_adapt(args):
     _emit(args, rep, [
         f"adapted {rep['vertex_count']} template vertices to {args.scan} in {rep['seconds']:.2f} s ({rep['method']})",
         f"  calibration FDPs: {', '.join(rep['calibration']['fdps_used'])}",
-        f"  levels {len(rep['levels'])}, final FPs {rep['fp_count']}, E_d {last.get('E_d', float('nan')):.3g} m^2",
+        f"  {_refinement_summary(rep['levels'], args.levels)}; final FPs {rep['fp_count']}, "
+        f"E_d {last.get('E_d', float('nan')):.3g} m^2",
         f"  distance to scan: median {d['median'] * 1e3:.2f} mm, RMS {d['rms'] * 1e3:.2f} mm",
         f"  wrote {args.out}/adapted.obj, adapted_scan_frame.obj, adapted_landmarks.json, report.json, "
         "error_heatmap.png, error_curve.png",
@@ -173,23 +287,18 @@ def cmd_build(args):
         f"built anatomy of {args.head} into {args.out}: {q['tet_count']} tets, {q['inverted_count']} inverted, "
         f"min dihedral {q.get('min_dihedral_deg', float('nan')):.1f} deg, conforming {q.get('conforming')}",
         f"  {q['muscle_count']} muscles, attached skin nodes per muscle: min {q.get('min_attached_nodes', 0)}",
-        f"  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz",
+        "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz",
     ])
 
 
 def cmd_simulate(args):
     from ._src.jobs.face import simulate_files
 
-    bar = None
-    if not args.json:
-        from tqdm import tqdm
-
-        bar = tqdm(total=int(round(args.seconds * args.fps)) + 1, desc="simulate", unit="frame", file=sys.stderr,
-                   disable=None, leave=False)
-    prog = (lambda k, n: bar.update(1)) if bar is not None else None
-    rep = simulate_files(args.head, args.expression, args.out, seconds=args.seconds, fps=args.fps,
-                         substeps=args.substeps, device=args.device, usd=args.usd, progress=prog)
-    if bar is not None:
+    bar = _FrameBar(not args.json)
+    try:
+        rep = simulate_files(args.head, args.expression, args.out, seconds=args.seconds, fps=args.fps,
+                             substeps=args.substeps, device=args.device, usd=args.usd, progress=bar)
+    finally:
         bar.close()
     _emit(args, rep, [
         f"simulated {rep['expression']} for {rep['seconds']} s on {rep['device']}: {rep['frames']} frames x "
@@ -199,41 +308,60 @@ def cmd_simulate(args):
     ])
 
 
+# ----------------------------------------------------------------------------- parser
+def _simulate_epilog() -> str:
+    import textwrap
+
+    from . import MUSCLES, PRESETS
+
+    muscles = textwrap.fill("muscles (Table 6.2; add _L or _R for one side): " + ", ".join(MUSCLES), width=100,
+                            initial_indent="  ", subsequent_indent="    ")
+    return f"""\
+expressions:
+  presets      {', '.join(PRESETS)} (Table 6.4; ramp up 0.3 s, hold, ramp down)
+  sequence     Fig. 6.16: smile, laugh, surprise, angry, sad, each ramping into the next,
+               spread over --seconds
+  FILE.json    a sequence file:
+    {{"segments": [
+      {{"expression": "smile", "start": 0.5, "attack": 0.3, "hold": 1.0, "release": 0.3, "weight": 1.0}},
+      {{"expression": {{"blend": {{"smile": 0.5, "surprise": 0.5}}}}, "start": 2.0}},
+      {{"expression": {{"muscles": {{"zygomatic_major": 0.6, "corrugator_L": 0.3}}, "jaw_deg": 10}}, "start": 3.5}}]}}
+    expression: a preset name, {{"blend": {{preset: weight}}}}, or {{"muscles": {{name: 0..1}}, "jaw_deg": 0..60,
+    "jaw_side_deg": -5..5}}; times in seconds >= 0 (defaults: start 0, attack 0.3, hold 1, release 0.3),
+    weight >= 0 (default 1). Overlapping segments add; activations are clamped to 0..1.
+    The run lasts --seconds whatever the segments' end.
+{muscles}"""
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="facewarp",
         description="Personalized, physically simulated faces (template head, adaptation, anatomy, physics).",
-        epilog="Units: the library works in metres; --units converts input files. Errors: one line, exit code 2.",
+        epilog="Units: the library works in metres; --units converts input files. Results go to stdout (one JSON "
+               "document with --json); progress and errors to stderr. Errors: one line, exit code 2.",
     )
-    p.add_argument("--device", type=_device, default="cpu", help="Warp device: cpu (default), cuda or cuda:N")
-    p.add_argument("--json", action="store_true", help="print machine-readable JSON instead of text")
+    p.add_argument("--device", type=_device, metavar="cpu|cuda|cuda:N", default="cpu", help="Warp device: cpu (default), cuda or cuda:N")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON document on stdout")
+    p.add_argument("--verbose", action="store_true",
+                   help="let Warp print its messages (banner, CUDA driver notes, kernel builds) on stderr, "
+                        "and show tracebacks of internal errors")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
     t = sub.add_parser("template", help="the default template head authored in code")
     tsub = t.add_subparsers(dest="template_command", metavar="ACTION", parser_class=_Parser)
     tsub.required = True
+    level_help = (f"resolution level 0..{MAX_TEMPLATE_LEVEL} (default 0: 3,415 vertices; each level has about 4x the "
+                  "vertices of the one before)")
     e = tsub.add_parser("export", help="write the template (mesh, FDPs, regions, anatomy refs, previews) to a folder")
     e.add_argument("--out", required=True, type=Path, help="output folder (created if needed)")
-    e.add_argument("--level", type=_level, default=0, help="resolution level 0..4 (0: ~3,400 vertices, x4 per level)")
+    e.add_argument("--level", type=_level, metavar="N", default=0, help=level_help)
     e.add_argument("--no-preview", action="store_true", help="skip preview_front.png / preview_side.png")
     e.add_argument("--usd", action="store_true", help="also write template.usda (skin and rigid parts)")
     e.set_defaults(func=cmd_template_export)
     i = tsub.add_parser("info", help="print counts, FDPs, regions and bounding box")
-    i.add_argument("--level", type=_level, default=0, help="resolution level 0..4")
+    i.add_argument("--level", type=_level, metavar="N", default=0, help=level_help)
     i.set_defaults(func=cmd_template_info)
-
-    def cmd_template_import_ict(args):
-        from ._src.jobs.template import import_ict_files
-
-        prog = _Progress(5 if not args.no_preview else 4, "template import-ict", not args.json)
-        rep = import_ict_files(args.ict_dir, args.out, previews=not args.no_preview, device=args.device, progress=prog)
-        prog.close()
-        _emit(args, rep, [f"imported {args.ict_dir} into {args.out}: {rep['vertex_count']} vertices, {rep['face_count']} "
-                          f"faces ({rep['frontal_face_count']} frontal), {rep['fdp_count']} FDPs, parts "
-                          + ", ".join(f"{k} {v}" for k, v in rep["parts"].items())
-                          + f"; wrote {len(rep['files'])} files in {rep['seconds']:.1f} s"])
-
     ic = tsub.add_parser("import-ict", help="make the ICT-FaceKit neutral head a full template (FDPs, regions, parts)")
     ic.add_argument("ict_dir", type=Path, metavar="ICT_DIR", help="ICT-FaceKit folder with generic_neutral_mesh.obj")
     ic.add_argument("--out", required=True, type=Path, help="output folder (created if needed)")
@@ -256,57 +384,126 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=cmd_landmarks_check)
 
-    a = sub.add_parser("adapt", help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)")
+    a = sub.add_parser("adapt", help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)",
+                       epilog="Inputs are checked before the adaptation: scan and landmarks in the same units, at "
+                              "least 4 FDPs shared with the template and not coplanar, every landmark near the scan "
+                              "surface.")
     a.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
     a.add_argument("--landmarks", required=True, type=Path, help="FDPs on the scan (JSON or .pp), in --units")
     a.add_argument("--out", required=True, type=Path, help="output folder")
     a.add_argument("--template", type=Path, help="template folder from `facewarp template export` (default: the built-in level 0)")
     a.add_argument("--template-mesh", type=Path, help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
     a.add_argument("--template-landmarks", type=Path, help="FDPs of --template-mesh (JSON or .pp)")
-    a.add_argument("--method", choices=["rbf", "csrbf", "multilevel"], default="multilevel")
-    a.add_argument("--levels", type=int, default=5, help="level limit (default 5)")
+    a.add_argument("--method", choices=["rbf", "csrbf", "multilevel"], default="multilevel",
+                   help="multilevel (default: global RBF while the feature points are few, then compactly "
+                        "supported RBF), rbf or csrbf at every level")
+    a.add_argument("--levels", type=_positive_int, metavar="N", default=5,
+                   help="refinement levels after the FDP level, each adding feature points from the feature mesh "
+                        "and the curvature search (Sec. 4.5); whole number >= 1, default 5; stops early when the "
+                        "error E (Eq. 5.2.3) rises. report.json numbers them 2..N+1 after level 0 (the calibrated "
+                        "template) and level 1 (the FDPs), then the final stages (non-rigid refinement, "
+                        "projection, relax)")
     a.add_argument("--markers", type=Path, help="FDPs held out of training, for the marker error E_m")
     a.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan and its landmarks")
     a.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
     a.set_defaults(func=cmd_adapt)
 
     b = sub.add_parser("build", help="skin tetrahedra, muscles and boundary conditions of a head (Sec. 6.2-6.3)")
-    b.add_argument("head", help="a `template export` folder, an `adapt` output folder, or 'default[:LEVEL]'")
+    b.add_argument("head", help="a `template export` folder, an `adapt` output folder, or 'default[:LEVEL]' "
+                                f"(LEVEL 0..{MAX_TEMPLATE_LEVEL}, default 0)")
     b.add_argument("--out", required=True, type=Path, help="output folder")
-    b.add_argument("--layers", type=int, default=1, help="tet layers through the skin (default 1)")
+    b.add_argument("--layers", type=_positive_int, metavar="N", default=1, help="tet layers through the skin (whole number >= 1, default 1)")
     b.set_defaults(func=cmd_build)
 
-    s = sub.add_parser("simulate", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)")
+    s = sub.add_parser("simulate", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
+                       epilog_factory=_simulate_epilog, formatter_class=_HelpFormatter)
     s.add_argument("head", type=Path, help="a `facewarp build` output folder")
-    s.add_argument("--expression", required=True,
-                   help="smile, laugh, surprise, angry, sad (Table 6.4), 'sequence' (Fig. 6.16) or a sequence .json")
-    s.add_argument("--seconds", type=float, default=2.0, help="simulated time [s] (default 2)")
-    s.add_argument("--fps", type=float, default=30.0, help="frames per second (default 30)")
-    s.add_argument("--substeps", type=int, help="substeps per frame (default: from the stable time step)")
+    s.add_argument("--expression", required=True, metavar="NAME|sequence|FILE.json",
+                   help="a preset, 'sequence' or a sequence file (see below)")
+    s.add_argument("--seconds", type=_finite_positive, metavar="S", default=2.0, help="simulated time [s], > 0 (default 2)")
+    s.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0, help="frames per second, > 0 (default 30)")
+    s.add_argument("--substeps", type=_positive_int, metavar="N",
+                   help="substeps per frame, >= 1 (default: enough for the stable time step)")
     s.add_argument("--out", required=True, type=Path, help="output folder")
     s.add_argument("--usd", action="store_true", help="also write frames.usda (time-sampled skin, eyes, teeth)")
     s.set_defaults(func=cmd_simulate)
     return p
 
 
-def main(argv=None) -> int:
-    parser = build_parser()
+# ----------------------------------------------------------------------------- main
+def _error(message: str, code: int = EXIT_USAGE) -> int:
+    print(f"facewarp: error: {message}", file=sys.stderr)
+    return code
+
+
+def _os_error_text(e: OSError) -> str:
+    what = e.strerror or str(e) or type(e).__name__
+    return f"{e.filename}: {what}" if e.filename else what
+
+
+def _quiet_broken_pipe() -> None:
+    """stdout's reader went away (``facewarp ... | head``): send what is left to /dev/null."""
     try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def main(argv=None) -> int:
+    """Run the command line ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    try:
+        parser = build_parser()
         args = parser.parse_args(argv)
     except SystemExit as e:  # --help, or a usage error already printed as one line
-        return int(e.code or 0)
+        return int(e.code or 0) if not isinstance(e.code, str) else EXIT_USAGE
+    args.stdout = sys.stdout
+    with _verbose_env(args.verbose):
+        return _run(args)
+
+
+@contextlib.contextmanager
+def _verbose_env(on: bool):
+    """``FACEWARP_VERBOSE=1`` (read by facewarp._src.core.warp.get_warp) while a --verbose command runs."""
+    old = os.environ.get("FACEWARP_VERBOSE")
+    if on:
+        os.environ["FACEWARP_VERBOSE"] = "1"
     try:
-        _check_device(args.device)
-        args.func(args)
+        yield
+    finally:
+        if on:
+            if old is None:
+                os.environ.pop("FACEWARP_VERBOSE", None)
+            else:
+                os.environ["FACEWARP_VERBOSE"] = old
+
+
+def _run(args) -> int:
+    """Run the parsed command; every error becomes one line on stderr and an exit code."""
+    try:
+        # anything printed on the way (Warp with --verbose, libraries) goes to stderr: stdout is
+        # for the result alone, written by _emit
+        with contextlib.redirect_stdout(sys.stderr):
+            _check_device(args.device)
+            args.func(args)
     except FacewarpError as e:
-        print(f"facewarp: error: {e}", file=sys.stderr)
-        return EXIT_USAGE
+        return _error(str(e))
     except KeyboardInterrupt:
         print("facewarp: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _quiet_broken_pipe()
+        return EXIT_BROKEN_PIPE
     except OSError as e:
-        print(f"facewarp: error: {e.filename or ''}: {e.strerror or e}", file=sys.stderr)
-        return EXIT_USAGE
+        return _error(_os_error_text(e))
+    except MemoryError:
+        return _error("out of memory (try a lower level, fewer frames or a smaller mesh)", EXIT_INTERNAL)
+    except Exception as e:  # a bug, or a broken installation (ImportError): one line unless --verbose
+        if args.verbose:
+            raise
+        hint = "" if isinstance(e, ImportError) else "; --verbose shows the traceback, please report it"
+        return _error(f"{type(e).__name__}: {e}{hint}", EXIT_INTERNAL)
     return 0
 
 

@@ -30,6 +30,7 @@ from ._src.physics.muscle_stage import (  # noqa: F401
     SupportStage,
     ellipsoid_uv,
     rig_reference,
+    segment_frames,
 )
 from ._src.physics.face_rig import (  # noqa: F401
     BONE_REGIONS,
@@ -52,4 +53,4 @@ from ._src.sim.simulator import (  # noqa: F401
     save_frames_npz,
 )
 
-__all__ = ["BONE_REGIONS", "CarryStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "JawStage", "MASS_SCALING_QUANTILE", "MUSCLE_STIFFNESS", "Model", "ModelBuilder", "MuscleRig", "MuscleStage", "SolverStage", "SolverVerlet", "State", "SupportStage", "TABLE_6_3", "build_face", "ellipsoid_uv", "face_rig_from_anatomy", "load_face_rig", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "simulate", "stable_dt"]
+__all__ = ["BONE_REGIONS", "CarryStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "JawStage", "MASS_SCALING_QUANTILE", "MUSCLE_STIFFNESS", "Model", "ModelBuilder", "MuscleRig", "MuscleStage", "SolverStage", "SolverVerlet", "State", "SupportStage", "TABLE_6_3", "build_face", "ellipsoid_uv", "face_rig_from_anatomy", "load_face_rig", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "simulate", "stable_dt"]

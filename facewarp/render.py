@@ -4,6 +4,14 @@ Re-exports of ``facewarp._src``; see each name's docstring for shapes and units.
 
 from __future__ import annotations
 
+from ._src.present.render import (  # noqa: F401
+    SKIN_COLOR,
+    VIEWS,
+    colormap,
+    render_mesh,
+    render_views,
+    save_png,
+)
 from ._src.present.strips import (  # noqa: F401
     displacement_max,
     render_strip,
@@ -24,4 +32,6 @@ from ._src.present.plot import (  # noqa: F401
     line_chart,
 )
 
-__all__ = ["LIPS", "SKIN", "TEETH", "TONGUE", "colored_scene", "displacement_max", "line_chart", "render_anatomy", "render_previews", "render_strip", "vermilion_weight"]
+__all__ = ["LIPS", "SKIN", "SKIN_COLOR", "TEETH", "TONGUE", "VIEWS", "colored_scene", "colormap", "displacement_max",
+           "line_chart", "render_anatomy", "render_mesh", "render_previews", "render_strip", "render_views", "save_png",
+           "vermilion_weight"]

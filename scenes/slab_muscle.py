@@ -1,141 +1,143 @@
 """Single linear muscle under a skin slab: the experiments of thesis Figs. 6.9 and 6.10.
 
-A square sheet of skin (n x n grid of triangles) is extruded into a two-layer tet slab; one linear
-muscle (a quadratic Bezier fibre with ellipsoid segments) runs under it along +x. Inner-layer nodes
-are attached to the muscle where their distance to the nearest segment surface is below lambda and
-the angle between the connection and the fibre is below the limit theta (Fig. 6.4); the slab's
-border is fixed. Fig. 6.9 varies theta at activation 0.5, Fig. 6.10 varies the activation at
-theta = pi/4. Each panel shows the skin surface coloured by displacement after the muscle pulled.
+A square sheet of skin (a grid of ``cells x cells`` squares, two triangles each) is extruded into
+a tet slab (:func:`facewarp.anatomy.slab_anatomy`); one straight linear muscle (a quadratic Bezier
+fibre cut into ellipsoid segments) runs under it along +x. Inner-sheet nodes attach to the muscle
+where their distance to the nearest segment surface is below lambda and the angle between the
+connection and the fibre's normal plane is below the limit theta (Fig. 6.4); the slab's border is
+fixed. Fig. 6.9 varies theta at activation 0.5, Fig. 6.10 varies the activation at theta = 45 deg.
+Each panel shows the skin coloured by its displacement after the muscle pulled.
 
-    python scenes/slab_muscle.py --output out/slab [--device cpu] [--grid 24] [--seconds 0.15]
+    python -m scenes.slab_muscle --device cpu --seconds 0.15 --out out/slab [--cells 24] [--size 340]
 
 Writes ``slab_angle.png`` (Fig. 6.9), ``slab_activation.png`` (Fig. 6.10) and ``slab.json``.
+Public names only; :class:`SlabMuscle` is one case, stepped a frame at a time.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 
 import numpy as np
-import warp as wp
 
-from facewarp._src.physics.model import ModelBuilder
-from facewarp._src.physics.muscle_stage import MuscleRig, MuscleStage, ellipsoid_point, ellipsoid_uv, segment_frames
-from facewarp._src.present.render import colormap, render_mesh, save_png
-from facewarp._src.physics.solvers.verlet import SolverVerlet, simulate, stable_dt
-from facewarp._src.anatomy.tissue import split_prisms
+import facewarp as fw
+from facewarp import anatomy, physics
 
+SIZE = 0.05  # side of the skin sheet [m]
+THICKNESS = 0.003  # skin slab [m]
+MUSCLE_DEPTH = 0.007  # fibre below the skin [m]
+MUSCLE_LENGTH = 0.0325  # [m]
+MUSCLE_RADIUS = 0.003  # y/z radius of the segments [m]
+LAMBDA = 0.006  # attachment distance [m]
+STIFFNESS = 4e5  # muscle spring k_m [N/m]
+COLOR_MAX_MM = 3.0  # top of the displacement colour scale
 
-def make_slab(n: int, size: float, thickness: float):
-    """Grid sheet (n x n cells) of side ``size`` [m] extruded by ``thickness`` [m] downward."""
-    g = np.stack(np.meshgrid(np.linspace(0, size, n + 1), np.linspace(0, size, n + 1), indexing="ij"), -1).reshape(-1, 2)
-    top = np.c_[g, np.zeros(len(g))]
-    F = []
-    for i in range(n):
-        for j in range(n):
-            a, b, c, d = i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
-            F += [(a, b, c), (a, c, d)]
-    F = np.array(F)
-    V = np.concatenate([top, top - [0, 0, thickness]])
-    T, _ = split_prisms(F, F + len(top))  # Fig. 6.2 split, conforming across prisms
-    return V, T, F
+FIGURES = {  # figure -> cases (activation, theta [rad])
+    "angle": [(0.5, a) for a in (np.pi / 12, np.pi / 6, np.pi / 4, np.pi / 3)],  # Fig. 6.9
+    "activation": [(s, np.pi / 4) for s in (0.25, 0.5, 0.75, 1.0)],  # Fig. 6.10
+}
 
 
-def make_rig(V, inner, size, depth, theta_limit, lam, stiffness):
-    """One linear muscle along +x under the slab, attached to inner nodes (Fig. 6.4)."""
-    y = 0.5 * size
-    ctrl = np.array([[0.25 * size, y, -depth], [0.55 * size, y, -depth - 0.002], [0.9 * size, y, -depth]])
-    segs = 5
-    t = np.linspace(0, 1, segs + 1)
-    rig = MuscleRig(
-        names=["slab"], activation_index=np.array([0]), contraction=np.array([0.3]), center=np.zeros((1, 3)),
-        center_jaw=np.zeros(1), ctrl_rest=ctrl, ctrl_muscle=np.zeros(3, int), ctrl_pivot=np.array([2, 2, -2]),
-        ctrl_jaw=np.zeros(3), curve_ctrl=np.array([[0, 1, 2]]), curve_weight=np.ones((1, 3)),
-        seg_curve=np.zeros(segs, int), seg_t=np.stack([t[:-1], t[1:]], 1), seg_rest_radii=np.zeros((segs, 3)),
-    )
-    c, f, r = segment_frames(rig, ctrl)
-    taper = np.ones(segs)
-    taper[[0, -1]] = 0.6
-    rig.seg_rest_radii = np.c_[r[:, 0], 0.003 * taper, 0.003 * taper]
-    c, f, r = segment_frames(rig, ctrl)
-    P = V[inner]
-    # nearest segment and its surface point (u, v)
-    d_centre = np.linalg.norm(P[:, None] - c[None], axis=-1)
-    seg = np.argmin(d_centre, axis=1)
-    uv = ellipsoid_uv(c[seg], f[seg], r[seg], P)
-    pm = ellipsoid_point(c[seg], f[seg], r[seg], uv)
-    conn = pm - P
-    dist = np.linalg.norm(conn, axis=1)
-    fibre = f[seg][:, :, 0]
-    ang = np.arccos(np.clip(np.abs(np.einsum("ij,ij->i", conn, fibre)) / np.maximum(dist, 1e-12), 0, 1))
-    # the angle limit of Fig. 6.9 measured from the fibre's normal plane: theta = 0 attaches only
-    # nodes straight above the muscle, pi/2 attaches every node within lambda
-    ok = (dist < lam) & (np.pi / 2 - ang < theta_limit + 1e-9)
-    rig.att_node, rig.att_seg, rig.att_uv = inner[ok], seg[ok], uv[ok]
-    rig.att_rest_length = dist[ok]
-    rig.att_stiffness = np.full(int(ok.sum()), stiffness)
-    return rig
+class SlabMuscle:
+    """One case of Figs. 6.9/6.10: the slab, its muscle at ``activation`` with angle limit ``theta``.
+
+    Args:
+        activation: Muscle activation in [0, 1].
+        theta: Attachment angle limit phi of Fig. 6.4 [rad] (0: only nodes right above the fibre).
+        cells: Grid squares per side of the skin sheet.
+        fps: Frames per second of :meth:`step`.
+        device: Warp device, ``"cpu"`` or ``"cuda[:N]"``.
+    """
+
+    def __init__(self, *, activation: float = 0.5, theta: float = np.pi / 4, cells: int = 24, fps: float = 60.0,
+                 device: str = "cpu"):
+        self.activation, self.theta, self.fps = float(activation), float(theta), float(fps)
+        self.anatomy = anatomy.slab_anatomy(cells=cells, size=SIZE, thickness=THICKNESS, muscle_depth=MUSCLE_DEPTH,
+                                            muscle_length=MUSCLE_LENGTH, radius=MUSCLE_RADIUS, lam=LAMBDA, phi=theta)
+        skin = self.anatomy.skin
+        self.rest = skin.vertices
+        self.top = np.flatnonzero(skin.layer == 0)  # skin-surface nodes, in sheet vertex order
+        border = np.isclose(np.abs(skin.vertices[:, :2]), SIZE / 2).any(1)
+        rig = physics.muscle_rig(self.anatomy.muscles, stiffness=STIFFNESS)
+        self.attached = len(rig.att_node)
+        self.model = fw.ModelBuilder(skin.vertices, skin.tets, layer=skin.layer, fixed=border,
+                                     muscle_count=1).finalize(device)
+        self.solver = fw.SolverVerlet(self.model, stages=[fw.MuscleStage(rig, None, self.model.device)])
+        dt = physics.stable_dt(self.model)
+        self.substeps = max(1, math.ceil(1.0 / (self.fps * dt)))
+        self.dt = 1.0 / (self.fps * self.substeps)
+        self.state = self.model.state()
+        self.control = self.model.control()
+        self.control.activations.assign(np.array([self.activation], np.float32))
+        self.frame = 0
+
+    @property
+    def time(self) -> float:
+        """Simulated time [s]."""
+        return self.frame / self.fps
+
+    def step(self) -> None:
+        """One frame (``1 / fps`` s) of Verlet substeps; raises SimulationError on a NaN or an inverted tet."""
+        physics.simulate(self.model, self.state, self.control, self.dt, self.substeps, solver=self.solver)
+        self.frame += 1
+
+    def displacement(self) -> np.ndarray:
+        """Displacement [m] of the skin-surface nodes from rest, shape (n,), float64."""
+        X = self.state.positions.numpy().astype(np.float64)[self.top]
+        return np.linalg.norm(X - self.rest[self.top], axis=1)
+
+    def render(self, size: int = 340) -> np.ndarray:
+        """The skin surface coloured by displacement (0..3 mm), RGB image (size, size, 3) uint8."""
+        X = self.state.positions.numpy().astype(np.float64)[self.top]
+        colors = fw.colormap(self.displacement() * 1e3, 0.0, COLOR_MAX_MM)
+        return fw.render_mesh(X, self.anatomy.head.faces, view=(15.0, 15.0), width=size, height=size,
+                              vertex_colors=colors, device=str(self.model.device))
+
+    def summary(self) -> dict:
+        """JSON-ready numbers of the case."""
+        return {"activation": self.activation, "theta_rad": self.theta, "attached": self.attached,
+                "max_displacement_m": float(self.displacement().max()), "time_s": self.time,
+                "substeps_per_frame": self.substeps, "dt_s": self.dt}
 
 
-def run_case(V, T, layer, fixed, rig, activation, seconds, device):
-    model = ModelBuilder(V, T, layer=layer, fixed=fixed, muscle_count=1).finalize(device)
-    stage = MuscleStage(rig, None, model.device)
-    solver = SolverVerlet(model, stages=[stage])
-    dt = stable_dt(model)
-    steps = max(1, int(round(seconds / dt)))
-    control = model.control()
-    control.activations.assign(np.array([activation], np.float32))
-    state = model.state()
-    simulate(model, state, control, dt, steps, solver=solver)
-    solver.check(state)
-    return state.positions.numpy().astype(np.float64), steps, dt
+def run_figures(out: Path, *, seconds: float, cells: int, device: str, size: int = 340) -> dict:
+    """Run every case of :data:`FIGURES` for ``seconds`` and write the two strips and ``slab.json``."""
+    out.mkdir(parents=True, exist_ok=True)
+    results = {"cells": cells, "size_m": SIZE, "thickness_m": THICKNESS, "device": device, "cases": []}
+    for fig, cases in FIGURES.items():
+        panels, labels = [], []
+        for activation, theta in cases:
+            t0 = time.perf_counter()
+            scene = SlabMuscle(activation=activation, theta=theta, cells=cells, device=device)
+            for _ in range(max(1, round(seconds * scene.fps))):
+                scene.step()
+            panels.append(scene.render(size))
+            labels.append(f"theta={np.degrees(theta):.0f} deg" if fig == "angle" else f"sigma={activation:.2f}")
+            case = {"figure": fig, **scene.summary(), "seconds": time.perf_counter() - t0}
+            results["cases"].append(case)
+            print(fig, labels[-1], f"attached {case['attached']}, max displacement "
+                  f"{case['max_displacement_m'] * 1e3:.2f} mm")
+        title = ("Fig. 6.9, sigma=0.5: " if fig == "angle" else "Fig. 6.10, theta=45 deg: ") + ", ".join(labels)
+        fw.save_png(out / f"slab_{fig}.png", np.concatenate(panels, axis=1), title=title,
+                    colorbar=(0.0, COLOR_MAX_MM, "displacement [mm]"))
+    (out / "slab.json").write_text(json.dumps(results, indent=2) + "\n")
+    return results
 
 
-def main():
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--output", type=Path, default=Path("out/slab"))
-    ap.add_argument("--device", default="cpu")
-    ap.add_argument("--grid", type=int, default=24, help="cells per side of the skin sheet")
+    ap.add_argument("--device", default="cpu", help="Warp device: cpu or cuda[:N]")
     ap.add_argument("--seconds", type=float, default=0.15, help="simulated time per case [s]")
-    args = ap.parse_args()
-    args.output.mkdir(parents=True, exist_ok=True)
-    size, thick, depth = 0.05, 0.003, 0.007
-    V, T, F = make_slab(args.grid, size, thick)
-    n_top = (args.grid + 1) ** 2
-    layer = np.r_[np.zeros(n_top, int), np.ones(n_top, int)]
-    xy = V[:, :2]
-    fixed = (np.isclose(xy, 0).any(1) | np.isclose(xy, size).any(1))
-    inner = np.where(layer == 1)[0]
-    results = {"grid": args.grid, "size_m": size, "thickness_m": thick, "cases": []}
-    panels = {}
-    with wp.ScopedDevice(args.device):
-        for fig, cases in (("angle", [(0.5, a) for a in (np.pi / 12, np.pi / 6, np.pi / 4, np.pi / 3)]),
-                           ("activation", [(s, np.pi / 4) for s in (0.25, 0.5, 0.75, 1.0)])):
-            imgs = []
-            for act, theta in cases:
-                rig = make_rig(V, inner, size, depth, theta, lam=0.006, stiffness=4e5)
-                t0 = time.perf_counter()
-                X, steps, dt = run_case(V, T, layer, fixed, rig, act, args.seconds, args.device)
-                disp = np.linalg.norm(X[:n_top] - V[:n_top], axis=1)
-                results["cases"].append({"figure": fig, "activation": act, "theta_rad": theta,
-                                         "attached": int(len(rig.att_node)), "max_displacement_m": float(disp.max()),
-                                         "steps": steps, "dt_s": dt, "seconds": time.perf_counter() - t0})
-                img = render_mesh(X[:n_top], F, view=(15.0, 15.0), width=340, height=340,
-                                  vertex_colors=colormap(disp * 1e3, 0.0, 3.0), device=args.device)
-                label = f"theta={np.degrees(theta):.0f} deg" if fig == "angle" else f"sigma={act:.2f}"
-                imgs.append((img, label))
-                print(fig, label, f"attached {len(rig.att_node)}, max displacement {disp.max() * 1e3:.2f} mm")
-            panels[fig] = imgs
-    for fig, imgs in panels.items():
-        strip = np.concatenate([im for im, _ in imgs], axis=1)
-        labels = ", ".join(lbl for _, lbl in imgs)
-        title = ("Fig. 6.9, sigma=0.5: " if fig == "angle" else "Fig. 6.10, theta=45 deg: ") + labels
-        save_png(args.output / f"slab_{fig}.png", strip, title=title, colorbar=(0.0, 3.0, "displacement [mm]"))
-    (args.output / "slab.json").write_text(json.dumps(results, indent=2))
-    print("wrote", args.output)
+    ap.add_argument("--out", type=Path, default=Path("out/slab"), help="output folder")
+    ap.add_argument("--cells", type=int, default=24, help="grid squares per side of the skin sheet")
+    ap.add_argument("--size", type=int, default=340, help="panel side [px]")
+    args = ap.parse_args(argv)
+    run_figures(args.out, seconds=args.seconds, cells=args.cells, device=args.device, size=args.size)
+    print("wrote", args.out)
 
 
 if __name__ == "__main__":

@@ -29,9 +29,10 @@ def warp_devices() -> list[str]:
     """Warp devices to run device tests on: "cpu" always, "cuda:0" when a GPU is present."""
     devices = ["cpu"]
     try:
-        from facewarp._src.geometry.surface import _warp
+        import warp as wp
 
-        if _warp().get_cuda_device_count() > 0:
+        wp.config.quiet = True  # as facewarp runs it (no banner, no "no CUDA driver" note)
+        if wp.get_cuda_device_count() > 0:
             devices.append("cuda:0")
     except Exception:  # no Warp: the device tests themselves will fail loudly
         pass

@@ -1,8 +1,11 @@
-"""`facewarp adapt` end to end on a synthetic scan: a stretched, posed default head in millimetres."""
+"""`facewarp adapt` end to end on a synthetic scan (a stretched, posed default head in millimetres),
+and its input checks on a sphere scan: each bad input is one line within seconds, before the
+adaptation and before the output folder is made."""
 
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -33,7 +36,7 @@ def scan(tmp_path_factory):
 def test_adapt_writes_outputs(scan, tmp_path, capsys):
     d, pose = scan
     out = tmp_path / "ad"
-    code = main(["--json", "adapt", str(d / "scan.obj"), "--landmarks", str(d / "lm.json"), "--out", str(out),
+    code = main(["adapt", str(d / "scan.obj"), "--landmarks", str(d / "lm.json"), "--out", str(out),
                  "--units", "mm", "--markers", str(d / "markers.json"), "--levels", "3"])
     o, err = capsys.readouterr()
     assert code == 0, err
@@ -43,6 +46,10 @@ def test_adapt_writes_outputs(scan, tmp_path, capsys):
     rep = json.loads((out / "report.json").read_text())
     assert rep["levels"] and "E_d" in rep["levels"][-1] and rep["calibration"]["fdps_used"]
     assert rep["distance_to_scan_m"]["median"] < 1e-3
+    # --levels counts the refinement levels after the FDP level: report levels 2..N+1 at most
+    refine = [r for r in rep["levels"] if r["kind"] in ("rbf", "csrbf") and r["level"] >= 2]
+    assert 1 <= len(refine) <= 3 and max(r["level"] for r in refine) <= 4
+    assert "of 3 refinement levels" in o, o
     # the scan-frame result is in the scan's units and pose: compare with the posed truth
     t = default_template(0)
     truth = pose(t.vertices)
@@ -51,13 +58,72 @@ def test_adapt_writes_outputs(scan, tmp_path, capsys):
     assert np.median(err_mm) < 3.0, np.median(err_mm)
 
 
-def test_adapt_bad_inputs(scan, tmp_path, capsys):
+@pytest.fixture(scope="module")
+def sphere(tmp_path_factory):
+    """A 10 cm sphere 'scan' around the template's centre and landmark files of several faults
+    (landmarks: the template's FDPs pushed radially onto the sphere)."""
+    import trimesh
+
+    d = tmp_path_factory.mktemp("sphere")
+    t = default_template(0)
+    lm = t.landmarks()
+    c = t.vertices.mean(0)
+    s = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    save_obj(d / "sphere.obj", np.asarray(s.vertices) + c, np.asarray(s.faces))
+
+    def on_sphere(k):
+        v = lm[k] - c
+        return c + 0.1 * v / np.linalg.norm(v)
+
+    ids = ["2.1", "3.7", "3.12", "8.3", "8.4", "9.3", "11.1", "10.9", "10.10"]
+    good = {k: on_sphere(k) for k in ids}
+    cases = {
+        "few": {k: good[k] for k in ids[:3]},
+        "coplanar": {k: np.array([good[k][0], good[k][1], c[2]]) for k in ("2.1", "3.7", "3.12", "8.3", "8.4")},
+        "far": {**good, "9.3": good["9.3"] + [0.0, 0.0, 0.08]},
+        "mm": {k: v * 1000.0 for k, v in good.items()},  # landmarks in mm, the scan in m
+    }
+    for name, pts in cases.items():
+        (d / f"{name}.json").write_text(json.dumps({k: np.asarray(v).tolist() for k, v in pts.items()}))
+    (d / "good.json").write_text(json.dumps({k: v.tolist() for k, v in good.items()}))
+    return d
+
+
+@pytest.mark.parametrize("case, needles", [
+    ("few", ["at least 4 FDPs", "got 3"]),
+    ("coplanar", ["coplanar"]),
+    ("far", ["far.json", "FDP 9.3", "mm off"]),
+    ("mm", ["mm.json", "different units"]),
+])
+def test_adapt_checks_inputs_first(sphere, case, needles, tmp_path, capsys):
+    out = tmp_path / "o"
+    t0 = time.perf_counter()
+    code = main(["adapt", str(sphere / "sphere.obj"), "--landmarks", str(sphere / f"{case}.json"), "--out", str(out)])
+    seconds = time.perf_counter() - t0
+    o, err = capsys.readouterr()
+    assert code == 2 and o == "" and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1, err
+    for n in needles:
+        assert n in err, (n, err)
+    assert not out.exists()  # failed before the output folder was made
+    assert seconds < 10.0, seconds  # loose: the checks come before the adaptation (benchmarks/cli_startup.py)
+
+
+def test_adapt_bad_arguments(scan, sphere, tmp_path, capsys):
     d, _ = scan
-    few = tmp_path / "few.json"
-    few.write_text(json.dumps({"3.7": [0, 0, 0], "3.12": [1, 0, 0], "9.3": [0, 1, 0]}))
-    code = main(["adapt", str(d / "scan.obj"), "--landmarks", str(few), "--out", str(tmp_path / "o"), "--units", "mm"])
-    err = capsys.readouterr().err
-    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1
-    assert not (tmp_path / "o" / "adapted.obj").exists()
-    code = main(["adapt", str(d / "nope.obj"), "--landmarks", str(d / "lm.json"), "--out", str(tmp_path / "o")])
-    assert code == 2 and "nope.obj" in capsys.readouterr().err
+    cases = [
+        (["adapt", str(d / "nope.obj"), "--landmarks", str(d / "lm.json"), "--out", str(tmp_path / "o")], "nope.obj"),
+        (["adapt", str(d / "scan.obj"), "--landmarks", str(d / "lm.json"), "--out", str(tmp_path / "o"),
+          "--template-mesh", str(d / "scan.obj")], "--template-landmarks"),
+        (["adapt", str(d / "scan.obj"), "--landmarks", str(d / "lm.json"), "--out", str(tmp_path / "o"),
+          "--template", str(tmp_path), "--template-mesh", str(d / "scan.obj"), "--template-landmarks",
+          str(d / "lm.json")], "not both"),
+        (["adapt", str(d / "scan.obj"), "--landmarks", str(d / "lm.json"), "--out", str(tmp_path / "o"),
+          "--template", str(tmp_path)], "template"),
+    ]
+    for argv, needle in cases:
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+        assert needle in err, (needle, err)
+    assert not (tmp_path / "o").exists()

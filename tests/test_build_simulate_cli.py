@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+import facewarp
 from facewarp.cli import main
 
 
@@ -46,36 +48,44 @@ def test_simulate_outputs(built, tmp_path, capsys):
 
 
 def test_errors(built, tmp_path, capsys):
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    seq = tmp_path / "seq_blend.json"
+    seq.write_text(json.dumps({"segments": [{"expression": {"blend": 3}}]}))
+    seq2 = tmp_path / "seq_muscles.json"
+    seq2.write_text(json.dumps({"segments": [{"expression": {"muscles": ["zygomatic_major"]}}]}))
+    o = str(tmp_path / "o")
     cases = [
-        (["build", str(tmp_path / "nope"), "--out", str(tmp_path / "o")], "nope"),
-        (["simulate", str(built), "--expression", "grin", "--out", str(tmp_path / "o")], "grin"),
-        (["simulate", str(built), "--expression", "smile", "--seconds", "-1", "--out", str(tmp_path / "o")], "seconds"),
-        (["simulate", str(tmp_path), "--expression", "smile", "--out", str(tmp_path / "o")], "face_rig"),
-        (["simulate", str(built), "--expression", "smile", "--substeps", "1", "--out", str(tmp_path / "o")], "substeps"),
+        (["build", str(tmp_path / "nope"), "--out", o], "nope"),
+        (["build", "default:7", "--out", o], "levels 0..4"),
+        (["simulate", str(built), "--expression", "grin", "--out", o], "grin"),
+        (["simulate", str(built), "--expression", "smile", "--seconds", "-1", "--out", o], "--seconds"),
+        (["simulate", str(built), "--expression", "smile", "--seconds", "nan", "--out", o], "--seconds"),
+        (["simulate", str(built), "--expression", "smile", "--seconds", "1e9", "--fps", "1e9", "--out", o], "frames"),
+        (["simulate", str(tmp_path), "--expression", "smile", "--out", o], "face_rig"),
+        (["simulate", str(built), "--expression", "smile", "--substeps", "1", "--out", o], "substeps"),
+        (["simulate", str(built), "--expression", str(seq), "--out", o], "blend"),
+        (["simulate", str(built), "--expression", str(seq2), "--out", o], "muscles"),
+        (["simulate", str(built), "--expression", "smile", "--out", str(afile)], "not a folder"),
+        (["simulate", str(built), "--expression", "smile", "--out", str(afile / "sub")], "cannot create"),
     ]
     for argv, needle in cases:
         code = main(argv)
         err = capsys.readouterr().err
         assert code == 2, (argv, err)
         assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and needle in err, err
-    assert not (tmp_path / "o" / "frames.npz").exists()
+    assert not (tmp_path / "o").exists()  # every error came before the output folder was made
 
 
 def test_build_rejects_mismatched_topology(tmp_path, capsys):
     """An adapt output whose adapted.obj does not have its template's topology: one-line error."""
-    from facewarp import default_template, save_obj
-
-    t = default_template(0)
+    t = facewarp.default_template(0)
     d = tmp_path / "adapt"
     d.mkdir()
-    save_obj(d / "adapted.obj", t.vertices[:-10], t.faces[(t.faces < len(t.vertices) - 10).all(1)])
+    facewarp.save_obj(d / "adapted.obj", t.vertices[:-10], t.faces[(t.faces < len(t.vertices) - 10).all(1)])
     (d / "report.json").write_text(json.dumps({"template": "default template (level 0)"}))
     code = main(["build", str(d), "--out", str(tmp_path / "b")])
     err = capsys.readouterr().err
     assert code == 2 and "topology" in err and len(err.strip().splitlines()) == 1
-    from facewarp._src.anatomy.build import build_anatomy
-    from facewarp._src.core.errors import InputError
-    from dataclasses import replace
-
-    with pytest.raises(InputError, match="topology"):
-        build_anatomy(replace(t, thickness=t.thickness[:-1]))
+    with pytest.raises(facewarp.InputError, match="topology"):
+        facewarp.build_anatomy(replace(t, thickness=t.thickness[:-1]))

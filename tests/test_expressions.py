@@ -7,8 +7,7 @@ import math
 
 import pytest
 
-from facewarp._src.core.errors import InputError
-from facewarp._src.expressions import MUSCLES, PRESETS, Segment, Timeline, blend, load_sequence, preset, thesis_sequence
+from facewarp import MUSCLES, PRESETS, InputError, Segment, Timeline, blend, load_sequence, preset, thesis_sequence
 
 
 def test_table_6_4_exact():

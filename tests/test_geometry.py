@@ -7,8 +7,7 @@ import pytest
 import trimesh
 from trimesh.ray.ray_triangle import RayMeshIntersector
 
-from facewarp._src.geometry import surface as geometry
-from facewarp._src.core.errors import InputError
+from facewarp import InputError, geometry
 
 # ----------------------------------------------------------------------------------------
 # fixtures

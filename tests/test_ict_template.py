@@ -10,12 +10,9 @@ import json
 import numpy as np
 import pytest
 
-from facewarp._src.core.errors import InputError
-from facewarp._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS
-from facewarp._src.geometry.mesh import load_mesh
-from facewarp._src.template import FRONTAL_REGIONS, REGIONS, default_template
-from facewarp._src.importers.ict import ICT_INNER_LIP_VERTICES, ICT_PART_RANGES, ICT_SKIN_VERTICES, import_ict
-from facewarp._src.template.likeness import ICT_FDP_VERTICES
+from facewarp import (FDP_CATALOGUE, FDP_IDS, FRONTAL_REGIONS, ICT_FDP_VERTICES, ICT_INNER_LIP_VERTICES, ICT_PART_RANGES,
+                      ICT_SKIN_VERTICES, REGIONS, InputError, build_anatomy, default_template, import_ict, load_mesh,
+                      load_template_dir)
 
 
 @pytest.fixture(scope="module")
@@ -104,8 +101,6 @@ def test_regions_and_frontal(ict):
 
 
 def test_anatomy_builds(ict):
-    from facewarp._src.anatomy.build import build_anatomy
-
     t, _ = ict
     q = build_anatomy(t, check_intersections=False).quality
     assert q["inverted_count"] == 0
@@ -120,7 +115,6 @@ def test_anatomy_builds(ict):
 
 def test_cli_import(ict_dir, tmp_path, capsys):
     from facewarp.cli import main
-    from facewarp._src.template.files import load_template_dir
 
     out = tmp_path / "ict"
     assert main(["--json", "template", "import-ict", str(ict_dir), "--out", str(out), "--no-preview"]) == 0

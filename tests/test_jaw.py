@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from facewarp import default_template
-from facewarp._src.anatomy.jaw import JawKinematic, rotate_about
+from facewarp.anatomy import JawKinematic, rotate_about
 
 
 @pytest.fixture(scope="module")

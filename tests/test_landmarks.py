@@ -8,9 +8,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from facewarp._src.core.errors import InputError
-from facewarp._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
-from facewarp._src.geometry.mesh import load_mesh
+from facewarp import FDP_CATALOGUE, FDP_IDS, InputError, fapu, load_landmarks, load_mesh, save_landmarks_json
 
 # ----------------------------------------------------------------------------------------
 # catalogue

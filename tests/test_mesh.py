@@ -9,17 +9,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from facewarp._src.core.errors import InputError
-from facewarp._src.core.fileio import atomic_write, write_json
-from facewarp._src.geometry.mesh import (
-    Mesh,
-    SurfacePoints,
-    closest_surface_points,
-    load_mesh,
-    mesh_report,
-    save_obj,
-    unit_scale,
-)
+from facewarp import InputError, Mesh, SurfacePoints, closest_surface_points, load_mesh, mesh_report, save_obj
+from facewarp import save_landmarks_json
+from facewarp.geometry import unit_scale
 
 CUBE_OBJ = """\
 # unit cube, quads
@@ -292,19 +284,25 @@ def test_save_obj_roundtrip(tmp_path):
     np.testing.assert_allclose(back.vertices, V, rtol=1e-9)
 
 
-def test_atomic_write_keeps_old_file_on_error(tmp_path):
-    p = tmp_path / "a.txt"
+def test_writer_failing_midway_keeps_old_file(tmp_path, monkeypatch):
+    # a disk error after part of the OBJ was written: the old file stays, no temporary is left
+    p = tmp_path / "a.obj"
     p.write_text("old")
-    with pytest.raises(RuntimeError):
-        with atomic_write(p) as f:
-            f.write("new, half written")
-            raise RuntimeError("boom")
+    V, F = np.eye(3), np.array([[0, 1, 2]])
+
+    def savetxt_then_fail(f, *args, **kwargs):
+        f.write("v 0 0 0\n")
+        raise OSError("disk full")
+
+    with monkeypatch.context() as m:
+        m.setattr(np, "savetxt", savetxt_then_fail)
+        with pytest.raises(OSError, match="disk full"):
+            save_obj(p, V, F)
     assert p.read_text() == "old"
-    assert sorted(x.name for x in tmp_path.iterdir()) == ["a.txt"]
-    with atomic_write(p, "wb") as f:
-        f.write(b"new")
-    assert p.read_bytes() == b"new"
-    assert os.stat(p).st_mode & 0o777 == 0o666 & ~_umask()
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["a.obj"]
+    save_obj(p, V, F)
+    assert load_mesh(p).vertex_count == 3
+    assert os.stat(p).st_mode & 0o777 == 0o666 & ~_umask()  # usual permissions, not a temp file's
 
 
 def _umask():
@@ -313,15 +311,17 @@ def _umask():
     return mask
 
 
-def test_write_json(tmp_path):
-    p = tmp_path / "r.json"
-    write_json(p, {"a": np.arange(3), "b": np.float64(1.5), "c": np.int64(2)})
-    assert json.loads(p.read_text()) == {"a": [0, 1, 2], "b": 1.5, "c": 2}
-    with pytest.raises(ValueError):
-        write_json(p, {"x": float("nan")})
-    assert json.loads(p.read_text())["b"] == 1.5
+def test_json_writer_numpy_values_nan_and_missing_folder(tmp_path):
+    p = tmp_path / "lm.json"
+    save_landmarks_json(p, {"2.1": np.array([0.0, -0.1, 0.05]), "9.3": [np.float32(0.0), np.float64(0.01), 0.1]})
+    assert json.loads(p.read_text()) == {"2.1": [0.0, -0.1, 0.05], "9.3": [0.0, 0.01, 0.1]}
+    with pytest.raises(InputError, match="finite"):
+        save_landmarks_json(p, {"2.1": [float("nan"), 0.0, 0.0]})
+    assert json.loads(p.read_text())["9.3"] == [0.0, 0.01, 0.1]  # the old file is untouched
     with pytest.raises(InputError, match="does not exist"):
-        write_json(tmp_path / "missing" / "r.json", {})
+        save_landmarks_json(tmp_path / "missing" / "lm.json", {})
+    with pytest.raises(InputError, match="does not exist"):
+        save_obj(tmp_path / "missing" / "m.obj", np.eye(3), np.array([[0, 1, 2]]))
 
 
 # ----------------------------------------------------------------------------------------

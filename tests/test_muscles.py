@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 import facewarp
-from facewarp._src.anatomy import muscles as mu
-from facewarp._src.anatomy import tissue as ts
+from facewarp import anatomy as mu
+from facewarp import physics
 
 
 @pytest.fixture(scope="module")
 def head0():
     t = facewarp.default_template(0)
-    sl = ts.build_skin_layer(t)
+    sl = mu.build_skin_layer(t)
     return t, sl, mu.build_muscles(t, sl)
 
 
@@ -181,9 +181,8 @@ def test_placements_reuse_and_json(head0, tmp_path):
     for a, b in zip(ms.muscles, again.muscles):
         np.testing.assert_allclose(a.control_points, b.control_points)
         np.testing.assert_array_equal(a.attachment.nodes, b.attachment.nodes)
-    from facewarp._src.core.fileio import write_json
-
-    write_json(tmp_path / "muscles.json", mu.muscles_to_json(ms))
+    # muscles_to_json is what write_anatomy writes as muscles.json
+    facewarp.write_anatomy(mu.Anatomy(head=t, skin=sl, muscles=ms, quality={}), tmp_path)
     d = json.loads((tmp_path / "muscles.json").read_text())
     assert len(d["muscles"]) == 27 and d["muscles"]["orbicularis_oris"]["kind"] == "sphincter"
 
@@ -203,7 +202,7 @@ def test_bad_definitions(tmp_path, head0):
 def test_build_and_write_anatomy(tmp_path):
     import dataclasses
 
-    from facewarp._src.anatomy.build import build_anatomy, write_anatomy
+    from facewarp import build_anatomy, write_anatomy
 
     t = facewarp.default_template(0)
     a = build_anatomy(t)
@@ -211,7 +210,10 @@ def test_build_and_write_anatomy(tmp_path):
     assert q["inverted_count"] == 0 and q["conforming"] and q["boundary_intersection_count"] == 0
     assert q["min_attached_nodes"] >= 5 and q["muscle_count"] == 27
     paths = write_anatomy(a, tmp_path / "anat")
-    assert {p.name for p in paths} == {"tets.npz", "muscles.json", "anatomy.json", "anatomy.png"}
+    assert {p.name for p in paths} == {"tets.npz", "muscles.json", "anatomy.json"}
+    # the picture (anatomy.png of `facewarp build`) is rendered separately
+    img = facewarp.render_anatomy(a, size=64)
+    assert img.shape == (64, 64, 3) and img.dtype == np.uint8 and img.std() > 0
     z = np.load(tmp_path / "anat" / "tets.npz")
     assert z["vertices"].shape == (q["vertex_count"], 3) and z["tets"].shape == (q["tet_count"], 4)
     assert z["layer"].shape == z["surface_vertex"].shape == (q["vertex_count"],)
@@ -224,9 +226,7 @@ def test_build_and_write_anatomy(tmp_path):
 
 
 def test_slab_scene():
-    from facewarp._src.anatomy.build import slab_anatomy
-
-    a = slab_anatomy(cells=20, size=0.02, muscle_length=0.012)
+    a = mu.slab_anatomy(cells=20, size=0.02, muscle_length=0.012)
     q = a.quality
     assert q["tet_count"] == 3 * 2 * 20 * 20 and q["inverted_count"] == 0 and q["conforming"]
     m = a.muscles.muscles[0]
@@ -235,18 +235,20 @@ def test_slab_scene():
     X = a.skin.vertices[m.attachment.nodes]
     assert (a.skin.layer[m.attachment.nodes] == 1).all()
     assert np.abs(X[:, 1]).max() < m.lam + m.radius
+    # a straight fibre has no control-point plane: the solver must frame its segments the same
+    # way, or the springs would pull at rest (each attachment point (u, v) on the wrong side)
+    rig = physics.muscle_rig(a.muscles)
+    _, pts = physics.rig_reference(rig, np.zeros(1))
+    np.testing.assert_allclose(np.linalg.norm(pts - a.skin.vertices[rig.att_node], axis=1), rig.att_rest_length,
+                               atol=1e-9, err_msg="slab springs not at rest length")
 
 
 def test_muscle_rig_matches_segments(head0):
-    from facewarp._src.anatomy.build import muscle_rig
-    from facewarp._src.anatomy.jaw import JawKinematic
-    from facewarp._src.physics.muscle_stage import rig_reference, segment_frames
-
     t, sl, ms = head0
-    jaw = JawKinematic.from_landmarks(t.condyles, t.landmarks())
-    rig = muscle_rig(ms, jaw=jaw, head=t)
+    jaw = mu.JawKinematic.from_landmarks(t.condyles, t.landmarks())
+    rig = physics.muscle_rig(ms, jaw=jaw, head=t)
     assert rig.muscle_count == 27 and len(rig.ctrl_rest) == 12 * 2 * 3 + 8 + 2 * 8
-    c, f, r = segment_frames(rig, rig.ctrl_rest)
+    c, f, r = physics.segment_frames(rig, rig.ctrl_rest)
     C = np.concatenate([m.segments.centers for m in ms.muscles])
     A = np.concatenate([m.segments.axes for m in ms.muscles])
     R = np.concatenate([m.segments.radii for m in ms.muscles])
@@ -254,7 +256,7 @@ def test_muscle_rig_matches_segments(head0):
     np.testing.assert_allclose(np.swapaxes(f, 1, 2), A, atol=1e-9, err_msg="segment frames differ from the solver's")
     np.testing.assert_allclose(r, R, rtol=1e-9)
     # at rest the attachment points sit at the recorded rest length from their nodes
-    _, pts = rig_reference(rig, np.zeros(27))
+    _, pts = physics.rig_reference(rig, np.zeros(27))
     d = np.linalg.norm(pts - sl.vertices[rig.att_node], axis=1)
     np.testing.assert_allclose(d, rig.att_rest_length, atol=1e-9)
     # the orbicularis oris corners follow the jaw by about a third, the forehead not at all
@@ -268,13 +270,11 @@ def test_transfer_to_a_reshaped_head(head0):
     # Sec. 6.6: same topology, another shape -> tets re-extruded, muscles reuse their skin points
     import dataclasses
 
-    from facewarp._src.anatomy.build import build_anatomy
-
     t, _, ms = head0
     V = t.vertices * [1.06, 0.95, 1.03]
     V = V + 0.002 * np.sin(V[:, [1]] * 40.0) * [1.0, 0.0, 0.0]
     t2 = dataclasses.replace(t, vertices=V)
-    a = build_anatomy(t2, placements={m.name: m.skin_points for m in ms.muscles}, check_intersections=False)
+    a = facewarp.build_anatomy(t2, placements={m.name: m.skin_points for m in ms.muscles}, check_intersections=False)
     assert a.quality["inverted_count"] == 0 and a.quality["conforming"]
     assert a.quality["min_attached_nodes"] >= 5
     for m0, m1 in zip(ms.muscles, a.muscles.muscles):

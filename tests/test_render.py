@@ -7,8 +7,8 @@ import pytest
 import trimesh
 from PIL import Image
 
-from facewarp._src.core.errors import InputError
-from facewarp._src.present.render import colormap, render_mesh, render_views, save_png
+from facewarp import InputError
+from facewarp.render import colormap, render_mesh, render_views, save_png
 
 SIZE = 64
 

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import hashlib
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from facewarp import FDP_IDS, FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, default_template, mesh_report
-from facewarp._src.template.head import _build
+from facewarp import FDP_IDS, FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, default_template, human_likeness, mesh_report
 
 
 @pytest.fixture(scope="module")
@@ -46,12 +50,19 @@ def test_levels_are_4x_and_manifold(level):
     assert err < 3e-3, err
 
 
-def test_deterministic():
-    a = _build.__wrapped__(0)
-    b = _build.__wrapped__(0)
-    np.testing.assert_array_equal(a.vertices, b.vertices)
-    np.testing.assert_array_equal(a.faces, b.faces)
-    np.testing.assert_array_equal(a.face_region, b.face_region)
+def _template_digest(t) -> str:
+    h = hashlib.sha256()
+    for a in (t.vertices, t.faces, t.face_region, t.thickness, t.skull_depth):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def test_deterministic(t0):
+    # default_template caches per level, so build it afresh in another process
+    code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import facewarp, test_template; "
+            "print(test_template._template_digest(facewarp.default_template(0)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split()[-1] == _template_digest(t0)
 
 
 def test_fdps_and_convention(t0):
@@ -104,8 +115,6 @@ def test_skull_and_condyles(t0):
 
 
 def test_human_likeness_ict(ict_dir, t0):
-    from facewarp._src.template.likeness import human_likeness
-
     r = human_likeness(t0, ict_dir)
     print(f"\nhuman likeness: RMS {r['rms_m'] * 1e3:.2f} mm, median {r['median_m'] * 1e3:.2f} mm, "
           f"p95 {r['p95_m'] * 1e3:.2f} mm over ICT face vertices 0-9408")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import facewarp
-from facewarp._src.anatomy import tissue as ts
+from facewarp import anatomy as ts
 
 
 def grid_sheet(n: int = 4, size: float = 0.01, *, bump: float = 0.0):
@@ -155,15 +155,13 @@ def test_template_two_layers():
 
 
 def test_tet_mean_ratio_regular_flat_inverted():
-    from facewarp._src.anatomy.tissue import tet_mean_ratio
-
     V = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float)
     T = np.array([[0, 1, 2, 3]])
     if ts.tet_volumes(V, T)[0] < 0:
         T = T[:, [0, 2, 1, 3]]
-    assert tet_mean_ratio(V, T)[0] == pytest.approx(1.0)
+    assert ts.tet_mean_ratio(V, T)[0] == pytest.approx(1.0)
     flat = V.copy()
     flat[3] = 0.5 * (flat[0] + flat[1]) + 1e-3 * (flat[3] - flat[0])
-    assert 0 < tet_mean_ratio(flat, T)[0] < 0.05
-    assert tet_mean_ratio(V, T[:, [0, 2, 1, 3]])[0] == pytest.approx(-1.0)
-    assert tet_mean_ratio(2.5 * V, T)[0] == pytest.approx(1.0)  # scale invariant
+    assert 0 < ts.tet_mean_ratio(flat, T)[0] < 0.05
+    assert ts.tet_mean_ratio(V, T[:, [0, 2, 1, 3]])[0] == pytest.approx(-1.0)
+    assert ts.tet_mean_ratio(2.5 * V, T)[0] == pytest.approx(1.0)  # scale invariant

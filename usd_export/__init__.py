@@ -1,12 +1,62 @@
 """USD export for facewarp: the only package that imports ``pxr`` (usd-core).
 
-Meshes are written as ``UsdGeom.Mesh`` prims in a Y-up stage with ``metersPerUnit = 1`` (facewarp
-works in metres). Animated heads are written with time-sampled ``points``: pass ``frames``
-(frames, n, 3) and ``times`` in seconds, and the stage's time codes run at ``fps``.
+Plain numpy arrays in, no dependency on ``facewarp``. Coordinates are in the stage's unit
+(``metersPerUnit``, default 1: SI metres, as facewarp works), Y up by default; times in seconds.
+
+Animation (:class:`AnimationWriter`, read back with :func:`read_animation`)
+    Streams an animated head, frame by frame and with no frame cap, into one ``.usda``, ``.usdc``
+    or ``.usdz`` file (no value clips, nothing beside it) with bounded memory: pending samples are
+    appended to a working ``.usdc`` whenever ``flush_bytes`` (32 MiB) accumulate, and the text or
+    package is made from it at ``close()`` (measurements in ``usd_export/_writer.py``). The format
+    is chosen by the extension; anything else raises :class:`UsdExportError`. The file is written
+    in a hidden temporary folder beside ``path`` and renamed at ``close()``: an exception in the
+    ``with`` block (KeyboardInterrupt included) leaves neither a partial file nor temporaries.
+
+    Stage layout (default prim ``/Head``, kind ``component``)::
+
+        /Head                      Xform
+          Skin                     Mesh: constant triangle topology; time-sampled points,
+                                   normals (area-weighted, interpolation "vertex") and extent;
+                                   primvars:st (vertex or indexed faceVarying) when uv is given;
+                                   material Looks/Skin; subdivisionScheme "none"
+          Parts/<name>             Xform with a time-sampled xformOp:transform (matrix4d)
+            Mesh                   the part's Mesh at rest; material Looks/White
+                                   (Looks/Skin for names containing "tongue")
+          Muscles                  BasisCurves, type "linear", one curve per muscle; time-sampled
+                                   points and extent; uniform primvars:activation (float, one per
+                                   curve) and primvars:displayColor, time-sampled; uniform
+                                   string[] muscleNames
+          Tissue                   TetMesh (purpose "guide"), time-sampled points and extent
+          Looks/Skin, Looks/White  Material with a UsdPreviewSurface
+
+    Stage metadata: ``upAxis``, ``metersPerUnit``, ``timeCodesPerSecond`` = ``framesPerSecond`` =
+    ``fps``, ``startTimeCode``/``endTimeCode`` = first/last frame's time code, ``defaultPrim``.
+    Time code = ``time_s * fps``, i.e. the frame index for frames at ``k / fps``.
+
+    Shapes and dtypes: ``points``/``rest_points`` V (n, 3), ``faces`` F (m, 3) int (counter-clockwise
+    seen from outside), ``uv`` (n, 2) or (k, 2) with ``uv_indices`` (m, 3), parts name -> (V (k, 3),
+    F (l, 3)), ``muscle_points`` (M, s, 3), ``activations`` (M,), ``tets`` (T (k, 4) int, nodes (p, 3)).
+    Floats may come as any real dtype and are stored as float32 (read back bit-exactly); indices
+    as int32; all values must be finite.
+
+    Transform convention: ``part_transforms[name]`` is a 4x4 matrix in USD's **row-vector**
+    convention, ``p' = p @ M`` (``p`` a row ``[x, y, z, 1]``), rotation in ``M[:3, :3]``,
+    translation in ``M[3, :3]``, last column ``(0, 0, 0, 1)``; this is the transpose of the
+    column-vector matrix ``p' = M @ p`` (pass ``M.T``). It maps the part's rest mesh to its pose in
+    the head's frame. A matrix with a translation in its last column is refused.
+
+Static meshes (:func:`write_meshes_usd`)
+    Triangle meshes as ``/Head/<name>`` with optional time-sampled points, used by the CLI.
+
+Checks (:func:`validate_usd`)
+    USD's compliance checks (usdchecker's rules) on a file, returning the problems as lines.
 """
 
 from __future__ import annotations
 
+from ._arrays import UsdExportError
+from ._reader import read_animation, validate_usd
+from ._writer import AnimationWriter
 from .stage import write_meshes_usd
 
-__all__ = ["write_meshes_usd"]
+__all__ = ["AnimationWriter", "UsdExportError", "read_animation", "validate_usd", "write_meshes_usd"]

@@ -1,4 +1,4 @@
-"""Stage writer with time samples (see the package docstring)."""
+"""Static/simple multi-mesh writer kept for the CLI; animations go through :class:`AnimationWriter`."""
 
 from __future__ import annotations
 
@@ -8,22 +8,17 @@ from pathlib import Path
 
 import numpy as np
 
-
-def _pxr():
-    try:
-        from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: F401
-    except ImportError:  # pragma: no cover - depends on the environment
-        raise ImportError("USD export needs the package usd-core: pip install usd-core") from None
-    return Usd, UsdGeom, Vt, Gf, Sdf
-
-
-def _prim_name(name: str) -> str:
-    s = "".join(c if c.isalnum() or c == "_" else "_" for c in name)
-    return s if s and not s[0].isdigit() else f"_{s}"
+from ._arrays import UsdExportError
+from ._pxr import Gf, Usd, UsdGeom, Vt
+from ._writer import prim_name as _prim_name
 
 
 def write_meshes_usd(path, meshes: dict, *, frames: dict | None = None, times=None, fps: float = 30.0) -> Path:
     """Write triangle meshes to a USD file (``.usda`` text or ``.usd``/``.usdc`` binary).
+
+    Every mesh is a deformable ``/Head/<name>`` with optional time-sampled points and one extent
+    covering all frames. For a head with rigid parts, muscles, normals and per-frame extents,
+    streamed with bounded memory, use :class:`usd_export.AnimationWriter`.
 
     Args:
         path: Output file; written to a temporary file beside it and renamed.
@@ -32,10 +27,9 @@ def write_meshes_usd(path, meshes: dict, *, frames: dict | None = None, times=No
         times: (frames,) float [s], required with ``frames``.
         fps: Time codes per second of the stage.
     """
-    Usd, UsdGeom, Vt, Gf, Sdf = _pxr()
     path = Path(path)
     if frames and times is None:
-        raise ValueError("times: required when frames are given")
+        raise UsdExportError("times: required when frames are given")
     suffix = path.suffix if path.suffix in (".usda", ".usd", ".usdc") else ".usda"
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
     os.close(fd)

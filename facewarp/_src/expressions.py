@@ -198,10 +198,10 @@ def thesis_sequence(*, each: float = 1.6, overlap: float = 0.3) -> Timeline:
     return Timeline(segs)
 
 
-def _num(src, d, key, default):
+def _num(src, d, key, default, *, signed=False):
     v = d.get(key, default)
-    if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
-        raise InputError(f"{src}: {key} must be a non-negative number, got {v!r}")
+    if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or (v < 0 and not signed):
+        raise InputError(f"{src}: {key} must be a {'finite' if signed else 'non-negative'} number, got {v!r}")
     return float(v)
 
 
@@ -237,10 +237,14 @@ def load_sequence(path: str | os.PathLike) -> Timeline:
         if isinstance(e, str):
             expr = preset(e)
         elif isinstance(e, dict) and "blend" in e:
-            expr = blend({str(k): float(v) for k, v in e["blend"].items()})
+            if not isinstance(e["blend"], dict) or not e["blend"]:
+                raise InputError(f'{src}: blend must be an object {{"preset": weight, ...}}')
+            expr = blend({str(k): _num(src, e["blend"], k, 0.0, signed=True) for k in e["blend"]})
         elif isinstance(e, dict) and "muscles" in e:
+            if not isinstance(e["muscles"], dict):
+                raise InputError(f'{src}: muscles must be an object {{"muscle": activation, ...}}')
             expr = Expression(f"segment{i}", dict(e["muscles"]), math.radians(_num(src, e, "jaw_deg", 0.0)),
-                              math.radians(float(e.get("jaw_side_deg", 0.0))))
+                              math.radians(_num(src, e, "jaw_side_deg", 0.0, signed=True)))
         else:
             raise InputError(f"{src}: expression must be a preset name, a blend or muscles")
         segs.append(Segment(expr, _num(src, s, "start", 0.0), _num(src, s, "attack", 0.3), _num(src, s, "hold", 1.0),

@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
-from .muscles import MuscleSet, build_muscles, muscles_to_json
-from .tissue import SkinLayer, build_skin_layer, skin_layer_quality
+from .attach import attach_nodes
+from .muscles import MuscleSet, build_muscles, make_linear_muscle, muscles_to_json
+from .tissue import SkinLayer, build_skin_layer, extrude_skin_layer, skin_layer_quality
 
 __all__ = [
     "Anatomy",
@@ -151,9 +152,6 @@ def slab_anatomy(
         :class:`Anatomy` whose ``head`` is a :class:`SlabHead`; its muscle is named ``"muscle"``
         with the insertion at -x and the attachment at +x.
     """
-    from .muscles import MuscleSet, make_linear_muscle
-    from .tissue import extrude_skin_layer
-
     n = int(cells) + 1
     if n < 2:
         raise InputError(f"cells: expected >= 1, got {cells}")
@@ -166,8 +164,6 @@ def slab_anatomy(
     h = muscle_length / 2
     P = np.array([[-h, 0.0, -muscle_depth], [0.0, 0.0, -muscle_depth], [h, 0.0, -muscle_depth]])
     m = make_linear_muscle("muscle", P, radius=radius, lam=lam, phi=phi, segments=segments, depth=np.full(3, muscle_depth))
-    from .muscles import attach_nodes
-
     m.attachment = attach_nodes(skin.vertices, m.segments, lam, phi, candidates=skin.inner_nodes)
     ms = MuscleSet(muscles=[m])
     return Anatomy(head=SlabHead(V, F), skin=skin, muscles=ms, quality=anatomy_report(skin, ms, check_intersections=False))

@@ -1,4 +1,5 @@
-"""Parametric muscles: Bezier fibres, ellipsoid segments, anchors and skin attachment (Sec. 6.3).
+"""The muscles of a head (Sec. 6.3): definitions as FDP-relative placement rules, placement,
+segmentation, anchors and skin attachment, and their JSON form.
 
 The 14 muscles of Table 6.2 (paired where anatomical) are defined as data in
 ``muscle_defs.json``: control points are *placement rules* relative to MPEG-4 FDPs, resolved on
@@ -14,19 +15,11 @@ any head with FDPs to skin points (face, barycentric) and displaced inward along
 Anchors (Fig. 6.3) tie the insertions of voluntary muscles to control points of a sphincter:
 the anchor is the mean of its member control points, so the sphincter follows the linear muscles.
 
-Every curve is cut into segments of equal arc length (the zygomatic major into 5, others in
-proportion to their length) and each segment is an ellipsoid: x along the chord (half-length
-``1.05 x chord / 2``), y perpendicular to x in the plane of the curve's control points,
-``z = x cross y``; y and z radii ``r = 2 d_m``, tapered at the two end segments of a linear muscle.
-An ellipsoid keeps its volume when its x radius changes (:func:`ellipsoid_radii_for_length`).
-
-Skin attachment (Fig. 6.4): an inner-layer node connects to the muscle when the distance to the
-nearest ellipsoid surface point is below ``lambda`` and the angle ``theta`` between the
-connection and the fibre's cross-section plane is below ``phi``. ``theta`` is measured from the
-plane normal to the fibre (0 for a node right above the fibre, 90deg for one beyond its end), so a
-wide ``phi`` (frontalis) takes nodes far along the ends and a narrow one (depressor anguli oris)
-only nodes over the muscle body. The attachment point is stored by its ellipsoid surface
-parameters ``(u, v)``: ``u`` the polar angle from +x, ``v`` the azimuth from +y toward +z.
+Every curve is cut into ellipsoid segments of equal arc length (the zygomatic major into 5, others
+in proportion to their length; :mod:`facewarp._src.anatomy.ellipsoids`), and inner-layer skin
+nodes attach to them by the distance and angle rule of Fig. 6.4
+(:mod:`facewarp._src.anatomy.attach`). The curves themselves are in
+:mod:`facewarp._src.anatomy.bezier`.
 """
 
 from __future__ import annotations
@@ -39,29 +32,24 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
-from ..geometry.surface import vertex_normals
 from ..geometry.mesh import SurfacePoints, closest_surface_points
+from ..geometry.surface import vertex_normals
+from .attach import MuscleAttachment, attach_nodes
+from .bezier import arc_length_params, bezier_quadratic
+from .ellipsoids import Ellipsoids, segment_ellipsoids
 
 __all__ = [
     "DEFAULT_MUSCLE_DEFS",
     "Anchor",
-    "Ellipsoids",
     "Muscle",
-    "MuscleAttachment",
     "MuscleKind",
     "MuscleSet",
-    "arc_length_params",
-    "attach_nodes",
-    "bezier_quadratic",
     "build_muscles",
-    "closest_point_on_ellipsoid",
-    "ellipsoid_points",
-    "ellipsoid_radii_for_length",
     "load_muscle_defs",
     "make_linear_muscle",
     "muscles_to_json",
-    "segment_ellipsoids",
 ]
+
 
 DEFAULT_MUSCLE_DEFS = Path(__file__).with_name("muscle_defs.json")
 """The shipped muscle definitions (placement rules relative to FDPs)."""
@@ -70,297 +58,6 @@ DEFAULT_MUSCLE_DEFS = Path(__file__).with_name("muscle_defs.json")
 class MuscleKind(str, enum.Enum):
     LINEAR = "linear"
     SPHINCTER = "sphincter"
-
-
-# ----------------------------------------------------------------------------- Bezier curves
-def bezier_quadratic(P, t, weights=None) -> np.ndarray:
-    """Points of a (rational) quadratic Bezier curve.
-
-    ``C(t) = sum_i B_i(t) w_i P_i / sum_i B_i(t) w_i`` with the Bernstein polynomials
-    ``B = ((1 - t)^2, 2 t (1 - t), t^2)``; all weights 1 is the regular curve of a linear muscle.
-
-    Args:
-        P: Control points [m], shape (3, 3) float64.
-        t: Parameters in [0, 1], shape (k,).
-        weights: Weights, shape (3,), positive (default ones).
-
-    Returns:
-        Curve points [m], shape (k, 3), float64.
-    """
-    P = np.asarray(P, dtype=np.float64)
-    if P.shape != (3, 3):
-        raise ValueError(f"P must have shape (3, 3), got {P.shape}")
-    t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-    w = np.ones(3) if weights is None else np.asarray(weights, dtype=np.float64)
-    if w.shape != (3,) or (w <= 0).any():
-        raise ValueError(f"weights must be 3 positive numbers, got {w}")
-    B = np.stack([(1 - t) ** 2, 2 * t * (1 - t), t**2], 1) * w
-    return (B @ P) / B.sum(1, keepdims=True)
-
-
-def arc_length_params(P, count: int, weights=None, *, samples: int = 512) -> tuple[np.ndarray, float]:
-    """Parameters cutting a quadratic Bezier curve into ``count`` pieces of equal arc length.
-
-    Args:
-        P: Control points [m], shape (3, 3).
-        count: Number of pieces (>= 1).
-        weights: Rational weights, shape (3,) (default ones).
-        samples: Polyline samples used to measure the arc length.
-
-    Returns:
-        ``(t, length)``: parameters shape (count + 1,) from 0 to 1, and the curve length [m].
-    """
-    ts = np.linspace(0.0, 1.0, samples + 1)
-    C = bezier_quadratic(P, ts, weights)
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(C, axis=0), axis=1))])
-    length = float(s[-1])
-    t = np.interp(np.linspace(0.0, length, int(count) + 1), s, ts)
-    t[0], t[-1] = 0.0, 1.0
-    return t, length
-
-
-# ----------------------------------------------------------------------------- ellipsoids
-@dataclass
-class Ellipsoids:
-    """Muscle segments (one ellipsoid each).
-
-    Attributes:
-        centers: Centres [m], shape (s, 3), float64.
-        axes: Unit axes as rows (x along the fibre chord, y in the control-point plane,
-            z = x cross y), shape (s, 3, 3), float64.
-        radii: Semi-axis lengths (x, y, z) [m], shape (s, 3), float64.
-        curve: Index of the Bezier curve (arc) each segment lies on, shape (s,), int64.
-        t: Curve parameters of each segment's two ends, shape (s, 2), float64.
-    """
-
-    centers: np.ndarray
-    axes: np.ndarray
-    radii: np.ndarray
-    curve: np.ndarray
-    t: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.centers)
-
-    @property
-    def volumes(self) -> np.ndarray:
-        """Volumes 4/3 pi a b c [m^3], shape (s,)."""
-        return 4.0 / 3.0 * np.pi * np.prod(self.radii, axis=1)
-
-
-def ellipsoid_radii_for_length(radii, x_radius) -> np.ndarray:
-    """Radii of a segment whose x radius becomes ``x_radius``, keeping its volume (Sec. 6.4.1).
-
-    Muscle is incompressible: ``a b c`` is constant, and the cross-section scales uniformly,
-    so ``b' = b sqrt(a / a')`` and ``c' = c sqrt(a / a')``.
-
-    Args:
-        radii: Rest radii (a, b, c) [m], shape (s, 3).
-        x_radius: New x radii a' [m], shape (s,), > 0.
-
-    Returns:
-        New radii [m], shape (s, 3).
-    """
-    radii = np.asarray(radii, dtype=np.float64).reshape(-1, 3)
-    a1 = np.asarray(x_radius, dtype=np.float64).reshape(-1)
-    if (a1 <= 0).any():
-        raise ValueError("x_radius must be > 0")
-    f = np.sqrt(radii[:, 0] / a1)
-    return np.stack([a1, radii[:, 1] * f, radii[:, 2] * f], 1)
-
-
-def ellipsoid_points(centers, axes, radii, uv) -> np.ndarray:
-    """Surface points at parameters (u, v): local ``(a cos u, b sin u cos v, c sin u sin v)``.
-
-    Args:
-        centers: (k, 3) [m]; axes: (k, 3, 3) unit rows; radii: (k, 3) [m]; uv: (k, 2) [rad].
-
-    Returns:
-        Points [m], shape (k, 3).
-    """
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    u, v = uv[:, 0], uv[:, 1]
-    radii = np.asarray(radii, dtype=np.float64).reshape(-1, 3)
-    loc = np.stack([radii[:, 0] * np.cos(u), radii[:, 1] * np.sin(u) * np.cos(v), radii[:, 2] * np.sin(u) * np.sin(v)], 1)
-    return np.asarray(centers) + np.einsum("kj,kji->ki", loc, np.asarray(axes))
-
-
-def closest_point_on_ellipsoid(Y, radii, *, iterations: int = 80) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Closest surface point of axis-aligned ellipsoids to points given in their local frames.
-
-    The closest point is ``x_i = e_i^2 y_i / (s + e_i^2)`` where s solves
-    ``F(s) = sum_i (e_i y_i / (s + e_i^2))^2 - 1 = 0`` on ``s > -min e_i^2`` (F decreases
-    there; s > 0 outside, s < 0 inside); solved by bisection (Eberly, "Distance from a point to
-    an ellipse, an ellipsoid, or a hyperellipsoid").
-
-    Args:
-        Y: Points in the local frames [m], shape (k, 3).
-        radii: Semi-axes (a, b, c) [m], shape (k, 3) or (3,).
-        iterations: Bisection steps.
-
-    Returns:
-        ``(X, dist, uv)``: closest points (local) shape (k, 3); unsigned distances [m] (k,);
-        surface parameters (u, v) [rad] (k, 2).
-    """
-    Y = np.asarray(Y, dtype=np.float64).reshape(-1, 3)
-    E = np.broadcast_to(np.asarray(radii, dtype=np.float64), Y.shape)
-    e2 = E * E
-    emin2 = e2.min(1)
-    ey = np.abs(E * Y)
-    lo = -emin2 + 1e-30 * np.maximum(emin2, 1e-300)
-    hi = np.maximum(np.linalg.norm(ey, axis=1), emin2)  # F(hi) <= 0
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        Fm = ((ey / (mid[:, None] + e2)) ** 2).sum(1) - 1.0
-        pos = Fm > 0
-        lo = np.where(pos, mid, lo)
-        hi = np.where(pos, hi, mid)
-    s = 0.5 * (lo + hi)
-    X = e2 * Y / (s[:, None] + e2)
-    # Degenerate inside case (Eberly): the root sits at s = -min e^2 when the point lies (nearly)
-    # in the plane of the smallest axis; then the other coordinates follow from s = -e_min^2
-    # and the smallest-axis coordinate from the ellipsoid equation.
-    kmin = np.argmin(e2, axis=1)
-    rows = np.arange(len(Y))
-    gap = s + emin2
-    deg = gap <= 1e-9 * emin2
-    if deg.any():
-        r, km = rows[deg], kmin[deg]
-        den = e2[deg] - emin2[deg][:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            Xd = np.where(den > 0, e2[deg] * Y[deg] / np.where(den > 0, den, 1.0), 0.0)
-        Xd[np.arange(len(r)), km] = 0.0
-        rest = np.clip(1.0 - ((Xd / E[deg]) ** 2).sum(1), 0.0, None)
-        sgn = np.where(Y[r, km] < 0, -1.0, 1.0)
-        Xd[np.arange(len(r)), km] = sgn * E[r, km] * np.sqrt(rest)
-        X[deg] = Xd
-    # put X exactly on the surface (bisection residue)
-    X /= np.sqrt(((X / E) ** 2).sum(1))[:, None]
-    dist = np.linalg.norm(Y - X, axis=1)
-    q = X / E
-    u = np.arccos(np.clip(q[:, 0], -1.0, 1.0))
-    v = np.arctan2(q[:, 2], q[:, 1])
-    return X, dist, np.stack([u, v], 1)
-
-
-def segment_ellipsoids(curves, weights, counts, radius: float, *, taper=None, chord_scale: float = 1.05) -> Ellipsoids:
-    """Cut Bezier curves into equal-arc-length segments, one ellipsoid each (Sec. 6.3).
-
-    Args:
-        curves: Control points of each curve [m], shape (q, 3, 3).
-        weights: Rational weights, shape (q, 3).
-        counts: Segments per curve, shape (q,), >= 1.
-        radius: y and z radius r = 2 d_m [m].
-        taper: Radius factor of the first and last segment overall (None: no taper).
-        chord_scale: x length / chord (1.05: 5 % longer, so neighbours overlap).
-
-    Returns:
-        :class:`Ellipsoids`.
-    """
-    C, A, R, cur, T = [], [], [], [], []
-    for qi, (P, w, n) in enumerate(zip(np.asarray(curves, float), np.asarray(weights, float), counts)):
-        t, _ = arc_length_params(P, int(n), w)
-        pts = bezier_quadratic(P, t, w)
-        plane = np.cross(P[1] - P[0], P[2] - P[0])
-        for k in range(int(n)):
-            a, b = pts[k], pts[k + 1]
-            chord = b - a
-            L = float(np.linalg.norm(chord))
-            if L <= 0:
-                raise InputError(f"curve {qi} has a zero-length segment {k}")
-            x = chord / L
-            y = np.cross(plane, x)
-            if np.linalg.norm(y) < 1e-9 * max(np.linalg.norm(plane), 1e-30) or np.linalg.norm(plane) < 1e-20:
-                # straight fibre: any perpendicular
-                y = np.cross(x, [0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.cross(x, [1.0, 0.0, 0.0])
-            y /= np.linalg.norm(y)
-            z = np.cross(x, y)
-            C.append(0.5 * (a + b))
-            A.append(np.stack([x, y, z]))
-            R.append([0.5 * chord_scale * L, radius, radius])
-            cur.append(qi)
-            T.append([t[k], t[k + 1]])
-    R = np.asarray(R)
-    if taper is not None and len(R):
-        R[0, 1:] *= taper
-        R[-1, 1:] *= taper
-    return Ellipsoids(np.asarray(C), np.asarray(A), R, np.asarray(cur, dtype=np.int64), np.asarray(T))
-
-
-# ----------------------------------------------------------------------------- attachment
-@dataclass
-class MuscleAttachment:
-    """Skin nodes connected to a muscle (Fig. 6.4, 6.5).
-
-    Attributes:
-        nodes: Tet-mesh node indices (inner layer), shape (a,), int64.
-        segment: Ellipsoid each node connects to, shape (a,), int64.
-        uv: Surface parameters (u, v) [rad] of the attachment point, shape (a, 2), float64.
-        rest_length: Rest length l0 of the connection [m], shape (a,), float64.
-        angle: theta [rad] of each connection (see the module docstring), shape (a,).
-    """
-
-    nodes: np.ndarray
-    segment: np.ndarray
-    uv: np.ndarray
-    rest_length: np.ndarray
-    angle: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.nodes)
-
-
-def attach_nodes(X, ell: Ellipsoids, lam: float, phi: float, *, candidates=None, directions=None) -> MuscleAttachment:
-    """Connect nodes to a muscle's ellipsoids (Fig. 6.4).
-
-    For each node x: the nearest surface point p over all segments; x connects when
-    ``|x - p| < lam`` and ``theta < phi``, theta the angle between ``x - p`` and the plane
-    normal to the segment's fibre axis. With ``directions``, x must also lie on the skin side
-    of the muscle, ``(p - x) . direction > 0``: on a head whose skin is thinner than the muscle
-    depth (the lips of an adapted scan) part of a muscle can lie in or above the skin layer, and
-    a spring from there would pull its inner node out through the skin.
-
-    Args:
-        X: Node positions [m], shape (p, 3).
-        ell: The muscle's segments.
-        lam: Distance threshold lambda [m].
-        phi: Angle threshold [rad].
-        candidates: Node indices to test (default all).
-        directions: Unit inward (skin to deep) direction of every node, shape (p, 3).
-
-    Returns:
-        :class:`MuscleAttachment` with indices into X.
-    """
-    X = np.asarray(X, dtype=np.float64)
-    idx = np.arange(len(X)) if candidates is None else np.asarray(candidates, dtype=np.int64)
-    s = len(ell)
-    if len(idx) == 0 or s == 0:
-        z = np.zeros(0)
-        return MuscleAttachment(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)), z, z)
-    P = X[idx]
-    best_d = np.full(len(idx), np.inf)
-    best_s = np.zeros(len(idx), np.int64)
-    best_uv = np.zeros((len(idx), 2))
-    best_sin = np.zeros(len(idx))
-    best_deeper = np.ones(len(idx), bool)
-    D = None if directions is None else np.asarray(directions, dtype=np.float64)[idx]
-    for k in range(s):
-        Y = (P - ell.centers[k]) @ ell.axes[k].T  # local coordinates
-        Xl, d, uv = closest_point_on_ellipsoid(Y, ell.radii[k])
-        conn = Y - Xl
-        n = np.linalg.norm(conn, axis=1)
-        sin_t = np.divide(np.abs(conn[:, 0]), n, out=np.zeros_like(n), where=n > 0)
-        better = d < best_d
-        best_d[better] = d[better]
-        best_s[better] = k
-        best_uv[better] = uv[better]
-        best_sin[better] = sin_t[better]
-        if D is not None:
-            deeper = np.einsum("ij,ij->i", conn @ ell.axes[k], D) < 0  # world x - p against inward
-            best_deeper[better] = deeper[better]
-    theta = np.arcsin(np.clip(best_sin, 0.0, 1.0))
-    ok = (best_d < lam) & (theta < phi) & best_deeper
-    return MuscleAttachment(idx[ok], best_s[ok], best_uv[ok], best_d[ok], theta[ok])
 
 
 # ----------------------------------------------------------------------------- definitions
@@ -517,7 +214,7 @@ def build_muscles(template, skin_layer=None, *, defs=None, placements=None) -> M
     Args:
         template: A head with ``vertices``, ``faces``, ``thickness``, ``skull_depth`` and
             ``landmarks()`` (a :class:`facewarp.Template`).
-        skin_layer: The head's :class:`~facewarp._src.tissue.SkinLayer`; without it no nodes
+        skin_layer: The head's :class:`~facewarp.anatomy.SkinLayer`; without it no nodes
             are attached.
         defs: Muscle definitions (default :func:`load_muscle_defs`).
         placements: Optional muscle name -> :class:`SurfacePoints` of its control points'
@@ -533,14 +230,25 @@ def build_muscles(template, skin_layer=None, *, defs=None, placements=None) -> M
     """
     defs = load_muscle_defs() if defs is None else defs
     dflt = defs.get("defaults", {})
+    muscles = _place_muscles(template, defs, placements or {})
+    by = {m.name: m for m in muscles}
+    _segment_muscles(muscles, by, dflt)
+    anchors = _anchor_muscles(defs, by)
+    if skin_layer is not None:
+        _attach_muscles(muscles, skin_layer)
+    return MuscleSet(muscles=muscles, anchors=anchors, defaults=dict(dflt))
+
+
+def _place_muscles(template, defs: dict, placements: dict) -> list[Muscle]:
+    """Step 1 of :func:`build_muscles`: every muscle instance with its skin points and control
+    points (the FDP rules resolved on the head, or the given ``placements``)."""
+    dflt = defs.get("defaults", {})
     mirror = defs.get("mirror_fdp", {})
     V = np.asarray(template.vertices, dtype=np.float64)
     F = np.asarray(template.faces, dtype=np.int64)
     N = vertex_normals(V, F)
     lm = template.landmarks()
-    placements = placements or {}
 
-    # 1. control points
     muscles: list[Muscle] = []
     for m in defs["muscles"]:
         sides = ("L", "R") if m.get("paired", False) else ("",)
@@ -601,9 +309,13 @@ def build_muscles(template, skin_layer=None, *, defs=None, placements=None) -> M
                     ),
                 )
             )
-    by = {m.name: m for m in muscles}
+    return muscles
 
-    # 2. segments: the reference muscle gets reference_segments, others in proportion
+
+def _segment_muscles(muscles: list[Muscle], by: dict[str, Muscle], dflt: dict) -> None:
+    """Step 2: the ellipsoid segments of every muscle; the reference muscle gets
+    ``reference_segments``, the others in proportion to their length (at least 2 for a linear
+    muscle)."""
     ref_name = dflt.get("reference_muscle", "zygomatic_major_L")
     ref_n = int(dflt.get("reference_segments", 5))
     if ref_name not in by:
@@ -625,7 +337,9 @@ def build_muscles(template, skin_layer=None, *, defs=None, placements=None) -> M
             chord_scale=chord_scale,
         )
 
-    # 3. anchors (Fig. 6.3)
+
+def _anchor_muscles(defs: dict, by: dict[str, Muscle]) -> list[Anchor]:
+    """Step 3: the anchors of Fig. 6.3 (a sphincter control point and the insertions it follows)."""
     anchors = []
     for a in defs.get("anchors", []):
         sides = ("L", "R") if a.get("paired", False) else ("",)
@@ -644,23 +358,25 @@ def build_muscles(template, skin_layer=None, *, defs=None, placements=None) -> M
                 members.append((nm, 0))
             pos = np.mean([by[n].control_points[i] for n, i in members], axis=0)
             anchors.append(Anchor(name=a["name"] + (f"_{side}" if side else ""), members=members, position=pos))
+    return anchors
 
-    # 4. attachment (Fig. 6.4)
-    if skin_layer is not None:
-        from scipy.spatial import cKDTree
 
-        inner = skin_layer.inner_nodes
-        tree = cKDTree(skin_layer.vertices[inner])
-        for mu in muscles:
-            e = mu.segments
-            reach = e.radii.max(1) + mu.lam
-            cand = set()
-            for c, rr in zip(e.centers, reach):
-                cand.update(tree.query_ball_point(c, rr))
-            cand = inner[np.array(sorted(cand), dtype=np.int64)] if cand else np.zeros(0, np.int64)
-            mu.attachment = attach_nodes(skin_layer.vertices, e, mu.lam, mu.phi, candidates=cand,
-                                         directions=skin_layer.direction)
-    return MuscleSet(muscles=muscles, anchors=anchors, defaults=dict(dflt))
+def _attach_muscles(muscles: list[Muscle], skin_layer) -> None:
+    """Step 4: attach the inner-sheet nodes of ``skin_layer`` near each muscle (Fig. 6.4); only
+    nodes on the skin side of the muscle (see :func:`attach_nodes`)."""
+    from scipy.spatial import cKDTree
+
+    inner = skin_layer.inner_nodes
+    tree = cKDTree(skin_layer.vertices[inner])
+    for mu in muscles:
+        e = mu.segments
+        reach = e.radii.max(1) + mu.lam
+        cand = set()
+        for c, rr in zip(e.centers, reach):
+            cand.update(tree.query_ball_point(c, rr))
+        cand = inner[np.array(sorted(cand), dtype=np.int64)] if cand else np.zeros(0, np.int64)
+        mu.attachment = attach_nodes(skin_layer.vertices, e, mu.lam, mu.phi, candidates=cand,
+                                     directions=skin_layer.direction)
 
 
 def make_linear_muscle(
@@ -678,7 +394,7 @@ def make_linear_muscle(
 ) -> Muscle:
     """A linear muscle from explicit control points (insertion, middle, attachment), segmented.
 
-    For scenes that are not heads (e.g. the slab of :func:`facewarp._src.anatomy.slab_anatomy`).
+    For scenes that are not heads (e.g. the slab of :func:`facewarp.anatomy.slab_anatomy`).
 
     Args:
         name: Muscle name.

@@ -27,6 +27,10 @@ class JawStage:
         self.rest = rest_positions
         self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
 
+    def prepare(self, model: Model, state_in, control, dt, targets) -> None:
+        """Implicit solvers: the same targets, once per step."""
+        self.apply(model, state_in, control, dt, None, targets)
+
     def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
         if self.count == 0:
             return
@@ -64,6 +68,10 @@ class CarryStage:
     def reset(self, angles=(0.0, 0.0)) -> None:
         """Set the remembered jaw angles [rad] (those the state's positions correspond to)."""
         self.prev.assign(np.asarray(angles, np.float32))
+
+    def prepare(self, model: Model, state_in, control, dt, targets) -> None:
+        """Implicit solvers: the same carry, once per step (by the change over the step)."""
+        self.apply(model, state_in, control, dt, None, targets)
 
     def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
         if self.count == 0:

@@ -12,7 +12,7 @@ def signed_tet_volumes(V, T) -> np.ndarray:
 
     Args:
         V: Vertex positions [m], shape (n, 3), float.
-        T: Tets, shape (k, 4), int (not checked; see ``anatomy.tissue.tet_volumes``).
+        T: Tets, shape (k, 4), int (not checked; see :func:`facewarp.anatomy.tet_volumes`).
 
     Returns:
         Signed volumes [m^3], shape (k,), float64; positive for a correctly oriented tet.

@@ -22,20 +22,24 @@ from ..present.anatomy import render_anatomy
 from ..present.render import save_png
 from ..present.strips import displacement_max, render_strip
 from ..sim.simulator import FaceSimulator, save_frames_npz
+from .checks import check_out_dir, make_out_dir
 
-__all__ = ["build_files", "simulate_files"]
+__all__ = ["MAX_FRAMES", "build_files", "simulate_files"]
+
+MAX_FRAMES = 100_000
+"""Most frames one ``simulate`` run keeps in memory (about 1 h at 30 fps; a level-0 head takes
+about 60 kB a frame)."""
 
 
 def build_files(head_path, out, *, layers: int = 1, device: str = "cpu", progress=None) -> dict:
     """Build anatomy and the face rig of a head folder into ``out``; returns the quality report."""
     step = progress or (lambda msg: None)
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a folder")
-    if layers < 1:
-        raise InputError(f"--layers: expected >= 1, got {layers}")
+    out = check_out_dir(out)
+    if not (isinstance(layers, (int, np.integer)) and not isinstance(layers, bool) and layers >= 1):
+        raise InputError(f"layers: expected a whole number >= 1, got {layers!r}")
     step("loading head")
     head = load_head(head_path)
+    make_out_dir(out)
     step("skin layer and muscles")
     anatomy = build_anatomy(head, layers=layers)
     fr = face_rig_from_anatomy(anatomy)
@@ -57,20 +61,22 @@ def build_files(head_path, out, *, layers: int = 1, device: str = "cpu", progres
 def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps: float = 30.0,
                    substeps: int | None = None, device: str = "cpu", usd: bool = False, progress=None) -> dict:
     """Simulate ``expression`` on a ``build`` output and write frames.npz / frames.png (/ frames.usda)."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a folder")
-    if not (seconds > 0 and math.isfinite(seconds)):
-        raise InputError(f"--seconds: expected a positive number, got {seconds}")
-    if not (fps > 0 and math.isfinite(fps)):
-        raise InputError(f"--fps: expected a positive number, got {fps}")
-    if substeps is not None and substeps < 1:
-        raise InputError(f"--substeps: expected >= 1, got {substeps}")
+    out = check_out_dir(out)
+    for name, v in (("seconds", seconds), ("fps", fps)):
+        if not (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+                and math.isfinite(v) and v > 0):
+            raise InputError(f"{name}: expected a finite number > 0, got {v!r}")
+    if substeps is not None and not (isinstance(substeps, (int, np.integer)) and not isinstance(substeps, bool)
+                                     and substeps >= 1):
+        raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
+    if not seconds * fps < MAX_FRAMES:  # FaceSimulator.run keeps round(seconds * fps) + 1 frames
+        raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
+                         f"more than {MAX_FRAMES} per run")
     fr = load_face_rig(head_path)
     timeline = timeline_from_spec(expression, seconds)
     sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps)
+    make_out_dir(out)
     frames = sim.run(timeline, seconds, progress=progress)
-    out.mkdir(parents=True, exist_ok=True)
     save_frames_npz(out / "frames.npz", frames)
     nf = len(frames.times)
     idx = np.unique(np.linspace(0, nf - 1, min(6, nf)).round().astype(int))

@@ -10,6 +10,7 @@ from ..importers.ict import ict_import_report, import_ict
 from ..present.template import render_previews
 from ..template.files import save_template
 from ..template.head import Template
+from .checks import check_out_dir, make_out_dir
 
 __all__ = ["export_template", "import_ict_files"]
 
@@ -24,6 +25,7 @@ def export_template(t: Template, out: str | os.PathLike, *, previews: bool = Tru
     Returns:
         The written paths.
     """
+    make_out_dir(out)
     written = save_template(t, out, progress=progress)
     if previews:
         (progress or (lambda msg: None))("previews")
@@ -36,11 +38,8 @@ def import_ict_files(ict_dir, out, *, previews: bool = True, device: str = "cpu"
 
     Returns a JSON-ready summary (counts, written files, seconds).
     """
-    import time
-
-    from ..template.files import export_template
-
     t0 = time.perf_counter()
+    check_out_dir(out)
     step = progress or (lambda msg: None)
     step("importing ICT-FaceKit")
     diag: dict = {}

@@ -162,6 +162,43 @@ def _ellipsoid_point(center: wp.vec3, frame: wp.mat33, radii: wp.vec3, u: float,
     return center + frame * local
 
 
+@wp.func
+def _attachment_point(
+    k: int,
+    att_seg: wp.array(dtype=wp.int32),
+    att_uv: wp.array(dtype=wp.vec2),
+    att_jaw_shift: wp.array(dtype=float),
+    jaw_pivot: wp.vec3,
+    jaw_u: wp.vec3,
+    jaw_v: wp.vec3,
+    jaw_angles: wp.array(dtype=float),
+    seg_center: wp.array(dtype=wp.vec3),
+    seg_frame: wp.array(dtype=wp.mat33),
+    seg_radii: wp.array(dtype=wp.vec3),
+):
+    # The attachment's point p_m on its (current) ellipsoid, from its surface parameters (u, v).
+    s = att_seg[k]
+    pm = _ellipsoid_point(seg_center[s], seg_frame[s], seg_radii[s], att_uv[k][0], att_uv[k][1])
+    # the muscle point turned with the jaw by the muscle's amount there; the node by its own:
+    # the difference (a_node - a_muscle) theta is turned in, so the jaw alone strains no spring
+    shift = att_jaw_shift[k]
+    if shift != 0.0:
+        pm = _jaw_move(pm, shift, jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    return pm
+
+
+@wp.func
+def _fibre_cosine(pm: wp.vec3, x: wp.vec3, frame: wp.mat33):
+    # |cos theta| of Eq. 6.4.1: the angle between the spring (x -> p_m) and the fibre (the
+    # segment's x axis); 0 for a spring of zero length
+    d = pm - x
+    length = wp.length(d)
+    if length <= 1.0e-12:
+        return 0.0
+    fibre = wp.vec3(frame[0, 0], frame[1, 0], frame[2, 0])
+    return wp.abs(wp.dot(d / length, fibre))
+
+
 @wp.kernel
 def _muscle_forces(
     # Model:
@@ -188,14 +225,8 @@ def _muscle_forces(
 ):
     k = wp.tid()
     att_force_out[k] = wp.vec3(0.0)
-    s = att_seg[k]
-    F = seg_frame[s]
-    pm = _ellipsoid_point(seg_center[s], F, seg_radii[s], att_uv[k][0], att_uv[k][1])
-    # the muscle point turned with the jaw by the muscle's amount there; the node by its own:
-    # the difference (a_node - a_muscle) theta is turned in, so the jaw alone strains no spring
-    shift = att_jaw_shift[k]
-    if shift != 0.0:
-        pm = _jaw_move(pm, shift, jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    pm = _attachment_point(k, att_seg, att_uv, att_jaw_shift, jaw_pivot, jaw_u, jaw_v, jaw_angles, seg_center,
+                           seg_frame, seg_radii)
     att_point_out[k] = pm
     i = att_node[k]
     d = pm - positions_in[i]
@@ -203,10 +234,47 @@ def _muscle_forces(
     if length <= 1.0e-12:
         return
     n = d / length
-    fibre = wp.vec3(F[0, 0], F[1, 0], F[2, 0])
-    cos_theta = wp.abs(wp.dot(n, fibre))
+    cos_theta = _fibre_cosine(pm, positions_in[i], seg_frame[att_seg[k]])
     # Eq. 6.4.1: spring toward the muscle, scaled by the cosine of the spring-fibre angle.
     att_force_out[k] = att_stiffness[k] * cos_theta * (length - att_rest_length[k]) * n
+
+
+# The muscle springs as energy terms for an implicit step (Eq. 6.4.1 made conservative):
+#   E_k = 1/2 k_m w_k (|p_m - x| - l0)^2,   w_k = |cos theta| evaluated once per step at the
+# step's start positions and held over the step. Within a step this is an energy with the exact
+# gradient -k_m w (|p_m - x| - l0) (p_m - x) / |p_m - x| (Eq. 6.4.1 with the frozen cosine) and a
+# Hessian, so the step is a minimisation; at rest (and for the Verlet reference, which takes w at
+# every substep) the force is Eq. 6.4.1 exactly. (An energy with |cos theta| inside would add a
+# force ~ 1/2 k_m (l - l0)^2 / l along the fibre, which dominates where the spring is nearly
+# perpendicular to the fibre, as most attachments are at rest.)
+@wp.kernel
+def _muscle_springs(
+    # Model:
+    att_node: wp.array(dtype=wp.int32),
+    att_seg: wp.array(dtype=wp.int32),
+    att_uv: wp.array(dtype=wp.vec2),
+    att_stiffness: wp.array(dtype=float),
+    att_jaw_shift: wp.array(dtype=float),
+    jaw_pivot: wp.vec3,
+    jaw_u: wp.vec3,
+    jaw_v: wp.vec3,
+    # Control:
+    jaw_angles: wp.array(dtype=float),
+    # In:
+    seg_center: wp.array(dtype=wp.vec3),
+    seg_frame: wp.array(dtype=wp.mat33),
+    seg_radii: wp.array(dtype=wp.vec3),
+    # State in:
+    positions_in: wp.array(dtype=wp.vec3),
+    # Out: spring anchor point and effective stiffness k_m w
+    att_point_out: wp.array(dtype=wp.vec3),
+    spring_stiffness_out: wp.array(dtype=float),
+):
+    k = wp.tid()
+    pm = _attachment_point(k, att_seg, att_uv, att_jaw_shift, jaw_pivot, jaw_u, jaw_v, jaw_angles, seg_center,
+                           seg_frame, seg_radii)
+    att_point_out[k] = pm
+    spring_stiffness_out[k] = att_stiffness[k] * _fibre_cosine(pm, positions_in[att_node[k]], seg_frame[att_seg[k]])
 
 
 @wp.kernel
@@ -230,14 +298,15 @@ def _jaw_targets(
 
 # Sliding support of the inner sheet: the skin glides over the deeper tissue but does not sink
 # into it. A spring acts only along the node's rest normal n (carried by the jaw like the rest
-# position p0): F = -k_s ((x - p0) . n) n, the gradient of 1/2 k_s ((x - p0) . n)^2.
+# position p0): F = -k_s ((x - p0) . n) n, the gradient of 1/2 k_s ((x - p0) . n)^2. Each
+# supported node appears once, so the atomic add is deterministic.
 @wp.kernel
 def _support_forces(
     # Model:
     support_node: wp.array(dtype=wp.int32),
     support_normal: wp.array(dtype=wp.vec3),
     support_jaw: wp.array(dtype=float),
-    support_stiffness: float,
+    support_stiffness: wp.array(dtype=float),
     rest_positions: wp.array(dtype=wp.vec3),
     jaw_pivot: wp.vec3,
     jaw_u: wp.vec3,
@@ -254,7 +323,32 @@ def _support_forces(
     a = support_jaw[k]
     p0 = _jaw_move(rest_positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
     n = _jaw_move(support_normal[k], a, wp.vec3(0.0), jaw_u, jaw_v, jaw_angles)
-    wp.atomic_add(forces_out, i, -support_stiffness * wp.dot(positions_in[i] - p0, n) * n)
+    wp.atomic_add(forces_out, i, -support_stiffness[k] * wp.dot(positions_in[i] - p0, n) * n)
+
+
+# The sliding support as energy terms for an implicit step: the anchor p0 and unit axis n of
+# each supported node (jaw-moved); E = 1/2 k_s ((x - p0) . n)^2.
+@wp.kernel
+def _support_springs(
+    # Model:
+    support_node: wp.array(dtype=wp.int32),
+    support_normal: wp.array(dtype=wp.vec3),
+    support_jaw: wp.array(dtype=float),
+    rest_positions: wp.array(dtype=wp.vec3),
+    jaw_pivot: wp.vec3,
+    jaw_u: wp.vec3,
+    jaw_v: wp.vec3,
+    # Control:
+    jaw_angles: wp.array(dtype=float),
+    # Out:
+    point_out: wp.array(dtype=wp.vec3),
+    axis_out: wp.array(dtype=wp.vec3),
+):
+    k = wp.tid()
+    i = support_node[k]
+    a = support_jaw[k]
+    point_out[k] = _jaw_move(rest_positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    axis_out[k] = _jaw_move(support_normal[k], a, wp.vec3(0.0), jaw_u, jaw_v, jaw_angles)
 
 
 @wp.func

@@ -5,7 +5,8 @@ Every internal force is the negative gradient of a constraint energy ``E = 1/2 k
 element writes the force on each of its corners into its own *slot* (no atomics); ``_gather``
 then adds every node's slots in a fixed order (``Model.node_slots``), which makes a step
 deterministic and the CPU and CUDA sums the same.
-Units are SI (m, kg, s; stiffnesses in J), see :mod:`facewarp._src.model`.
+Units are SI (m, kg, s; stiffnesses in J, strain-rate dashpots in J s), see
+:mod:`facewarp._src.physics.model`.
 """
 
 from __future__ import annotations
@@ -28,16 +29,17 @@ def _finite3(x: wp.vec3) -> bool:
 #       E(C) = k0 (C^2 / 2 + C^4 / 4)          (dE/dC = k0 (1 + C^2) C = k(C) C),
 #   which reduces to Eq. 6.4.4's 1/2 k0 C^2 at small strain. So
 #       F_i = -k0 (1 + C^2) C / D0 n,   F_j = -F_i.
-#   Damping, Eq. 6.4.5 applied to the spring: a dashpot on the relative velocity along the
-#   edge, v = (x - x_prev) / dt, F_i += -c ((v_i - v_j) . n) n, F_j -= the same. It acts only
-#   on stretching rates, so rigid motions are not damped; c = 0 switches it off.
+#   Damping, Eq. 6.4.5 applied to the spring: a dashpot on the strain rate,
+#   F_i = -d dC/dt dC/dx_i with dC/dt = (v_i - v_j) . n / D0 and v = (x - x_prev) / dt, i.e.
+#   F_i = -d / D0^2 ((v_i - v_j) . n) n (d [J s] = beta k0 + c D0^2, Model.edge_damping). It acts
+#   only on stretching rates, so rigid motions are not damped; d = 0 switches it off.
 @wp.kernel
 def _edge_forces(
     # Model:
     edge_indices: wp.array(dtype=wp.vec2i),
     edge_rest_length: wp.array(dtype=float),
     edge_k0: wp.array(dtype=float),
-    edge_damping: float,
+    edge_damping: wp.array(dtype=float),
     inv_dt: float,
     # State in:
     positions_in: wp.array(dtype=wp.vec3),
@@ -60,30 +62,35 @@ def _edge_forces(
     d0 = edge_rest_length[e]
     c = (l - d0) / d0
     f = -edge_k0[e] * (1.0 + c * c) * c / d0 * n
-    if edge_damping > 0.0:
+    dmp = edge_damping[e]
+    if dmp > 0.0:
         vi = (xi - prev_positions_in[i]) * inv_dt
         vj = (xj - prev_positions_in[j]) * inv_dt
-        f = f - edge_damping * wp.dot(vi - vj, n) * n
+        f = f - dmp / (d0 * d0) * wp.dot(vi - vj, n) * n
     slots_out[2 * e] = f
     slots_out[2 * e + 1] = -f
 
 
-# Area energy per unique tet face (i, j, k), Eq. 6.4.7: E = 1/2 k_area C^2, C = (A - A0) / A0.
+# Area energy per unique tet face (i, j, k), Eq. 6.4.7: E = 1/2 k C^2, C = (A - A0) / A0.
 #   e1 = x_j - x_i, e2 = x_k - x_i, N = e1 x e2, A = |N| / 2, m = N / |N|.
 #   dA = 1/2 m . dN, and dN = de1 x e2 + e1 x de2, so with the triple product
 #   m . (de1 x e2) = de1 . (e2 x m) and m . (e1 x de2) = de2 . (m x e1):
 #       dA/dx_j = 1/2 e2 x m,   dA/dx_k = 1/2 m x e1,   dA/dx_i = -(dA/dx_j + dA/dx_k).
-#   F_a = -k_area C / A0 dA/dx_a (Eq. 6.4.3). A collapsed face (|N| = 0) has no direction
-#   and gets no force.
+#   F_a = -(k C + d dC/dt) / A0 dA/dx_a (Eq. 6.4.3 plus the strain-rate dashpot d [J s], with
+#   dC/dt = sum_a dA/dx_a . v_a / A0). A collapsed face (|N| = 0) has no direction and gets no
+#   force.
 @wp.kernel
 def _face_forces(
     # Model:
     face_indices: wp.array(dtype=wp.vec3i),
     face_rest_area: wp.array(dtype=float),
-    k_area: float,
+    face_k: wp.array(dtype=float),
+    face_damping: wp.array(dtype=float),
+    inv_dt: float,
     slot_offset: int,
     # State in:
     positions_in: wp.array(dtype=wp.vec3),
+    prev_positions_in: wp.array(dtype=wp.vec3),
     # Out: corner forces, slots offset + 3t + (0, 1, 2)
     slots_out: wp.array(dtype=wp.vec3),
 ):
@@ -105,30 +112,41 @@ def _face_forces(
     m = nn / nl
     a0 = face_rest_area[t]
     c = (0.5 * nl - a0) / a0
-    s = -k_area * c / a0 * 0.5
-    fj = s * wp.cross(e2, m)
-    fk = s * wp.cross(m, e1)
-    slots_out[o] = -(fj + fk)
-    slots_out[o + 1] = fj
-    slots_out[o + 2] = fk
+    gj = 0.5 * wp.cross(e2, m)
+    gk = 0.5 * wp.cross(m, e1)
+    gi = -(gj + gk)
+    s = face_k[t] * c
+    dmp = face_damping[t]
+    if dmp > 0.0:
+        vi = (xi - prev_positions_in[i]) * inv_dt
+        vj = (positions_in[j] - prev_positions_in[j]) * inv_dt
+        vk = (positions_in[k] - prev_positions_in[k]) * inv_dt
+        s = s + dmp * (wp.dot(gi, vi) + wp.dot(gj, vj) + wp.dot(gk, vk)) / a0
+    s = -s / a0
+    slots_out[o] = s * gi
+    slots_out[o + 1] = s * gj
+    slots_out[o + 2] = s * gk
 
 
-# Volume energy per tet (i, j, k, l), Eq. 6.4.8: E = 1/2 k_volume C^2, C = (V - V0) / V0 with
+# Volume energy per tet (i, j, k, l), Eq. 6.4.8: E = 1/2 k C^2, C = (V - V0) / V0 with
 #   the signed volume V = 1/6 e1 . (e2 x e3), e1 = x_j - x_i, e2 = x_k - x_i, e3 = x_l - x_i.
 #   V is trilinear in (e1, e2, e3), so (cyclic triple product)
 #       dV/dx_j = 1/6 e2 x e3,  dV/dx_k = 1/6 e3 x e1,  dV/dx_l = 1/6 e1 x e2,
 #       dV/dx_i = -(dV/dx_j + dV/dx_k + dV/dx_l).
-#   F_a = -k_volume C / V0 dV/dx_a (Eq. 6.4.3). The signed volume keeps pushing an inverted tet
-#   back (C < -1 still points towards V0 > 0).
+#   F_a = -(k C + d dC/dt) / V0 dV/dx_a (Eq. 6.4.3 plus the strain-rate dashpot). The signed
+#   volume keeps pushing an inverted tet back (C < -1 still points towards V0 > 0).
 @wp.kernel
 def _tet_forces(
     # Model:
     tet_indices: wp.array(dtype=wp.vec4i),
     tet_rest_volume: wp.array(dtype=float),
-    k_volume: float,
+    tet_k: wp.array(dtype=float),
+    tet_damping: wp.array(dtype=float),
+    inv_dt: float,
     slot_offset: int,
     # State in:
     positions_in: wp.array(dtype=wp.vec3),
+    prev_positions_in: wp.array(dtype=wp.vec3),
     # Out: corner forces, slots offset + 4t + (0..3)
     slots_out: wp.array(dtype=wp.vec3),
 ):
@@ -145,14 +163,23 @@ def _tet_forces(
     v = wp.dot(e1, wp.cross(e2, e3)) / 6.0
     v0 = tet_rest_volume[t]
     c = (v - v0) / v0
-    s = -k_volume * c / v0 / 6.0
-    fj = s * wp.cross(e2, e3)
-    fk = s * wp.cross(e3, e1)
-    fl = s * wp.cross(e1, e2)
-    slots_out[o] = -(fj + fk + fl)
-    slots_out[o + 1] = fj
-    slots_out[o + 2] = fk
-    slots_out[o + 3] = fl
+    gj = wp.cross(e2, e3) / 6.0
+    gk = wp.cross(e3, e1) / 6.0
+    gl = wp.cross(e1, e2) / 6.0
+    gi = -(gj + gk + gl)
+    s = tet_k[t] * c
+    dmp = tet_damping[t]
+    if dmp > 0.0:
+        vi = (xi - prev_positions_in[i]) * inv_dt
+        vj = (positions_in[j] - prev_positions_in[j]) * inv_dt
+        vk = (positions_in[k] - prev_positions_in[k]) * inv_dt
+        vl = (positions_in[l] - prev_positions_in[l]) * inv_dt
+        s = s + dmp * (wp.dot(gi, vi) + wp.dot(gj, vj) + wp.dot(gk, vk) + wp.dot(gl, vl)) / v0
+    s = -s / v0
+    slots_out[o] = s * gi
+    slots_out[o + 1] = s * gj
+    slots_out[o + 2] = s * gk
+    slots_out[o + 3] = s * gl
 
 
 # Each node adds its slots, in a fixed order, to the forces of the stages (deterministic, no
@@ -189,20 +216,23 @@ def _init_forces(
     forces_out[i] = external_force[i]
 
 
-# Damped Verlet step, Eq. 6.4.10: x(t + dt) = 2 x(t) - x(t - dt) + dt^2 F / m, written as
-#   x' = x + (1 - damping) (x - x_prev) + dt^2 F / m,
-# where the (1 - damping) factor is Eq. 6.4.5's velocity damping -k_damping v with
-# k_damping = damping m / dt (x - x_prev = v dt). Held nodes feel a spring to their target,
-# F += -k_hold (x - target) (energy 1/2 k_hold |x - target|^2); fixed nodes are placed on
-# their target. Thread 0 also advances the device step counter used by the guard.
+# Damped Verlet step, Eq. 6.4.10: x(t + dt) = 2 x(t) - x(t - dt) + dt^2 F / m, with Eq. 6.4.5's
+# mass-proportional damping F_d = -alpha m (v - v_c) on the velocity v = (x - x_prev) / dt
+# relative to the cranium's rigid velocity v_c = v_lin + w x x:
+#   x' = x + (1 - alpha dt) (x - x_prev) + alpha dt^2 v_c + dt^2 F / m
+# (Table 6.3's 0.002 per substep is alpha dt = 0.002). Held nodes feel a spring to their target,
+# F += -k_hold (x - target) (energy 1/2 k_hold |x - target|^2); fixed nodes are placed on their
+# target. Thread 0 also advances the device step counter used by the guard.
 @wp.kernel
 def _integrate_verlet(
     # Model:
     vertex_inv_mass: wp.array(dtype=float),
     vertex_fixed: wp.array(dtype=wp.int32),
     vertex_hold_stiffness: wp.array(dtype=float),
-    damping: float,
+    damping_rate: float,
     dt: float,
+    # Control:
+    cranium_velocity: wp.array(dtype=wp.vec3),
     # Solver:
     forces: wp.array(dtype=wp.vec3),
     targets: wp.array(dtype=wp.vec3),
@@ -223,7 +253,9 @@ def _integrate_verlet(
         x_new = target
     else:
         f = forces[i] - vertex_hold_stiffness[i] * (x - target)
-        x_new = x + (1.0 - damping) * (x - prev_positions_in[i]) + (dt * dt * vertex_inv_mass[i]) * f
+        ad = damping_rate * dt
+        vc = cranium_velocity[0] + wp.cross(cranium_velocity[1], x)
+        x_new = x + (1.0 - ad) * (x - prev_positions_in[i]) + (ad * dt) * vc + (dt * dt * vertex_inv_mass[i]) * f
     positions_out[i] = x_new
     prev_positions_out[i] = x
 

@@ -3,32 +3,31 @@
 :class:`ModelBuilder` takes a generic tetrahedral mesh (numpy), validates it and derives the
 elements of the deformation model: unique tet edges (distance energy, Eq. 6.4.4 with the
 nonlinear stiffness of Eq. 6.4.6), unique tet faces (area energy, Eq. 6.4.7) and the tets
-themselves (volume energy, Eq. 6.4.8). :meth:`ModelBuilder.finalize` copies everything into a
-read-only :class:`Model` of Warp arrays on one device; :meth:`Model.state` and
-:meth:`Model.control` make the mutable buffers that :class:`~facewarp._src.solver.SolverVerlet`
-steps.
+themselves (volume energy, Eq. 6.4.8), with per-element stiffness, damping and per-node masses
+from a material profile (:mod:`.materials`: ``thesis``, Table 6.3 as it stands, or
+``physical``, the same energies from moduli in Pa and a density). :meth:`ModelBuilder.finalize`
+copies everything into a read-only :class:`Model` of Warp arrays on one device;
+:meth:`Model.state` and :meth:`Model.control` make the mutable buffers the solvers step
+(:class:`~facewarp._src.physics.solvers.implicit.SolverImplicit`,
+:class:`~facewarp._src.physics.solvers.verlet.SolverVerlet`).
 
 Unit system
 -----------
 SI throughout: metre, kilogram, second (so newton and joule). Every energy term of Sec. 6.4.2
 is ``E = 1/2 k C^2`` with a *dimensionless* constraint ``C`` (relative length, area or volume
-change), so the stiffness coefficients ``k0``, ``k_area`` and ``k_volume`` are energies [J] (the
-energy of a unit relative strain); masses are [kg]. Table 6.3's numbers are used as they stand
-in this system: node mass 0.5 kg, k0 15 / 10 / 5 J (outer / inner / cross-layer edges),
-k_area = k_volume = 7.5 J. Only the ratio k / m sets the motion (15 J / 0.5 kg = 30 J/kg,
-of the order of Young's modulus over density of skin, ~1e5 Pa / 1e3 kg m^-3 = 100 J/kg), so
-time scales are plausible; absolute force magnitudes are those of a 0.5 kg node, i.e. the
-numbers are best read as a consistent *model* unit system, not measured tissue forces.
+change), so the per-element stiffness coefficients (``edge_k0``, ``face_k``, ``tet_k``) are
+energies [J] (the energy of a unit relative strain); masses are [kg]. An edge of rest length
+``D0`` acts like a linear spring of stiffness ``k0 / D0^2`` [N/m].
 
-Because the constraints are relative, an edge of rest length ``D0`` acts like a linear spring
-of stiffness ``k0 / D0^2`` [N/m]: finer meshes are stiffer and need smaller steps (the stable
-step scales with ``D0``; see :mod:`facewarp._src.solver`).
-
-The damping of Table 6.3 (``k_damping`` 0.002) is the *per-substep* velocity loss of the
-damped Verlet step ``x' = x + (1 - damping) (x - x_prev) + dt^2 f / m`` (dimensionless), which
-is Eq. 6.4.5's ``-k_damping v`` term with ``k_damping = damping m / dt`` [kg/s]. An optional
-dashpot along each edge (``edge_damping`` [N s/m], default 0) damps relative velocity only,
-so it never slows a rigid motion.
+Damping (the same for every solver)
+-----------------------------------
+* ``damping_rate`` alpha [1/s]: Eq. 6.4.5's ``-k_damping v`` with ``k_damping = alpha m``, on the
+  velocity relative to the cranium (``Control.cranium_velocity``), so a head carried at constant
+  velocity is not dragged. Table 6.3's 0.002 per substep is ``alpha = 0.002 / dt``.
+* per-element dashpots on the strain rate, ``F = -d dC/dt grad C`` with ``d`` [J s] per edge,
+  face and tet (``edge_damping``, ``face_damping``, ``tet_damping``): Rayleigh stiffness damping
+  ``d = beta k`` plus, on edges, the thesis profile's dashpot ``c`` [N s/m] along the edge
+  (``d = c D0^2``). They act on deformation rates only, never on a rigid motion.
 """
 
 from __future__ import annotations
@@ -46,9 +45,13 @@ __all__ = [
     "EDGE_INNER",
     "EDGE_OUTER",
     "TABLE_6_3",
+    "DT_STABLE_1CM",
+    "sheet_areas",
+    "thesis_substep",
     "Control",
     "Model",
     "ModelBuilder",
+    "Springs",
     "State",
 ]
 
@@ -61,14 +64,14 @@ EDGE_CROSS = 2
 
 TABLE_6_3 = {
     "mass": 0.5,  # kg per node
-    "damping": 0.002,  # per-substep velocity loss (dimensionless)
+    "damping": 0.002,  # per-substep velocity loss of the Verlet reference (dimensionless)
     "k0_outer": 15.0,  # J
     "k0_inner": 10.0,  # J
     "k0_cross": 5.0,  # J
     "k_area": 7.5,  # J
     "k_volume": 7.5,  # J
 }
-"""Table 6.3 of the thesis in the SI model unit system of this module (see the module doc)."""
+"""Table 6.3 of the thesis in SI as it stands (the ``thesis`` material profile)."""
 
 _TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
 _TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
@@ -104,47 +107,104 @@ def group_indices(keys, groups=None) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return groups, np.r_[start, len(keys)], order
 
 
+def thesis_substep(d0, mass, k0_max: float, *, safety: float = 0.5):
+    """The Verlet reference substep [s] of the thesis profile's edge rule:
+    ``safety * DT_STABLE_1CM * (d0 / 1 cm) * sqrt(mass / 0.5 kg) * sqrt(15 J / k0_max)``.
+
+    ``DT_STABLE_1CM`` (0.6 ms) is the largest step found stable for a 1 cm tet with the Table 6.3
+    defaults (see :mod:`facewarp._src.physics.solvers.verlet`). Scalars or arrays.
+    """
+    k = max(float(k0_max), 1e-30)
+    return safety * DT_STABLE_1CM * (np.asarray(d0) / 0.01) * np.sqrt(np.asarray(mass) / 0.5) * np.sqrt(15.0 / k)
+
+
+DT_STABLE_1CM = 0.6e-3
+"""Largest Verlet step [s] found stable for a 1 cm tet with the Table 6.3 defaults: one regular
+tet (all-outer or mixed layers) and a 3 x 3 x 1 slab of 1 cm Kuhn cubes, from random starts
+with strains up to ~10 %, run for 1-2 s (all 20 / 5 starts bounded; at 0.8 ms a quarter to
+most of the 10 %-strain starts of the mixed-layer tet invert). The linear limit 2 / omega_max
+of the regular tet at rest is 1.04 ms (omega_max^2 = 3.7e6 s^-2); the stiffening of
+Eq. 6.4.6 at large strain lowers it."""
+
+
+def _opt(value, default):
+    return default if value is None else value
+
+
+def sheet_areas(V, T, layer) -> np.ndarray:
+    """Each node's share of the boundary area of its own sheet [m^2], shape (n,), float64.
+
+    The boundary faces of the tet mesh whose three nodes lie in one layer (the skin surface for
+    layer 0, the inner sheet for layer 1) give a third of their area to each node; nodes on no
+    such face (a side wall) get 0.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    T = np.asarray(T)
+    n = len(V)
+    F = np.sort(T[:, _TET_FACES].reshape(-1, 3), axis=1)
+    uniq, count = np.unique(F, axis=0, return_counts=True)
+    B = uniq[count == 1]
+    lay = np.asarray(layer)[B]
+    B = B[(lay == lay[:, :1]).all(axis=1)]
+    a = 0.5 * np.linalg.norm(np.cross(V[B[:, 1]] - V[B[:, 0]], V[B[:, 2]] - V[B[:, 0]]), axis=1)
+    return np.bincount(B.ravel(), weights=np.repeat(a / 3.0, 3), minlength=n)
+
+
 class ModelBuilder:
     """Validates a tet mesh and derives the elements of the deformation model (Sec. 6.4).
 
     Args:
         vertices: Rest positions [m], shape (n, 3), float.
         tets: Tetrahedra, shape (k, 4), int; each must have positive signed volume
-            ``(1/6) (x1 - x0) . ((x2 - x0) x (x3 - x0))`` (see :func:`facewarp._src.geometry.tets.signed_tet_volumes`).
+            ``(1/6) (x1 - x0) . ((x2 - x0) x (x3 - x0))`` (see :func:`facewarp.geometry.signed_tet_volumes`).
         layer: Layer of each vertex, shape (n,), int: 0 outer (skin surface), 1 inner.
             Sets the edge class and so ``k0`` (Table 6.3). Default: all outer.
         fixed: Nodes pinned to their target (the rest position unless a solver stage moves
             it), shape (n,), bool. Default: none.
         held: Nodes pulled to their target by a spring of ``hold_stiffness``, shape (n,),
             bool. Default: none.
-        mass: Node mass [kg], scalar or shape (n,). Default 0.5 (Table 6.3).
-        damping: Per-substep velocity loss of the damped Verlet step, dimensionless in
-            [0, 1). Default 0.002 (Table 6.3 ``k_damping``; see the module doc).
-        edge_damping: Dashpot along each edge on the relative velocity [N s/m] (Eq. 6.4.5
-            applied per spring). Default 0.
+        material: ``"thesis"`` (default: Table 6.3 as it stands), ``"physical"`` or a
+            :class:`~facewarp._src.physics.materials.MaterialThesis` /
+            :class:`~facewarp._src.physics.materials.MaterialPhysical`. The keywords below
+            override single values of the profile.
+        mass: Node mass [kg], scalar or shape (n,). Default: the profile's (thesis 0.5 kg;
+            physical: density times a quarter of each incident tet's volume).
+        damping_rate: Mass-proportional damping alpha [1/s] on the velocity relative to the
+            cranium. Default: physical 50; thesis Table 6.3's 0.002 per substep of ``substep``.
+        substep: The Verlet reference substep [s] that turns the thesis profile's per-substep
+            damping into a rate. Default: :func:`thesis_substep` of the mesh (the shortest edge,
+            the lightest node, the stiffest k0).
+        stiffness_damping: Rayleigh stiffness damping beta [s]: every element gets a dashpot
+            ``beta k`` on its strain rate. Default: physical 2e-5, thesis 0.
+        edge_damping: Dashpot along each edge on the relative velocity [N s/m] (Eq. 6.4.5 per
+            spring). Default 0 (the face simulator's thesis profile uses 500).
         k0_outer, k0_inner, k0_cross: Basic distance stiffness k0 [J] of Eq. 6.4.6 for
-            outer-outer, inner-inner and cross-layer edges. Default 15, 10, 5 (Table 6.3).
-        k_area: Area stiffness [J] of Eq. 6.4.7. Default 7.5 (Table 6.3).
-        k_volume: Volume stiffness [J] of Eq. 6.4.8. Default 7.5 (Table 6.3).
+            outer-outer, inner-inner and cross-layer edges, the same for every edge of a class
+            (thesis profile: 15, 10, 5). With the physical profile they come from its moduli.
+        k_area: Area stiffness [J] of every face (Eq. 6.4.7; thesis 7.5).
+        k_volume: Volume stiffness [J] of every tet (Eq. 6.4.8; thesis 7.5).
         hold_stiffness: Spring stiffness [N/m] pulling each ``held`` node to its target.
-            Default (None): four times the 98th percentile of the rest edge springs,
-            ``4 k0 / D0^2`` (6e5 N/m for 1 cm outer edges), stiff against the tissue yet within
-            the stable step of :func:`facewarp._src.solver.stable_dt`. The percentile keeps a
-            few very short edges (a crease of an adapted head) from stiffening every hold;
-            :func:`facewarp._src.solver.scale_masses` takes care of those edges' own nodes.
+            Default (None): thesis: four times the 98th percentile of the rest edge springs,
+            ``4 k0 / D0^2`` (6e5 N/m for 1 cm outer edges), stiff against the tissue; a few very
+            short edges (a crease of an adapted head) do not stiffen every hold. Physical:
+            ``hold_modulus`` [N/m^3] times the node's sheet area (:func:`sheet_areas`).
         muscle_count: Number of muscle activations in :class:`Control`. Default 0.
 
     Raises:
         InputError: on bad shapes, indices out of range, repeated vertices in a tet, an
-            inverted or degenerate tet (naming its index), or bad coefficients.
+            inverted or degenerate tet (naming its index), or bad coefficients (negative or
+            non-finite values, a material with no stiffness at all).
 
     Attributes (numpy, float64 / int64; ``finalize`` copies them as float32 / int32):
         vertices (n, 3) [m], tets (k, 4), layer (n,), fixed (n,) bool, held (n,) bool (never
-        also fixed), mass (n,) [kg], hold_stiffness (n,) [N/m] (0 where not held);
-        edges (e, 2) unique, i < j; edge_rest_lengths (e,) [m]; edge_class (e,) EDGE_*;
-        edge_k0 (e,) [J]; faces (f, 3) unique, sorted; face_rest_areas (f,) [m^2];
-        tet_rest_volumes (k,) [m^3]; damping, edge_damping [N s/m], k_area [J],
-        k_volume [J], muscle_count.
+        also fixed), mass (n,) [kg], hold_stiffness (n,) [N/m] (0 where not held),
+        vertex_area (n,) [m^2] (:func:`sheet_areas`), vertex_volume (n,) [m^3] (a quarter of
+        each incident tet); edges (e, 2) unique, i < j; edge_rest_lengths (e,) [m];
+        edge_class (e,) EDGE_*; edge_k0 (e,) [J]; edge_damping_coef (e,) [J s];
+        faces (f, 3) unique, sorted; face_rest_areas (f,) [m^2]; face_k (f,) [J];
+        face_damping_coef (f,) [J s]; tet_rest_volumes (k,) [m^3]; tet_k (k,) [J];
+        tet_damping_coef (k,) [J s]; damping_rate [1/s]; stiffness_damping [s];
+        edge_damping [N s/m]; material (the profile); muscle_count.
     """
 
     def __init__(
@@ -155,17 +215,24 @@ class ModelBuilder:
         layer=None,
         fixed=None,
         held=None,
-        mass=TABLE_6_3["mass"],
-        damping: float = TABLE_6_3["damping"],
-        edge_damping: float = 0.0,
-        k0_outer: float = TABLE_6_3["k0_outer"],
-        k0_inner: float = TABLE_6_3["k0_inner"],
-        k0_cross: float = TABLE_6_3["k0_cross"],
-        k_area: float = TABLE_6_3["k_area"],
-        k_volume: float = TABLE_6_3["k_volume"],
+        material=None,
+        mass=None,
+        damping_rate: float | None = None,
+        substep: float | None = None,
+        stiffness_damping: float | None = None,
+        edge_damping: float | None = None,
+        k0_outer: float | None = None,
+        k0_inner: float | None = None,
+        k0_cross: float | None = None,
+        k_area: float | None = None,
+        k_volume: float | None = None,
         hold_stiffness: float | None = None,
         muscle_count: int = 0,
     ):
+        from .materials import MaterialPhysical, material_profile
+
+        mat = material_profile("thesis" if material is None else material)
+        physical = isinstance(mat, MaterialPhysical)
         V = np.asarray(vertices, dtype=np.float64)
         if V.ndim != 2 or V.shape[1] != 3:
             raise InputError(f"vertices must have shape (n, 3), got {V.shape}")
@@ -211,60 +278,108 @@ class ModelBuilder:
             raise InputError(f"layer must be 0 (outer) or 1 (inner), got values {np.unique(layer).tolist()}")
         fixed = np.zeros(n, bool) if fixed is None else _vertex_array(fixed, n, "fixed", bool)
         held = np.zeros(n, bool) if held is None else _vertex_array(held, n, "held", bool)
-        mass = _vertex_array(mass, n, "mass", np.float64)
-        if not (np.isfinite(mass).all() and (mass > 0).all()):
-            raise InputError(f"mass must be positive and finite [kg], got min {mass.min()}")
-        if not 0.0 <= damping < 1.0:
-            raise InputError(f"damping must lie in [0, 1) (per-substep velocity loss), got {damping}")
-        for name, val in (
-            ("edge_damping", edge_damping),
-            ("k0_outer", k0_outer),
-            ("k0_inner", k0_inner),
-            ("k0_cross", k0_cross),
-            ("k_area", k_area),
-            ("k_volume", k_volume),
-        ):
-            if not (np.isfinite(val) and val >= 0.0):
-                raise InputError(f"{name} must be a finite value >= 0, got {val}")
         if int(muscle_count) < 0:
             raise InputError(f"muscle_count must be >= 0, got {muscle_count}")
+        for name, val in (("damping_rate", damping_rate), ("substep", substep),
+                          ("stiffness_damping", stiffness_damping), ("edge_damping", edge_damping),
+                          ("k0_outer", k0_outer), ("k0_inner", k0_inner), ("k0_cross", k0_cross),
+                          ("k_area", k_area), ("k_volume", k_volume)):
+            if val is not None and not (np.isfinite(val) and val >= 0.0):
+                raise InputError(f"{name} must be a finite value >= 0, got {val}")
+        if substep is not None and substep <= 0.0:
+            raise InputError(f"substep must be > 0 [s], got {substep}")
 
-        # unique edges (i < j) with their rest length D0 and class
-        E = np.sort(T[:, _TET_EDGES].reshape(-1, 2), axis=1)
-        E = np.unique(E, axis=0)
+        # unique edges (i < j) with their rest length D0 and class; each tet's edges and faces
+        # map to the unique ones (inverse) for the volume shares
+        E_all = np.sort(T[:, _TET_EDGES].reshape(-1, 2), axis=1)
+        E, e_inv = np.unique(E_all, axis=0, return_inverse=True)
         D0 = np.linalg.norm(V32[E[:, 1]] - V32[E[:, 0]], axis=1)
         la, lb = layer[E[:, 0]], layer[E[:, 1]]
         edge_class = np.where(la != lb, EDGE_CROSS, np.where(la == 0, EDGE_OUTER, EDGE_INNER))
-        k0 = np.array([k0_outer, k0_inner, k0_cross])[edge_class]
-
         # unique faces (sorted vertex triples: the area energy ignores the winding)
-        Fc = np.sort(T[:, _TET_FACES].reshape(-1, 3), axis=1)
-        Fc = np.unique(Fc, axis=0)
+        F_all = np.sort(T[:, _TET_FACES].reshape(-1, 3), axis=1)
+        Fc, f_inv = np.unique(F_all, axis=0, return_inverse=True)
         A0 = 0.5 * np.linalg.norm(np.cross(V32[Fc[:, 1]] - V32[Fc[:, 0]], V32[Fc[:, 2]] - V32[Fc[:, 0]]), axis=1)
+        # volume shares: a node a quarter of each tet, an edge a sixth, a face a quarter
+        v_node = np.bincount(T.ravel(), weights=np.repeat(vol / 4.0, 4), minlength=n)
+        v_edge = np.bincount(e_inv.ravel(), weights=np.repeat(vol / 6.0, 6), minlength=len(E))
+        v_face = np.bincount(f_inv.ravel(), weights=np.repeat(vol / 4.0, 4), minlength=len(Fc))
+        area = sheet_areas(V32, T, layer)
+
+        if physical:
+            mod = np.asarray(mat.distance_modulus, dtype=np.float64)
+            k0 = mod[edge_class] * v_edge
+            face_k = mat.area_modulus * v_face
+            tet_k = mat.volume_modulus * vol
+            mass_default = mat.density * v_node
+            beta = mat.stiffness_damping
+            alpha = mat.damping_rate
+            c_edge = 0.0
+        else:
+            k0 = np.array([mat.k0_outer, mat.k0_inner, mat.k0_cross], dtype=np.float64)[edge_class]
+            face_k = np.full(len(Fc), mat.k_area)
+            tet_k = np.full(len(T), mat.k_volume)
+            mass_default = np.full(n, mat.mass)
+            beta = 0.0
+            alpha = None  # the per-substep damping, converted below
+            c_edge = 0.0
+        if k0_outer is not None or k0_inner is not None or k0_cross is not None:
+            cls_k = [k0_outer, k0_inner, k0_cross]
+            for c in range(3):
+                if cls_k[c] is not None:
+                    k0 = np.where(edge_class == c, float(cls_k[c]), k0)
+        if k_area is not None:
+            face_k = np.full(len(Fc), float(k_area))
+        if k_volume is not None:
+            tet_k = np.full(len(T), float(k_volume))
+        mass = mass_default if mass is None else _vertex_array(mass, n, "mass", np.float64)
+        if not (np.isfinite(mass).all() and (mass > 0).all()):
+            raise InputError(f"mass must be positive and finite [kg], got min {mass.min()}")
+        if k0.max(initial=0.0) + face_k.max(initial=0.0) + tet_k.max(initial=0.0) <= 0.0:
+            raise InputError("the material has no stiffness: k0, k_area and k_volume are all 0")
+        beta = _opt(stiffness_damping, beta)
+        c_edge = _opt(edge_damping, c_edge)
+        if damping_rate is not None:
+            alpha = float(damping_rate)
+        elif alpha is None:
+            dt_ref = substep if substep is not None else float(thesis_substep(D0.min(), mass.min(), k0.max()))
+            alpha = mat.damping / dt_ref
 
         if hold_stiffness is None:
-            hold_stiffness = 4.0 * float(np.quantile(k0 / D0**2, 0.98))
-        if not (np.isfinite(hold_stiffness) and hold_stiffness >= 0.0):
-            raise InputError(f"hold_stiffness must be a finite value >= 0 [N/m], got {hold_stiffness}")
+            if physical:
+                hold = mat.hold_modulus * area
+            else:
+                hold = np.full(n, 4.0 * float(np.quantile(k0 / D0**2, 0.98)))
+        else:
+            if not (np.isfinite(hold_stiffness) and hold_stiffness >= 0.0):
+                raise InputError(f"hold_stiffness must be a finite value >= 0 [N/m], got {hold_stiffness}")
+            hold = np.full(n, float(hold_stiffness))
 
+        self.material = mat
         self.vertices = V
         self.tets = T
         self.layer = layer
         self.fixed = fixed
         self.held = held & ~fixed
         self.mass = mass
-        self.damping = float(damping)
-        self.edge_damping = float(edge_damping)
+        self.vertex_area = area
+        self.vertex_volume = v_node
+        self.damping_rate = float(alpha)
+        self.stiffness_damping = float(beta)
+        self.edge_damping = float(c_edge)
         self.edges = E
         self.edge_rest_lengths = D0
         self.edge_class = edge_class
         self.edge_k0 = k0
+        self.edge_damping_coef = beta * k0 + c_edge * D0**2
         self.faces = Fc
         self.face_rest_areas = A0
+        self.face_k = face_k
+        self.face_damping_coef = beta * face_k
         self.tet_rest_volumes = vol
-        self.k_area = float(k_area)
-        self.k_volume = float(k_volume)
-        self.hold_stiffness = np.where(self.held, float(hold_stiffness), 0.0)
+        self.tet_k = tet_k
+        self.tet_damping_coef = beta * tet_k
+        self.hold_stiffness = np.where(self.held, hold, 0.0)
         self.muscle_count = int(muscle_count)
 
     @property
@@ -306,18 +421,21 @@ class ModelBuilder:
             edge_indices=i32(self.edges, wp.vec2i),
             edge_rest_length=f32(self.edge_rest_lengths),
             edge_k0=f32(self.edge_k0),
+            edge_damping=f32(self.edge_damping_coef),
             edge_class=i32(self.edge_class),
             face_indices=i32(self.faces, wp.vec3i),
             face_rest_area=f32(self.face_rest_areas),
+            face_k=f32(self.face_k),
+            face_damping=f32(self.face_damping_coef),
             tet_indices=i32(self.tets, wp.vec4i),
             tet_rest_volume=f32(self.tet_rest_volumes),
+            tet_k=f32(self.tet_k),
+            tet_damping=f32(self.tet_damping_coef),
             slot_count=len(slot_node),
             node_slot_start=i32(start),
             node_slots=i32(order),
-            k_area=self.k_area,
-            k_volume=self.k_volume,
-            damping=self.damping,
-            edge_damping=self.edge_damping,
+            damping_rate=self.damping_rate,
+            material=self.material.name,
         )
 
 
@@ -325,8 +443,8 @@ class ModelBuilder:
 class Model:
     """Read-only tissue model on one device (made by :meth:`ModelBuilder.finalize`).
 
-    Units: SI (m, kg, s); stiffnesses of the relative-strain energies in J (see the module
-    doc). Arrays are Warp arrays on :attr:`device`; the solver never writes them.
+    Units: SI (m, kg, s); stiffnesses of the relative-strain energies in J, strain-rate dashpots
+    in J s (see the module doc). Arrays are Warp arrays on :attr:`device`; solvers never write them.
     """
 
     device: object
@@ -345,7 +463,7 @@ class Model:
     rest_positions: object
     """Rest positions [m], shape (vertex_count,), wp.vec3 (float32)."""
     vertex_mass: object
-    """Node mass [kg], shape (vertex_count,), float32 (Table 6.3: 0.5)."""
+    """Node mass [kg], shape (vertex_count,), float32."""
     vertex_inv_mass: object
     """Inverse node mass [1/kg], 0 for fixed nodes, shape (vertex_count,), float32."""
     vertex_layer: object
@@ -361,8 +479,9 @@ class Model:
     edge_rest_length: object
     """Rest length D0 [m] (Eq. 6.4.4), shape (edge_count,), float32."""
     edge_k0: object
-    """Basic distance stiffness k0 [J] (Eq. 6.4.6, Table 6.3 by edge class),
-    shape (edge_count,), float32."""
+    """Basic distance stiffness k0 [J] (Eq. 6.4.6), shape (edge_count,), float32."""
+    edge_damping: object
+    """Dashpot on the edge's strain rate [J s], ``F = -d dC/dt grad C``, shape (edge_count,), float32."""
     edge_class: object
     """EDGE_OUTER / EDGE_INNER / EDGE_CROSS, shape (edge_count,), int32."""
 
@@ -370,11 +489,19 @@ class Model:
     """Unique tet faces (i, j, k), sorted; shape (face_count,), wp.vec3i (int32)."""
     face_rest_area: object
     """Rest area A0 [m^2] (Eq. 6.4.7), shape (face_count,), float32."""
+    face_k: object
+    """Area stiffness [J] (Eq. 6.4.7), shape (face_count,), float32."""
+    face_damping: object
+    """Dashpot on the face's area strain rate [J s], shape (face_count,), float32."""
 
     tet_indices: object
     """Tets (i, j, k, l) with positive signed volume; shape (tet_count,), wp.vec4i (int32)."""
     tet_rest_volume: object
     """Rest signed volume V0 [m^3] (Eq. 6.4.8), > 0; shape (tet_count,), float32."""
+    tet_k: object
+    """Volume stiffness [J] (Eq. 6.4.8), shape (tet_count,), float32."""
+    tet_damping: object
+    """Dashpot on the tet's volume strain rate [J s], shape (tet_count,), float32."""
 
     slot_count: int
     """Number of per-element force slots: 2 per edge, 3 per face, 4 per tet (edges first)."""
@@ -386,15 +513,10 @@ class Model:
     forces are bit-for-bit reproducible run to run and the same sums on CPU and CUDA (atomic
     adds would add in whatever order threads arrive)."""
 
-    k_area: float
-    """Area stiffness [J] (Eq. 6.4.7, Table 6.3: 7.5)."""
-    k_volume: float
-    """Volume stiffness [J] (Eq. 6.4.8, Table 6.3: 7.5)."""
-    damping: float
-    """Per-substep velocity loss of the damped Verlet step (Eq. 6.4.10), dimensionless
-    (Table 6.3 k_damping: 0.002)."""
-    edge_damping: float
-    """Dashpot coefficient along each edge on the relative velocity [N s/m] (Eq. 6.4.5)."""
+    damping_rate: float
+    """Mass-proportional damping alpha [1/s] on the velocity relative to the cranium (Eq. 6.4.5)."""
+    material: str
+    """Name of the material profile the model was built with."""
 
     def state(self) -> State:
         """A new :class:`State` at rest: positions = previous positions = rest positions."""
@@ -405,18 +527,19 @@ class Model:
         )
 
     def control(self) -> Control:
-        """A new :class:`Control`: no activation, jaw closed, no external force."""
+        """A new :class:`Control`: no activation, jaw closed, no external force, cranium at rest."""
         wp = get_warp()
         return Control(
             activations=wp.zeros(self.muscle_count, dtype=float, device=self.device),
             jaw_angles=wp.zeros(2, dtype=float, device=self.device),
             external_force=wp.zeros(self.vertex_count, dtype=wp.vec3, device=self.device),
+            cranium_velocity=wp.zeros(2, dtype=wp.vec3, device=self.device),
         )
 
 
 @dataclass(eq=False)
 class State:
-    """Positions of the mass points at two consecutive substeps (Verlet, Eq. 6.4.10)."""
+    """Positions of the mass points at two consecutive steps (the velocity is their difference)."""
 
     positions: object
     """Positions x(t) [m], shape (vertex_count,), wp.vec3 (float32)."""
@@ -432,10 +555,11 @@ class State:
 
 @dataclass(eq=False)
 class Control:
-    """What drives the face: muscle activations, jaw angles, and a user force.
+    """What drives the face: muscle activations, jaw angles, a user force, the cranium's motion.
 
     The solver only reads these. Muscle and jaw stages (see
-    :class:`facewarp._src.solver.SolverStage`) turn them into forces and targets each substep.
+    :class:`facewarp._src.physics.solvers.verlet.SolverStage`) turn them into forces, springs
+    and targets each step.
     """
 
     activations: object
@@ -444,6 +568,39 @@ class Control:
     """Jaw rotation [rad] about the condyle u-axis (0..60 deg) and the v-axis (+-5 deg),
     shape (2,), float32 (Sec. 6.4.3)."""
     external_force: object
-    """A constant external force [N] on each node, added every substep;
+    """A constant external force [N] on each node, added every step;
     shape (vertex_count,), wp.vec3 (float32). Zero by default."""
+    cranium_velocity: object
+    """Rigid velocity of the cranium: linear velocity [m/s] of the world origin and angular
+    velocity [rad/s], shape (2,), wp.vec3 (float32). The mass-proportional damping acts on the
+    node velocity relative to ``v + w x x``. Zero by default (the cranium at rest)."""
 
+
+@dataclass(eq=False)
+class Springs:
+    """Point springs a solver stage adds to the tissue energy (muscles, supports), on the device.
+
+    Two kinds, by whether :attr:`axis` is given:
+
+    * distance springs ``E = 1/2 k (|p - x| - l0)^2`` (the muscle springs of Eq. 6.4.1 with the
+      fibre cosine folded into ``k`` for the step);
+    * axis springs ``E = 1/2 k ((x - p) . a)^2`` (a sliding support along the unit axis a).
+
+    A stage that has springs fills them in its ``prepare`` (once per implicit step); the arrays
+    stay allocated, so a captured frame keeps reading the same buffers.
+    """
+
+    node: object
+    """Tissue node of each spring, shape (k,), int32."""
+    point: object
+    """The spring's other end p [m], shape (k,), wp.vec3."""
+    stiffness: object
+    """Stiffness k [N/m], shape (k,), float32."""
+    rest_length: object = None
+    """Rest length l0 [m] of distance springs, shape (k,), float32 (None for axis springs)."""
+    axis: object = None
+    """Unit axis a of axis springs, shape (k,), wp.vec3 (None for distance springs)."""
+
+    @property
+    def count(self) -> int:
+        return int(self.node.shape[0])

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..core.warp import get_warp
 from ..core.errors import InputError
-from .model import Model, group_indices
+from .model import Model, Springs, group_indices
 
 __all__ = ["MuscleRig", "MuscleStage", "SupportStage", "ellipsoid_uv", "rig_reference"]
 
@@ -195,12 +195,18 @@ def rig_reference(rig: MuscleRig, activations, jaw=None, jaw_angles=(0.0, 0.0)):
 
 # ---------------------------------------------------------------------------------------- stages
 class MuscleStage:
-    """Adds the muscle springs of Eq. 6.4.1 each substep (solver stage).
+    """The muscle springs of Eq. 6.4.1 (solver stage).
+
+    Explicit solvers call :meth:`apply` every substep (forces of Eq. 6.4.1 as printed, the fibre
+    cosine at the current positions); implicit solvers call :meth:`prepare` once per step, which
+    fills :attr:`springs` with the energy terms ``1/2 k_m w (|p_m - x| - l0)^2`` with the cosine
+    ``w`` taken at the step's start (see ``kernels_muscle._muscle_springs``).
 
     Attributes (device arrays, written every substep, readable between frames):
         ctrl: Current control points [m], shape (P,), wp.vec3.
         seg_center, seg_frame, seg_radii: Current ellipsoids.
         att_point: Current attachment points on the ellipsoids [m], shape (K,), wp.vec3.
+        springs: The springs of the current implicit step (:class:`~facewarp._src.physics.model.Springs`).
     """
 
     def __init__(self, rig: MuscleRig, jaw, device, node_amount=None):
@@ -259,6 +265,9 @@ class MuscleStage:
         self.seg_frame = wp.zeros(S, dtype=wp.mat33, device=device)
         self.seg_radii = wp.zeros(S, dtype=wp.vec3, device=device)
         self.att_point = wp.zeros(K, dtype=wp.vec3, device=device)
+        self.spring_stiffness = wp.zeros(K, dtype=float, device=device)
+        self.springs = Springs(node=self.att_node, point=self.att_point, stiffness=self.spring_stiffness,
+                               rest_length=self.att_rest_length)
         if jaw is not None:
             self.jaw_pivot, self.jaw_u, self.jaw_v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
         else:
@@ -302,15 +311,29 @@ class MuscleStage:
                       outputs=[forces], device=self.device)
 
 
+    def prepare(self, model: Model, state_in, control, dt, targets) -> None:
+        """Muscle geometry for ``control`` and the step's springs (attachment points, ``k_m w``)."""
+        wp = get_warp()
+        self.update_geometry(control)
+        if len(self.rig.att_node):
+            wp.launch(self.km._muscle_springs, dim=len(self.rig.att_node),
+                      inputs=[self.att_node, self.att_seg, self.att_uv, self.att_stiffness, self.att_jaw_shift,
+                              self.jaw_pivot, self.jaw_u, self.jaw_v, control.jaw_angles, self.seg_center,
+                              self.seg_frame, self.seg_radii, state_in.positions],
+                      outputs=[self.att_point, self.spring_stiffness], device=self.device)
+
+
 class SupportStage:
     """Sliding support of free inner-sheet nodes along their rest normal (solver stage).
 
     The inner sheet of the skin lies on deeper tissue: it may glide along it but not sink into
-    it or lift off it. Each node gets a spring of ``stiffness`` [N/m] acting only along its rest
-    normal (the extrusion direction), moved with the jaw by its Eq. 6.4.9 amount.
+    it or lift off it. Each node gets a spring of ``stiffness`` [N/m] (one value, or one per
+    node) acting only along its rest normal (the extrusion direction), moved with the jaw by its
+    Eq. 6.4.9 amount: ``E = 1/2 k ((x - p0) . n)^2``. :meth:`apply` adds its forces (explicit
+    solvers), :meth:`prepare` fills :attr:`springs` (implicit solvers).
     """
 
-    def __init__(self, jaw, nodes, normals, amounts, stiffness: float, rest_positions, device):
+    def __init__(self, jaw, nodes, normals, amounts, stiffness, rest_positions, device):
         wp = get_warp()
         from . import kernels_muscle as km
 
@@ -322,9 +345,15 @@ class SupportStage:
         n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         self.normals = wp.array(n.astype(np.float32), dtype=wp.vec3, device=device)
         self.amounts = wp.array(np.asarray(amounts, np.float32), dtype=float, device=device)
-        self.stiffness = float(stiffness)
+        k = np.broadcast_to(np.asarray(stiffness, np.float64), (self.count,))
+        if not (np.isfinite(k).all() and (k >= 0).all()):
+            raise InputError(f"support stiffness must be finite and >= 0 [N/m], got min {k.min() if len(k) else 0}")
+        self.stiffness = wp.array(k.astype(np.float32), dtype=float, device=device)
         self.rest = rest_positions
         self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+        self.point = wp.zeros(self.count, dtype=wp.vec3, device=device)
+        self.axis = wp.zeros(self.count, dtype=wp.vec3, device=device)
+        self.springs = Springs(node=self.nodes, point=self.point, stiffness=self.stiffness, axis=self.axis)
 
     def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
         if self.count == 0:
@@ -333,3 +362,12 @@ class SupportStage:
                      inputs=[self.nodes, self.normals, self.amounts, self.stiffness, self.rest, self.pivot, self.u,
                              self.v, control.jaw_angles, state_in.positions],
                      outputs=[forces], device=self.device)
+
+    def prepare(self, model: Model, state_in, control, dt, targets) -> None:
+        """The step's springs: jaw-moved anchors and axes."""
+        if self.count == 0:
+            return
+        get_warp().launch(self.km._support_springs, dim=self.count,
+                          inputs=[self.nodes, self.normals, self.amounts, self.rest, self.pivot, self.u, self.v,
+                                  control.jaw_angles],
+                          outputs=[self.point, self.axis], device=self.device)

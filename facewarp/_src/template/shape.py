@@ -44,6 +44,7 @@ orbitale about 12 mm below the pupil) place the face on the cranium.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,6 +98,31 @@ def _smooth_profile(knots, sigma=7.0):
     top = ys > Y_VERTEX - 4 * sigma  # keep the closure at the vertex exact
     vals[top] = base(ys[top])
     return CubicSpline(ys, vals, extrapolate=True)
+
+
+@functools.lru_cache(maxsize=1)
+def _feature_profiles():
+    """Profiles over y [mm] of the nose ridge height, nose half width, upper and lower lip
+    protrusion (built once: :meth:`HeadShape.features` runs thousands of times per head)."""
+    y_tip = Y_NASION - 39.0
+    prof = _pchip([
+        (Y_NASION + 6, 0.0), (Y_NASION, 2.0), (Y_NASION - 15, 9.0), (y_tip + 6, 22.0),
+        (y_tip, 26.0), (y_tip - 5, 22.0), (Y_SUBNASALE + 4, 10.0), (Y_SUBNASALE, 3.0),
+        (Y_SUBNASALE - 3, 0.0),
+    ])
+    half = _pchip([
+        (Y_NASION + 6, 7.0), (Y_NASION, 8.0), (Y_NASION - 20, 9.5), (y_tip, 12.0),
+        (Y_SUBNASALE + 4, 11.0), (Y_SUBNASALE - 3, 9.0),
+    ])
+    upper = _pchip([
+        (Y_SUBNASALE, 0.0), (Y_SUBNASALE - 6, 3.5), (Y_STOMION + 9, 6.5), (Y_STOMION + 7, 9.5),
+        (Y_STOMION + 3, 10.0), (Y_STOMION, 6.0),
+    ])
+    lower = _pchip([
+        (Y_STOMION, 6.0), (Y_STOMION - 4, 11.0), (Y_STOMION - 9, 10.0), (Y_STOMION - 14, 4.0),
+        (Y_STOMION - 21, 0.0),
+    ])
+    return prof, half, upper, lower
 
 
 def _bump(d2):
@@ -195,16 +221,7 @@ class HeadShape:
         out += 4.0 * _gauss(ax, y, 50.0, Y_EYE - 22.0, 14.0, 14.0)
 
         # Nose: a ridge from nasion to the tip (pronasale), cross-section (1 - s^2)^1.5.
-        y_tip = Y_NASION - 39.0
-        prof = _pchip([
-            (Y_NASION + 6, 0.0), (Y_NASION, 2.0), (Y_NASION - 15, 9.0), (y_tip + 6, 22.0),
-            (y_tip, 26.0), (y_tip - 5, 22.0), (Y_SUBNASALE + 4, 10.0), (Y_SUBNASALE, 3.0),
-            (Y_SUBNASALE - 3, 0.0),
-        ])
-        half = _pchip([
-            (Y_NASION + 6, 7.0), (Y_NASION, 8.0), (Y_NASION - 20, 9.5), (y_tip, 12.0),
-            (Y_SUBNASALE + 4, 11.0), (Y_SUBNASALE - 3, 9.0),
-        ])
+        prof, half, upper, lower = _feature_profiles()
         inside_y = (y < Y_NASION + 6) & (y > Y_SUBNASALE - 3)
         s2 = (x / half(y)) ** 2
         out += np.where(inside_y, prof(y) * np.clip(1.0 - s2, 0.0, None) ** 1.5, 0.0)
@@ -215,14 +232,6 @@ class HeadShape:
         # Lips: upper lip (sn to sto) and lower lip (sto to the labiomental fold).
         mouth_w = X_CH + 6.0
         lat = np.clip(1.0 - (x / mouth_w) ** 2, 0.0, None) ** 1.6
-        upper = _pchip([
-            (Y_SUBNASALE, 0.0), (Y_SUBNASALE - 6, 3.5), (Y_STOMION + 9, 6.5), (Y_STOMION + 7, 9.5),
-            (Y_STOMION + 3, 10.0), (Y_STOMION, 6.0),
-        ])
-        lower = _pchip([
-            (Y_STOMION, 6.0), (Y_STOMION - 4, 11.0), (Y_STOMION - 9, 10.0), (Y_STOMION - 14, 4.0),
-            (Y_STOMION - 21, 0.0),
-        ])
         lip = np.where(
             (y <= Y_SUBNASALE) & (y >= Y_STOMION), upper(np.clip(y, Y_STOMION, Y_SUBNASALE)), 0.0
         ) + np.where(

@@ -19,65 +19,55 @@ Stable time step
 ----------------
 An edge of rest length D0 acts like a spring of stiffness k0 / D0^2 on a node of mass m, so
 the explicit step must stay below about 2 / omega with omega^2 ~ (sum of the node's element
-stiffnesses) / m, and the limit scales with D0. With the Table 6.3 defaults (SI model units,
-see :mod:`facewarp._src.model`) the measured limit for tets with 1 cm edges is
-:data:`DT_STABLE_1CM` (0.6 ms; 1.04 ms is the linear limit at rest); :func:`stable_dt`
-scales a safe step (by default half of it: 0.3 ms for 1 cm edges) with the shortest edge, the
-lightest node and the stiffest k0.
+stiffnesses) / m, and the limit scales with D0. For the ``thesis`` profile the measured limit
+for tets with 1 cm edges is :data:`DT_STABLE_1CM` (0.6 ms; 1.04 ms is the linear limit at rest);
+:func:`stable_dt` scales a safe step (by default half of it: 0.3 ms for 1 cm edges) with the
+shortest edge, the lightest node and the stiffest k0. For any other material (``physical``)
+:func:`node_stable_dt` bounds every node's omega^2 and damping rate by Gershgorin's theorem on the
+rest stiffness and damping matrices and takes the explicit limit of damped Verlet,
+``dt < (sqrt(c^2 + 4 omega^2) - c) / omega^2``.
 """
 
 from __future__ import annotations
-
-from typing import Protocol
 
 import numpy as np
 
 from ...core.warp import get_warp
 from .. import kernels_tissue as kt
-from ...core.errors import SimulationError
+from ...core.errors import InputError, SimulationError
 from ...geometry.tets import tet_heights
-from ..model import Control, Model, State
+from ..model import DT_STABLE_1CM, Control, Model, State, thesis_substep
+from .base import SolverBase, SolverStage, check_step_args  # noqa: F401 (re-exported)
 
-__all__ = ["DT_STABLE_1CM", "MASS_SCALING_QUANTILE", "SolverStage", "SolverVerlet", "node_stable_dt", "scale_masses",
+__all__ = ["DT_STABLE_1CM", "MASS_SCALING_QUANTILE", "SolverStage", "SolverVerlet", "check_step_args", "node_stable_dt", "scale_masses",
            "simulate", "stable_dt"]
 
-DT_STABLE_1CM = 0.6e-3
-"""Largest step [s] found stable for a 1 cm tet with the Table 6.3 defaults: one regular
-tet (all-outer or mixed layers) and a 3 x 3 x 1 slab of 1 cm Kuhn cubes, from random starts
-with strains up to ~10 %, run for 1-2 s (all 20 / 5 starts bounded; at 0.8 ms a quarter to
-most of the 10 %-strain starts of the mixed-layer tet invert). The linear limit 2 / omega_max
-of the regular tet at rest is 1.04 ms (omega_max^2 = 3.7e6 s^-2); the stiffening of
-Eq. 6.4.6 at large strain lowers it. See ``tests/test_solver.py::test_stable_dt_one_centimetre_tet``."""
-
-
 def stable_dt(model_or_builder, *, safety: float = 0.5) -> float:
-    """A safe substep [s] for a mesh: ``safety * DT_STABLE_1CM * (shortest edge / 1 cm)``,
-    scaled by ``sqrt(lightest node mass / 0.5 kg)`` and ``sqrt(15 J / largest k0)``.
+    """A safe Verlet substep [s] for a mesh.
 
-    Assumes the Table 6.3 proportions of k_area and k_volume to k0 and hold springs no
-    stiffer than the default; check larger steps with :meth:`SolverVerlet.check`.
+    Thesis profile: ``safety * DT_STABLE_1CM * (shortest edge / 1 cm)``, scaled by
+    ``sqrt(lightest node mass / 0.5 kg)`` and ``sqrt(15 J / largest k0)`` (it assumes the
+    Table 6.3 proportions of k_area and k_volume to k0 and hold springs no stiffer than the
+    default). Other profiles: the smallest of :func:`node_stable_dt`.
 
     Args:
-        model_or_builder: a :class:`~facewarp._src.model.ModelBuilder` (numpy, preferred) or
-            a :class:`Model` (reads its arrays back to the host once).
-        safety: fraction of the measured single-tet limit, default 0.5.
+        model_or_builder: a :class:`~facewarp._src.physics.model.ModelBuilder` (numpy,
+            preferred) or a :class:`Model` (thesis profile only; reads its arrays back once).
+        safety: fraction of the limit, default 0.5.
     """
     if isinstance(model_or_builder, Model):
+        if model_or_builder.material != "thesis":
+            raise InputError("model_or_builder: stable_dt of a non-thesis Model needs its ModelBuilder")
         d0 = model_or_builder.edge_rest_length.numpy()
         mass = model_or_builder.vertex_mass.numpy()
         k0 = model_or_builder.edge_k0.numpy()
-    else:
-        d0 = model_or_builder.edge_rest_lengths
-        mass = model_or_builder.mass
-        k0 = model_or_builder.edge_k0
-    return float(_edge_dt(d0.min(), mass.min(), float(k0.max()), safety))
-
-
-def _edge_dt(d0, mass, k0_max: float, safety: float):
-    """The edge rule of :func:`stable_dt`: ``safety * DT_STABLE_1CM`` scaled by edge length,
-    node mass and the stiffest k0 (scalars or arrays)."""
-    k = max(k0_max, 1e-30)
-    return safety * DT_STABLE_1CM * (d0 / 0.01) * np.sqrt(mass / 0.5) * np.sqrt(15.0 / k)
+        return float(thesis_substep(d0.min(), mass.min(), float(k0.max()), safety=safety))
+    b = model_or_builder
+    if b.material.name == "thesis":
+        return float(thesis_substep(b.edge_rest_lengths.min(), b.mass.min(), float(b.edge_k0.max()), safety=safety))
+    free = ~b.fixed
+    dtn = node_stable_dt(b, safety=safety)
+    return float(dtn[free].min() if free.any() else dtn.min())
 
 
 MASS_SCALING_QUANTILE = 0.02
@@ -85,10 +75,48 @@ MASS_SCALING_QUANTILE = 0.02
 the extra mass that brings them up to it (:func:`scale_masses`)."""
 
 
-def node_stable_dt(builder, *, safety: float = 0.5) -> np.ndarray:
-    """The stable step [s] each node allows, shape (n,), float64.
+def _gershgorin_rates(builder) -> tuple[np.ndarray, np.ndarray]:
+    """Per node bounds of the rest stiffness and strain-rate damping rows [N/m], [N s/m].
 
-    Two limits per node, the smaller wins:
+    Each element term ``1/2 k C^2`` has the rest Hessian ``k grad C grad C^T``; the row of
+    node a is bounded by ``k |g_a| sum_b |g_b|`` (Gershgorin), likewise the dashpot ``d``.
+    The distance energy's stiffening (Eq. 6.4.6, 1 + 3 C^2) is left to the safety factor.
+    """
+    V, n = builder.vertices, builder.vertex_count
+    K = np.zeros(n)
+    D = np.zeros(n)
+
+    def add(idx, g, k, d):
+        norms = np.linalg.norm(g, axis=2)  # (m, c)
+        tot = norms.sum(axis=1, keepdims=True)
+        for c in range(idx.shape[1]):
+            np.add.at(K, idx[:, c], k * norms[:, c] * tot[:, 0])
+            np.add.at(D, idx[:, c], d * norms[:, c] * tot[:, 0])
+
+    E = builder.edges
+    dvec = V[E[:, 0]] - V[E[:, 1]]
+    L = builder.edge_rest_lengths
+    nrm = dvec / np.linalg.norm(dvec, axis=1, keepdims=True)
+    add(E, np.stack([nrm, -nrm], 1) / L[:, None, None], builder.edge_k0, builder.edge_damping_coef)
+    F = builder.faces
+    e1, e2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    N = np.cross(e1, e2)
+    m = N / np.linalg.norm(N, axis=1, keepdims=True)
+    gj, gk = 0.5 * np.cross(e2, m), 0.5 * np.cross(m, e1)
+    add(F, np.stack([-(gj + gk), gj, gk], 1) / builder.face_rest_areas[:, None, None], builder.face_k,
+        builder.face_damping_coef)
+    T = builder.tets
+    e1, e2, e3 = (V[T[:, c]] - V[T[:, 0]] for c in (1, 2, 3))
+    gj, gk, gl = np.cross(e2, e3) / 6, np.cross(e3, e1) / 6, np.cross(e1, e2) / 6
+    add(T, np.stack([-(gj + gk + gl), gj, gk, gl], 1) / builder.tet_rest_volumes[:, None, None], builder.tet_k,
+        builder.tet_damping_coef)
+    return K + builder.hold_stiffness, D
+
+
+def node_stable_dt(builder, *, safety: float = 0.5, extra_stiffness=None) -> np.ndarray:
+    """The stable Verlet step [s] each node allows, shape (n,), float64.
+
+    Thesis profile, two limits per node, the smaller wins:
 
     * edges: :func:`stable_dt`'s rule with the node's shortest incident edge and its own mass
       (an edge of rest length D0 is a spring k0 / D0^2);
@@ -97,27 +125,41 @@ def node_stable_dt(builder, *, safety: float = 0.5) -> np.ndarray:
       ``dt <= 0.5 h sqrt(m / (k_volume + k_area))`` (half the explicit limit 1 / omega) over the
       node's tets.
 
+    Other profiles: ``safety`` times the damped explicit limit with Gershgorin bounds of the
+    node's rest stiffness and damping rows (module doc), the hold spring and ``extra_stiffness``
+    included, and the mass-proportional damping rate.
+
     Args:
-        builder: a :class:`~facewarp._src.model.ModelBuilder`.
-        safety: fraction of the measured single-tet limit (as :func:`stable_dt`).
+        builder: a :class:`~facewarp._src.physics.model.ModelBuilder`.
+        safety: fraction of the limit (as :func:`stable_dt`).
+        extra_stiffness: Further springs on each node [N/m] (support, muscles), shape (n,);
+            counted by the non-thesis rule only.
     """
     V, T, m = builder.vertices, builder.tets, builder.mass
     n = len(V)
+    if builder.material.name != "thesis":
+        K, D = _gershgorin_rates(builder)
+        if extra_stiffness is not None:
+            K = K + np.asarray(extra_stiffness, dtype=np.float64)
+        w2 = K / m
+        c = D / m + builder.damping_rate
+        return safety * (np.sqrt(c * c + 4.0 * w2) - c) / np.maximum(w2, 1e-30)
     E, d0 = builder.edges, builder.edge_rest_lengths
     dmin = np.full(n, np.inf)
     np.minimum.at(dmin, E[:, 0], d0)
     np.minimum.at(dmin, E[:, 1], d0)
-    dt = _edge_dt(dmin, m, float(builder.edge_k0.max()), safety)
+    dt = thesis_substep(dmin, m, float(builder.edge_k0.max()), safety=safety)
     h = tet_heights(V, T)
     hmin = np.full(n, np.inf)
     for i in range(4):
         np.minimum.at(hmin, T[:, i], h)
-    kf = max(builder.k_volume + builder.k_area, 1e-30)
+    kf = max(float(builder.tet_k.max() + builder.face_k.max()), 1e-30)
     return np.minimum(dt, 0.5 * hmin * np.sqrt(m / kf))
 
 
-def scale_masses(builder, *, quantile: float = MASS_SCALING_QUANTILE, safety: float = 0.5) -> tuple[float, float]:
-    """Selective mass scaling: choose the substep and add mass where a node is below it.
+def scale_masses(builder, *, quantile: float = MASS_SCALING_QUANTILE, safety: float = 0.5,
+                 extra_stiffness=None) -> tuple[float, float]:
+    """Selective mass scaling: choose the Verlet substep and add mass where a node is below it.
 
     The substep is the ``quantile`` of :func:`node_stable_dt` over the free nodes; a node that
     allows less (a short edge or a flat tet: on adapted heads these sit in sharp creases of the
@@ -127,16 +169,17 @@ def scale_masses(builder, *, quantile: float = MASS_SCALING_QUANTILE, safety: fl
     feel. ``quantile = 0`` leaves the masses alone and returns the smallest limit.
 
     Args:
-        builder: a :class:`~facewarp._src.model.ModelBuilder` (its ``mass`` is updated).
+        builder: a :class:`~facewarp._src.physics.model.ModelBuilder` (its ``mass`` is updated).
         quantile: fraction of the free nodes that may get extra mass, in [0, 0.5].
         safety: as :func:`stable_dt`.
+        extra_stiffness: as :func:`node_stable_dt`.
 
     Returns:
         ``(dt, added)``: the substep [s] and the added mass as a fraction of the total.
     """
     if not 0.0 <= quantile <= 0.5:
-        raise ValueError(f"quantile must lie in [0, 0.5], got {quantile}")
-    dtn = node_stable_dt(builder, safety=safety)
+        raise InputError(f"quantile must lie in [0, 0.5], got {quantile}")
+    dtn = node_stable_dt(builder, safety=safety, extra_stiffness=extra_stiffness)
     free = ~builder.fixed
     if not free.any():
         return float(dtn.min()), 0.0
@@ -147,41 +190,7 @@ def scale_masses(builder, *, quantile: float = MASS_SCALING_QUANTILE, safety: fl
     return dt, float(builder.mass.sum() / total - 1.0)
 
 
-class SolverStage(Protocol):
-    """A stage that adds external forces or moves kinematic targets each substep.
-
-    Muscles (Eq. 6.4.1) accumulate spring forces into ``forces``; the jaw (Eq. 6.4.9) writes
-    the targets of the nodes it carries (fixed nodes are placed on their target, held nodes
-    are pulled to it), and its carry stage moves the free jaw-region nodes kinematically, in
-    place in ``state_in`` (both position buffers, before any force is computed). ``apply`` may
-    only launch kernels: no allocation, no host read.
-    """
-
-    def apply(
-        self,
-        model: Model,
-        state_in: State,
-        control: Control,
-        dt: float,
-        forces: object,
-        targets: object,
-    ) -> None:
-        """Launch kernels for one substep.
-
-        Args:
-            model: the tissue model.
-            state_in: positions at t and t - dt (read only, except a kinematic carry).
-            control: activations, jaw angles (read only).
-            dt: substep [s].
-            forces: forces [N] to accumulate into (wp.atomic_add), shape (vertex_count,),
-                wp.vec3; holds ``control.external_force`` when the stage is called.
-            targets: target positions [m] of fixed / held nodes, shape (vertex_count,),
-                wp.vec3; persistent between substeps, rest positions initially.
-        """
-        ...
-
-
-class SolverVerlet:
+class SolverVerlet(SolverBase):
     """Damped Verlet integration of the tissue model (Eq. 6.4.10) on ``model.device``.
 
     Args:
@@ -198,16 +207,11 @@ class SolverVerlet:
 
     def __init__(self, model: Model, *, stages=()):
         wp = get_warp()
-        self.model = model
-        self.device = model.device
-        self.stages = list(stages)
+        super().__init__(model, stages=stages)
         n = model.vertex_count
         self.forces = wp.zeros(n, dtype=wp.vec3, device=self.device)
         self.slots = wp.zeros(model.slot_count, dtype=wp.vec3, device=self.device)
         self.nodes = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
-        self.targets = wp.clone(model.rest_positions)
-        self.step_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
-        self.guard = wp.array([kt.GUARD_NONE, kt.GUARD_NONE], dtype=wp.int32, device=self.device)
 
     # ------------------------------------------------------------------------------------
     # device work (no allocation, no host read)
@@ -230,36 +234,27 @@ class SolverVerlet:
         wp.launch(
             kt._edge_forces,
             dim=m.edge_count,
-            inputs=[
-                m.edge_indices,
-                m.edge_rest_length,
-                m.edge_k0,
-                m.edge_damping,
-                1.0 / dt,
-                state_in.positions,
-                state_in.prev_positions,
-            ],
+            inputs=[m.edge_indices, m.edge_rest_length, m.edge_k0, m.edge_damping, 1.0 / dt,
+                    state_in.positions, state_in.prev_positions],
             outputs=[self.slots],
             device=self.device,
         )
-        # area / volume slots stay zero (as allocated) when their stiffness is 0
-        if m.k_area > 0.0:
-            wp.launch(
-                kt._face_forces,
-                dim=m.face_count,
-                inputs=[m.face_indices, m.face_rest_area, m.k_area, 2 * m.edge_count, state_in.positions],
-                outputs=[self.slots],
-                device=self.device,
-            )
-        if m.k_volume > 0.0:
-            wp.launch(
-                kt._tet_forces,
-                dim=m.tet_count,
-                inputs=[m.tet_indices, m.tet_rest_volume, m.k_volume, 2 * m.edge_count + 3 * m.face_count,
-                        state_in.positions],
-                outputs=[self.slots],
-                device=self.device,
-            )
+        wp.launch(
+            kt._face_forces,
+            dim=m.face_count,
+            inputs=[m.face_indices, m.face_rest_area, m.face_k, m.face_damping, 1.0 / dt, 2 * m.edge_count,
+                    state_in.positions, state_in.prev_positions],
+            outputs=[self.slots],
+            device=self.device,
+        )
+        wp.launch(
+            kt._tet_forces,
+            dim=m.tet_count,
+            inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, 1.0 / dt,
+                    2 * m.edge_count + 3 * m.face_count, state_in.positions, state_in.prev_positions],
+            outputs=[self.slots],
+            device=self.device,
+        )
         wp.launch(kt._gather, dim=m.vertex_count, inputs=[self.nodes, m.node_slot_start, m.node_slots, self.slots],
                   outputs=[self.forces], device=self.device)
         return self.forces
@@ -270,8 +265,7 @@ class SolverVerlet:
         ``state_in`` and ``state_out`` must be different buffers. Allocates nothing and does
         not synchronise, so it can be captured in a CUDA graph.
         """
-        if state_in.positions.ptr == state_out.positions.ptr:
-            raise ValueError("state_in and state_out must be different State buffers")
+        check_step_args(state_in, state_out, dt)
         wp = get_warp()
         m = self.model
         self.compute_forces(state_in, control, dt)
@@ -282,8 +276,9 @@ class SolverVerlet:
                 m.vertex_inv_mass,
                 m.vertex_fixed,
                 m.vertex_hold_stiffness,
-                m.damping,
+                m.damping_rate,
                 dt,
+                control.cranium_velocity,
                 self.forces,
                 self.targets,
                 state_in.positions,
@@ -292,61 +287,7 @@ class SolverVerlet:
             outputs=[state_out.positions, state_out.prev_positions, self.step_counter],
             device=self.device,
         )
-        wp.launch(
-            kt._check_tets,
-            dim=m.tet_count,
-            inputs=[m.tet_indices, self.step_counter, state_out.positions],
-            outputs=[self.guard],
-            device=self.device,
-        )
-
-    # ------------------------------------------------------------------------------------
-    # host side
-
-    @property
-    def step_count(self) -> int:
-        """Substeps taken so far (reads the device counter back)."""
-        return int(self.step_counter.numpy()[0])
-
-    def reset(self) -> None:
-        """Back to the rest pose: targets at rest, step counter 0, guard cleared (no allocation)."""
-        self.targets.assign(self.model.rest_positions)
-        self.step_counter.zero_()
-        self.reset_guard()
-
-    def reset_guard(self) -> None:
-        """Forget a recorded failure (host side)."""
-        self.guard.assign(np.array([kt.GUARD_NONE, kt.GUARD_NONE], dtype=np.int32))
-
-    def check(self, state: State | None = None) -> None:
-        """Raise :class:`SimulationError` if a substep produced a NaN or an inverted tet.
-
-        Host side (reads the guard back): call it between frames, not inside ``step``.
-
-        Args:
-            state: the current state, used to name the offending vertex of a NaN tet and
-                the current volume of an inverted one (optional).
-
-        Raises:
-            SimulationError: naming the first failing substep and tet (and vertex).
-        """
-        step, code = (int(v) for v in self.guard.numpy())
-        if step == kt.GUARD_NONE:
-            return
-        tet, kind = divmod(code, 2)
-        idx = self.model.tet_indices.numpy()[tet].tolist()
-        where = f"simulation failed at step {step}: tet {tet} (vertices {idx})"
-        if kind == 0:
-            msg = f"{where} has a non-finite (NaN/inf) node position"
-            if state is not None:
-                x = state.positions.numpy()[idx]
-                bad = [v for v, row in zip(idx, x) if not np.all(np.isfinite(row))]
-                if bad:
-                    msg += f" (now non-finite: vertices {bad})"
-        else:
-            v0 = float(self.model.tet_rest_volume.numpy()[tet])
-            msg = f"{where} is inverted (signed volume <= 0, rest volume {v0:.3g} m^3)"
-        raise SimulationError(msg + "; reduce dt (see solver.stable_dt) or raise damping")
+        self._launch_guard(state_out)
 
 
 def simulate(
@@ -384,16 +325,16 @@ def simulate(
     """
     wp = get_warp()
     if substeps < 1:
-        raise ValueError(f"substeps must be >= 1, got {substeps}")
-    if dt <= 0.0:
-        raise ValueError(f"dt must be > 0, got {dt}")
+        raise InputError(f"substeps must be >= 1, got {substeps}")
+    if not (np.isfinite(dt) and dt > 0.0):
+        raise InputError(f"dt must be a positive number of seconds, got {dt!r}")
     solver = solver or SolverVerlet(model)
     scratch = model.state()
     device = model.device
     if use_graph is None:
         use_graph = device.is_cuda
     if use_graph and not device.is_cuda:
-        raise ValueError(f"use_graph needs a CUDA device, the model is on {device}")
+        raise InputError(f"use_graph needs a CUDA device, the model is on {device}")
 
     def frame():
         for s in range(substeps):

@@ -1,0 +1,185 @@
+"""The jaw as a MuJoCo hinge body, two-way coupled to the simulated skin (Sec. 6.4.3).
+
+:class:`MujocoJaw` attaches a :class:`~facewarp.FaceSimulator` to a user's ``MjModel`` /
+``MjData`` by body and joint names (those of :func:`~facewarp._src.coupling.mjcf.head_mjcf`:
+bodies ``cranium`` and ``mandible``, hinges ``jaw_open`` about the condyle u-axis and
+``jaw_side`` about the v-axis). Data are exchanged once per frame, not per substep:
+
+1. MuJoCo -> skin: the hinge angles become the skin's jaw angles (:meth:`FaceSimulator.set_jaw`):
+   the held inner nodes of the jaw regions, the carried mass points, the muscle control points
+   and anchors follow the mandible with their Eq. 6.4.9 amounts, through the stiff hold springs
+   of the held nodes (the skin can resist). The cranium body's pose becomes the head pose
+   (:meth:`FaceSimulator.set_head_pose`), so the face rides the body.
+2. skin -> MuJoCo: the hold springs' reaction on the mandible, ``k_i (x_i - T_i)`` at the targets
+   ``T_i``, projected on each hinge's motion ``dT_i/dtheta = a_i (axis x (T_i - pivot))``, is the
+   skin's generalised force on that hinge. It is passed with its linearisation about the current
+   angle: the joint's spring reference is set to the current angle, its stiffness to the skin's
+   (the secant of the force over the last frames, clipped to what MuJoCo's explicit spring can
+   take at its time step), and the rest goes to ``qfrc_applied``. MuJoCo then steps the frame with
+   a spring that answers the mandible's motion inside the frame, which keeps the exchange stable
+   at the frame's step.
+
+What is conserved and what is approximated: the force pair between skin and mandible is equal
+and opposite at the frame boundaries (the torque applied to MuJoCo is exactly the reaction of
+the springs the skin feels at that instant); inside a frame the skin's answer is the linear
+spring above, and the skin sees the angle at the frame's end (a one-frame lag). The kinematic
+carry of the jaw regions' free mass points (Sec. 6.4.3) moves them without a reaction, as in the
+thesis; only held nodes push back. Energy is not exactly conserved across the exchange: the lag
+and the clipped stiffness make the coupling slightly dissipative, never energy-producing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..core.errors import InputError
+
+__all__ = ["MujocoJaw"]
+
+
+def _mujoco():
+    try:
+        import mujoco
+    except ImportError:  # pragma: no cover - depends on the environment
+        raise InputError("the MuJoCo coupling needs the package mujoco: pip install mujoco") from None
+    return mujoco
+
+
+class MujocoJaw:
+    """Couples a face simulator to a MuJoCo model's mandible (see the module docstring).
+
+    Args:
+        sim: The :class:`~facewarp.FaceSimulator` of the head.
+        model: The ``mujoco.MjModel``.
+        data: Its ``mujoco.MjData``.
+        mandible: Name of the mandible body.
+        cranium: Name of the cranium body (the head pose); None keeps the head still.
+        open_joint, side_joint: Names of the hinges (``side_joint`` may be None).
+        two_way: Apply the skin's reaction to MuJoCo (False: MuJoCo drives the skin only).
+
+    Raises:
+        InputError: a body or joint name not in the model, or a joint that is not a hinge.
+    """
+
+    def __init__(self, sim, model, data, *, mandible: str = "mandible", cranium: str | None = "cranium",
+                 open_joint: str = "jaw_open", side_joint: str | None = "jaw_side", two_way: bool = True):
+        mj = _mujoco()
+        self.mj = mj
+        self.sim, self.model, self.data = sim, model, data
+        self.two_way = bool(two_way)
+
+        def body(name):
+            i = mj.mj_name2id(model, mj.mjtObj.mjOBJ_BODY, name)
+            if i < 0:
+                raise InputError(f"mandible/cranium: no body named {name!r} in the MuJoCo model")
+            return i
+
+        def hinge(name):
+            j = mj.mj_name2id(model, mj.mjtObj.mjOBJ_JOINT, name)
+            if j < 0:
+                raise InputError(f"joint: no joint named {name!r} in the MuJoCo model")
+            if model.jnt_type[j] != mj.mjtJoint.mjJNT_HINGE:
+                raise InputError(f"joint {name!r}: expected a hinge")
+            return j
+
+        self.mandible = body(mandible)
+        self.cranium = body(cranium) if cranium is not None else None
+        self.joints = [hinge(open_joint)] + ([hinge(side_joint)] if side_joint is not None else [])
+        self.qadr = [int(model.jnt_qposadr[j]) for j in self.joints]
+        self.dadr = [int(model.jnt_dofadr[j]) for j in self.joints]
+        self.frame_dt = 1.0 / sim.fps
+        ratio = self.frame_dt / float(model.opt.timestep)
+        self.mj_steps = max(1, int(round(ratio)))
+        if abs(ratio - self.mj_steps) > 1e-6 * ratio:
+            raise InputError(f"fps: a frame ({self.frame_dt:.6g} s) must be a whole number of MuJoCo steps "
+                             f"({float(model.opt.timestep):.6g} s)")
+        fr = sim.fr
+        self.pivot = np.asarray(fr.jaw_pivot, np.float64)
+        self.axes = [np.asarray(fr.jaw_u, np.float64), np.asarray(fr.jaw_v, np.float64)][: len(self.joints)]
+        self.nodes = np.asarray(fr.jaw_nodes, np.int64)
+        self.amount = np.asarray(fr.jaw_amount, np.float64)
+        self.k_hold = sim.hold_stiffness()[self.nodes]
+        self.rest = np.asarray(fr.nodes, np.float64)[self.nodes]
+        # the stiffest spring MuJoCo's explicit passive force takes at its step, per hinge
+        mj.mj_forward(model, data)
+        self._k_max = []
+        for d in self.dadr:
+            M = np.zeros((model.nv, model.nv))
+            mj.mj_fullM(model, M, data.qM)
+            self._k_max.append(0.5 * (2.0 / float(model.opt.timestep)) ** 2 * float(M[d, d]))
+        self._stiff0 = [float(model.jnt_stiffness[j]) for j in self.joints]
+        self._ref0 = [float(model.qpos_spring[a]) for a in self.qadr]
+        self._last = None  # (angles, generalised forces) of the previous frame
+        self.torque = np.zeros(len(self.joints))
+        self.stiffness = np.zeros(len(self.joints))
+
+    # ---------------------------------------------------------------------------------------
+    def angles(self) -> np.ndarray:
+        """Current hinge angles [rad], (open, side)."""
+        a = [float(self.data.qpos[q]) for q in self.qadr]
+        return np.array(a + [0.0] * (2 - len(a)))
+
+    def skin_forces(self, angles) -> tuple[np.ndarray, np.ndarray]:
+        """The skin's generalised force on each hinge [N m] at the simulator's current state,
+        and its upper-bound stiffness ``sum k a^2 |axis x r|^2`` [N m / rad], each (hinges,)."""
+        jaw = self.sim.jaw
+        T = jaw.apply(self.rest, self.amount, float(angles[0]), float(angles[1]))
+        X = self.sim.positions()[self.nodes]
+        f_mandible = self.k_hold[:, None] * (X - T)  # the springs pull the mandible toward the skin
+        tau, k = [], []
+        for ax in self.axes:  # small angles: the v rotation's effect on the u axis is neglected
+            lever = self.amount[:, None] * np.cross(ax, T - self.pivot)
+            tau.append(float(np.einsum("kd,kd->", f_mandible, lever)))
+            k.append(float((self.k_hold * np.einsum("kd,kd->k", lever, lever)).sum()))
+        return np.array(tau), np.array(k)
+
+    def head_pose(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The cranium body's pose (R (3, 3), t (3,) [m]) in the MuJoCo world, or None."""
+        if self.cranium is None:
+            return None
+        return self.data.xmat[self.cranium].reshape(3, 3).copy(), self.data.xpos[self.cranium].copy()
+
+    def exchange(self) -> None:
+        """Skin side of one frame: take the MuJoCo angles and head pose, step the skin, and hand
+        MuJoCo the skin's torque with its linearisation (no MuJoCo step)."""
+        mj = self.mj
+        mj.mj_kinematics(self.model, self.data)
+        pose = self.head_pose()
+        if pose is not None:
+            self.sim.set_head_pose(*pose)
+        ang = self.angles()
+        self.sim.set_jaw(min(max(ang[0], 0.0), math.radians(60.0)), float(np.clip(ang[1], -math.radians(5), math.radians(5))))
+        self.sim.step()
+        tau, k_bound = self.skin_forces(ang)
+        k = np.zeros(len(self.joints))
+        if self._last is not None:
+            dq = ang[: len(self.joints)] - self._last[0]
+            dt = tau - self._last[1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                sec = np.where(np.abs(dq) > 1e-6, -dt / dq, 0.0)
+            k = np.clip(sec, 0.0, k_bound)
+        k = np.minimum(k, self._k_max)
+        self._last = (ang[: len(self.joints)].copy(), tau.copy())
+        self.torque, self.stiffness = tau, k
+        if self.two_way:
+            for i, (j, q, d) in enumerate(zip(self.joints, self.qadr, self.dadr)):
+                self.model.jnt_stiffness[j] = self._stiff0[i] + k[i]
+                self.model.qpos_spring[q] = ang[i]
+                # the joint's own spring keeps its reference: -(s0 + k)(q - ang) = -s0 (q - r0)
+                # - k (q - ang) - s0 (r0 - ang), so the last term is given back here
+                self.data.qfrc_applied[d] = tau[i] + self._stiff0[i] * (self._ref0[i] - ang[i])
+
+    def step(self) -> None:
+        """One frame: :meth:`exchange`, then the frame's MuJoCo steps."""
+        self.exchange()
+        for _ in range(self.mj_steps):
+            self.mj.mj_step(self.model, self.data)
+
+    def detach(self) -> None:
+        """Give the model back its own joint stiffness and spring references, no applied force."""
+        for i, (j, q, d) in enumerate(zip(self.joints, self.qadr, self.dadr)):
+            self.model.jnt_stiffness[j] = self._stiff0[i]
+            self.model.qpos_spring[q] = self._ref0[i]
+            self.data.qfrc_applied[d] = 0.0

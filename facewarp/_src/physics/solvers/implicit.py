@@ -1,0 +1,558 @@
+"""Implicit (backward) Euler solver of the skin model: the thesis's energies at frame-sized steps.
+
+``SolverImplicit(model, stages=...).step(state_in, state_out, control, dt)`` has the contract of
+:class:`~.verlet.SolverVerlet` (:mod:`.base`) and integrates the same :class:`Model` (energies of
+Eq. 6.4.4-6.4.8, muscle springs of Eq. 6.4.1, holds, supports, damping): one step minimises the
+incremental potential Phi of backward Euler (:mod:`facewarp._src.physics.potential`, kernels in
+:mod:`.kernels_implicit`), which is stable for any step, so a 30 fps frame can be one step.
+
+Why this method (measured on the 2-core CPU box, default head level 0, 6.7k tets, physical
+profile, smile / laugh with the jaw; ``benchmarks/solver_methods.py``)
+--------------------------------------------------------------------------------------------
+The skin is a thin stiff layer driven quasi-statically: at 30 fps the mass term ``M / h^2`` is
+~1e-4 of the stiffness, so a step is practically a static solve whose error modes span the whole
+face. Sweep methods (Jacobi, Gauss-Seidel / VBD colour sweeps, XPBD) reduce such smooth modes by
+a factor ~(1 - (edge / region)^2) per sweep and need hundreds of sweeps per frame here; so does
+conjugate gradients with a Jacobi preconditioner inside Newton (the GPU path below). A global
+direct solve removes all modes at once. Newton with a fresh sparse factorisation per iteration
+converges in 2-6 iterations but a factorisation costs 50-200 ms at level 0. The default is
+therefore the quasi-Newton method of Liu, Bouaziz & Kavan 2017 ("Quasi-Newton methods for
+real-time simulation of hyperelastic materials"): L-BFGS whose initial inverse Hessian is a sparse
+Cholesky / LU factorisation of the PSD Hessian ``M / h^2 + K`` made once (at the first step) and
+reused, with energy-decreasing backtracking. Its gradient and energy are Warp kernels (one launch
+per element kind, ~1 ms at level 0 on one CPU thread); the factor's back-substitution is the
+other half of an iteration. From the previous motion extrapolated, 1-3 iterations per frame keep
+every node within 0.1 mm of the converged step, and the factorisation is renewed at the current
+shape only when an expression (jaw rotation, muscle springs switching on) makes the old one a poor
+model (more than ``refactor_iterations`` iterations in a step).
+
+Methods (``method=``):
+
+* ``"lbfgs"`` (default on the CPU): the above; host factorisation (CHOLMOD from scikit-sparse, or
+  QDLDL, when installed, else SuperLU from SciPy) on zero-copy views of the Warp arrays.
+* ``"newton"`` (CPU): Newton with a fresh factorisation every iteration and backtracking: the
+  "fully converged" reference of the benchmarks.
+* ``"newton-pcg"`` (default on CUDA, runs on the CPU too): a fixed number of Newton iterations,
+  each with a fixed number of block-Jacobi preconditioned conjugate-gradient iterations
+  (``warp.optim.linear.cg``) on the block-sparse Hessian assembled by kernels, and a backtracking
+  line search decided on the device: no host round trip, so a whole frame can be captured in one
+  CUDA graph (:meth:`SolverImplicit.step` allocates nothing).
+
+The muscle springs' fibre cosine of Eq. 6.4.1 is taken at the step's start and held over the
+step (see ``kernels_muscle._muscle_springs``): a conservative spring within the step, Eq. 6.4.1
+exactly at rest.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import time
+
+import numpy as np
+
+from ...core.errors import InputError
+from ...core.warp import get_warp
+from .. import kernels_tissue as kt
+from ..model import Control, Model, State, group_indices
+from . import kernels_implicit as ki
+from .base import SolverBase, check_step_args
+
+__all__ = ["IMPLICIT_METHODS", "SolverImplicit", "factorization_backend"]
+
+IMPLICIT_METHODS = ("lbfgs", "newton", "newton-pcg")
+"""The methods of :class:`SolverImplicit` (see the module doc)."""
+
+_CHUNK = 256  # entries per thread of the deterministic energy sums
+_LINE_SEARCH_TRIALS = 4  # device line search: t = 1, 1/2, 1/4, 1/8
+
+
+def factorization_backend() -> str:
+    """The sparse factorisation the CPU methods use: ``"cholmod"`` (scikit-sparse),
+    ``"qdldl"`` or ``"splu"`` (SciPy's SuperLU, always there), the first one installed."""
+    if importlib.util.find_spec("sksparse") is not None:
+        try:
+            from sksparse.cholmod import cholesky  # noqa: F401
+
+            return "cholmod"
+        except ImportError:  # pragma: no cover - a broken install
+            pass
+    if importlib.util.find_spec("qdldl") is not None:
+        return "qdldl"
+    return "splu"
+
+
+def _factorize(A, backend: str):
+    """A solve function ``b -> A^-1 b`` for the sparse SPD matrix A (scipy, any format)."""
+    import scipy.sparse as sp
+
+    A = sp.csc_matrix(A)
+    if backend == "cholmod":
+        from sksparse.cholmod import cholesky
+
+        f = cholesky(A)
+        return f
+    if backend == "qdldl":
+        import qdldl
+
+        s = qdldl.Solver(sp.triu(A, format="csc"))
+        return s.solve
+    import scipy.sparse.linalg as spla
+
+    lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True))
+    return lu.solve
+
+
+class _SpringSet:
+    """One stage's springs with the fixed-order gather of their gradient slots and Hessian blocks."""
+
+    def __init__(self, springs, device):
+        wp = get_warp()
+        self.springs = springs
+        node = springs.node.numpy().astype(np.int64)
+        self.count = len(node)
+        self.node_host = node
+        self.axis = springs.axis is not None
+        nodes_u, start, order = group_indices(node)
+        self.group_nodes = wp.array(nodes_u.astype(np.int32), dtype=wp.int32, device=device)
+        self.group_start = wp.array(start.astype(np.int32), dtype=wp.int32, device=device)
+        self.group_order = wp.array(order.astype(np.int32), dtype=wp.int32, device=device)
+        self.energy = None  # views into the solver's energy array
+        self.grad = wp.zeros(self.count, dtype=wp.vec3, device=device)
+
+
+class SolverImplicit(SolverBase):
+    """Backward Euler of the skin model, one minimisation of the step's potential per step.
+
+    Args:
+        model: the tissue :class:`Model`.
+        stages: :class:`~.base.SolverStage` objects prepared, in order, at the start of each step.
+        method: ``"lbfgs"`` (CPU default), ``"newton"`` (CPU) or ``"newton-pcg"`` (CUDA
+            default); see the module doc.
+        tolerance: Converged when no free node moves more than this in an iteration [m]
+            (default 1e-5 m = 0.01 mm). Ignored with ``iterations``.
+        max_iterations: At most this many (quasi-)Newton iterations per step (default 50).
+        iterations: A fixed count per step instead (the interactive mode: a fixed cost per
+            frame, no convergence test). ``"newton-pcg"`` always runs a fixed count (default 3).
+        history: L-BFGS memory (default 8 pairs).
+        extrapolate: The first guess is ``x_n + extrapolate (x_n - x_prev)`` (default 1: the
+            previous step's motion continued).
+        linear_iterations: Conjugate-gradient iterations per Newton iteration (``"newton-pcg"``,
+            default 200).
+        refactor_iterations: ``"lbfgs"`` renews its factorisation at the end of a step that
+            needed more iterations than this (default 8).
+        backend: Sparse factorisation for the CPU methods (default :func:`factorization_backend`).
+
+    Attributes:
+        last_iterations: Iterations of the last step (host; 0 before the first step).
+        factorizations: Number of factorisations made so far (CPU methods).
+        timings: Seconds spent, accumulated: ``{"prepare", "gradient", "solve", "factor"}``.
+    """
+
+    def __init__(self, model: Model, *, stages=(), method: str | None = None, tolerance: float = 1e-5,
+                 max_iterations: int = 50, iterations: int | None = None, history: int = 8,
+                 extrapolate: float = 1.0, linear_iterations: int = 200, refactor_iterations: int = 8,
+                 backend: str | None = None):
+        super().__init__(model, stages=stages)
+        wp = get_warp()
+        if method is None:
+            method = "newton-pcg" if self.device.is_cuda else "lbfgs"
+        if method not in IMPLICIT_METHODS:
+            raise InputError(f"method: expected one of {', '.join(IMPLICIT_METHODS)}, got {method!r}")
+        if method != "newton-pcg" and self.device.is_cuda:
+            raise InputError(f"method {method!r} factorises on the host and runs on the CPU only; "
+                             "use method='newton-pcg' on CUDA")
+        for name, val in (("tolerance", tolerance), ("extrapolate", extrapolate)):
+            if not (np.isfinite(val) and val >= 0):
+                raise InputError(f"{name}: expected a finite number >= 0, got {val!r}")
+        for name, val in (("max_iterations", max_iterations), ("history", history),
+                          ("linear_iterations", linear_iterations), ("refactor_iterations", refactor_iterations)):
+            if not (isinstance(val, (int, np.integer)) and val >= 1):
+                raise InputError(f"{name}: expected a whole number >= 1, got {val!r}")
+        if iterations is not None and not (isinstance(iterations, (int, np.integer)) and iterations >= 1):
+            raise InputError(f"iterations: expected a whole number >= 1 or None, got {iterations!r}")
+        if backend is not None and backend not in ("cholmod", "qdldl", "splu"):
+            raise InputError(f"backend: expected 'cholmod', 'qdldl' or 'splu', got {backend!r}")
+        for st in self.stages:
+            if not hasattr(st, "prepare"):
+                raise InputError(f"stages: {type(st).__name__} has no prepare(): it drives explicit solvers only")
+        self.method = method
+        self.tolerance = float(tolerance)
+        self.max_iterations = int(max_iterations)
+        self.iterations = None if iterations is None else int(iterations)
+        if method == "newton-pcg" and self.iterations is None:
+            self.iterations = 3
+        self.history = int(history)
+        self.extrapolate = float(extrapolate)
+        self.linear_iterations = int(linear_iterations)
+        self.refactor_iterations = int(refactor_iterations)
+        self.backend = backend or factorization_backend()
+        self.last_iterations = 0
+        self.factorizations = 0
+        self.timings = {"prepare": 0.0, "gradient": 0.0, "solve": 0.0, "factor": 0.0}
+
+        m, dev, n = model, self.device, model.vertex_count
+        self.springs = [_SpringSet(st.springs, dev) for st in self.stages
+                        if getattr(st, "springs", None) is not None and st.springs.count > 0]
+        self.x = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self.x_trial = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self.z = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self.grad = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self.slots = wp.zeros(m.slot_count, dtype=wp.vec3, device=dev)
+        self.c_edge = wp.zeros(m.edge_count, dtype=float, device=dev)
+        self.c_face = wp.zeros(m.face_count, dtype=float, device=dev)
+        self.c_tet = wp.zeros(m.tet_count, dtype=float, device=dev)
+        self.nodes = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=dev)
+        # one energy array: edges, faces, tets, nodes, then each spring set
+        sizes = [m.edge_count, m.face_count, m.tet_count, n] + [s.count for s in self.springs]
+        off = np.r_[0, np.cumsum(sizes)]
+        self.energy = wp.zeros(int(off[-1]), dtype=float, device=dev)
+        self._e_views = [self.energy[int(off[i]):int(off[i + 1])] for i in range(len(sizes))]
+        for s, v in zip(self.springs, self._e_views[4:]):
+            s.energy = v
+        self._chunks = max(1, -(-int(off[-1]) // _CHUNK))
+        self.partial = wp.zeros(self._chunks, dtype=wp.float64, device=dev)
+        self.totals = wp.zeros(1 + _LINE_SEARCH_TRIALS, dtype=wp.float64, device=dev)
+        self._h = None
+        self._solve0 = None
+        self._blocks_ready = False
+        self._build_blocks()
+        if method == "newton-pcg":
+            self._build_pcg()
+
+    # ------------------------------------------------------------------------------ Hessian pattern
+    def _build_blocks(self):
+        """Block slots of every element, node and spring, and the BSR pattern they sum into."""
+        wp = get_warp()
+        m, dev, n = self.model, self.device, self.model.vertex_count
+        E = m.edge_indices.numpy().astype(np.int64)
+        F = m.face_indices.numpy().astype(np.int64)
+        T = m.tet_indices.numpy().astype(np.int64)
+
+        def pairs(idx):
+            c = idx.shape[1]
+            r = np.repeat(idx[:, :, None], c, axis=2).reshape(-1)
+            cc = np.repeat(idx[:, None, :], c, axis=1).reshape(-1)
+            return r, cc
+
+        rows, cols = zip(*[pairs(E), pairs(F), pairs(T), (np.arange(n), np.arange(n))]
+                         + [(s.node_host, s.node_host) for s in self.springs])
+        rows, cols = np.concatenate(rows), np.concatenate(cols)
+        self._block_offsets = np.cumsum([0, 4 * len(E), 9 * len(F), 16 * len(T), n] + [s.count for s in self.springs])
+        code = rows * n + cols
+        uniq, inv = np.unique(code, return_inverse=True)
+        nb = len(uniq)
+        _, start, order = group_indices(inv, np.arange(nb))
+        brow, bcol = uniq // n, uniq % n
+        self.block_count = nb
+        self._bsr_offsets = np.searchsorted(brow, np.arange(n + 1)).astype(np.int32)
+        self._bsr_columns = bcol.astype(np.int32)
+        self._diag_block = np.searchsorted(uniq, np.arange(n) * n + np.arange(n)).astype(np.int32)
+        i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=dev)  # noqa: E731
+        self.block_slots = wp.zeros(len(code), dtype=wp.mat33, device=dev)
+        self.block_start = i32(start)
+        self.block_order = i32(order)
+        self.block_row = i32(brow)
+        self.block_col = i32(bcol)
+        self.diag_block = i32(self._diag_block)
+        self.block_values = wp.zeros(nb, dtype=wp.mat33, device=dev)
+        self._blocks_ready = True
+
+    def _build_pcg(self):
+        import warp.optim.linear as wol
+        import warp.sparse as wsp
+
+        wp = get_warp()
+        dev, n = self.device, self.model.vertex_count
+        A = wsp.bsr_zeros(n, n, block_type=wp.mat33, device=dev)
+        rows = np.repeat(np.arange(n), np.diff(self._bsr_offsets)).astype(np.int32)
+        wsp.bsr_set_from_triplets(A, wp.array(rows, dtype=wp.int32, device=dev),
+                                  wp.array(self._bsr_columns, dtype=wp.int32, device=dev),
+                                  wp.array(np.tile(np.eye(3, dtype=np.float32), (self.block_count, 1, 1)),
+                                           dtype=wp.mat33, device=dev), prune_numerical_zeros=False)
+        if not (np.array_equal(A.offsets.numpy()[: n + 1], self._bsr_offsets)
+                and np.array_equal(A.columns.numpy()[: self.block_count], self._bsr_columns)):
+            raise RuntimeError("warp.sparse ordered the Hessian blocks differently from the solver's pattern")
+        self.A = A
+        self.block_values = A.values  # the gather writes straight into the matrix
+        self.inv_diag = wp.zeros(n, dtype=wp.mat33, device=dev)
+        inv = self.inv_diag
+
+        def precond_matvec(x, y, z, alpha, beta):
+            wp.launch(ki._apply_blocks, dim=n, inputs=[inv, x, y, float(alpha), float(beta)], outputs=[z], device=dev)
+
+        self.M = wol.LinearOperator(shape=(3 * n, 3 * n), dtype=float, device=dev, matvec=precond_matvec)
+        self.rhs = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self.direction = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self.t_step = wp.zeros(1, dtype=float, device=dev)
+        self.t_trials = [wp.array([0.5**j], dtype=float, device=dev) for j in range(_LINE_SEARCH_TRIALS)]
+        self.cg = wol.cg(self.A, self.rhs, self.direction, maxiter=self.linear_iterations, M=self.M, tol=0.0, atol=0.0,
+                         check_every=0, use_cuda_graph=False, run=False)
+
+    # ------------------------------------------------------------------------------ device work
+    def _begin(self, state_in: State, control: Control, h: float) -> None:
+        """Stages, the dashpots' start constraints, the inertial target and the first guess."""
+        wp = get_warp()
+        m, dev = self.model, self.device
+        for st in self.stages:
+            st.prepare(m, state_in, control, h, self.targets)
+        x = state_in.positions
+        wp.launch(ki._edge_constraints, dim=m.edge_count, inputs=[m.edge_indices, m.edge_rest_length, x],
+                  outputs=[self.c_edge], device=dev)
+        wp.launch(ki._face_constraints, dim=m.face_count, inputs=[m.face_indices, m.face_rest_area, x],
+                  outputs=[self.c_face], device=dev)
+        wp.launch(ki._tet_constraints, dim=m.tet_count, inputs=[m.tet_indices, m.tet_rest_volume, x],
+                  outputs=[self.c_tet], device=dev)
+        wp.launch(ki._inertial_target, dim=m.vertex_count,
+                  inputs=[m.damping_rate, h, control.cranium_velocity, x, state_in.prev_positions],
+                  outputs=[self.z], device=dev)
+        wp.launch(ki._initial_guess, dim=m.vertex_count,
+                  inputs=[m.vertex_fixed, self.extrapolate, self.targets, x, state_in.prev_positions],
+                  outputs=[self.x], device=dev)
+
+    def _mass_scale(self, h: float) -> float:
+        return (1.0 + self.model.damping_rate * h) / (h * h)
+
+    def _launch_energy(self, x, control: Control, h: float, with_grad: bool = True) -> None:
+        """Per-element energies into :attr:`energy` and the gradient into :attr:`grad` at x."""
+        wp = get_warp()
+        m, dev = self.model, self.device
+        ih = 1.0 / h
+        ee, ef, et, en = self._e_views[:4]
+        wp.launch(ki._edge_energy, dim=m.edge_count,
+                  inputs=[m.edge_indices, m.edge_rest_length, m.edge_k0, m.edge_damping, self.c_edge, ih, x],
+                  outputs=[ee, self.slots], device=dev)
+        wp.launch(ki._face_energy, dim=m.face_count,
+                  inputs=[m.face_indices, m.face_rest_area, m.face_k, m.face_damping, self.c_face, ih,
+                          2 * m.edge_count, x],
+                  outputs=[ef, self.slots], device=dev)
+        wp.launch(ki._tet_energy, dim=m.tet_count,
+                  inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, self.c_tet, ih,
+                          2 * m.edge_count + 3 * m.face_count, x],
+                  outputs=[et, self.slots], device=dev)
+        wp.launch(ki._node_energy, dim=m.vertex_count,
+                  inputs=[m.vertex_mass, m.vertex_fixed, m.vertex_hold_stiffness, self._mass_scale(h), self.z,
+                          self.targets, control.external_force, x],
+                  outputs=[en, self.grad], device=dev)
+        for s in self.springs:
+            sp_ = s.springs
+            if s.axis:
+                wp.launch(ki._axis_spring_energy, dim=s.count, inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.axis, x],
+                          outputs=[s.energy, s.grad], device=dev)
+            else:
+                wp.launch(ki._distance_spring_energy, dim=s.count,
+                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.rest_length, x],
+                          outputs=[s.energy, s.grad], device=dev)
+        if not with_grad:
+            return
+        wp.launch(ki._gather_free, dim=m.vertex_count,
+                  inputs=[self.nodes, m.node_slot_start, m.node_slots, m.vertex_fixed, self.slots],
+                  outputs=[self.grad], device=dev)
+        for s in self.springs:
+            wp.launch(ki._gather_free, dim=len(s.group_nodes),
+                      inputs=[s.group_nodes, s.group_start, s.group_order, m.vertex_fixed, s.grad],
+                      outputs=[self.grad], device=dev)
+
+    def _launch_total(self, slot: int) -> None:
+        """The total energy, summed deterministically into ``totals[slot]``."""
+        wp = get_warp()
+        wp.launch(ki._chunk_sums, dim=self._chunks, inputs=[self.energy, _CHUNK], outputs=[self.partial],
+                  device=self.device)
+        wp.launch(ki._final_sum, dim=1, inputs=[self.partial, slot], outputs=[self.totals], device=self.device)
+
+    def _launch_hessian(self, x, h: float) -> None:
+        """PSD Hessian blocks at x summed into :attr:`block_values` (fixed rows / columns: identity)."""
+        wp = get_warp()
+        m, dev = self.model, self.device
+        ih = 1.0 / h
+        o = self._block_offsets
+        wp.launch(ki._edge_hessian, dim=m.edge_count,
+                  inputs=[m.edge_indices, m.edge_rest_length, m.edge_k0, m.edge_damping, self.c_edge, ih, x],
+                  outputs=[self.block_slots], device=dev)
+        wp.launch(ki._face_hessian, dim=m.face_count,
+                  inputs=[m.face_indices, m.face_rest_area, m.face_k, m.face_damping, ih, int(o[1]), x],
+                  outputs=[self.block_slots], device=dev)
+        wp.launch(ki._tet_hessian, dim=m.tet_count,
+                  inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, ih, int(o[2]), x],
+                  outputs=[self.block_slots], device=dev)
+        wp.launch(ki._node_hessian, dim=m.vertex_count,
+                  inputs=[m.vertex_mass, m.vertex_hold_stiffness, self._mass_scale(h), int(o[3])],
+                  outputs=[self.block_slots], device=dev)
+        for s, off in zip(self.springs, o[4:]):
+            sp_ = s.springs
+            if s.axis:
+                wp.launch(ki._axis_spring_hessian, dim=s.count, inputs=[sp_.stiffness, sp_.axis, int(off)],
+                          outputs=[self.block_slots], device=dev)
+            else:
+                wp.launch(ki._distance_spring_hessian, dim=s.count,
+                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.rest_length, int(off), x],
+                          outputs=[self.block_slots], device=dev)
+        wp.launch(ki._gather_blocks, dim=self.block_count,
+                  inputs=[self.block_start, self.block_order, self.block_row, self.block_col, m.vertex_fixed,
+                          self.block_slots],
+                  outputs=[self.block_values], device=dev)
+
+    def _finish(self, state_in: State, state_out: State) -> None:
+        wp = get_warp()
+        wp.copy(state_out.prev_positions, state_in.positions)
+        wp.copy(state_out.positions, self.x)
+        wp.launch(ki._advance_counter, dim=1, inputs=[], outputs=[self.step_counter], device=self.device)
+        self._launch_guard(state_out)
+
+    # ------------------------------------------------------------------------------ step
+    def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
+        """Advance one step of ``dt`` [s] from ``state_in`` into ``state_out`` (different buffers).
+
+        ``"newton-pcg"`` allocates nothing and never reads back to the host (capturable in a
+        CUDA graph); the CPU methods read the Warp arrays as zero-copy NumPy views.
+
+        Raises:
+            InputError: ``dt`` not a positive finite number, or the same state buffers.
+        """
+        check_step_args(state_in, state_out, dt)
+        h = float(dt)
+        t0 = time.perf_counter()
+        self._begin(state_in, control, h)
+        self.timings["prepare"] += time.perf_counter() - t0
+        if self.method == "newton-pcg":
+            self._step_pcg(control, h)
+        else:
+            self._step_host(control, h)
+        self._finish(state_in, state_out)
+
+    # ------------------------------------------------------------------------------ device method
+    def _step_pcg(self, control: Control, h: float) -> None:
+        wp = get_warp()
+        m, dev, n = self.model, self.device, self.model.vertex_count
+        for _ in range(self.iterations):
+            self._launch_energy(self.x, control, h)
+            self._launch_total(0)
+            self._launch_hessian(self.x, h)
+            wp.launch(ki._invert_diagonal, dim=n, inputs=[self.diag_block, self.block_values], outputs=[self.inv_diag],
+                      device=dev)
+            wp.launch(ki._negate, dim=n, inputs=[self.grad], outputs=[self.rhs], device=dev)
+            self.direction.zero_()
+            self.cg(self.A, self.rhs, self.direction)
+            for j in range(_LINE_SEARCH_TRIALS):
+                wp.launch(ki._axpy_free, dim=n, inputs=[m.vertex_fixed, self.x, self.direction, self.t_trials[j]],
+                          outputs=[self.x_trial], device=dev)
+                self._launch_energy(self.x_trial, control, h, with_grad=False)
+                self._launch_total(1 + j)
+            wp.launch(ki._select_step, dim=1, inputs=[self.totals, _LINE_SEARCH_TRIALS], outputs=[self.t_step],
+                      device=dev)
+            wp.launch(ki._axpy_free, dim=n, inputs=[m.vertex_fixed, self.x, self.direction, self.t_step],
+                      outputs=[self.x], device=dev)
+        self.last_iterations = self.iterations
+
+    # ------------------------------------------------------------------------------ host methods
+    def _host_eval(self, x64: np.ndarray, control: Control, h: float) -> tuple[float, np.ndarray, float]:
+        """Energy, gradient (3n,) and the energy's float32 rounding scale at positions x64 (n, 3)."""
+        t0 = time.perf_counter()
+        self.x.numpy()[:] = x64
+        self._launch_energy(self.x, control, h)
+        e = self.energy.numpy()
+        g = self.grad.numpy().astype(np.float64).ravel()
+        total = float(np.sum(e, dtype=np.float64))
+        noise = 4.0 * 1.2e-7 * float(np.sum(np.abs(e), dtype=np.float64)) + 1e-30
+        self.timings["gradient"] += time.perf_counter() - t0
+        return total, g, noise
+
+    def _host_factor(self, x64: np.ndarray, h: float):
+        import scipy.sparse as sp
+
+        t0 = time.perf_counter()
+        self.x.numpy()[:] = x64
+        self._launch_hessian(self.x, h)
+        n = self.model.vertex_count
+        vals = self.block_values.numpy().astype(np.float64)
+        A = sp.bsr_matrix((vals, self._bsr_columns, self._bsr_offsets), shape=(3 * n, 3 * n))
+        solve = _factorize(A, self.backend)
+        self.factorizations += 1
+        self.timings["factor"] += time.perf_counter() - t0
+        return solve
+
+    def _line_search(self, x64, d, e, g, noise, control, h):
+        """Backtracking from t = 1 on the energy; returns (t, x, e, g, noise) at the accepted point."""
+        gd = float(g @ d)
+        t = 1.0
+        for _ in range(12):
+            xt = x64 + t * d.reshape(-1, 3)
+            et, gt, nt = self._host_eval(xt, control, h)
+            if et <= e + 1e-4 * t * gd + noise:
+                return t, xt, et, gt, nt
+            t *= 0.5
+        return 0.0, x64, e, g, noise
+
+    def _step_host(self, control: Control, h: float) -> None:
+        x64 = self.x.numpy().astype(np.float64)
+        e, g, noise = self._host_eval(x64, control, h)
+        if self.method == "newton":
+            its = self._newton(x64, e, g, noise, control, h)
+        else:
+            if self._solve0 is None or self._h != h:
+                self._solve0 = self._host_factor(x64, h)
+                self._h = h
+            its, x_end = self._lbfgs(x64, e, g, noise, control, h)
+            if self.iterations is None and its > self.refactor_iterations:
+                self._solve0 = self._host_factor(x_end, h)
+        self.last_iterations = its
+
+    def _converged(self, step: np.ndarray) -> bool:
+        return self.iterations is None and float(np.abs(step).max(initial=0.0)) < self.tolerance
+
+    def _newton(self, x64, e, g, noise, control, h) -> int:
+        its = self.iterations or self.max_iterations
+        for k in range(its):
+            solve = self._host_factor(x64, h)
+            t0 = time.perf_counter()
+            d = -solve(g)
+            self.timings["solve"] += time.perf_counter() - t0
+            t, xn, e, g, noise = self._line_search(x64, d, e, g, noise, control, h)
+            step, x64 = t * d, xn
+            if t == 0.0 or self._converged(step):
+                return k + 1
+        return its
+
+    def _lbfgs(self, x64, e, g, noise, control, h) -> tuple[int, np.ndarray]:
+        S, Y, R = [], [], []
+        its = self.iterations or self.max_iterations
+        solve0 = self._solve0
+        for k in range(its):
+            t0 = time.perf_counter()
+            q = -g
+            alphas = []
+            for s_, y_, rho in zip(reversed(S), reversed(Y), reversed(R)):
+                a = rho * float(s_ @ q)
+                alphas.append(a)
+                q = q - a * y_
+            r = solve0(q)
+            for (s_, y_, rho), a in zip(zip(S, Y, R), reversed(alphas)):
+                r = r + s_ * (a - rho * float(y_ @ r))
+            d = r
+            if float(g @ d) >= 0.0:  # not a descent direction: restart from the factorised Hessian
+                S, Y, R = [], [], []
+                d = solve0(-g)
+            self.timings["solve"] += time.perf_counter() - t0
+            t, xn, en, gn, nn = self._line_search(x64, d, e, g, noise, control, h)
+            if t == 0.0:
+                return k + 1, x64
+            s_ = t * d
+            y_ = gn - g
+            sy = float(s_ @ y_)
+            if sy > 1e-12 * float(np.linalg.norm(s_) * np.linalg.norm(y_)):
+                S.append(s_)
+                Y.append(y_)
+                R.append(1.0 / sy)
+                if len(S) > self.history:
+                    S.pop(0), Y.pop(0), R.pop(0)
+            x64, e, g, noise = xn, en, gn, nn
+            if self._converged(s_):
+                return k + 1, x64
+        return its, x64
+
+    def reset(self) -> None:
+        """Back to the rest pose (targets, counter, guard); the factorisation is kept."""
+        super().reset()
+        self.last_iterations = 0
+
+    def _advice(self) -> str:
+        return "lower the activation or jaw speed, or take smaller steps"

@@ -1,0 +1,611 @@
+"""Warp kernels of the implicit Euler step (:mod:`.implicit`): the incremental potential, its
+gradient and its PSD Hessian blocks, on any device.
+
+The potential of one step (see :mod:`facewarp._src.physics.potential`, the float64 NumPy
+reference of the same terms):
+
+    Phi(x) = sum_i mu_i / 2 |x_i - z_i|^2 + sum_held k_h / 2 |x - target|^2 - f . x
+           + sum_edges [k0 (C^2 / 2 + C^4 / 4) + d / (2 h) (C - C_n)^2]         (Eq. 6.4.4, 6.4.6)
+           + sum_faces [k / 2 C^2 + d / (2 h) (C - C_n)^2]                             (Eq. 6.4.7)
+           + sum_tets  [k / 2 C^2 + d / (2 h) (C - C_n)^2]                             (Eq. 6.4.8)
+           + sum_springs E_s(x),
+
+with ``mu = m (1 + alpha h) / h^2``, z the inertial target, C_n the constraint at the step's
+start (the strain-rate dashpots). Every element writes its energy into its own entry and its
+corner gradients (``dPhi/dx``, the negative force) into its own slots, in the layout of the
+explicit force slots (``Model.node_slots``), and every node sums its slots in a fixed order:
+deterministic, the same sums on CPU and CUDA. Hessian blocks go to block slots and are summed
+per block of a block-sparse (BSR, 3 x 3) matrix in a fixed order likewise. Fixed nodes are not
+unknowns: their gradient is 0 and their rows and columns of the Hessian are the identity.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+
+@wp.func
+def _outer(a: wp.vec3, b: wp.vec3):
+    return wp.outer(a, b)
+
+
+@wp.func
+def _pick4(g0: wp.vec3, g1: wp.vec3, g2: wp.vec3, g3: wp.vec3, a: int):
+    if a == 0:
+        return g0
+    if a == 1:
+        return g1
+    if a == 2:
+        return g2
+    return g3
+
+
+# ---------------------------------------------------------------------------- step start
+# The constraints of every element at the step's start (the dashpots' C_n), and the inertial
+# target z = (2 x_n - x_prev + alpha h (x_n + h v_c(x_n))) / (1 + alpha h): backward Euler's
+# prediction y = x_n + h v_n merged with the mass damping's alpha m / (2 h) |x - x_n - h v_c|^2.
+@wp.kernel
+def _edge_constraints(
+    edge_indices: wp.array(dtype=wp.vec2i),
+    edge_rest_length: wp.array(dtype=float),
+    positions: wp.array(dtype=wp.vec3),
+    c_out: wp.array(dtype=float),
+):
+    e = wp.tid()
+    d = positions[edge_indices[e][0]] - positions[edge_indices[e][1]]
+    c_out[e] = wp.length(d) / edge_rest_length[e] - 1.0
+
+
+@wp.kernel
+def _face_constraints(
+    face_indices: wp.array(dtype=wp.vec3i),
+    face_rest_area: wp.array(dtype=float),
+    positions: wp.array(dtype=wp.vec3),
+    c_out: wp.array(dtype=float),
+):
+    t = wp.tid()
+    xi = positions[face_indices[t][0]]
+    nn = wp.cross(positions[face_indices[t][1]] - xi, positions[face_indices[t][2]] - xi)
+    c_out[t] = 0.5 * wp.length(nn) / face_rest_area[t] - 1.0
+
+
+@wp.kernel
+def _tet_constraints(
+    tet_indices: wp.array(dtype=wp.vec4i),
+    tet_rest_volume: wp.array(dtype=float),
+    positions: wp.array(dtype=wp.vec3),
+    c_out: wp.array(dtype=float),
+):
+    t = wp.tid()
+    xi = positions[tet_indices[t][0]]
+    e1 = positions[tet_indices[t][1]] - xi
+    e2 = positions[tet_indices[t][2]] - xi
+    e3 = positions[tet_indices[t][3]] - xi
+    c_out[t] = wp.dot(e1, wp.cross(e2, e3)) / 6.0 / tet_rest_volume[t] - 1.0
+
+
+@wp.kernel
+def _inertial_target(
+    damping_rate: float,
+    h: float,
+    cranium_velocity: wp.array(dtype=wp.vec3),
+    positions: wp.array(dtype=wp.vec3),
+    prev_positions: wp.array(dtype=wp.vec3),
+    z_out: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    x = positions[i]
+    ah = damping_rate * h
+    w = x + h * (cranium_velocity[0] + wp.cross(cranium_velocity[1], x))
+    z_out[i] = (2.0 * x - prev_positions[i] + ah * w) / (1.0 + ah)
+
+
+# ---------------------------------------------------------------------------- energy, gradient
+# Distance (Eq. 6.4.4 with k(C) of Eq. 6.4.6): E = k0 (C^2/2 + C^4/4) + d/(2h) (C - C_n)^2,
+# dE/dC = k0 (C + C^3) + d/h (C - C_n), dC/dx_i = n / D0 = -dC/dx_j.
+@wp.kernel
+def _edge_energy(
+    edge_indices: wp.array(dtype=wp.vec2i),
+    edge_rest_length: wp.array(dtype=float),
+    edge_k0: wp.array(dtype=float),
+    edge_damping: wp.array(dtype=float),
+    edge_c_start: wp.array(dtype=float),
+    inv_h: float,
+    positions: wp.array(dtype=wp.vec3),
+    energy_out: wp.array(dtype=float),
+    slots_out: wp.array(dtype=wp.vec3),
+):
+    e = wp.tid()
+    d = positions[edge_indices[e][0]] - positions[edge_indices[e][1]]
+    l = wp.length(d)
+    d0 = edge_rest_length[e]
+    c = l / d0 - 1.0
+    dc = c - edge_c_start[e]
+    k0 = edge_k0[e]
+    dmp = edge_damping[e] * inv_h
+    energy_out[e] = k0 * c * c * (0.5 + 0.25 * c * c) + 0.5 * dmp * dc * dc
+    g = wp.vec3(0.0)
+    if l > 0.0:
+        g = (k0 * (c + c * c * c) + dmp * dc) / (d0 * l) * d
+    slots_out[2 * e] = g
+    slots_out[2 * e + 1] = -g
+
+
+# Area (Eq. 6.4.7): E = k/2 C^2 + d/(2h) (C - C_n)^2, grad = (k C + d/h (C - C_n)) / A0 dA/dx
+# (dA/dx as in kernels_tissue._face_forces).
+@wp.kernel
+def _face_energy(
+    face_indices: wp.array(dtype=wp.vec3i),
+    face_rest_area: wp.array(dtype=float),
+    face_k: wp.array(dtype=float),
+    face_damping: wp.array(dtype=float),
+    face_c_start: wp.array(dtype=float),
+    inv_h: float,
+    slot_offset: int,
+    positions: wp.array(dtype=wp.vec3),
+    energy_out: wp.array(dtype=float),
+    slots_out: wp.array(dtype=wp.vec3),
+):
+    t = wp.tid()
+    o = slot_offset + 3 * t
+    xi = positions[face_indices[t][0]]
+    e1 = positions[face_indices[t][1]] - xi
+    e2 = positions[face_indices[t][2]] - xi
+    nn = wp.cross(e1, e2)
+    nl = wp.length(nn)
+    a0 = face_rest_area[t]
+    c = 0.5 * nl / a0 - 1.0
+    dc = c - face_c_start[t]
+    dmp = face_damping[t] * inv_h
+    energy_out[t] = 0.5 * face_k[t] * c * c + 0.5 * dmp * dc * dc
+    gj = wp.vec3(0.0)
+    gk = wp.vec3(0.0)
+    if nl > 0.0:
+        m = nn / nl
+        s = 0.5 * (face_k[t] * c + dmp * dc) / a0
+        gj = s * wp.cross(e2, m)
+        gk = s * wp.cross(m, e1)
+    slots_out[o] = -(gj + gk)
+    slots_out[o + 1] = gj
+    slots_out[o + 2] = gk
+
+
+# Volume (Eq. 6.4.8): E = k/2 C^2 + d/(2h) (C - C_n)^2, grad = (k C + d/h (C - C_n)) / V0 dV/dx.
+@wp.kernel
+def _tet_energy(
+    tet_indices: wp.array(dtype=wp.vec4i),
+    tet_rest_volume: wp.array(dtype=float),
+    tet_k: wp.array(dtype=float),
+    tet_damping: wp.array(dtype=float),
+    tet_c_start: wp.array(dtype=float),
+    inv_h: float,
+    slot_offset: int,
+    positions: wp.array(dtype=wp.vec3),
+    energy_out: wp.array(dtype=float),
+    slots_out: wp.array(dtype=wp.vec3),
+):
+    t = wp.tid()
+    o = slot_offset + 4 * t
+    xi = positions[tet_indices[t][0]]
+    e1 = positions[tet_indices[t][1]] - xi
+    e2 = positions[tet_indices[t][2]] - xi
+    e3 = positions[tet_indices[t][3]] - xi
+    v0 = tet_rest_volume[t]
+    c = wp.dot(e1, wp.cross(e2, e3)) / 6.0 / v0 - 1.0
+    dc = c - tet_c_start[t]
+    dmp = tet_damping[t] * inv_h
+    energy_out[t] = 0.5 * tet_k[t] * c * c + 0.5 * dmp * dc * dc
+    s = (tet_k[t] * c + dmp * dc) / (6.0 * v0)
+    gj = s * wp.cross(e2, e3)
+    gk = s * wp.cross(e3, e1)
+    gl = s * wp.cross(e1, e2)
+    slots_out[o] = -(gj + gk + gl)
+    slots_out[o + 1] = gj
+    slots_out[o + 2] = gk
+    slots_out[o + 3] = gl
+
+
+# Per node: inertia mu/2 |x - z|^2 (mu = m (1 + alpha h) / h^2), hold k_h/2 |x - target|^2 and
+# the external force -f . x; the gradient starts here (element and spring slots are gathered on
+# top). Fixed nodes contribute nothing.
+@wp.kernel
+def _node_energy(
+    vertex_mass: wp.array(dtype=float),
+    vertex_fixed: wp.array(dtype=wp.int32),
+    vertex_hold_stiffness: wp.array(dtype=float),
+    mass_scale: float,
+    z: wp.array(dtype=wp.vec3),
+    targets: wp.array(dtype=wp.vec3),
+    external_force: wp.array(dtype=wp.vec3),
+    positions: wp.array(dtype=wp.vec3),
+    energy_out: wp.array(dtype=float),
+    grad_out: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    if vertex_fixed[i] != 0:
+        energy_out[i] = 0.0
+        grad_out[i] = wp.vec3(0.0)
+        return
+    x = positions[i]
+    mu = vertex_mass[i] * mass_scale
+    dz = x - z[i]
+    kh = vertex_hold_stiffness[i]
+    dh = x - targets[i]
+    f = external_force[i]
+    energy_out[i] = 0.5 * mu * wp.dot(dz, dz) + 0.5 * kh * wp.dot(dh, dh) - wp.dot(f, x)
+    grad_out[i] = mu * dz + kh * dh - f
+
+
+# Distance springs (muscles): E = k/2 (|p - x| - l0)^2, dE/dx = k (l - l0) (x - p) / l.
+@wp.kernel
+def _distance_spring_energy(
+    node: wp.array(dtype=wp.int32),
+    point: wp.array(dtype=wp.vec3),
+    stiffness: wp.array(dtype=float),
+    rest_length: wp.array(dtype=float),
+    positions: wp.array(dtype=wp.vec3),
+    energy_out: wp.array(dtype=float),
+    grad_out: wp.array(dtype=wp.vec3),
+):
+    k = wp.tid()
+    r = positions[node[k]] - point[k]
+    l = wp.length(r)
+    st = l - rest_length[k]
+    energy_out[k] = 0.5 * stiffness[k] * st * st
+    g = wp.vec3(0.0)
+    if l > 0.0:
+        g = stiffness[k] * st / l * r
+    grad_out[k] = g
+
+
+# Axis springs (sliding supports): E = k/2 ((x - p) . a)^2, dE/dx = k ((x - p) . a) a.
+@wp.kernel
+def _axis_spring_energy(
+    node: wp.array(dtype=wp.int32),
+    point: wp.array(dtype=wp.vec3),
+    stiffness: wp.array(dtype=float),
+    axis: wp.array(dtype=wp.vec3),
+    positions: wp.array(dtype=wp.vec3),
+    energy_out: wp.array(dtype=float),
+    grad_out: wp.array(dtype=wp.vec3),
+):
+    k = wp.tid()
+    a = axis[k]
+    s = wp.dot(positions[node[k]] - point[k], a)
+    energy_out[k] = 0.5 * stiffness[k] * s * s
+    grad_out[k] = stiffness[k] * s * a
+
+
+# Gather per node for springs whose nodes may repeat: node[k] takes slots order[start[k]] ..
+# (the same fixed-order sum as kernels_tissue._gather, but skipping fixed nodes).
+@wp.kernel
+def _gather_free(
+    node: wp.array(dtype=wp.int32),
+    start: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
+    vertex_fixed: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.vec3),
+    forces: wp.array(dtype=wp.vec3),
+):
+    k = wp.tid()
+    i = node[k]
+    if vertex_fixed[i] != 0:
+        return
+    f = wp.vec3(0.0)
+    for s in range(start[k], start[k + 1]):
+        f = f + slots[order[s]]
+    forces[i] = forces[i] + f
+
+
+@wp.kernel
+def _zero_fixed(vertex_fixed: wp.array(dtype=wp.int32), v: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    if vertex_fixed[i] != 0:
+        v[i] = wp.vec3(0.0)
+
+
+# ---------------------------------------------------------------------------- Hessian blocks
+# PSD Hessian blocks (the same approximations as potential.StepPotential.hessian):
+#   distance: a n n^T + b (I - n n^T) with a = (k0 (1 + 3 C^2) + d/h) / D0^2 and
+#             b = max(dE/dC, 0) / (D0 l) (the transverse term dropped when compressed);
+#             blocks (i,i) = (j,j) = H, (i,j) = (j,i) = -H;
+#   area, volume: Gauss-Newton (k + d/h) g_a g_b^T with g = grad C (the neglected k C grad^2 C
+#             vanishes at rest);
+# each written into the element's block slots: edges 4 (ii, ij, ji, jj), faces 9, tets 16,
+# corner-major (a, b) -> a * c + b.
+@wp.kernel
+def _edge_hessian(
+    edge_indices: wp.array(dtype=wp.vec2i),
+    edge_rest_length: wp.array(dtype=float),
+    edge_k0: wp.array(dtype=float),
+    edge_damping: wp.array(dtype=float),
+    edge_c_start: wp.array(dtype=float),
+    inv_h: float,
+    positions: wp.array(dtype=wp.vec3),
+    blocks_out: wp.array(dtype=wp.mat33),
+):
+    e = wp.tid()
+    d = positions[edge_indices[e][0]] - positions[edge_indices[e][1]]
+    l = wp.length(d)
+    d0 = edge_rest_length[e]
+    c = l / d0 - 1.0
+    k0 = edge_k0[e]
+    dmp = edge_damping[e] * inv_h
+    n = wp.vec3(0.0)
+    if l > 0.0:
+        n = d / l
+    nn = _outer(n, n)
+    a = (k0 * (1.0 + 3.0 * c * c) + dmp) / (d0 * d0)
+    b = float(0.0)
+    if l > 0.0:
+        b = wp.max(k0 * (c + c * c * c) + dmp * (c - edge_c_start[e]), 0.0) / (d0 * l)
+    H = a * nn + b * (wp.identity(n=3, dtype=float) - nn)
+    blocks_out[4 * e] = H
+    blocks_out[4 * e + 1] = -H
+    blocks_out[4 * e + 2] = -H
+    blocks_out[4 * e + 3] = H
+
+
+@wp.kernel
+def _face_hessian(
+    face_indices: wp.array(dtype=wp.vec3i),
+    face_rest_area: wp.array(dtype=float),
+    face_k: wp.array(dtype=float),
+    face_damping: wp.array(dtype=float),
+    inv_h: float,
+    block_offset: int,
+    positions: wp.array(dtype=wp.vec3),
+    blocks_out: wp.array(dtype=wp.mat33),
+):
+    t = wp.tid()
+    o = block_offset + 9 * t
+    xi = positions[face_indices[t][0]]
+    e1 = positions[face_indices[t][1]] - xi
+    e2 = positions[face_indices[t][2]] - xi
+    nn = wp.cross(e1, e2)
+    nl = wp.length(nn)
+    g1 = wp.vec3(0.0)
+    g2 = wp.vec3(0.0)
+    if nl > 0.0:
+        m = nn / nl
+        g1 = 0.5 * wp.cross(e2, m)
+        g2 = 0.5 * wp.cross(m, e1)
+    g0 = -(g1 + g2)
+    a0 = face_rest_area[t]
+    s = (face_k[t] + face_damping[t] * inv_h) / (a0 * a0)
+    blocks_out[o + 0] = s * _outer(g0, g0)
+    blocks_out[o + 1] = s * _outer(g0, g1)
+    blocks_out[o + 2] = s * _outer(g0, g2)
+    blocks_out[o + 3] = s * _outer(g1, g0)
+    blocks_out[o + 4] = s * _outer(g1, g1)
+    blocks_out[o + 5] = s * _outer(g1, g2)
+    blocks_out[o + 6] = s * _outer(g2, g0)
+    blocks_out[o + 7] = s * _outer(g2, g1)
+    blocks_out[o + 8] = s * _outer(g2, g2)
+
+
+@wp.kernel
+def _tet_hessian(
+    tet_indices: wp.array(dtype=wp.vec4i),
+    tet_rest_volume: wp.array(dtype=float),
+    tet_k: wp.array(dtype=float),
+    tet_damping: wp.array(dtype=float),
+    inv_h: float,
+    block_offset: int,
+    positions: wp.array(dtype=wp.vec3),
+    blocks_out: wp.array(dtype=wp.mat33),
+):
+    t = wp.tid()
+    o = block_offset + 16 * t
+    xi = positions[tet_indices[t][0]]
+    e1 = positions[tet_indices[t][1]] - xi
+    e2 = positions[tet_indices[t][2]] - xi
+    e3 = positions[tet_indices[t][3]] - xi
+    g1 = wp.cross(e2, e3) / 6.0
+    g2 = wp.cross(e3, e1) / 6.0
+    g3 = wp.cross(e1, e2) / 6.0
+    g0 = -(g1 + g2 + g3)
+    v0 = tet_rest_volume[t]
+    s = (tet_k[t] + tet_damping[t] * inv_h) / (v0 * v0)
+    for a in range(4):
+        ga = _pick4(g0, g1, g2, g3, a)
+        for b in range(4):
+            blocks_out[o + 4 * a + b] = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
+
+
+# Diagonal blocks of every node: (mu + k_h) I; fixed nodes: the identity (their DOFs are not
+# unknowns; the right-hand side there is 0).
+@wp.kernel
+def _node_hessian(
+    vertex_mass: wp.array(dtype=float),
+    vertex_hold_stiffness: wp.array(dtype=float),
+    mass_scale: float,
+    block_offset: int,
+    blocks_out: wp.array(dtype=wp.mat33),
+):
+    i = wp.tid()
+    s = vertex_mass[i] * mass_scale + vertex_hold_stiffness[i]
+    blocks_out[block_offset + i] = s * wp.identity(n=3, dtype=float)
+
+
+# Springs: distance k (n n^T + max(1 - l0/l, 0) (I - n n^T)); axis k a a^T.
+@wp.kernel
+def _distance_spring_hessian(
+    node: wp.array(dtype=wp.int32),
+    point: wp.array(dtype=wp.vec3),
+    stiffness: wp.array(dtype=float),
+    rest_length: wp.array(dtype=float),
+    block_offset: int,
+    positions: wp.array(dtype=wp.vec3),
+    blocks_out: wp.array(dtype=wp.mat33),
+):
+    k = wp.tid()
+    r = positions[node[k]] - point[k]
+    l = wp.length(r)
+    H = stiffness[k] * wp.identity(n=3, dtype=float)
+    if l > 0.0:
+        n = r / l
+        nn = _outer(n, n)
+        H = stiffness[k] * (nn + wp.max(1.0 - rest_length[k] / l, 0.0) * (wp.identity(n=3, dtype=float) - nn))
+    blocks_out[block_offset + k] = H
+
+
+@wp.kernel
+def _axis_spring_hessian(
+    stiffness: wp.array(dtype=float),
+    axis: wp.array(dtype=wp.vec3),
+    block_offset: int,
+    blocks_out: wp.array(dtype=wp.mat33),
+):
+    k = wp.tid()
+    a = axis[k]
+    blocks_out[block_offset + k] = stiffness[k] * _outer(a, a)
+
+
+# Every BSR block sums its block slots in a fixed order; a block in a fixed node's row or column
+# is the identity on the diagonal and 0 elsewhere.
+@wp.kernel
+def _gather_blocks(
+    start: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
+    block_row: wp.array(dtype=wp.int32),
+    block_col: wp.array(dtype=wp.int32),
+    vertex_fixed: wp.array(dtype=wp.int32),
+    blocks: wp.array(dtype=wp.mat33),
+    values_out: wp.array(dtype=wp.mat33),
+):
+    b = wp.tid()
+    r = block_row[b]
+    c = block_col[b]
+    if vertex_fixed[r] != 0 or vertex_fixed[c] != 0:
+        if r == c:
+            values_out[b] = wp.identity(n=3, dtype=float)
+        else:
+            values_out[b] = wp.mat33(0.0)
+        return
+    H = wp.mat33(0.0)
+    for s in range(start[b], start[b + 1]):
+        H = H + blocks[order[s]]
+    values_out[b] = H
+
+
+# ---------------------------------------------------------------------------- vector updates
+# x_out = x + t * d on the free nodes (fixed nodes stay on their targets).
+@wp.kernel
+def _axpy_free(
+    vertex_fixed: wp.array(dtype=wp.int32),
+    x: wp.array(dtype=wp.vec3),
+    d: wp.array(dtype=wp.vec3),
+    t: wp.array(dtype=float),
+    x_out: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    if vertex_fixed[i] != 0:
+        x_out[i] = x[i]
+    else:
+        x_out[i] = x[i] + t[0] * d[i]
+
+
+# Start of a step: fixed nodes on their targets, free nodes at x_n + (x_n - x_prev) * extrapolate
+# (the previous motion continued: a good first guess of a slowly changing quasi-static shape).
+@wp.kernel
+def _initial_guess(
+    vertex_fixed: wp.array(dtype=wp.int32),
+    extrapolate: float,
+    targets: wp.array(dtype=wp.vec3),
+    positions: wp.array(dtype=wp.vec3),
+    prev_positions: wp.array(dtype=wp.vec3),
+    x_out: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    if vertex_fixed[i] != 0:
+        x_out[i] = targets[i]
+    else:
+        x = positions[i]
+        x_out[i] = x + extrapolate * (x - prev_positions[i])
+
+
+# ---------------------------------------------------------------------------- reductions
+# Deterministic sum of an energy array: each thread adds a fixed chunk in order (float64), then
+# one thread adds the chunks in order and writes total_out[slot]. No atomics: the same sum on
+# every run and device.
+@wp.kernel
+def _chunk_sums(values: wp.array(dtype=float), chunk: int, partial_out: wp.array(dtype=wp.float64)):
+    c = wp.tid()
+    n = values.shape[0]
+    s = wp.float64(0.0)
+    for i in range(c * chunk, wp.min((c + 1) * chunk, n)):
+        s = s + wp.float64(values[i])
+    partial_out[c] = s
+
+
+@wp.kernel
+def _final_sum(partial: wp.array(dtype=wp.float64), slot: int, total_out: wp.array(dtype=wp.float64)):
+    s = wp.float64(0.0)
+    for i in range(partial.shape[0]):
+        s = s + partial[i]
+    total_out[slot] = s
+
+
+# Backtracking on the device: trials t = 1, 1/2, 1/4, 1/8 have energies totals[1..4]; take the
+# first that does not raise the energy above totals[0] (within float32 rounding), else the
+# lowest if it is below, else no move (t = 0).
+@wp.kernel
+def _select_step(totals: wp.array(dtype=wp.float64), trials: int, t_out: wp.array(dtype=float)):
+    e0 = totals[0]
+    tol = wp.float64(1.0e-6) * wp.abs(e0) + wp.float64(1.0e-20)
+    t = float(1.0)
+    best = int(-1)
+    for j in range(trials):
+        if best < 0 and totals[1 + j] <= e0 + tol:
+            best = j
+    if best < 0:
+        lowest = e0
+        for j in range(trials):
+            if totals[1 + j] < lowest:
+                lowest = totals[1 + j]
+                best = j
+    if best < 0:
+        t_out[0] = 0.0
+    else:
+        for j in range(best):
+            t = t * 0.5
+        t_out[0] = t
+
+
+# Block-Jacobi preconditioner: the inverse of every 3 x 3 diagonal block (block index diag[i]);
+# a singular block falls back to the identity.
+@wp.kernel
+def _invert_diagonal(diag: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.mat33), inv_out: wp.array(dtype=wp.mat33)):
+    i = wp.tid()
+    B = values[diag[i]]
+    det = wp.determinant(B)
+    if wp.abs(det) > 1.0e-30:
+        inv_out[i] = wp.inverse(B)
+    else:
+        inv_out[i] = wp.identity(n=3, dtype=float)
+
+
+# z = alpha P x + beta y with the block-diagonal P (the preconditioner's matvec).
+@wp.kernel
+def _apply_blocks(
+    inv: wp.array(dtype=wp.mat33),
+    x: wp.array(dtype=wp.vec3),
+    y: wp.array(dtype=wp.vec3),
+    alpha: float,
+    beta: float,
+    z_out: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    z_out[i] = alpha * (inv[i] * x[i]) + beta * y[i]
+
+
+@wp.kernel
+def _negate(v: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    out[i] = -v[i]
+
+
+@wp.kernel
+def _advance_counter(counter: wp.array(dtype=wp.int32)):
+    counter[0] = counter[0] + 1

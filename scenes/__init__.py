@@ -1,0 +1,1 @@
+"""Runnable scenes (``python -m scenes.<name> --help``); see scenes/README.md."""
