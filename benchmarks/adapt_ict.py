@@ -70,7 +70,7 @@ def ict_dir() -> Path:
 
 
 def load_ict(d: Path):
-    from facewarp._src.geometry.mesh import load_mesh
+    from facewarp.geometry import load_mesh
 
     neutral = load_mesh(d / "generic_neutral_mesh.obj", units="cm")
     F = neutral.faces[(neutral.faces < HEAD_VERTS).all(axis=1)]
@@ -93,7 +93,7 @@ def make_scan(V_true: np.ndarray, F: np.ndarray, seed: int, *, faces: int = 6000
     """
     import igl
 
-    from facewarp._src.geometry.surface import vertex_normals
+    from facewarp.geometry import vertex_normals
 
     rng = np.random.default_rng(seed)
     V2, F2 = igl.upsample(V_true, F, 2)
@@ -128,10 +128,8 @@ def to_scan_frame(X: np.ndarray, pose) -> np.ndarray:
 
 
 def run_case(k: int, TV, TF, markers_idx, *, peers: bool, levels: int, method: str):
-    from facewarp._src.adapt.pipeline import adapt
-    from facewarp._src.adapt.calibrate import calibrate
-    from facewarp._src.geometry.mesh import load_mesh, unit_scale
-    from facewarp._src.adapt.metrics import distance_error, vertex_error
+    from facewarp.adaptation import adapt, calibrate, distance_error, vertex_error
+    from facewarp.geometry import load_mesh, unit_scale
 
     truth = load_mesh(ict_dir() / f"identity{k:03d}.obj", units="cm").vertices[:HEAD_VERTS]
     t0 = time.perf_counter()
@@ -259,7 +257,7 @@ def main(argv=None) -> int:
     ap.add_argument("--identities", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--no-peers", action="store_true")
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--levels", type=int, default=3)
+    ap.add_argument("--levels", type=int, default=2)
     ap.add_argument("--method", default="multilevel")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
@@ -270,7 +268,7 @@ def main(argv=None) -> int:
     TV, TF, markers_idx = load_ict(d)
 
     # warm-up (Warp kernel compile / load), not timed
-    from facewarp._src.adapt.pipeline import adapt
+    from facewarp.adaptation import adapt
 
     lm = {f: TV[i] for f, i in ICT_FDP.items()}
     adapt(TV, TF, lm, TV * 1.02, TF, {f: v * 1.02 for f, v in lm.items()}, levels=1)

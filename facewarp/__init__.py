@@ -13,7 +13,9 @@ The pipeline, in the order data flows (thesis chapters 4-6):
    the ``usd_export`` package.
 
 Lower level, after Newton's layout: :class:`ModelBuilder` -> :class:`Model` / :class:`State` /
-:class:`Control` -> :class:`SolverVerlet` with its stages. Detailed free functions live in the
+:class:`Control` -> :class:`SolverImplicit` (backward Euler, the default) or :class:`SolverVerlet` (the
+explicit reference) with their stages; material profiles :class:`MaterialPhysical` (default) and
+:class:`MaterialThesis` (Table 6.3). Detailed free functions live in the
 public submodules :mod:`facewarp.geometry`, :mod:`facewarp.adaptation`, :mod:`facewarp.anatomy`,
 :mod:`facewarp.physics`, :mod:`facewarp.coupling` and :mod:`facewarp.render`. Everything under ``facewarp._src`` is
 private and may change.
@@ -45,12 +47,16 @@ _NAMES = {
     "Template": "template.head", "default_template": "template.head", "load_template_dir": "template.files",
     "save_template": "template.files", "export_template": "jobs.template", "import_ict": "importers.ict",
     "load_head": "adapt.transfer", "human_likeness": "template.likeness",
+    # a synthetic scan of another face (the demo's input)
+    "FaceProportions": "template.synthetic", "SyntheticScan": "template.synthetic",
+    "synthetic_scan": "template.synthetic",
     # the ICT-FaceKit layout (vertex ranges and the FDPs on its vertices)
     "ICT_FDP_VERTICES": "template.likeness", "ICT_INNER_LIP_VERTICES": "importers.ict",
     "ICT_PART_RANGES": "importers.ict", "ICT_SKIN_VERTICES": "importers.ict",
     # adaptation
     "adapt": "adapt.pipeline", "AdaptResult": "adapt.pipeline", "calibrate": "adapt.calibrate",
     "Calibration": "adapt.calibrate", "distance_error": "adapt.metrics", "vertex_error": "adapt.metrics",
+    "AdaptOptions": "adapt.pipeline", "detect_landmarks": "adapt.detect",
     # anatomy
     "Anatomy": "anatomy.build", "build_anatomy": "anatomy.build", "write_anatomy": "anatomy.build",
     "JawKinematic": "anatomy.jaw",
@@ -62,9 +68,13 @@ _NAMES = {
     "FaceRig": "physics.face_rig", "build_face": "physics.face_rig", "face_rig_from_anatomy": "physics.face_rig",
     "load_face_rig": "physics.face_rig", "save_face_rig": "physics.face_rig",
     "FaceSimulator": "sim.simulator", "Frames": "sim.simulator", "save_frames_npz": "sim.simulator",
+    # USD animations streamed while simulating
+    "UsdAnimation": "jobs.animation", "play_timeline": "jobs.animation",
     # lower level
     "ModelBuilder": "physics.model", "Model": "physics.model", "State": "physics.model", "Control": "physics.model",
-    "SolverVerlet": "physics.solvers.verlet", "SolverStage": "physics.solvers.verlet",
+    "SolverVerlet": "physics.solvers.verlet", "SolverStage": "physics.solvers.base",
+    "SolverImplicit": "physics.solvers.implicit", "MaterialPhysical": "physics.materials",
+    "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_stage", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
     # MuJoCo coupling, moving head
@@ -97,7 +107,8 @@ def __dir__():
 if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.adapt.calibrate import Calibration, calibrate
     from ._src.adapt.metrics import distance_error, vertex_error
-    from ._src.adapt.pipeline import AdaptResult, adapt
+    from ._src.adapt.detect import detect_landmarks
+    from ._src.adapt.pipeline import AdaptOptions, AdaptResult, adapt
     from ._src.adapt.transfer import load_head
     from ._src.anatomy.build import Anatomy, build_anatomy, write_anatomy
     from ._src.anatomy.jaw import JawKinematic
@@ -113,11 +124,15 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.geometry.similarity import Similarity, fit_similarity
     from ._src.geometry.surface import MeshQuery, mean_curvature, vertex_normals
     from ._src.importers.ict import ICT_INNER_LIP_VERTICES, ICT_PART_RANGES, ICT_SKIN_VERTICES, import_ict
+    from ._src.jobs.animation import UsdAnimation, play_timeline
     from ._src.jobs.template import export_template
     from ._src.physics.face_rig import FaceRig, build_face, face_rig_from_anatomy, load_face_rig, save_face_rig
     from ._src.physics.model import Control, Model, ModelBuilder, State
     from ._src.physics.muscle_stage import MuscleRig, MuscleStage, SupportStage
-    from ._src.physics.solvers.verlet import SolverStage, SolverVerlet
+    from ._src.physics.materials import MaterialPhysical, MaterialThesis
+    from ._src.physics.solvers.base import SolverStage
+    from ._src.physics.solvers.implicit import SolverImplicit
+    from ._src.physics.solvers.verlet import SolverVerlet
     from ._src.present.anatomy import render_anatomy
     from ._src.present.render import colormap, render_mesh, save_png
     from ._src.present.strips import render_strip
@@ -126,3 +141,4 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.template.files import load_template_dir, save_template
     from ._src.template.head import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, default_template
     from ._src.template.likeness import ICT_FDP_VERTICES, human_likeness
+    from ._src.template.synthetic import FaceProportions, SyntheticScan, synthetic_scan

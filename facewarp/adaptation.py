@@ -1,4 +1,4 @@
-"""Template-to-scan adaptation (thesis Ch. 4-5): calibration, RBF / CSRBF, the multi-level scheme, error metrics, transfer of the template's parts onto an adapted head (public).
+"""Template-to-scan adaptation (thesis Ch. 4-5): calibration, RBF / CSRBF, the multi-level scheme, the non-sliding field and landing stages, automatic landmarks, error and quality metrics, transfer of the template's parts onto an adapted head (public).
 
 Re-exports of ``facewarp._src``; see each name's docstring for shapes and units."""
 
@@ -22,9 +22,21 @@ from ._src.adapt.rbf import (  # noqa: F401
 )
 from ._src.adapt.pipeline import (  # noqa: F401
     METHODS,
+    AdaptOptions,
     AdaptResult,
     LevelRecord,
     adapt,
+)
+from ._src.adapt.detect import (  # noqa: F401
+    DetectionResult,
+    detect_landmarks,
+    symmetry_plane,
+)
+from ._src.adapt.quality import (  # noqa: F401
+    DIHEDRAL_MARGIN_DEG,
+    FOLD_DEG,
+    distortion,
+    surface_quality,
 )
 from ._src.adapt.metrics import (  # noqa: F401
     DEFAULT_REGION_WEIGHTS,
@@ -47,4 +59,4 @@ from ._src.adapt.transfer import (  # noqa: F401
     transfer_uv,
 )
 
-__all__ = ["AdaptResult", "CALIBRATION_FDPS", "CSRBFField", "Calibration", "DEFAULT_REGION_WEIGHTS", "DistanceError", "EYE_FDPS", "LevelRecord", "METHODS", "Quadrics", "RBFField", "REGION_GROUPS", "Similarity", "VertexError", "adapt", "apply_part", "calibrate", "combined_error", "distance_error", "eye_transform", "fit_csrbf", "fit_local_quadrics", "fit_part_transform", "fit_rbf", "fit_similarity", "head_width", "load_head", "marker_error", "transfer_uv", "vertex_error", "vertex_groups", "wendland"]
+__all__ = ["AdaptOptions", "AdaptResult", "DIHEDRAL_MARGIN_DEG", "DetectionResult", "FOLD_DEG", "detect_landmarks", "distortion", "surface_quality", "symmetry_plane", "CALIBRATION_FDPS", "CSRBFField", "Calibration", "DEFAULT_REGION_WEIGHTS", "DistanceError", "EYE_FDPS", "LevelRecord", "METHODS", "Quadrics", "RBFField", "REGION_GROUPS", "Similarity", "VertexError", "adapt", "apply_part", "calibrate", "combined_error", "distance_error", "eye_transform", "fit_csrbf", "fit_local_quadrics", "fit_part_transform", "fit_rbf", "fit_similarity", "head_width", "load_head", "marker_error", "transfer_uv", "vertex_error", "vertex_groups", "wendland"]

@@ -70,6 +70,7 @@ def _number(parse, ok, expected: str):
 
 _finite_positive = _number(float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
 _positive_int = _number(int, lambda v: v >= 1, "a whole number >= 1")
+_non_negative_int = _number(int, lambda v: v >= 0, "a whole number >= 0")
 _level = _number(int, lambda v: 0 <= v <= MAX_TEMPLATE_LEVEL, f"a level 0..{MAX_TEMPLATE_LEVEL}")
 
 
@@ -297,7 +298,7 @@ def cmd_simulate(args):
     bar = _FrameBar(not args.json)
     try:
         rep = simulate_files(args.head, args.expression, args.out, seconds=args.seconds, fps=args.fps,
-                             substeps=args.substeps, device=args.device, usd=args.usd, progress=bar)
+                             substeps=args.substeps, device=args.device, usd=args.usd, tets=args.tets, progress=bar)
     finally:
         bar.close()
     _emit(args, rep, [
@@ -306,6 +307,80 @@ def cmd_simulate(args):
         f"  {rep['steps_per_second']:.0f} simulated steps per second",
         "  wrote " + ", ".join(rep["files"]),
     ])
+
+
+class _StageBar:
+    """A tqdm bar over a job's named stages that gives way to a frame bar while simulating."""
+
+    def __init__(self, stages, desc: str, enabled: bool):
+        self.stages, self.enabled = list(stages), enabled
+        self.bar = _Progress(len(self.stages), desc, enabled)
+        self.frames = _FrameBar(enabled)
+
+    def __call__(self, msg: str):
+        self.frames.close()
+        self.frames = _FrameBar(self.enabled)
+        self.bar(msg)
+
+    def close(self):
+        self.frames.close()
+        self.bar.close()
+
+
+def cmd_demo(args):
+    from ._src.jobs.demo import DEMO_STAGES, demo_files
+
+    bar = _StageBar(DEMO_STAGES, "demo", not args.json)
+    try:
+        rep = demo_files(args.out, seconds=args.seconds, quick=args.quick, device=args.device, jaw=args.jaw,
+                         seed=args.seed, progress=bar, frame_progress=lambda k, n: bar.frames(k, n))
+    finally:
+        bar.close()
+    a, q, s = rep["adaptation"], rep["anatomy"], rep["simulation"]
+    _emit(args, rep, [
+        f"demo in {args.out} ({rep['timings_s']['total']:.1f} s on {s['device']}):",
+        f"  scan: {rep['scan']['vertex_count']} vertices in mm, {rep['scan']['landmark_count']} FDPs, "
+        f"pose {rep['scan']['pose']['rotation_deg']:.1f} deg",
+        f"  adaptation: {a['seconds']:.1f} s, vertex error E_v median {a['E_v_mm']['median']:.2f} mm, RMS "
+        f"{a['E_v_mm']['rms']:.2f} mm; distance to scan median {a['distance_to_scan_mm']['median']:.2f} mm",
+        f"  anatomy: {q['tet_count']} tets, {q['inverted_count']} inverted, {q['muscle_count']} muscles",
+        f"  simulation: {s['frames']} frames ({s['seconds']:g} s), {s['frames_per_second']:.1f} frames/s "
+        f"({s['jaw']} jaw)",
+        "  wrote animation.usdc, head.xml, report.json, adapted_head.png, expressions.png, sequence.gif",
+    ])
+
+
+def cmd_morph(args):
+    from ._src.jobs.morph import morph_files
+
+    prog = _Progress(3 + (args.steps + 2 if args.build is not None else 0), "morph", not args.json)
+    try:
+        rep = morph_files(args.a, args.b, args.out, steps=args.steps, fps=args.fps, build=args.build,
+                          device=args.device, progress=prog)
+    finally:
+        prog.close()
+    lines = [f"morphed {args.a} into {args.b}: {rep['samples']} heads (s = 0..1) in {args.out}",
+             f"  largest vertex distance A-B {rep['max_vertex_distance_mm']:.1f} mm; parts "
+             + ", ".join(f"{k} {'rigid' if v['rigid'] else 'affine'}" for k, v in rep["parts"].items())]
+    if "heads" in rep:
+        lines.append(f"  anatomy of every head in {args.build}: "
+                     + ", ".join(f"{h['tet_count']} tets/{h['inverted_count']} inverted" for h in rep["heads"]))
+    _emit(args, rep, lines)
+
+
+def cmd_retarget(args):
+    from ._src.jobs.retarget import retarget_files
+
+    bar = _StageBar(range(2 * len(args.heads) + 1), "retarget", not args.json)
+    try:
+        rep = retarget_files(args.expression, args.heads, args.out, seconds=args.seconds, fps=args.fps,
+                             device=args.device, progress=bar, frame_progress=lambda k, n: bar.frames(k, n))
+    finally:
+        bar.close()
+    _emit(args, rep, [f"played {rep['expression']} ({rep['seconds']:g} s) on {len(rep['heads'])} heads into {args.out}:"]
+          + [f"  {h['name']}: {h['frames']} frames, {h['frames_per_second']:.1f} frames/s, lip corners "
+             f"{h['max_fdp_motion_mm'].get('8.3', float('nan')):.1f}/{h['max_fdp_motion_mm'].get('8.4', float('nan')):.1f} mm"
+             for h in rep["heads"]] + ["  wrote " + ", ".join(Path(f).name for f in rep["files"])])
 
 
 # ----------------------------------------------------------------------------- parser
@@ -424,9 +499,57 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0, help="frames per second, > 0 (default 30)")
     s.add_argument("--substeps", type=_positive_int, metavar="N",
                    help="substeps per frame, >= 1 (default: enough for the stable time step)")
-    s.add_argument("--out", required=True, type=Path, help="output folder")
-    s.add_argument("--usd", action="store_true", help="also write frames.usda (time-sampled skin, eyes, teeth)")
+    s.add_argument("--out", required=True, type=Path, metavar="DIR|FILE.usd[a|c|z]",
+                   help="output folder (frames.npz, frames.png), or a .usda/.usdc/.usdz file: only the USD "
+                        "animation, streamed while simulating, no frame cap")
+    s.add_argument("--usd", action="store_true",
+                   help="with an output folder, also write animation.usdc (whole head, eyes, teeth and tongue "
+                        "as moving parts, muscles with activations), streamed while simulating")
+    s.add_argument("--tets", action="store_true",
+                   help="put the skin's tet layer into the USD too (a TetMesh of purpose guide, hidden by default)")
     s.set_defaults(func=cmd_simulate)
+
+    d = sub.add_parser("demo", help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "
+                                    "the Fig. 6.16 sequence -> USD, MuJoCo head, pictures",
+                       epilog="Writes DIR/animation.usdc, DIR/head.xml, DIR/report.json, DIR/adapted_head.png, "
+                              "DIR/expressions.png, DIR/sequence.gif and the intermediate folders scan/, adapt/, "
+                              "build/.")
+    d.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    d.add_argument("--seconds", type=_finite_positive, metavar="S",
+                   help="length of the sequence [s], > 0 (default: the full sequence, 8 s; shorter squeezes it)")
+    d.add_argument("--quick", action="store_true", help="a smoke run: 0.2 s of sequence, small pictures")
+    d.add_argument("--seed", type=_non_negative_int, metavar="N", default=0,
+                   help="seed of the synthetic scan (face proportions, noise, holes, pose), default 0")
+    d.add_argument("--jaw", choices=["kinematic", "mujoco"], default="kinematic",
+                   help="the jaw: kinematic (Eq. 6.4.9, default) or the MuJoCo hinge body of head.xml")
+    d.set_defaults(func=cmd_demo)
+
+    mo = sub.add_parser("morph", help="in-between heads of two heads of the same topology, as one USD",
+                        epilog="A and B: template folders, adapt outputs or default[:LEVEL] made from one template. "
+                               "The USD holds steps + 2 time samples (A, the in-betweens, B); a picture "
+                               "FILE.png is written beside it.")
+    mo.add_argument("a", metavar="A", help="first head (s = 0)")
+    mo.add_argument("b", metavar="B", help="second head (s = 1)")
+    mo.add_argument("--steps", type=_positive_int, metavar="N", default=8, help="in-between heads, >= 1 (default 8)")
+    mo.add_argument("--out", required=True, type=Path, metavar="FILE.usd[a|c|z]", help="the USD file")
+    mo.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0,
+                    help="time codes per second of the file, > 0 (default 30)")
+    mo.add_argument("--build", type=Path, metavar="DIR",
+                    help="also write every head as a template folder DIR/head_KK with its anatomy in "
+                         "DIR/head_KK/build (simulate it with `facewarp simulate DIR/head_KK/build`)")
+    mo.set_defaults(func=cmd_morph)
+
+    r = sub.add_parser("retarget", help="one activation sequence on several heads: a USD per head and a picture",
+                       epilog="SEQUENCE: a sequence file (see `facewarp simulate --help`), a preset name or "
+                              "'sequence'. HEAD: a `facewarp build` output, a template folder, an adapt output or "
+                              "default[:LEVEL]. Every head gets the same physical parameters.")
+    r.add_argument("expression", metavar="SEQUENCE", help="sequence .json, preset or 'sequence'")
+    r.add_argument("heads", nargs="+", metavar="HEAD", help="heads to play it on")
+    r.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    r.add_argument("--seconds", type=_finite_positive, metavar="S",
+                   help="length [s], > 0 (default: the file's length + 0.5 s; 2 s for a preset, 8 s for 'sequence')")
+    r.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0, help="frames per second, > 0 (default 30)")
+    r.set_defaults(func=cmd_retarget)
     return p
 
 

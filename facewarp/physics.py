@@ -5,6 +5,7 @@ Re-exports of ``facewarp._src``; see each name's docstring for shapes and units.
 from __future__ import annotations
 
 from ._src.physics.model import (  # noqa: F401
+    DT_STABLE_1CM,
     EDGE_CROSS,
     EDGE_INNER,
     EDGE_OUTER,
@@ -12,17 +13,39 @@ from ._src.physics.model import (  # noqa: F401
     Control,
     Model,
     ModelBuilder,
+    Springs,
     State,
+    sheet_areas,
+    thesis_substep,
+)
+from ._src.physics.materials import (  # noqa: F401
+    MATERIALS,
+    TISSUE_DENSITY,
+    MaterialPhysical,
+    MaterialThesis,
+    isotropic_moduli,
+    material_profile,
+)
+from ._src.physics.potential import (  # noqa: F401
+    StepData,
+    StepPotential,
+)
+from ._src.physics.solvers.base import (  # noqa: F401
+    SolverBase,
+    SolverStage,
 )
 from ._src.physics.solvers.verlet import (  # noqa: F401
-    DT_STABLE_1CM,
     MASS_SCALING_QUANTILE,
-    SolverStage,
     SolverVerlet,
     node_stable_dt,
     scale_masses,
     simulate,
     stable_dt,
+)
+from ._src.physics.solvers.implicit import (  # noqa: F401
+    IMPLICIT_METHODS,
+    SolverImplicit,
+    factorization_backend,
 )
 from ._src.physics.muscle_stage import (  # noqa: F401
     MuscleRig,
@@ -48,9 +71,10 @@ from ._src.coupling.kinematic import (  # noqa: F401
     JawStage,
 )
 from ._src.sim.simulator import (  # noqa: F401
+    SOLVERS,
     FaceSimulator,
     Frames,
     save_frames_npz,
 )
 
-__all__ = ["BONE_REGIONS", "CarryStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "JawStage", "MASS_SCALING_QUANTILE", "MUSCLE_STIFFNESS", "Model", "ModelBuilder", "MuscleRig", "MuscleStage", "SolverStage", "SolverVerlet", "State", "SupportStage", "TABLE_6_3", "build_face", "ellipsoid_uv", "face_rig_from_anatomy", "load_face_rig", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "simulate", "stable_dt"]
+__all__ = ["BONE_REGIONS", "CarryStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "IMPLICIT_METHODS", "JawStage", "MASS_SCALING_QUANTILE", "MATERIALS", "MUSCLE_STIFFNESS", "MaterialPhysical", "MaterialThesis", "Model", "ModelBuilder", "MuscleRig", "MuscleStage", "SOLVERS", "SolverBase", "SolverImplicit", "SolverStage", "SolverVerlet", "Springs", "State", "StepData", "StepPotential", "SupportStage", "TABLE_6_3", "TISSUE_DENSITY", "build_face", "ellipsoid_uv", "face_rig_from_anatomy", "factorization_backend", "isotropic_moduli", "load_face_rig", "material_profile", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "sheet_areas", "simulate", "stable_dt", "thesis_substep"]

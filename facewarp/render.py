@@ -31,7 +31,12 @@ from ._src.present.template import (  # noqa: F401
 from ._src.present.plot import (  # noqa: F401
     line_chart,
 )
+from ._src.present.animation import (  # noqa: F401
+    FaceView,
+    label_grid,
+    save_gif,
+)
 
-__all__ = ["LIPS", "SKIN", "SKIN_COLOR", "TEETH", "TONGUE", "VIEWS", "colored_scene", "colormap", "displacement_max",
-           "line_chart", "render_anatomy", "render_mesh", "render_previews", "render_strip", "render_views", "save_png",
-           "vermilion_weight"]
+__all__ = ["LIPS", "SKIN", "SKIN_COLOR", "TEETH", "TONGUE", "VIEWS", "FaceView", "colored_scene", "colormap",
+           "displacement_max", "label_grid", "line_chart", "render_anatomy", "render_mesh", "render_previews",
+           "render_strip", "render_views", "save_gif", "save_png", "vermilion_weight"]

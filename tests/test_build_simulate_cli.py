@@ -44,7 +44,7 @@ def test_simulate_outputs(built, tmp_path, capsys):
     z = np.load(out / "frames.npz")
     assert z["points"].shape[0] == 5 and z["fdp_points"].shape == (5, 84, 3) and z["times"].shape == (5,)
     assert len(z["fdp_ids"]) == 84
-    assert (out / "frames.png").is_file() and (out / "frames.usda").is_file()
+    assert (out / "frames.png").is_file() and (out / "animation.usdc").is_file()
 
 
 def test_errors(built, tmp_path, capsys):

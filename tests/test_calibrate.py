@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from facewarp._src.adapt.calibrate import CALIBRATION_FDPS, Similarity, calibrate, fit_similarity
-from facewarp._src.core.errors import InputError
+from facewarp import InputError
+from facewarp.adaptation import CALIBRATION_FDPS, Similarity, calibrate, fit_similarity
 
 
 def _rotation(rng):

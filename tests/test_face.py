@@ -1,26 +1,27 @@
-"""The simulated face: Table 6.4 presets move the FDPs the right way; rest stays at rest."""
+"""The simulated face: Table 6.4 presets move the FDPs the right way; rest stays at rest.
+
+Run with the default solver (implicit, one step per 30 fps frame) and material (physical); one
+test runs the Verlet reference with the thesis profile (the simulator's behaviour before the
+implicit solver)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from facewarp import default_template
-from facewarp._src.anatomy.build import build_anatomy
-from facewarp._src.expressions import Expression, Segment, Timeline, timeline_for
-from facewarp._src.sim.face import FaceSimulator, face_rig_from_anatomy, load_face_rig, save_face_rig
+from facewarp import (Expression, FaceSimulator, InputError, Segment, Timeline, build_face, default_template,
+                      load_face_rig, preset as table_preset, save_face_rig, timeline_for)
 
 SECONDS = 0.4
 
 
 @pytest.fixture(scope="module")
 def rig():
-    a = build_anatomy(default_template(0), check_intersections=False)
-    return face_rig_from_anatomy(a)
+    return build_face(default_template(0))
 
 
-def motion(rig, timeline, seconds=SECONDS):
-    frames = FaceSimulator(rig, fps=30).run(timeline, seconds)
+def motion(rig, timeline, seconds=SECONDS, **kw):
+    frames = FaceSimulator(rig, fps=30, **kw).run(timeline, seconds)
     ids = list(map(str, frames.fdp_ids))
     d = frames.fdp_points[-1] - frames.fdp_points[0]
     assert np.isfinite(frames.points).all()
@@ -45,10 +46,13 @@ def test_rest_stays_at_rest(rig):
     assert np.abs(frames.points - frames.points[0]).max() < 1e-6
 
 
-def test_smile_raises_lip_corners_outward(rig):
-    d, _ = motion(rig, preset("smile"))
+@pytest.mark.parametrize("solver, material", [("implicit", "physical"), ("implicit", "thesis"), ("verlet", "thesis")])
+def test_smile_raises_lip_corners_outward(rig, solver, material):
+    seconds = SECONDS if solver == "implicit" else 0.2  # Verlet: ~1,000 substeps per frame
+    d, frames = motion(rig, preset("smile"), seconds, solver=solver, material=material)
     assert d["8.3"][1] > 1e-3 and d["8.4"][1] > 1e-3  # up (+y) by more than a millimetre
     assert d["8.3"][0] > 2e-4 and d["8.4"][0] < -2e-4  # outward: left corner +x, right corner -x
+    assert frames.frames_per_second > 0 and frames.solver == solver and frames.material == material
 
 
 def test_sad_lowers_lip_corners(rig):
@@ -79,34 +83,44 @@ def test_jaw_moves_chin_down_and_back(rig):
     assert np.abs(frames.parts["eye_L"][0][-1] - frames.parts["eye_L"][0][0]).max() == 0
 
 
-def _laugh_steps(rig, device, steps=1000, chunks=10):
-    """``steps`` substeps of the laugh preset (muscles and jaw) ramped in over ``chunks``."""
-    from facewarp._src.expressions import preset as table_preset
-    from facewarp._src.sim.face import _activation_vector
-
-    sim = FaceSimulator(rig, device=device)
+def _laugh_frames(rig, device, frames=6, **kw):
+    """The laugh preset (muscles and jaw) ramped in over ``frames`` frames of the user loop."""
+    sim = FaceSimulator(rig, device=device, **kw)
     e = table_preset("laugh")
-    a = _activation_vector(rig.rig.names, e)
-    for k in range(1, chunks + 1):
-        sim.control.activations.assign(a * (k / chunks))
-        sim.control.jaw_angles.assign(np.array([e.jaw_u * k / chunks, 0.0], np.float32))
-        sim.advance(steps // chunks)
-    sim.solver.check(sim.state)
-    return sim.state.positions.numpy().astype(np.float64)
+    for k in range(1, frames + 1):
+        sim.set_activations({m: v * k / frames for m, v in e.activations.items()})
+        sim.set_jaw(e.jaw_u * k / frames)
+        sim.step()
+    return sim.positions()
 
 
 def test_steps_are_deterministic(rig):
-    # elements write their own force slots and nodes add them in a fixed order: no atomics
-    a, b = _laugh_steps(rig, "cpu", 200), _laugh_steps(rig, "cpu", 200)
+    # elements write their own slots and nodes add them in a fixed order (no atomics), and the
+    # solver's choices count iterations, not seconds
+    a, b = _laugh_frames(rig, "cpu"), _laugh_frames(rig, "cpu")
     assert np.array_equal(a, b)
 
 
-def test_cpu_and_cuda_agree_after_1000_steps(rig):
+def test_user_loop_rejects_bad_controls(rig):
+    sim = FaceSimulator(rig)
+    with pytest.raises(InputError, match="activations"):
+        sim.set_activations({"zygomatic_major": float("nan")})
+    with pytest.raises(InputError, match="dt"):
+        sim.step(0.0)
+    with pytest.raises(InputError, match="solver"):
+        FaceSimulator(rig, solver="euler")
+    with pytest.raises(InputError, match="material"):
+        FaceSimulator(rig, material="rubber")
+
+
+def test_cpu_and_cuda_agree(rig):
     from conftest import warp_devices
 
     if "cuda:0" not in warp_devices():
         pytest.skip("compares a GPU with the CPU")
-    x_cpu, x_gpu = _laugh_steps(rig, "cpu"), _laugh_steps(rig, "cuda:0")
+    # the same solver method on both (newton-pcg, the CUDA default, runs on the CPU too)
+    x_cpu = _laugh_frames(rig, "cpu", method="newton-pcg")
+    x_gpu = _laugh_frames(rig, "cuda:0", method="newton-pcg")
     moved = np.linalg.norm(x_cpu - rig.nodes, axis=1).max()
     diff = np.linalg.norm(x_cpu - x_gpu, axis=1).max()
     assert moved > 1e-3 and diff <= 1e-4 * moved, (diff, moved)

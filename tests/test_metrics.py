@@ -3,7 +3,7 @@
 import numpy as np
 import trimesh
 
-from facewarp._src.adapt.metrics import combined_error, distance_error, marker_error, vertex_error
+from facewarp.adaptation import combined_error, distance_error, marker_error, vertex_error
 
 
 def _sphere(r=0.1, sub=3):

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facewarp._src.anatomy.jaw import JawKinematic
-from facewarp._src.physics.model import ModelBuilder
-from facewarp._src.physics.muscle_stage import MuscleRig, MuscleStage, JawStage, ellipsoid_point, ellipsoid_uv, rig_reference, segment_frames
-from facewarp._src.physics.solvers.verlet import SolverVerlet
+from facewarp import JawKinematic
+from facewarp.anatomy import bezier_quadratic, ellipsoid_points
+from facewarp.physics import (CarryStage, JawStage, ModelBuilder, MuscleRig, MuscleStage, SolverImplicit,
+                              SolverVerlet, ellipsoid_uv, rig_reference, segment_frames)
 
 S2 = np.sqrt(0.5)
 
@@ -32,6 +32,11 @@ def slab(n=4, h=0.01):
     T[vol < 0] = T[vol < 0][:, [0, 2, 1, 3]]
     layer = np.r_[np.zeros(m, int), np.ones(m, int)]
     return V, T, layer
+
+
+def ellipsoid_point(center, frame, radii, uv):
+    """Points on ellipsoids with frames whose columns are the axes (as segment_frames gives)."""
+    return ellipsoid_points(center, np.transpose(frame, (0, 2, 1)), radii, uv)
 
 
 def small_rig(nodes, node_pos):
@@ -69,11 +74,9 @@ def small_rig(nodes, node_pos):
 def test_rational_bezier_ring_is_a_circle():
     V, T, layer = slab()
     rig = small_rig([0], V[:1])
-    from facewarp._src.physics.muscle_stage import _bezier_np
-
     t = np.linspace(0, 1, 11)
     for k in range(1, 5):
-        pts = _bezier_np(rig.ctrl_rest[rig.curve_ctrl[k]][None], rig.curve_weight[k][None], t)
+        pts = bezier_quadratic(rig.ctrl_rest[rig.curve_ctrl[k]], t, rig.curve_weight[k])
         np.testing.assert_allclose(np.linalg.norm(pts - rig.center[1], axis=1), 0.012, rtol=1e-12)
 
 
@@ -136,8 +139,6 @@ def test_jaw_stage_moves_targets(device):
 
 
 def test_carry_stage_moves_nodes_rigidly_without_velocity(device):
-    from facewarp._src.physics.muscle_stage import CarryStage
-
     V, T, layer = slab()
     model = ModelBuilder(V, T, layer=layer).finalize(device)
     jaw = JawKinematic(np.array([0.0, 0.0, 0.05]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
@@ -187,3 +188,72 @@ def test_jaw_alone_strains_no_muscle_spring(device):
     stage0.apply(model, state, control, 1e-5, solver.forces, solver.targets)
     f0 = np.abs(solver.forces.numpy()).max()
     assert f < 0.02 * f0 and f0 > 1.0, (f, f0)
+
+
+def contracted_stage(device, activation=0.9):
+    """The slab with its inner sheet attached to the small rig, the linear muscle contracted."""
+    V, T, layer = slab()
+    inner = np.where(layer == 1)[0]
+    rig = small_rig(inner, V[inner])
+    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    stage = MuscleStage(rig, None, model.device)
+    control = model.control()
+    control.activations.assign(np.array([activation, 0.3], np.float32))
+    return V, rig, model, stage, control
+
+
+def test_muscle_force_is_eq_6_4_1(device):
+    """Each spring pulls its node with k_m |cos theta| (|p_m - p_s| - l0) toward p_m (Eq. 6.4.1)."""
+    V, rig, model, stage, control = contracted_stage(device)
+    solver = SolverVerlet(model, stages=[stage])
+    state = model.state()
+    X = V + np.random.default_rng(3).normal(scale=2e-4, size=V.shape)  # strained: l != l0, theta arbitrary
+    state.positions.assign(X.astype(np.float32))
+    state.prev_positions.assign(X.astype(np.float32))
+    solver.forces.zero_()
+    stage.apply(model, state, control, 1e-5, solver.forces, solver.targets)
+    F = solver.forces.numpy().astype(np.float64)
+    # reference from the stage's own muscle geometry (checked against NumPy in test_kernels_match_reference)
+    pm = stage.att_point.numpy().astype(np.float64)
+    fibre = stage.seg_frame.numpy().astype(np.float64)[rig.att_seg][:, :, 0]
+    d = pm - X.astype(np.float32).astype(np.float64)[rig.att_node]
+    length = np.linalg.norm(d, axis=1)
+    n = d / length[:, None]
+    cos = np.abs(np.einsum("ij,ij->i", n, fibre))
+    f = (rig.att_stiffness * cos * (length - rig.att_rest_length))[:, None] * n
+    expect = np.zeros_like(F)
+    np.add.at(expect, rig.att_node, f)
+    assert np.abs(expect).max() > 1e-2, "the contraction must strain the springs"
+    np.testing.assert_allclose(F, expect, atol=1e-4 * np.abs(expect).max(), err_msg="Eq. 6.4.1")
+    # a spring along the fibre gets |cos| = 1, one across it 0: spot-check the extremes exist
+    assert cos.max() > 0.5 and cos.min() < 0.2
+
+
+def test_implicit_muscle_energy_gradient_is_the_eq_6_4_1_force(device):
+    """At the step's start the muscle springs' energy 1/2 k_m w (l - l0)^2 (w = |cos theta| frozen
+    over the step) has exactly the gradient -F of Eq. 6.4.1; away from it, its gradient is the
+    finite difference of its energy."""
+    V, rig, model, stage, control = contracted_stage(device)
+    state = model.state()
+    X = V + np.random.default_rng(4).normal(scale=2e-4, size=V.shape)
+    state.positions.assign(X.astype(np.float32))
+    state.prev_positions.assign(X.astype(np.float32))
+    implicit = SolverImplicit(model, stages=[stage])
+    verlet = SolverVerlet(model, stages=[stage])
+    stage.prepare(model, state, control, 1.0, verlet.targets)
+    verlet.forces.zero_()
+    stage.apply(model, state, control, 1.0, verlet.forces, verlet.targets)
+    F = verlet.forces.numpy().astype(np.float64)
+    # the muscle part of the implicit gradient: the potential with and without the muscles
+    e1, g1 = implicit.potential(state, control, 1.0, X)
+    e0, g0 = SolverImplicit(model).potential(state, control, 1.0, X)
+    np.testing.assert_allclose(g1 - g0, -F, atol=2e-3 * np.abs(F).max(), err_msg="muscle gradient != -Eq. 6.4.1")
+    # finite differences of the frozen-cosine energy around X (the cosine stays that of X)
+    rng = np.random.default_rng(5)
+    D = rng.normal(size=V.shape) * 1e-6
+    ep, _ = implicit.potential(state, control, 1.0, X + D)
+    em, _ = implicit.potential(state, control, 1.0, X - D)
+    ep0, _ = SolverImplicit(model).potential(state, control, 1.0, X + D)
+    em0, _ = SolverImplicit(model).potential(state, control, 1.0, X - D)
+    fd = ((ep - ep0) - (em - em0)) / 2.0
+    np.testing.assert_allclose(fd, np.sum((g1 - g0) * D), rtol=2e-2)

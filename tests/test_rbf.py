@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from facewarp._src.adapt.rbf import fit_csrbf, fit_local_quadrics, fit_rbf, wendland
+from facewarp.adaptation import fit_csrbf, fit_local_quadrics, fit_rbf, wendland
 
 
 def _points(n, seed=0):

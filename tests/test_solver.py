@@ -1,4 +1,4 @@
-"""Tests of the tissue model, its kernels and the Verlet solver (thesis Sec. 6.4, Table 6.3).
+"""Tests of the tissue model, its kernels and the Verlet reference solver (thesis Sec. 6.4, Table 6.3).
 
 Every force is checked against the finite-difference gradient of a float64 NumPy energy
 written here from the thesis equations (independent of the kernels); the solver is checked
@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 import warp as wp
 
-from facewarp._src.core.errors import InputError, SimulationError
-from facewarp._src.physics.model import EDGE_CROSS, EDGE_INNER, EDGE_OUTER, ModelBuilder, signed_volumes
-from facewarp._src.physics.solvers.verlet import DT_STABLE_1CM, SolverVerlet, simulate, stable_dt
+from facewarp import InputError, SimulationError
+from facewarp.geometry import signed_tet_volumes as signed_volumes
+from facewarp.physics import (DT_STABLE_1CM, EDGE_CROSS, EDGE_INNER, EDGE_OUTER, ModelBuilder, SolverVerlet,
+                              node_stable_dt, scale_masses, simulate, stable_dt, thesis_substep)
 
 CM = 0.01
 
@@ -82,9 +83,9 @@ def oracle_energy(b: ModelBuilder, X: np.ndarray) -> float:
     f = b.faces
     area = 0.5 * np.linalg.norm(np.cross(X[f[:, 1]] - X[f[:, 0]], X[f[:, 2]] - X[f[:, 0]]), axis=1)
     c = area / b.face_rest_areas - 1.0
-    e += 0.5 * b.k_area * np.sum(c**2)
+    e += 0.5 * np.sum(b.face_k * c**2)
     c = signed_volumes(X, b.tets) / b.tet_rest_volumes - 1.0
-    e += 0.5 * b.k_volume * np.sum(c**2)
+    e += 0.5 * np.sum(b.tet_k * c**2)
     e += 0.5 * np.sum(b.hold_stiffness * np.sum((X - b.vertices) ** 2, axis=1))
     return float(e)
 
@@ -137,7 +138,10 @@ def test_builder_derives_elements_and_table_6_3_defaults():
     assert cls[(0, 1)] == EDGE_OUTER and cls[(2, 3)] == EDGE_INNER and cls[(0, 2)] == EDGE_CROSS
     k0 = {tuple(e): k for e, k in zip(b.edges.tolist(), b.edge_k0)}
     assert (k0[(0, 1)], k0[(2, 3)], k0[(1, 3)]) == (15.0, 10.0, 5.0)
-    assert (b.k_area, b.k_volume, b.damping) == (7.5, 7.5, 0.002)
+    assert (b.face_k == 7.5).all() and (b.tet_k == 7.5).all()
+    # Table 6.3's 0.002 per substep, as a rate over the thesis profile's Verlet substep
+    assert b.damping_rate == pytest.approx(0.002 / thesis_substep(CM, 0.5, 15.0))
+    assert ModelBuilder(V, T, substep=1e-4).damping_rate == pytest.approx(20.0)
     np.testing.assert_array_equal(b.mass, 0.5)
 
 
@@ -159,8 +163,10 @@ def test_builder_shares_edges_and_faces_between_tets():
         (dict(tets=[[0, 1, 2, 3], [0, 2, 1, 3]]), r"tet 1 \[0, 2, 1, 3\] is inverted"),
         (dict(layer=[0, 1, 2, 0]), r"layer must be 0 \(outer\) or 1 \(inner\)"),
         (dict(fixed=[True, False]), r"fixed must have shape \(4,\)"),
-        (dict(damping=1.5), r"damping must lie in \[0, 1\)"),
+        (dict(damping_rate=-1.0), r"damping_rate must be a finite value >= 0"),
         (dict(mass=-1.0), r"mass must be positive"),
+        (dict(k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_area=0.0, k_volume=0.0), r"no stiffness"),
+        (dict(material="rubber"), r"material: expected one of"),
     ],
 )
 def test_builder_rejects_bad_input(kwargs, match):
@@ -189,7 +195,7 @@ def test_finalize_model_state_control(device):
     assert control.activations.shape == (14,) and control.jaw_angles.shape == (2,)
     assert control.external_force.shape == (len(V),)
     with pytest.raises(Exception):
-        model.k_area = 1.0  # frozen
+        model.damping_rate = 1.0  # frozen
 
 
 # ----------------------------------------------------------------------------------------
@@ -234,7 +240,7 @@ def test_edge_damping_opposes_stretch_rate(device):
     # Eq. 6.4.5 per spring: two nodes separating along their edge are pulled together by c v
     V, T = one_tet()
     c, dt = 3.0, 1e-3
-    b = ModelBuilder(V, T, edge_damping=c, k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_area=0.0, k_volume=0.0)
+    b = ModelBuilder(V, T, edge_damping=c, k0_outer=1e-9, k0_inner=0.0, k0_cross=0.0, k_area=0.0, k_volume=0.0)
     prev = V.copy()
     prev[1, 0] -= 1e-5  # node 1 moves +x at 1 cm/s, along edge (0, 1)
     F = kernel_forces(b, device, V, prev, dt=dt)
@@ -298,7 +304,7 @@ def total_energy(b, state, dt) -> float:
 
 @pytest.mark.parametrize(
     "kwargs",
-    [dict(), dict(damping=0.0, edge_damping=20.0)],
+    [dict(), dict(damping_rate=0.0, edge_damping=20.0)],
     ids=["verlet_damping", "edge_damping"],
 )
 def test_energy_decays_with_damping(device, kwargs):
@@ -321,7 +327,7 @@ def test_energy_decays_with_damping(device, kwargs):
 def test_energy_is_conserved_without_damping(device):
     # the forces are conservative: undamped Verlet keeps the energy within a few per cent
     V, T = grid_tets(2, 1, 1)
-    b = ModelBuilder(V, T, layer=slab_layers(V), damping=0.0)
+    b = ModelBuilder(V, T, layer=slab_layers(V), damping_rate=0.0)
     model = b.finalize(device)
     dt = 1e-4
     state = model.state()
@@ -516,8 +522,6 @@ def test_stable_dt_one_centimetre_tet(device):
 
 
 def test_node_stable_dt_and_selective_mass_scaling():
-    from facewarp._src.physics.solvers.verlet import node_stable_dt, scale_masses
-
     V, T = grid_tets(4, 4, 1)
     V = V.copy()
     # flatten one interior top node toward its bottom neighbour: one short edge, flat tets

@@ -89,31 +89,37 @@ def relax_squeezed(V, F, scan_q, folds: FoldCheck, allowed, reject, *, rounds: i
     floor, so the relaxation never trades one flat triangle for another. A flat triangle makes a
     flat tet in the skin layer (Sec. 6.2), and a flat tet sets the solver's step (Sec. 6.4.4).
     """
+    import scipy.sparse as sp
+
     q0 = tri_quality(folds.V0, F)
     target = np.minimum(TRI_QUALITY_FLOOR, 0.5 * q0)
-    if not (tri_quality(V, F) < target).any():
+    q = tri_quality(V, F)
+    if not (q < target).any():
         return V
-    n = len(V)
+    n, m = len(V), len(F)
     E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     E = np.concatenate([E, E[:, ::-1]])
-    deg = np.bincount(E[:, 0], minlength=n)
-    vf = np.repeat(np.arange(len(F)), 3)  # vertex -> face incidence, as pairs
-    vv = F.ravel()
+    adj = sp.csr_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    deg = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1)  # an interior edge counts twice
+    vf = sp.csr_matrix((np.ones(3 * m), (F.ravel(), np.repeat(np.arange(m), 3))), shape=(n, m))
     W = V.copy()
     for _ in range(rounds):
-        q = tri_quality(W, F)
         bad = q < target
         if not bad.any():
             break
         act = np.zeros(n, bool)
         act[F[bad].ravel()] = True
-        act[E[act[E[:, 0]], 1]] = True  # and their one-ring
+        act[adj[np.flatnonzero(act)].indices] = True  # and their one-ring
         idx = np.flatnonzero(act)
-        mean = np.zeros_like(W)
-        np.add.at(mean, E[:, 0], W[E[:, 1]])
-        mean = mean / np.maximum(deg, 1)[:, None]
-        N = vertex_normals(W, F)[idx]
-        step = mean[idx] - W[idx]
+        fl = np.unique(vf[idx].indices)  # every face around an active vertex
+        Fl = F[fl]
+        mean = (adj[idx] @ W) / deg[idx][:, None]
+        fn = np.cross(W[Fl[:, 1]] - W[Fl[:, 0]], W[Fl[:, 2]] - W[Fl[:, 0]])  # area-weighted face normals
+        N = np.zeros((n, 3))
+        for d in range(3):
+            N[:, d] = np.bincount(Fl.ravel(), weights=np.repeat(fn[:, d], 3), minlength=n)
+        N = N[idx] / np.maximum(np.linalg.norm(N[idx], axis=1, keepdims=True), 1e-300)
+        step = mean - W[idx]
         step -= np.einsum("kd,kd->k", step, N)[:, None] * N  # stay in the tangent plane
         C = W.copy()
         C[idx] += 0.5 * step
@@ -121,26 +127,27 @@ def relax_squeezed(V, F, scan_q, folds: FoldCheck, allowed, reject, *, rounds: i
         ok = cp.face >= 0
         C[idx[ok]] = cp.points[ok]
         # keep a vertex's step if, with its neighbours where they were, its worst triangle improves
+        ql = q[fl]
         old_min = np.full(n, np.inf)
-        np.minimum.at(old_min, vv, q[vf])
+        np.minimum.at(old_min, Fl.ravel(), np.repeat(ql, 3))
         new_min = np.full(n, np.inf)
-        PW = W[F]
+        PW = W[Fl]
         for k in range(3):  # move one corner at a time
             P = PW.copy()
-            P[:, k] = C[F[:, k]]
-            qk = tri_quality_points(P)
-            np.minimum.at(new_min, F[:, k], qk)
+            P[:, k] = C[Fl[:, k]]
+            np.minimum.at(new_min, Fl[:, k], tri_quality_points(P))
         keep = act & (new_min > old_min)
         if not keep.any():
             break
         Wn = W.copy()
         Wn[keep] = C[keep]
-        qn = tri_quality(Wn, F)
-        worse = (qn < q) & (qn < target)
-        Wn[F[worse].ravel()] = W[F[worse].ravel()]
+        qn = tri_quality(Wn, Fl)
+        worse = (qn < ql) & (qn < target[fl])
+        Wn[Fl[worse].ravel()] = W[Fl[worse].ravel()]
         if np.array_equal(Wn, W):
             break
         W = Wn
+        q[fl] = tri_quality(W, Fl)
     return unfold(W, V, F, folds, allowed)
 
 

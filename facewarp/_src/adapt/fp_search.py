@@ -95,13 +95,15 @@ def thin(P: np.ndarray, count: int, spacing: float) -> np.ndarray:
     return np.asarray(out, dtype=np.int64)
 
 
-def curvature_candidates(Q: np.ndarray, SF: np.ndarray, Q_lm: dict) -> tuple[np.ndarray, np.ndarray]:
+def curvature_candidates(Q: np.ndarray, SF: np.ndarray, Q_lm: dict, H: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
     """Scan vertices in the eyes..mouth box, and their order by decreasing |kappa_H| (Sec. 4.5.2).
 
     Args:
         Q: Calibrated scan vertices [m], shape (k, 3), float64 (template frame: y up, z front).
         SF: Scan triangles, shape (l, 3), int64.
         Q_lm: FDP id -> calibrated scan position [m], shape (3,).
+        H: Optional precomputed mean curvature of the smoothed scan [1/m], shape (k,).
 
     Returns:
         (vertex indices in the box, an ordering of them by decreasing Meyer |kappa_H|
@@ -116,8 +118,8 @@ def curvature_candidates(Q: np.ndarray, SF: np.ndarray, Q_lm: dict) -> tuple[np.
     inside = (Q[:, 0] >= x0) & (Q[:, 0] <= x1) & (Q[:, 1] >= y0)
     if not inside.any():
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    Qs = uniform_smooth(Q, SF, 3)
-    H = mean_curvature(Qs, SF)
+    if H is None:
+        H = mean_curvature(uniform_smooth(Q, SF, 3), SF)
     N = vertex_normals(Q, SF)
     inside &= np.isfinite(H) & (N[:, 2] > 0.0)  # only the front (facing +z in the template frame)
     idx = np.flatnonzero(inside)
@@ -184,7 +186,7 @@ class FeatureSearch:
         self.auto_src = np.full(len(self.auto_p), 1, dtype=np.int8)
         self.auto_cp = None
         # curvature candidates on the scan (Sec. 4.5.2), computed once
-        idx, order = curvature_candidates(prob.Q, prob.SF, Q_lm)
+        idx, order = curvature_candidates(prob.Q, prob.SF, Q_lm, prob.scan_curvature())
         self.curv_sorted = idx[order]  # scan vertices by decreasing |kappa_H|
         self.curv_taken = np.zeros(len(self.curv_sorted), dtype=bool)
         self.curv_p = np.zeros((0, 3))

@@ -90,12 +90,6 @@ class DistanceError:
         return {"E_d": self.value, **{f"dist_{k}": v for k, v in self.stats.items()}, "holes": int(self.hole.sum()), "per_region": self.per_region}
 
 
-def _boundary_edges(F: np.ndarray) -> set:
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    Eu, c = np.unique(E, axis=0, return_counts=True)
-    return Eu[c == 1]
-
-
 def distance_error(
     V,
     scan_V=None,
@@ -165,20 +159,22 @@ def distance_error(
 
 
 def _on_boundary(query, cp, tol: float = 1e-4) -> np.ndarray:
-    """Whether each closest point lies on a boundary edge of the queried mesh."""
+    """Whether each closest point (:class:`ClosestPoints` of ``query``) lies on a boundary edge
+    of the queried mesh, shape (k,), bool. The mesh's boundary edge keys are kept on the query
+    object (its faces never change)."""
+    from ..geometry.surface import boundary_edges
+
     F = query._F
-    cache = getattr(query, "_facewarp_boundary", None)
-    if cache is None:
-        be = _boundary_edges(F)
-        n = query.vertex_count
-        keys = np.sort(be, axis=1)
-        cache = set((keys[:, 0] * n + keys[:, 1]).tolist())
-        query._facewarp_boundary = cache
+    n = query.vertex_count
+    keys = getattr(query, "_facewarp_boundary_keys", None)
+    if keys is None:
+        be = boundary_edges(F)
+        keys = np.sort(be[:, 0] * n + be[:, 1])
+        query._facewarp_boundary_keys = keys
     out = np.zeros(len(cp.face), dtype=bool)
     found = np.flatnonzero(cp.face >= 0)
-    if not cache or len(found) == 0:
+    if len(keys) == 0 or len(found) == 0:
         return out
-    n = query.vertex_count
     b = cp.bary[found]
     tri = F[cp.face[found]]
     for c in range(3):  # bary[c] ~ 0: the point is on the edge opposite corner c
@@ -188,9 +184,8 @@ def _on_boundary(query, cp, tol: float = 1e-4) -> np.ndarray:
         a = tri[on, (c + 1) % 3]
         bb = tri[on, (c + 2) % 3]
         key = np.minimum(a, bb) * n + np.maximum(a, bb)
-        isb = np.fromiter((k in cache for k in key.tolist()), dtype=bool, count=len(key))
-        idx = found[on]
-        out[idx] |= isb
+        pos = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
+        out[found[on]] |= keys[pos] == key
     return out
 
 

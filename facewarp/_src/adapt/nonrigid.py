@@ -1,39 +1,28 @@
-"""A regularised non-rigid ICP after the thesis's levels: vertices land on the scan without sliding.
+"""Non-rigid stages after the thesis's levels: vertices land on the scan without sliding.
 
-Not a step of the thesis. The multi-level RBF (Sec. 4.5) fits dense FP pairs whose scan
-partners are closest points; nothing in it penalises a vertex sliding *along* the scan, so
-away from the FDPs the template's vertices drift tangentially (the surface lands, the
-correspondence does not). This stage keeps the RBF result as its starting point and
-minimises, over the template vertices ``x_i`` (template frame, metres)::
+Not steps of the thesis. The multi-level RBF (Sec. 4.5) interpolates dense FP pairs whose scan
+partners are closest points; nothing in it penalises a vertex sliding *along* the scan, so away
+from the FDPs the template's vertices drift tangentially: the surface lands, the correspondence
+does not (on random unseen faces, E_v RMS 3-10 mm with distance-to-scan 0). Two stages follow
+the levels (``AdaptOptions.refine = "field+land"``):
 
-    E(X) = sum_i a_i (n_i . (x_i - c_i))^2                            data: point-to-plane
-         + lambda sum_(i,j) w_ij |(x_i - x_j) - R_i (p_i - p_j)|^2     as-rigid-as-possible
-         + mu sum_l |sum_c b_lc x_(f_l c) - q_l|^2                      FDPs (barycentric)
-
-- data: ``c_i`` is the closest point of ``x_i`` on the scan and ``n_i`` the scan's normal
-  there (point-to-plane, Chen & Medioni 1992); a pair counts only if it is closer than a
-  threshold, not on the scan's border (holes, the edge of a partial scan) and its normal is
-  compatible with the deformed template's (angle below 60 degrees), as in Amberg et al. 2007
-  (optimal step non-rigid ICP). ``a_i`` is the vertex's area share (mean 1), so the data term
-  is a surface integral;
-- regulariser: the as-rigid-as-possible energy of Sorkine & Alexa 2007 with the rest shape the
-  calibrated template ``p`` and clamped cotangent weights ``w_ij``; it penalises stretch and
-  shear of the template's triangles, i.e. exactly the tangential sliding, while bending and
-  local rotation (which a different face needs) cost nothing;
-- FDPs: each shared FDP as a barycentric point of the template pulled to its scan position.
-
-Minimised by alternation (Sorkine & Alexa's local/global steps): closest points and rotations
-``R_i`` (SVD of the 3x3 covariance per vertex) with X fixed, then X by one sparse solve. The
-point-to-plane term is linearised per iteration as a point target in the tangent plane of the
-scan point, ``c~_i = x_i + n_i n_i^T (c_i - x_i)``, which keeps the system matrix
-``lambda L_w + diag(a) + mu B^T B`` the same for the three coordinates and for every
-iteration of a stiffness stage: one sparse LU per stage (scipy SuperLU). Like Amberg et al.,
-the stiffness ``lambda`` falls in stages (``AdaptOptions.refine_stiffness``). A stage ends when
-the correspondences converge: the RMS change of the vertices and of their scan partners
-between iterations below 1e-4 of the head width (not only when E_d stops falling).
+1. :func:`field_stage`: one smooth 3D displacement field, the thesis's own global RBF
+   (``phi(r) = r`` with an affine part, Eq. 4.4.1-4.4.4), fitted by regularised least squares
+   to *point-to-plane* pairs (Chen & Medioni 1992) over the whole template instead of
+   interpolating point pairs: a pair constrains only the distance along the scan's normal, the
+   tangential part comes from the smoothest field (its thin-plate energy in 3D, Duchon 1977,
+   Carr et al. 2001) that puts the template on the scan's tangent planes and its FDPs on
+   theirs. The closest points are re-found each iteration with normal compatibility and border
+   rejection (as in Amberg et al. 2007's optimal-step non-rigid ICP) and the stiffness falls in
+   stages; a stage ends when the correspondences converge (the RMS change of the vertices and
+   of their scan partners below 1e-4 of the head width), not only when E_d stops falling.
+2. :func:`land_stage`: the field's surface moved along its own normals by a smooth offset field
+   (point-to-plane data + a cotangent Dirichlet term) onto the scan: detail the field cannot
+   carry, no tangential motion at all, no per-vertex copy of scanner noise.
 
 Vertices without a valid scan partner (holes, parts a partial scan does not cover: neck,
-scalp) have no data term and follow their neighbours as rigidly as possible.
+scalp) have no data term: the field extrapolates smoothly into them and the landing offsets
+extend harmonically.
 """
 
 from __future__ import annotations
@@ -45,19 +34,13 @@ import scipy.sparse.linalg as spla
 from ..geometry.surface import face_normals, vertex_normals
 from .metrics import _on_boundary
 
-__all__ = ["arap_stage", "cotan_edge_weights", "field_stage", "vertex_areas"]
+__all__ = ["cotan_edge_weights", "field_stage", "land_stage", "vertex_areas"]
 
 NORMAL_COS = 0.5
 """Smallest cosine between the scan normal and the deformed template normal at a pair (60 deg)."""
 
 CONVERGED = 1e-4
-"""A stiffness stage stops when the RMS change of vertices and partners is below this times the head width."""
-
-
-def unique_edges(F: np.ndarray) -> np.ndarray:
-    """Undirected edges of the triangles F, each once, shape (e, 2), int64 (i < j)."""
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    return np.unique(E, axis=0)
+"""A stage stops when the RMS change of vertices and partners is below this times the head width."""
 
 
 def cotan_edge_weights(V: np.ndarray, F: np.ndarray, *, floor: float = 1e-2) -> tuple[np.ndarray, np.ndarray]:
@@ -99,49 +82,6 @@ def _laplacian(n: int, E: np.ndarray, w: np.ndarray) -> sp.csr_matrix:
     i, j = E[:, 0], E[:, 1]
     L = sp.coo_matrix((np.concatenate([-w, -w]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n)).tocsr()
     return L + sp.diags(np.bincount(np.concatenate([i, j]), weights=np.concatenate([w, w]), minlength=n))
-
-
-def _rotations(P: np.ndarray, X: np.ndarray, E: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Best rotation per vertex (Sorkine & Alexa 2007, Eq. 6): R_i = V U^T from the SVD of
-    S_i = sum_j w_ij (p_i - p_j)(x_i - x_j)^T, det fixed to +1; shape (n, 3, 3)."""
-    n = len(P)
-    e0 = P[E[:, 0]] - P[E[:, 1]]
-    e1 = X[E[:, 0]] - X[E[:, 1]]
-    outer = (w[:, None, None] * e0[:, :, None] * e1[:, None, :]).reshape(-1, 9)
-    S = np.zeros((n, 9))
-    for k in range(9):
-        S[:, k] = np.bincount(E[:, 0], weights=outer[:, k], minlength=n) + np.bincount(E[:, 1], weights=outer[:, k], minlength=n)
-    U, _, Vt = np.linalg.svd(S.reshape(n, 3, 3))
-    R = np.einsum("nji,nkj->nik", Vt, U)  # V U^T
-    bad = np.linalg.det(R) < 0
-    if bad.any():
-        U[bad, :, 2] *= -1.0
-        R[bad] = np.einsum("nji,nkj->nik", Vt[bad], U[bad])
-    return R
-
-
-def _arap_rhs(P: np.ndarray, R: np.ndarray, E: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """b_i = sum_j w_ij / 2 (R_i + R_j)(p_i - p_j) (Sorkine & Alexa 2007, Eq. 9), shape (n, 3)."""
-    n = len(P)
-    e0 = P[E[:, 0]] - P[E[:, 1]]
-    v = 0.5 * w[:, None] * np.einsum("kab,kb->ka", R[E[:, 0]] + R[E[:, 1]], e0)
-    b = np.zeros((n, 3))
-    for d in range(3):
-        b[:, d] = np.bincount(E[:, 0], weights=v[:, d], minlength=n) - np.bincount(E[:, 1], weights=v[:, d], minlength=n)
-    return b
-
-
-def _partners(prob, X: np.ndarray, max_dist: float):
-    """Closest scan points of X with their scan normals, and which pairs are valid."""
-    cp = prob.scan_q.closest_point(X, max_dist)
-    ok = cp.face >= 0
-    face = np.maximum(cp.face, 0)
-    ns = prob.scan_N_face[face]
-    nx = vertex_normals(X, prob.TF)
-    ok &= np.einsum("kd,kd->k", ns, nx) > NORMAL_COS
-    ok &= ~_on_boundary(prob.scan_q, cp)
-    C = np.where(ok[:, None], cp.points, X)
-    return C, ns, ok
 
 
 def _voxel_sample(V: np.ndarray, count: int) -> np.ndarray:
@@ -214,7 +154,7 @@ def field_stage(prob, opts, X0: np.ndarray) -> tuple[np.ndarray, dict]:
     G_D = G_all[D]
     G_f = basis(prob.P_fdp)
     N_ref = len(D)
-    mu = 10.0
+    mu = float(opts.field_fdp_weight)
     M_fdp = mu * (G_f.T @ G_f)
     b_fdp = mu * (G_f.T @ (prob.Q_fdp - prob.P_fdp))
     max_dist = 0.05 * W
@@ -251,7 +191,11 @@ def field_stage(prob, opts, X0: np.ndarray) -> tuple[np.ndarray, dict]:
                         M[sc, sa] = blk.T
                 M[sa, sa] += M_fdp
                 M[a * k:a * k + k - 4, a * k:a * k + k - 4] += gamma * Rg
-            U = cho_solve(cho_factor(M), b).reshape(3, k).T
+            M[np.diag_indices_from(M)] += 1e-9 * float(np.mean(np.diag(M))) + 1e-300  # keeps an unconstrained direction finite
+            try:
+                U = cho_solve(cho_factor(M), b).reshape(3, k).T
+            except np.linalg.LinAlgError:
+                U = np.linalg.lstsq(M, b, rcond=None)[0].reshape(3, k).T
             Xn = TV + G_all @ U
             dx = float(np.sqrt(np.mean(np.sum((Xn - X) ** 2, axis=1))))
             dc = float(np.sqrt(np.mean(np.sum((C - C_prev) ** 2, axis=1)))) if C_prev is not None else float("inf")
@@ -265,67 +209,57 @@ def field_stage(prob, opts, X0: np.ndarray) -> tuple[np.ndarray, dict]:
                "field_covered_fraction": float(ok.mean()) if len(ok) else 0.0}
 
 
-def arap_stage(prob, opts, X0: np.ndarray) -> tuple[np.ndarray, dict]:
-    """The ARAP-regularised non-rigid ICP (see the module docstring), seeded by X0.
+def land_stage(prob, opts, Y: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Land the field's result on the scan by smooth offsets along its normals (no sliding).
+
+    Each vertex moves only along its normal ``N_i`` (of the field's surface Y):
+    ``x_i = y_i + t_i N_i``, with the scalar offsets minimising::
+
+        sum_i a_i (n_i . (y_i + t_i N_i - c_i))^2 + lambda sum_(i,j) w_ij (t_i - t_j)^2
+
+    (point-to-plane data to the closest scan point ``c_i`` with scan normal ``n_i``, and the
+    cotangent Dirichlet energy of the offset field, Pinkall & Polthier 1993). As no vertex moves
+    tangentially, the field's correspondence is kept; the Dirichlet term spreads the offsets
+    smoothly, so scanner noise is not copied vertex by vertex and vertices without a scan
+    partner (holes, parts a partial scan lacks) follow their neighbours (a harmonic extension).
+    A sparse SPD solve per iteration (closest points, solve) until the offsets converge.
 
     Args:
-        prob: The :class:`~.problem.Problem` (calibrated scan, template, FDP pairs).
-        opts: The :class:`~.problem.AdaptOptions` (``refine_stiffness``, ``refine_iterations``).
-        X0: The levels' result [m], shape (n, 3), float64.
+        prob: The :class:`~.problem.Problem`.
+        opts: The :class:`~.problem.AdaptOptions` (``land_smoothing`` is lambda, ``land_iterations``).
+        Y: The field's result [m], shape (n, 3), float64.
 
     Returns:
-        (vertices [m] (n, 3) float64, info dict: iterations, per-stage iterations, the RMS
-        vertex / partner change at the end [m], covered vertex fraction).
+        (vertices [m] (n, 3) float64, info dict).
     """
     TV, TF = prob.TV, prob.TF
     n = len(TV)
-    E, w = cotan_edge_weights(TV, TF)
+    E, w = cotan_edge_weights(Y, TF)
     L = _laplacian(n, E, w)
-    area = vertex_areas(TV, TF)
+    area = vertex_areas(Y, TF)
     area = area / max(float(area[area > 0].mean()), 1e-300)
-    # FDPs as barycentric rows of B
-    cp = prob.tmpl_q.closest_point(prob.P_fdp)
-    rows = np.repeat(np.arange(len(cp.face)), 3)
-    B = sp.csr_matrix((cp.bary.ravel(), (rows, TF[cp.face].ravel())), shape=(len(cp.face), n))
-    mu = 10.0 * float(np.mean(area[TF[cp.face].ravel()])) if len(cp.face) else 0.0
-    BtB = (B.T @ B).tocsr() * mu
-    BtQ = mu * (B.T @ prob.Q_fdp)
-    max_dist = 0.05 * prob.W
-    tol = CONVERGED * prob.W
-    X = np.asarray(X0, dtype=np.float64).copy()
-    its_per_stage = []
-    total = 0
-    stiff = tuple(opts.refine_stiffness)
-    per_stage = max(1, int(np.ceil(opts.refine_iterations / len(stiff))))
-    C_prev = None
-    dx = dc = float("nan")
+    N = vertex_normals(Y, TF)
+    lam = float(opts.land_smoothing)
+    max_dist = 0.02 * prob.W
+    t = np.zeros(n)
+    its = 0
+    dt = float("nan")
     ok = np.zeros(n, bool)
-    for lam in stiff:
-        C, ns, ok = _partners(prob, X, max_dist)
-        a = np.where(ok, area, 0.0)
-        A = (lam * L + sp.diags(a) + BtB).tocsc()
-        lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A")
-        its = 0
-        for its in range(1, per_stage + 1):
-            if its > 1:
-                C, ns, ok_now = _partners(prob, X, max_dist)
-                ok_now &= ok  # the stage's matrix fixes which vertices have data
-                C = np.where(ok_now[:, None], C, X)
-            else:
-                ok_now = ok
-            R = _rotations(TV, X, E, w)
-            # point-to-plane as a point target in the scan's tangent plane
-            Ct = X + np.einsum("kd,kd->k", ns, C - X)[:, None] * ns
-            Ct = np.where(ok_now[:, None], Ct, X)
-            rhs = lam * _arap_rhs(TV, R, E, w) + a[:, None] * Ct + BtQ
-            Xn = np.column_stack([lu.solve(rhs[:, d]) for d in range(3)])
-            dx = float(np.sqrt(np.mean(np.sum((Xn - X) ** 2, axis=1))))
-            dc = float(np.sqrt(np.mean(np.sum((C[ok_now] - C_prev[ok_now]) ** 2, axis=1)))) if C_prev is not None and ok_now.any() else float("inf")
-            X = Xn
-            C_prev = C
-            total += 1
-            if dx < tol and dc < tol:  # correspondences converged
-                break
-        its_per_stage.append(its)
-    return X, {"iterations": total, "per_stage": its_per_stage, "stiffness": list(stiff),
-               "last_vertex_change_m": dx, "last_partner_change_m": dc, "covered_fraction": float(ok.mean())}
+    for its in range(1, int(opts.land_iterations) + 1):
+        X = Y + t[:, None] * N
+        cp = prob.scan_q.closest_point(X, max_dist)
+        ok = cp.face >= 0
+        ns = prob.scan_N_face[np.maximum(cp.face, 0)]
+        ok &= np.einsum("kd,kd->k", ns, N) > NORMAL_COS
+        ok &= ~_on_boundary(prob.scan_q, cp)
+        g = np.where(ok, np.einsum("kd,kd->k", ns, N), 0.0)  # d(residual)/dt
+        r = np.where(ok, np.einsum("kd,kd->k", ns, np.where(ok[:, None], cp.points, 0.0) - Y), 0.0)
+        A = (sp.diags(area * g * g + 1e-9) + lam * L).tocsc()
+        tn = spla.spsolve(A, area * g * r)
+        dt = float(np.sqrt(np.mean((tn - t) ** 2)))
+        t = tn
+        if dt < CONVERGED * prob.W:
+            break
+    X = Y + t[:, None] * N
+    return X, {"land_iterations": its, "land_last_change_m": dt, "land_covered_fraction": float(ok.mean()),
+               "land_offset_rms_m": float(np.sqrt(np.mean(t * t)))}

@@ -12,23 +12,27 @@ then a regularised non-rigid stage.
    curvature FP search (Sec. 4.5.2, :mod:`fp_search`), a global RBF or CSRBF offset per level
    (Eq. 4.5.4-4.5.7), a fold guard (:mod:`folds`), E (Eq. 5.2.3) per level, stop at its local
    minimum.
-4. :func:`~.nonrigid.arap_stage` (``refine="arap"``, not in the thesis): an
-   as-rigid-as-possible regularised non-rigid ICP seeded by the levels, so that vertices do
+4. :func:`~.nonrigid.field_stage` and :func:`~.nonrigid.land_stage` (``refine="field+land"``,
+   the default; not in the thesis): a smooth 3D field fitted to point-to-plane pairs over the
+   whole template, then smooth offsets along the normals onto the scan, so that vertices do
    not slide along the scan (:mod:`nonrigid` cites its sources).
-5. :func:`~.levels.projection_stage` (optional, on by default): each vertex onto the scan along
+5. :func:`~.levels.projection_stage` (with ``refine="none"``): each vertex onto the scan along
    its normal within a small tolerance.
 6. :func:`~.folds.relax_squeezed`: squeezed triangles relaxed tangentially on the scan.
+7. :mod:`quality`: folds, dihedral angles, curvature difference and template distortion per
+   region, figures that need no truth.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .calibrate import Calibration
-from .folds import FoldCheck, relax_squeezed
+from .folds import relax_squeezed, unfold
 from .levels import Displacement, fdp_level, projection_stage, refinement_levels
 from .problem import METHODS, AdaptOptions, LevelRecord, calibration_stage
 
@@ -49,6 +53,13 @@ class AdaptResult:
         fp_source: Where each FP came from: 0 FDP, 1 coverage sample, 2 feature mesh,
             3 curvature search; shape (k,), int8.
         options: The :class:`AdaptOptions` used.
+        refine: Figures of the non-rigid stages (iterations, convergence, covered fraction).
+        quality: Figures that need no truth (:mod:`quality`): "surface" (folds, dihedral angles
+            and mean-curvature difference to the scan per region) and "distortion" (edge
+            stretch and angle change of the template per region, a correspondence measure).
+        vertex_curvature_diff: |H_adapted - H_scan| per vertex [1/m], shape (n,), NaN off the scan.
+        vertex_stretch: Mean |log(l / l0)| of each vertex's edges, shape (n,), dimensionless.
+        template_vertices: The template's vertices [m], shape (n, 3), float64.
         method: The method used.
         seconds: Total wall time [s].
         per_region: Region label -> distance stats of the final head (when regions were given).
@@ -66,6 +77,10 @@ class AdaptResult:
     per_region: dict = field(default_factory=dict)
     options: AdaptOptions | None = None
     refine: dict = field(default_factory=dict)
+    quality: dict = field(default_factory=dict)
+    vertex_curvature_diff: np.ndarray | None = None
+    vertex_stretch: np.ndarray | None = None
+    template_vertices: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -75,7 +90,9 @@ class AdaptResult:
             "levels": [r.to_dict() for r in self.levels],
             "fp_count": int(len(self.fp_template)),
             "per_region": self.per_region,
+            **({"options": dataclasses.asdict(self.options)} if self.options is not None else {}),
             **({"refine": self.refine} if self.refine else {}),
+            **({"quality": self.quality} if self.quality else {}),
         }
 
 
@@ -94,7 +111,7 @@ def adapt(
     device: str = "cpu",
     **settings,
 ) -> AdaptResult:
-    """Adapt a template head to a scan (thesis Sec. 4.3-4.5, then a regularised non-rigid stage).
+    """Adapt a template head to a scan (thesis Sec. 4.3-4.5, then non-rigid stages that do not slide).
 
     Args:
         template_V: Template vertices [m], shape (n, 3), float64.
@@ -140,8 +157,8 @@ def adapt(
     Vk = lv.vertices
     fps = lv.fps
     refine_info: dict = {}
-    # 4. regularised non-rigid stage (not in the thesis; see nonrigid.py)
-    if opts.refine in ("field", "field+arap"):
+    # 4. the smooth field and the landing along the normals (not in the thesis; nonrigid.py)
+    if opts.refine in ("field", "field+land"):
         from .nonrigid import field_stage
 
         t0 = time.perf_counter()
@@ -150,17 +167,19 @@ def adapt(
         rec, de = prob.errors.record(records[-1].level + 1, "field", Vk, fp_count=len(fps),
                                      iterations=int(info["field_iterations"]), seconds=time.perf_counter() - t0)
         records.append(rec)
-    if opts.refine in ("arap", "field+arap"):
-        from .nonrigid import arap_stage
+    if opts.refine == "field+land":
+        from .nonrigid import land_stage
 
         t0 = time.perf_counter()
-        Vk, info = arap_stage(prob, opts, Vk)
+        V_field = Vk
+        Vk, info = land_stage(prob, opts, Vk)
+        Vk = unfold(Vk, V_field, TF, lv.folds, lv.folded0)  # fold guard (folds.py)
         refine_info.update(info)
-        rec, de = prob.errors.record(records[-1].level + 1, "arap", Vk, fp_count=len(fps),
-                                     iterations=int(info.get("iterations", 0)), seconds=time.perf_counter() - t0)
+        rec, de = prob.errors.record(records[-1].level + 1, "land", Vk, fp_count=len(fps),
+                                     iterations=int(info["land_iterations"]), seconds=time.perf_counter() - t0)
         records.append(rec)
     # 5. projection onto the scan along the vertex normals (common practice)
-    if opts.project:
+    if opts.project or (opts.project is None and opts.refine == "none"):
         t0 = time.perf_counter()
         Vk = projection_stage(prob, Vk, opts.project_tolerance, opts.normal_agreement, lv.folds, lv.folded0)
         rec, de = prob.errors.record(records[-1].level + 1, "projection", Vk, fp_count=len(fps),
@@ -177,6 +196,12 @@ def adapt(
     if records[-1].kind in ("none", "rbf", "csrbf") or not records[-1].accepted:
         de, _, _ = prob.errors(Vk)
     per_region = de.per_region if region is not None else {}
+    # 7. quality figures that need no truth (quality.py)
+    from .quality import distortion, surface_quality
+
+    surf, dH = surface_quality(Vk, TV, TF, scan_V=prob.Q, scan_F=prob.SF, scan_query=prob.scan_q, region=region,
+                               scan_curvature=prob.scan_curvature())
+    dist, stretch = distortion(Vk, TV, TF, region=region)
     return AdaptResult(
         vertices=Vk,
         vertices_scan_frame=T.inverse().apply(Vk),
@@ -190,4 +215,8 @@ def adapt(
         per_region=per_region,
         options=opts,
         refine=refine_info,
+        quality={"surface": surf, "distortion": dist},
+        vertex_curvature_diff=dH,
+        vertex_stretch=stretch,
+        template_vertices=TV,
     )

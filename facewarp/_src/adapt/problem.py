@@ -23,9 +23,9 @@ __all__ = ["METHODS", "AdaptOptions", "ErrorMeter", "LevelRecord", "Problem", "c
 METHODS: tuple[str, ...] = ("rbf", "csrbf", "multilevel")
 """Adaptation methods: global RBF only, CSRBF only, or the thesis's combination."""
 
-REFINE_MODES: tuple[str, ...] = ("none", "field", "field+arap", "arap")
-"""Final non-rigid stages (:mod:`nonrigid`): none (the thesis's levels only), the smooth field
-fitted to point-to-plane pairs, the field then the ARAP landing, or the ARAP stage alone."""
+REFINE_MODES: tuple[str, ...] = ("none", "field", "field+land")
+"""Non-rigid stages after the levels (:mod:`nonrigid`): none (the thesis's levels only), the
+smooth field fitted to point-to-plane pairs, or the field then the landing along the normals."""
 
 
 @dataclass(frozen=True)
@@ -54,18 +54,26 @@ class AdaptOptions:
         calibration_fdps: Optional FDP ids for the calibration (default: see :func:`calibrate`).
         alpha, beta: Weights of E = alpha E_d + beta E_m (Eq. 5.2.3).
         region_weights: Region label -> E_d weight (default ears 0.2, Sec. 5.2.1).
-        refine: Final non-rigid stage: "arap" (an as-rigid-as-possible regularised
-            non-rigid ICP seeded by the levels, :mod:`nonrigid`) or "none" (the thesis's
-            levels only).
-        refine_iterations: Outer iterations (closest points + solve) of the ARAP stage.
-        refine_stiffness: Stiffness schedule of the ARAP stage, relative weights of the ARAP
-            term against the data term (dimensionless), from stiff to soft.
-        project: Run the final normal projection onto the scan.
+        refine: Non-rigid stages after the levels (:mod:`nonrigid`): "field+land" (a smooth
+            3D field fitted to point-to-plane pairs, then smooth offsets along the normals onto
+            the scan), "field", or "none" (the thesis's levels only).
+        field_centers: RBF centres of the field (the FDPs and farthest-point samples).
+        field_samples: About this many template vertices carry point-to-plane pairs.
+        field_stiffness: Thin-plate weights of the field's stages, from stiff to soft, per
+            sample and per metre of head width (dimensionless).
+        field_iterations: Largest number of (closest points, solve) iterations per stage.
+        field_fdp_weight: Weight of each FDP pair in the field, in point-to-plane samples
+            (0: the FDPs only calibrate, e.g. for guessed landmarks).
+        land_smoothing: Weight of the Dirichlet term of the landing offsets against the data
+            (dimensionless; vertex areas have mean 1).
+        land_iterations: Largest number of (closest points, solve) iterations of the landing.
+        project: Run the final per-vertex normal projection onto the scan; None: only when
+            ``refine`` is "none" (the landing stage of "field+land" replaces it).
         project_tolerance: Largest move of the projection [m]; default 1.5 % of the head width.
     """
 
     method: str = "multilevel"
-    levels: int = 3
+    levels: int = 2
     fp_threshold: int = 500
     rho: float = 0.0
     sigma0: float | None = None
@@ -82,14 +90,15 @@ class AdaptOptions:
     alpha: float = 1.0
     beta: float = 0.1
     region_weights: dict | None = None
-    refine: str = "none"
-    field_centers: int = 300
-    field_samples: int = 3000
-    field_stiffness: tuple = (7.4e-4, 7.4e-5)
+    refine: str = "field+land"
+    field_centers: int = 150
+    field_samples: int = 2000
+    field_stiffness: tuple = (7e-4, 7e-5)
     field_iterations: int = 3
-    refine_iterations: int = 12
-    refine_stiffness: tuple = (10.0, 3.0, 1.0)
-    project: bool = True
+    field_fdp_weight: float = 10.0
+    land_smoothing: float = 0.5
+    land_iterations: int = 3
+    project: bool | None = None
     project_tolerance: float | None = None
 
     def checked(self) -> "AdaptOptions":
@@ -103,19 +112,23 @@ class AdaptOptions:
         levels = int(self.levels)
         if levels < 0:
             raise InputError(f"levels must be >= 0, got {levels}")
-        for name in ("coverage_points", "curvature_points", "inner_iterations", "refine_iterations"):
+        for name in ("coverage_points", "curvature_points", "inner_iterations", "field_iterations", "land_iterations"):
             if int(getattr(self, name)) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("rho", "sigma_factor", "normal_agreement", "alpha", "beta"):
+        for name in ("rho", "sigma_factor", "normal_agreement", "alpha", "beta", "land_smoothing", "field_fdp_weight"):
             v = float(getattr(self, name))
             if not np.isfinite(v):
                 raise InputError(f"{name} must be finite, got {v}")
         if self.sigma0 is not None and not float(self.sigma0) > 0:
             raise InputError(f"sigma0 must be positive, got {self.sigma0}")
-        stiff = tuple(float(s) for s in self.refine_stiffness)
+        stiff = tuple(float(s) for s in self.field_stiffness)
         if not stiff or not all(np.isfinite(s) and s > 0 for s in stiff):
-            raise InputError(f"refine_stiffness must be positive numbers, got {self.refine_stiffness!r}")
-        return dataclasses.replace(self, levels=levels, refine_stiffness=stiff)
+            raise InputError(f"field_stiffness must be positive numbers, got {self.field_stiffness!r}")
+        if int(self.field_centers) < 8 or int(self.field_samples) < 8:
+            raise InputError(f"field_centers and field_samples must be >= 8, got {self.field_centers}, {self.field_samples}")
+        if float(self.land_smoothing) < 0:
+            raise InputError(f"land_smoothing must be >= 0, got {self.land_smoothing}")
+        return dataclasses.replace(self, levels=levels, field_stiffness=stiff)
 
     @classmethod
     def from_keywords(cls, options: "AdaptOptions | None", settings: dict) -> "AdaptOptions":
@@ -136,13 +149,13 @@ class LevelRecord:
 
     Attributes:
         level: 0 = calibrated template before any deformation, 1 = FDP RBF, ...
-        kind: "none", "rbf", "csrbf", "arap", "projection" or "relax".
+        kind: "none", "rbf", "csrbf", "field", "land", "projection" or "relax".
         fp_count: FP pairs in use after this level.
         new_feature: New FPs from the feature mesh at this level.
         new_curvature: New FPs from the curvature search at this level.
         sigma: CSRBF support [m], or None for a global RBF level.
-        iterations: Krylov iterations (max over x, y, z) of a CSRBF level, outer iterations of
-            an ARAP stage, else 0.
+        iterations: Krylov iterations (max over x, y, z) of a CSRBF level, (closest points,
+            solve) iterations of a field or landing stage, else 0.
         E_d: Distance error [m^2] (Eq. 5.2.1).
         E_m: Marker error [m^2] (Eq. 5.2.2); 0 without markers.
         E: Combined error [m^2] (Eq. 5.2.3).
@@ -236,6 +249,18 @@ class Problem:
     fdp_skin_dist: np.ndarray
     device: str
     errors: ErrorMeter | None = None
+    _scan_H: np.ndarray | None = None
+
+    def scan_curvature(self) -> np.ndarray:
+        """Meyer mean curvature (Eq. 4.5.1, 4.5.2) of the calibrated scan after 3 rounds of
+        uniform smoothing (so that scanner noise does not win) [1/m], shape (k,); NaN on its
+        border. Computed once."""
+        if self._scan_H is None:
+            from ..geometry.surface import mean_curvature
+            from .fp_search import uniform_smooth
+
+            self._scan_H = mean_curvature(uniform_smooth(self.Q, self.SF, 3), self.SF)
+        return self._scan_H
 
 
 def _mesh_arrays(V, F, what: str) -> tuple[np.ndarray, np.ndarray]:

@@ -90,11 +90,8 @@ class MujocoJaw:
         self.qadr = [int(model.jnt_qposadr[j]) for j in self.joints]
         self.dadr = [int(model.jnt_dofadr[j]) for j in self.joints]
         self.frame_dt = 1.0 / sim.fps
-        ratio = self.frame_dt / float(model.opt.timestep)
-        self.mj_steps = max(1, int(round(ratio)))
-        if abs(ratio - self.mj_steps) > 1e-6 * ratio:
-            raise InputError(f"fps: a frame ({self.frame_dt:.6g} s) must be a whole number of MuJoCo steps "
-                             f"({float(model.opt.timestep):.6g} s)")
+        self._clock = 0.0  # frame time simulated; MuJoCo steps until its time catches up
+        self._elapsed = 0.0
         fr = sim.fr
         self.pivot = np.asarray(fr.jaw_pivot, np.float64)
         self.axes = [np.asarray(fr.jaw_u, np.float64), np.asarray(fr.jaw_v, np.float64)][: len(self.joints)]
@@ -172,10 +169,14 @@ class MujocoJaw:
                 self.data.qfrc_applied[d] = tau[i] + self._stiff0[i] * (self._ref0[i] - ang[i])
 
     def step(self) -> None:
-        """One frame: :meth:`exchange`, then the frame's MuJoCo steps."""
+        """One frame: :meth:`exchange`, then MuJoCo steps until its clock reaches the frame's end
+        (the frame need not be a whole number of MuJoCo steps; the remainder carries over)."""
         self.exchange()
-        for _ in range(self.mj_steps):
+        self._clock += self.frame_dt
+        h = float(self.model.opt.timestep)
+        while self._elapsed + 0.5 * h < self._clock:
             self.mj.mj_step(self.model, self.data)
+            self._elapsed += h
 
     def detach(self) -> None:
         """Give the model back its own joint stiffness and spring references, no applied force."""

@@ -17,6 +17,7 @@ __all__ = [
     "ClosestPoints",
     "MeshQuery",
     "RayHits",
+    "boundary_edges",
     "boundary_vertices",
     "closest_point",
     "face_areas",
@@ -113,6 +114,22 @@ def vertex_normals(V, F) -> np.ndarray:
     return np.divide(N, n, out=np.zeros_like(N), where=n > 0)
 
 
+def boundary_edges(F) -> np.ndarray:
+    """Edges used by exactly one triangle, shape (b, 2), int64, each as (i, j) with i < j.
+
+    Args:
+        F: Triangles, shape (m, 3), int64.
+    """
+    F = np.asarray(F, dtype=np.int64)
+    if F.size == 0:
+        return np.zeros((0, 2), np.int64)
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    n = int(F.max()) + 1
+    key, counts = np.unique(E[:, 0] * n + E[:, 1], return_counts=True)  # 1-D keys: fast unique
+    key = key[counts == 1]
+    return np.stack([key // n, key % n], axis=1)
+
+
 def boundary_vertices(F, vertex_count: int) -> np.ndarray:
     """Mask of vertices on a boundary edge (an edge used by exactly one triangle).
 
@@ -123,11 +140,8 @@ def boundary_vertices(F, vertex_count: int) -> np.ndarray:
     Returns:
         Mask, shape (n,), bool.
     """
-    F = np.asarray(F, dtype=np.int64)
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    Eu, counts = np.unique(E, axis=0, return_counts=True)
     mask = np.zeros(vertex_count, dtype=bool)
-    mask[Eu[counts == 1].ravel()] = True
+    mask[boundary_edges(F).ravel()] = True
     return mask
 
 

@@ -2,11 +2,17 @@
 
 Writes into the output folder:
 ``adapted.obj`` (template topology, template frame, metres), ``adapted_scan_frame.obj`` (scan
-frame and units), ``adapted_landmarks.json`` (metres, template frame), ``report.json``,
-``error_heatmap.png`` (distance to the scan on the adapted head) and ``error_curve.png``.
+frame and units), ``adapted_landmarks.json`` (metres, template frame), ``report.json`` (the
+levels, the calibration, the distance to the scan, and ``quality``: folds, dihedral angles,
+curvature difference to the scan and the template's edge stretch and angle change per region,
+figures that need no truth), ``error_heatmap.png`` (distance to the scan on the adapted head),
+``quality_heatmap.png`` (curvature difference, folds marked), ``distortion_heatmap.png``
+(edge stretch) and ``error_curve.png``.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -19,7 +25,7 @@ from ..geometry.landmarks import load_landmarks, save_landmarks_json
 from ..geometry.mesh import load_mesh, save_obj, unit_scale
 from .checks import check_out_dir, make_out_dir
 
-__all__ = ["adapt_files"]
+__all__ = ["adapt_files", "detect_landmarks_files"]
 
 def _load_template(template_dir, template_mesh, template_landmarks, template_units):
     """(V, F, landmarks, region labels or None, Template or None) in metres."""
@@ -97,23 +103,78 @@ def _check_inputs(scan_mesh, scan_lm, tlm, TV, *, landmarks, scan, device) -> No
                           f"the scan {scan}", device)
 
 
+def _confidence_path(out_json: Path) -> Path:
+    return out_json.with_name(out_json.stem + "_confidence.json")
+
+
+def detect_landmarks_files(scan, out_json, *, units="m", template_dir=None, template_mesh=None,
+                           template_landmarks=None, template_units="m", device="cpu", progress=None) -> dict:
+    """Find the template's FDPs on a scan (:func:`~facewarp.adaptation.detect_landmarks`) and write
+    them as a landmarks JSON in ``units``, with the confidences beside it
+    (``<name>_confidence.json``: FDP id -> 0..1, and the detector's diagnostics).
+
+    Returns:
+        The report dict: ``landmarks`` (FDP id -> [x, y, z] in ``units``), ``confidence``,
+        ``info``, ``path``, ``confidence_path``.
+    """
+    from ..adapt.detect import detect_landmarks
+
+    step = progress or (lambda msg: None)
+    out_json = Path(out_json)
+    if out_json.suffix.lower() != ".json":
+        raise InputError(f"out {out_json}: the landmarks file must end in .json")
+    if out_json.exists() and out_json.is_dir():
+        raise InputError(f"out {out_json}: is a folder, expected a .json file")
+    if not out_json.parent.exists():
+        raise InputError(f"out {out_json}: the folder {out_json.parent} does not exist")
+    step("loading")
+    scan_mesh = load_mesh(scan, units=units)
+    template = None
+    if template_dir is not None or template_mesh is not None:
+        TV, TF, tlm, _, _ = _load_template(template_dir, template_mesh, template_landmarks, template_units)
+        template = (TV, TF, tlm)
+    step("detecting")
+    lm, conf = detect_landmarks(scan_mesh.vertices, scan_mesh.faces, template=template, device=device)
+    step("writing")
+    save_landmarks_json(out_json, dict(lm), units=units)
+    scale = unit_scale(units)
+    rep = {"path": str(out_json), "confidence_path": str(_confidence_path(out_json)), "units": units,
+           "landmarks": {k: (np.asarray(v) / scale).tolist() for k, v in lm.items()},
+           "confidence": conf, "info": getattr(lm, "info", {})}
+    write_json(_confidence_path(out_json), {"confidence": conf, "info": rep["info"], "scan": str(scan)})
+    return rep
+
+
 def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, template_landmarks=None,
-                method="multilevel", levels=5, markers=None, units="m", template_units="m", device="cpu",
+                method="multilevel", levels=None, markers=None, units="m", template_units="m", device="cpu",
                 progress=None) -> dict:
     """Run the adaptation on files and write the outputs; returns the report dict.
 
-    ``levels`` is :func:`~facewarp.adapt`'s: refinement levels after the FDP level. Inputs are
-    checked first (units of scan and landmarks, FDPs shared with the template, landmarks on
-    the scan, the output folder), so a bad input fails in seconds.
+    ``levels`` is :func:`~facewarp.adapt`'s: refinement levels after the FDP level (None: its
+    default). ``landmarks`` None: the FDPs are found on the scan
+    (:func:`~facewarp.adaptation.detect_landmarks`), written to ``detected_landmarks.json`` (scan
+    units) with their confidences in the report. Inputs are checked first (units of scan and
+    landmarks, FDPs shared with the template, landmarks on the scan, the output folder), so a bad
+    input fails in seconds.
     """
     step = progress or (lambda msg: None)
     out = check_out_dir(out)
     scale = unit_scale(units)
     step("loading")
     scan_mesh = load_mesh(scan, units=units)
-    scan_lm = load_landmarks(landmarks, units=units)
-    _check_units(scan_mesh.vertices, scan_lm, landmarks, f"the scan {scan}")
+    detected = None
+    if landmarks is not None:
+        scan_lm = load_landmarks(landmarks, units=units)
+        _check_units(scan_mesh.vertices, scan_lm, landmarks, f"the scan {scan}")
     TV, TF, tlm, groups, tmpl = _load_template(template_dir, template_mesh, template_landmarks, template_units)
+    if landmarks is None:
+        from ..adapt.detect import detect_landmarks
+
+        step("detecting landmarks")
+        scan_lm, conf = detect_landmarks(scan_mesh.vertices, scan_mesh.faces, template=(TV, TF, tlm), device=device)
+        detected = {"confidence": conf, "info": getattr(scan_lm, "info", {})}
+        scan_lm = dict(scan_lm)
+        landmarks = "detected_landmarks.json"
     if template_mesh is not None:
         _check_units(TV, tlm, template_landmarks, f"the template mesh {template_mesh}")
     mk = None
@@ -127,9 +188,12 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     _check_inputs(scan_mesh, scan_lm, tlm, TV, landmarks=landmarks, scan=scan, device=device)
     make_out_dir(out)
     step("adapting")
-    res = adapt(TV, TF, tlm, scan_mesh.vertices, scan_mesh.faces, scan_lm, method=method, levels=levels,
-                markers=mk, region=groups, device=device)
+    settings = {} if levels is None else {"levels": levels}
+    res = adapt(TV, TF, tlm, scan_mesh.vertices, scan_mesh.faces, scan_lm, method=method, markers=mk, region=groups,
+                device=device, **settings)
     step("writing")
+    if detected is not None:
+        save_landmarks_json(out / "detected_landmarks.json", scan_lm, units=units)
     save_obj(out / "adapted.obj", res.vertices, TF)
     save_obj(out / "adapted_scan_frame.obj", res.vertices_scan_frame, TF, units=units)
     # landmarks follow the adapted surface (face + barycentric on the template)
@@ -151,22 +215,46 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
         "scan": str(scan), "landmarks": str(landmarks), "units": units, "scale_to_metres": scale,
         "template": str(template_mesh or template_dir or "default template (level 0)"),
         "vertex_count": int(len(TV)), "scan_vertex_count": int(len(scan_mesh.vertices)),
+        "levels_requested": int(res.options.levels),
         "distance_to_scan_m": {"median": float(np.nanmedian(d_show)), "rms": float(np.sqrt(np.nanmean(d_show**2))),
                                "p95": float(np.nanpercentile(d_show, 95))},
     })
+    if detected is not None:
+        report["detected_landmarks"] = detected
     write_json(out / "report.json", report)
     step("pictures")
-    from ..present.plot import line_chart
-    from ..present.render import colormap, render_mesh, save_png
+    _pictures(out, res, TF, d_show, device)
+    return report
 
+
+def _pictures(out, res, TF, d_show, device) -> None:
+    """error_heatmap.png (distance to the scan), quality_heatmap.png (|H_adapted - H_scan| with
+    folded faces as red dots), distortion_heatmap.png (stretch of the template's edges) and
+    error_curve.png (E_d, E_m, E per level)."""
+    from ..geometry.surface import face_normals
+    from ..present.adapt_maps import heat_map
+    from ..present.plot import line_chart
+
+    V = res.vertices
     vmax = max(float(np.nanpercentile(d_show, 98)) * 1e3, 0.5)
-    colors = colormap(d_show * 1e3, 0.0, vmax)
-    img = render_mesh(res.vertices, TF, view="front", width=700, height=700, vertex_colors=colors, device=device)
-    save_png(out / "error_heatmap.png", img, title="distance of the adapted head to the scan",
-             colorbar=(0.0, vmax, "mm"))
-    lv = [r for r in res.levels]
+    heat_map(out / "error_heatmap.png", V, TF, d_show * 1e3, vmax=vmax, unit="mm", size=600,
+             title="distance of the adapted head to the scan", device=device)
+    q = res.quality.get("surface", {})
+    dH = res.vertex_curvature_diff
+    if dH is not None and np.isfinite(dH).any():
+        n0 = face_normals(res.template_vertices, TF) if res.template_vertices is not None else None
+        folds = None
+        if n0 is not None:
+            turned = np.einsum("kd,kd->k", face_normals(V, TF), n0) < np.cos(np.radians(q.get("fold_threshold_deg", 75.0)))
+            folds = V[TF[turned]].mean(axis=1)
+        hmax = max(float(np.nanpercentile(dH, 98)), 1.0)
+        heat_map(out / "quality_heatmap.png", V, TF, dH, vmax=hmax, unit="1/m", size=450, points=folds,
+                 title=f"|mean curvature - scan's| ({q.get('folds', 0)} folds as red dots)", device=device)
+    if res.vertex_stretch is not None:
+        heat_map(out / "distortion_heatmap.png", V, TF, res.vertex_stretch * 100.0, vmax=30.0, unit="% stretch",
+                 size=450, title="stretch of the template's edges (|log(l / l0)|)", device=device)
+    lv = list(res.levels)
     line_chart(out / "error_curve.png", [r.level for r in lv],
                {"E_d [mm^2]": [r.E_d * 1e6 for r in lv], "E_m [mm^2]": [r.E_m * 1e6 for r in lv],
                 "E [mm^2]": [r.E * 1e6 for r in lv]},
                title="adaptation error per level (Eq. 5.2.1-5.2.3)", xlabel="level", ylabel="error", log_y=True)
-    return report

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 
@@ -16,15 +17,20 @@ from ..adapt.transfer import load_head
 from ..anatomy.build import build_anatomy, write_anatomy
 from ..core.errors import InputError
 from ..core.fileio import write_json
+from ..coupling.mjcf import write_head_mjcf
 from ..expressions import timeline_from_spec
 from ..physics.face_rig import face_rig_from_anatomy, load_face_rig, save_face_rig
 from ..present.anatomy import render_anatomy
 from ..present.render import save_png
 from ..present.strips import displacement_max, render_strip
 from ..sim.simulator import FaceSimulator, save_frames_npz
+from .animation import USD_SUFFIXES, UsdAnimation, check_usd_path, play_timeline
 from .checks import check_out_dir, make_out_dir
 
-__all__ = ["MAX_FRAMES", "build_files", "simulate_files"]
+__all__ = ["MAX_FRAMES", "USD_NAME", "build_files", "build_head_files", "simulate_files"]
+
+USD_NAME = "animation.usdc"
+"""The USD animation ``simulate --usd`` writes into its output folder."""
 
 MAX_FRAMES = 100_000
 """Most frames one ``simulate`` run keeps in memory (about 1 h at 30 fps; a level-0 head takes
@@ -35,10 +41,27 @@ def build_files(head_path, out, *, layers: int = 1, device: str = "cpu", progres
     """Build anatomy and the face rig of a head folder into ``out``; returns the quality report."""
     step = progress or (lambda msg: None)
     out = check_out_dir(out)
-    if not (isinstance(layers, (int, np.integer)) and not isinstance(layers, bool) and layers >= 1):
-        raise InputError(f"layers: expected a whole number >= 1, got {layers!r}")
+    _check_layers(layers)
     step("loading head")
     head = load_head(head_path)
+    return build_head_files(head, out, layers=layers, device=device, progress=progress)
+
+
+def _check_layers(layers) -> None:
+    if not (isinstance(layers, (int, np.integer)) and not isinstance(layers, bool) and layers >= 1):
+        raise InputError(f"layers: expected a whole number >= 1, got {layers!r}")
+
+
+def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progress=None) -> dict:
+    """Build anatomy and the face rig of ``head`` (a :class:`~facewarp.Template`) into ``out``.
+
+    Writes ``tets.npz``, ``muscles.json``, ``anatomy.json``, ``face_rig.npz``, ``head.xml`` (the
+    MuJoCo cranium and mandible, :func:`~facewarp.write_head_mjcf`) and ``anatomy.png``; returns
+    the quality report.
+    """
+    step = progress or (lambda msg: None)
+    out = check_out_dir(out)
+    _check_layers(layers)
     make_out_dir(out)
     step("skin layer and muscles")
     anatomy = build_anatomy(head, layers=layers)
@@ -46,6 +69,7 @@ def build_files(head_path, out, *, layers: int = 1, device: str = "cpu", progres
     step("writing")
     write_anatomy(anatomy, out)
     save_face_rig(out / "face_rig.npz", fr)
+    write_head_mjcf(out / "head.xml", head, jaw=fr.jaw)
     q = dict(anatomy.quality)
     q["boundary_conditions"] = {"fixed_nodes": int(fr.fixed.sum()), "held_nodes": int(fr.held.sum()),
                                 "supported_nodes": int(len(fr.support_nodes)), "jaw_nodes": int(len(fr.jaw_nodes))}
@@ -59,9 +83,18 @@ def build_files(head_path, out, *, layers: int = 1, device: str = "cpu", progres
 
 
 def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps: float = 30.0,
-                   substeps: int | None = None, device: str = "cpu", usd: bool = False, progress=None) -> dict:
-    """Simulate ``expression`` on a ``build`` output and write frames.npz / frames.png (/ frames.usda)."""
-    out = check_out_dir(out)
+                   substeps: int | None = None, device: str = "cpu", usd: bool = False, tets: bool = False,
+                   progress=None) -> dict:
+    """Simulate ``expression`` on a ``build`` output and write its frames.
+
+    ``out`` is a folder (``frames.npz``, ``frames.png``, and with ``usd`` the USD animation
+    :data:`USD_NAME`, streamed while simulating) or a ``.usda`` / ``.usdc`` / ``.usdz`` file: then
+    only that animation is written, streamed frame by frame with no frame kept in memory and no
+    frame cap (:mod:`~facewarp._src.jobs.animation`). With ``tets`` the USD also holds the skin's
+    tet layer (a ``TetMesh`` of purpose ``guide``).
+    """
+    usd_out = Path(out).suffix.lower() in USD_SUFFIXES
+    out = check_usd_path(out) if usd_out else check_out_dir(out)
     for name, v in (("seconds", seconds), ("fps", fps)):
         if not (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
                 and math.isfinite(v) and v > 0):
@@ -69,14 +102,25 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
     if substeps is not None and not (isinstance(substeps, (int, np.integer)) and not isinstance(substeps, bool)
                                      and substeps >= 1):
         raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
-    if not seconds * fps < MAX_FRAMES:  # FaceSimulator.run keeps round(seconds * fps) + 1 frames
+    if not usd_out and not seconds * fps < MAX_FRAMES:  # FaceSimulator.run keeps round(seconds * fps) + 1 frames
         raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
                          f"more than {MAX_FRAMES} per run")
     fr = load_face_rig(head_path)
     timeline = timeline_from_spec(expression, seconds)
     sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps)
+    if usd_out:
+        return _simulate_to_usd(sim, timeline, seconds, out, expression, progress, tets=tets)
     make_out_dir(out)
-    frames = sim.run(timeline, seconds, progress=progress)
+    anim = UsdAnimation(out / USD_NAME, sim, tets=tets) if usd else None
+
+    def on_frame(k: int, n: int) -> None:  # the USD is written as the frames are simulated
+        if anim is not None:
+            anim.add(sim, k / sim.fps)
+        if progress:
+            progress(k, n)
+
+    with anim if anim is not None else contextlib.nullcontext():
+        frames = sim.run(timeline, seconds, progress=on_frame)
     save_frames_npz(out / "frames.npz", frames)
     nf = len(frames.times)
     idx = np.unique(np.linspace(0, nf - 1, min(6, nf)).round().astype(int))
@@ -87,16 +131,32 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
              colorbar=(0.0, hmax * 1e3, "displacement from rest [mm]"))
     written = ["frames.npz", "frames.png"]
     if usd:
-        from usd_export import write_meshes_usd
-
-        meshes = {"skin": (fr.head_vertices, fr.head_faces), **{k: (V[0], F) for k, (V, F) in frames.parts.items()}}
-        fr_pts = {"skin": frames.points, **{k: V for k, (V, F) in frames.parts.items()}}
-        write_meshes_usd(out / "frames.usda", meshes, frames=fr_pts, times=frames.times, fps=fps)
-        written.append("frames.usda")
+        written.append(USD_NAME)
     moved = np.linalg.norm(frames.fdp_points - frames.fdp_points[:1], axis=2).max(0)
     return {
         "expression": str(expression), "frames": nf, "seconds": float(seconds), "fps": fps, "substeps": sim.substeps,
         "dt_s": sim.dt, "steps_per_second": frames.steps_per_second, "device": str(sim.device),
         "nodes": int(len(fr.nodes)), "tets": int(len(fr.tets)), "files": [str(out / w) for w in written],
         "max_fdp_motion_m": {str(k): float(v) for k, v in zip(frames.fdp_ids, moved) if v > 1e-4},
+    }
+
+
+def _simulate_to_usd(sim, timeline, seconds: float, path: Path, expression, progress, *, tets: bool = False) -> dict:
+    """Stream ``seconds`` of ``timeline`` into the USD file ``path``; the report of :func:`simulate_files`."""
+    fr = sim.fr
+    rest = sim.fdp_points()
+    moved = np.zeros(len(rest))
+
+    def track(s, k: int, t: float) -> None:
+        np.maximum(moved, np.linalg.norm(s.fdp_points() - rest, axis=1), out=moved)
+
+    with UsdAnimation(path, sim, tets=tets) as anim:
+        stats = play_timeline(sim, timeline, seconds, on_frame=(lambda s, k, t: anim.add(s, t), track),
+                              progress=progress)
+    return {
+        "expression": str(expression), "frames": stats["frames"], "seconds": float(seconds), "fps": sim.fps,
+        "substeps": sim.substeps, "dt_s": sim.dt, "steps_per_second": stats["steps_per_second"],
+        "frames_per_second": stats["frames_per_second"], "device": str(sim.device), "nodes": int(len(fr.nodes)),
+        "tets": int(len(fr.tets)), "files": [str(path)],
+        "max_fdp_motion_m": {str(k): float(v) for k, v in zip(fr.fdp_ids, moved) if v > 1e-4},
     }

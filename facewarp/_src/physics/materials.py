@@ -106,8 +106,10 @@ class MaterialThesis:
         k_area, k_volume: Area and volume stiffness [J] (7.5, 7.5).
         damping: Table 6.3 ``k_damping``: velocity loss per substep of the Verlet reference
             (0.002); the model's rate is ``damping / dt`` with the reference substep dt.
-        edge_damping: Dashpot along every edge on the relative velocity [N s/m] (500; Eq. 6.4.5
-            per spring; keeps the stiff layer from ringing when the jaw moves held nodes).
+        edge_damping: Dashpot along every edge on the relative velocity [N s/m] (Eq. 6.4.5 per
+            spring). Table 6.3 has none (0); the face simulator's thesis profile adds
+            :data:`~facewarp._src.physics.face_rig.EDGE_DAMPING` (500), which keeps the stiff layer
+            from ringing when the jaw moves held nodes.
         muscle_stiffness: Muscle spring stiffness k_m of Eq. 6.4.1 [N/m] shared by the springs
             on a node (None: the rig's own, :data:`~facewarp._src.physics.face_rig.MUSCLE_STIFFNESS`).
     """
@@ -120,7 +122,7 @@ class MaterialThesis:
     k_area: float = 7.5
     k_volume: float = 7.5
     damping: float = 0.002
-    edge_damping: float = 500.0
+    edge_damping: float = 0.0
     muscle_stiffness: float | None = None
 
     def __post_init__(self):

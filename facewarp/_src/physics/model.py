@@ -177,7 +177,8 @@ class ModelBuilder:
         stiffness_damping: Rayleigh stiffness damping beta [s]: every element gets a dashpot
             ``beta k`` on its strain rate. Default: physical 2e-5, thesis 0.
         edge_damping: Dashpot along each edge on the relative velocity [N s/m] (Eq. 6.4.5 per
-            spring). Default 0 (the face simulator's thesis profile uses 500).
+            spring). Default: the thesis profile's ``edge_damping`` (0; the face simulator's
+            thesis profile uses 500), physical 0.
         k0_outer, k0_inner, k0_cross: Basic distance stiffness k0 [J] of Eq. 6.4.6 for
             outer-outer, inner-inner and cross-layer edges, the same for every edge of a class
             (thesis profile: 15, 10, 5). With the physical profile they come from its moduli.
@@ -322,7 +323,7 @@ class ModelBuilder:
             mass_default = np.full(n, mat.mass)
             beta = 0.0
             alpha = None  # the per-substep damping, converted below
-            c_edge = 0.0
+            c_edge = mat.edge_damping
         if k0_outer is not None or k0_inner is not None or k0_cross is not None:
             cls_k = [k0_outer, k0_inner, k0_cross]
             for c in range(3):

@@ -313,14 +313,22 @@ class MuscleStage:
 
     def prepare(self, model: Model, state_in, control, dt, targets) -> None:
         """Muscle geometry for ``control`` and the step's springs (attachment points, ``k_m w``)."""
-        wp = get_warp()
         self.update_geometry(control)
+        self.refresh(model, state_in.positions, control)
+
+    def refresh(self, model: Model, positions, control) -> None:
+        """The springs' fibre cosine ``w`` (and attachment points) at ``positions`` [m], (n,) wp.vec3.
+
+        Implicit solvers call it after a solve so that the step ends with Eq. 6.4.1's cosine at
+        its own end positions (a fixed point), not the start's.
+        """
         if len(self.rig.att_node):
-            wp.launch(self.km._muscle_springs, dim=len(self.rig.att_node),
-                      inputs=[self.att_node, self.att_seg, self.att_uv, self.att_stiffness, self.att_jaw_shift,
-                              self.jaw_pivot, self.jaw_u, self.jaw_v, control.jaw_angles, self.seg_center,
-                              self.seg_frame, self.seg_radii, state_in.positions],
-                      outputs=[self.att_point, self.spring_stiffness], device=self.device)
+            get_warp().launch(self.km._muscle_springs, dim=len(self.rig.att_node),
+                              inputs=[self.att_node, self.att_seg, self.att_uv, self.att_stiffness,
+                                      self.att_jaw_shift, self.jaw_pivot, self.jaw_u, self.jaw_v,
+                                      control.jaw_angles, self.seg_center, self.seg_frame, self.seg_radii,
+                                      positions],
+                              outputs=[self.att_point, self.spring_stiffness], device=self.device)
 
 
 class SupportStage:

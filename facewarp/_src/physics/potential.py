@@ -188,9 +188,10 @@ class StepPotential:
             if np.any(vc):
                 w = x_n + h * (vc[0] + np.cross(vc[1], x_n))
         z = (y + ah * w) / (1.0 + ah)
-        mu = self.mass * (1.0 + ah) / (h * h)
+        # fixed nodes are not unknowns: no inertia, hold or external force terms
+        mu = np.where(self.free, self.mass * (1.0 + ah) / (h * h), 0.0)
         ce, cf, ct = self.constraints(x_n)
-        f = np.zeros((self.n, 3)) if force is None else np.asarray(force, np.float64)
+        f = np.zeros((self.n, 3)) if force is None else np.asarray(force, np.float64) * self.free[:, None]
         return StepData(h, z, mu, np.asarray(targets, np.float64), f, ce, cf, ct, list(springs))
 
     def start_positions(self, x_guess, data: StepData) -> np.ndarray:
@@ -254,7 +255,7 @@ class StepPotential:
         dz = X - data.z
         e = 0.5 * np.sum(data.mu * np.einsum("ij,ij->i", dz, dz))
         dh = X - data.targets
-        e += 0.5 * np.sum(self.hold * np.einsum("ij,ij->i", dh, dh))
+        e += 0.5 * np.sum(self.hold * np.einsum("ij,ij->i", dh, dh))  # held nodes are never fixed
         e -= np.sum(data.force * X)
         G = None
         if want_grad:
@@ -297,7 +298,7 @@ class StepPotential:
         vals = self._element_hessian_values(X, data)
         diag = np.zeros((self.n, 3, 3))
         idx = np.arange(3)
-        diag[:, idx, idx] = (data.mu + self.hold)[:, None]
+        diag[:, idx, idx] = (data.mu + np.where(self.free, self.hold, 0.0))[:, None]
         for node, point, k, l0, axis in data.springs:
             if len(node) == 0:
                 continue

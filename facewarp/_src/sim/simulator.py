@@ -21,7 +21,7 @@ from ..core.warp import get_warp
 from ..expressions import MUSCLES, Timeline
 from ..physics.face_rig import EDGE_DAMPING, FaceRig, node_jaw_amounts
 
-__all__ = ["FaceSimulator", "Frames", "save_frames_npz"]
+__all__ = ["SOLVERS", "FaceSimulator", "Frames", "save_frames_npz"]
 
 
 # ------------------------------------------------------------------------------------ frames
@@ -41,6 +41,11 @@ class Frames:
             sphincters repeat their first point).
         activations: Activations per frame, shape (f, M); jaw: (f, 2) [rad].
         steps_per_second: Simulated substeps per wall-clock second.
+        substeps: Solver steps per frame; dt: step [s].
+        frames_per_second: Frames simulated per wall-clock second (the stepping only, not the
+            surface and curve read-back of each frame).
+        realtime_factor: Simulated seconds per wall-clock second of stepping (1: real time).
+        solver, material: The solver and material profile names.
     """
 
     times: np.ndarray
@@ -56,6 +61,10 @@ class Frames:
     steps_per_second: float = 0.0
     substeps: int = 0
     dt: float = 0.0
+    frames_per_second: float = 0.0
+    realtime_factor: float = 0.0
+    solver: str = ""
+    material: str = ""
 
 
 def _unit_value(name: str, value) -> float:
@@ -77,6 +86,11 @@ def _activation_vector(names: list[str], expr) -> np.ndarray:
     return out
 
 
+SOLVERS = ("implicit", "verlet")
+"""Solvers of :class:`FaceSimulator`: ``implicit`` (backward Euler, a few steps per frame; the
+default) and ``verlet`` (the explicit reference, hundreds of substeps per frame)."""
+
+
 class FaceSimulator:
     """A simulated face: Model + solver + muscle, support and jaw stages for one
     :class:`~facewarp.FaceRig` on one device.
@@ -84,63 +98,141 @@ class FaceSimulator:
     Step it in your own loop (:meth:`set_activations`, :meth:`set_jaw`, :meth:`step` or
     :meth:`advance`, then :meth:`surface`, :meth:`positions` or :meth:`fdp`; :meth:`reset`
     goes back to rest), or play a :class:`~facewarp.Timeline` with :meth:`run`. Controls
-    change once per step and ramp linearly across it in :attr:`CONTROL_CHUNKS` pieces, each a
-    run of substeps with no host round trip inside (a replayed CUDA graph on the GPU).
+    change once per step and ramp linearly across it in up to :attr:`CONTROL_CHUNKS` pieces,
+    each a run of substeps with no host round trip inside (a replayed CUDA graph on the GPU).
 
     Args:
         fr: The face rig (:func:`~facewarp.build_face` or :func:`~facewarp.load_face_rig`).
         device: Warp device, ``"cpu"`` or ``"cuda[:N]"``.
-        dt: Substep [s]; default the stable step of the rig.
-        substeps: Substeps per frame (overrides ``dt``).
+        solver: ``"implicit"`` (default: backward Euler, stable at one step per frame;
+            :class:`~facewarp.physics.SolverImplicit`) or ``"verlet"`` (the explicit reference,
+            :class:`~facewarp.physics.SolverVerlet`, at its stable substep).
+        material: ``"physical"`` (default: tissue density, moduli in Pa, damping rates in 1/s)
+            or ``"thesis"`` (Table 6.3 as it stands), or a material object
+            (:mod:`facewarp.physics` ``MaterialPhysical`` / ``MaterialThesis``).
+            ``solver="verlet", material="thesis"`` is the simulator before the implicit solver.
+        dt: Substep [s]; default: implicit one step per frame, Verlet its stable step.
+        substeps: Substeps (steps) per frame (overrides ``dt``).
         fps: Frames per second of :meth:`step` / :meth:`run`.
+        iterations: Implicit solver: a fixed iteration count per step (the interactive mode: a
+            fixed cost per frame) instead of iterating to ``tolerance``.
+        tolerance: Implicit solver: converged when no node moves more than this in an iteration
+            [m] (default 3e-5).
+        method: Implicit solver method (default: ``"lbfgs"`` on the CPU, ``"newton-pcg"`` on CUDA).
+        support_stiffness: Sliding-support stiffness [N/m] of every supported node (default:
+            physical ``support_modulus`` times the node's area; thesis the hold stiffness).
+        edge_damping: Edge dashpot [N s/m] (default: thesis 500, physical 0).
+        mass_scaling: Verlet: add mass to the 2 % of nodes below the chosen substep.
+
+    Raises:
+        InputError: an unknown solver, material or method, or bad numbers.
     """
 
     CONTROL_CHUNKS = 16
 
-    def __init__(self, fr: FaceRig, *, device: str = "cpu", dt: float | None = None, substeps: int | None = None,
-                 fps: float = 30.0, support_stiffness: float | None = None, edge_damping: float = EDGE_DAMPING,
+    def __init__(self, fr: FaceRig, *, device: str = "cpu", solver: str = "implicit", material="physical",
+                 dt: float | None = None, substeps: int | None = None, fps: float = 30.0,
+                 iterations: int | None = None, tolerance: float | None = None, method: str | None = None,
+                 support_stiffness: float | None = None, edge_damping: float | None = None,
                  mass_scaling: bool = True):
         wp = get_warp()
-        from ..physics.model import ModelBuilder
+        from dataclasses import replace
+
         from ..coupling.kinematic import CarryStage, JawStage
+        from ..physics.materials import MaterialPhysical, material_profile
+        from ..physics.model import ModelBuilder
         from ..physics.muscle_stage import MuscleStage, SupportStage
+        from ..physics.solvers.implicit import SolverImplicit
         from ..physics.solvers.verlet import MASS_SCALING_QUANTILE, SolverVerlet, scale_masses
 
+        if solver not in SOLVERS:
+            raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
+        mat = material_profile(material)
+        physical = isinstance(mat, MaterialPhysical)
+        if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
+            raise InputError(f"fps: expected a positive number, got {fps!r}")
+        if substeps is not None and not (isinstance(substeps, (int, np.integer)) and substeps >= 1):
+            raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
+        if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+            raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
         self.fr = fr
         self.fps = float(fps)
-        builder = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held,
+        self.solver_name = solver
+        self.material = mat
+        if edge_damping is None:
+            edge_damping = 0.0 if physical else EDGE_DAMPING
+        builder = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held, material=mat,
                                muscle_count=len(fr.rig.names), edge_damping=edge_damping)
-        # the substep: the 2 % of nodes with the smallest own limit (short edges, flat tets in
-        # creases of adapted heads) get the mass that lifts them to it (selective mass scaling)
-        dt_safe, self.added_mass_fraction = scale_masses(
-            builder, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0)
+        # springs of the stages, per node: sliding supports and muscles (physical: per unit area)
+        rig = fr.rig
+        if physical:
+            k_support = mat.support_modulus * builder.vertex_area[fr.support_nodes]
+            per_node = np.bincount(rig.att_node, minlength=len(fr.nodes))
+            att_k = mat.muscle_modulus * builder.vertex_area[rig.att_node] / np.maximum(per_node[rig.att_node], 1)
+            rig = replace(rig, att_stiffness=att_k)
+        else:
+            k_support = float(builder.hold_stiffness.max()) if fr.held.any() else 0.0
+            if mat.muscle_stiffness is not None:
+                per_node = np.bincount(rig.att_node, minlength=len(fr.nodes))
+                rig = replace(rig, att_stiffness=mat.muscle_stiffness / np.maximum(per_node[rig.att_node], 1))
+        if support_stiffness is not None:
+            k_support = support_stiffness
+        extra = np.zeros(len(fr.nodes))
+        np.add.at(extra, fr.support_nodes, np.broadcast_to(k_support, (len(fr.support_nodes),)))
+        np.add.at(extra, rig.att_node, rig.att_stiffness)
+        # the Verlet reference substep (selective mass scaling: the 2 % of nodes with the smallest
+        # own limit, short edges and flat tets in creases of adapted heads, get the mass that lifts
+        # them to it); the thesis profile's per-substep damping is a rate of 0.002 / that step
         frame_dt = 1.0 / self.fps
-        if substeps is None:
-            substeps = int(np.ceil(frame_dt / (dt or dt_safe)))
-        self.substeps = int(substeps)
-        self.dt = frame_dt / self.substeps
-        if self.dt > 2.0 * dt_safe:
-            raise InputError(f"substeps: {substeps} gives dt {self.dt:.2e} s, above twice the stable step "
-                             f"{dt_safe:.2e} s; use at least {int(np.ceil(frame_dt / (2 * dt_safe)))} substeps")
+        self.added_mass_fraction = 0.0
+        if solver == "verlet":
+            dt_safe, self.added_mass_fraction = scale_masses(
+                builder, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0, extra_stiffness=extra)
+            if substeps is None:
+                substeps = int(np.ceil(frame_dt / (dt or dt_safe)))
+            self.substeps = int(substeps)
+            self.dt = frame_dt / self.substeps
+            if self.dt > 2.0 * dt_safe:
+                raise InputError(f"substeps {substeps}: dt {self.dt:.2e} s is above twice the stable step "
+                                 f"{dt_safe:.2e} s; use at least {int(np.ceil(frame_dt / (2 * dt_safe)))} substeps")
+            if not physical:
+                builder.damping_rate = mat.damping / self.dt
+        else:
+            if substeps is None:
+                substeps = 1 if dt is None else int(np.ceil(frame_dt / dt))
+            self.substeps = int(substeps)
+            self.dt = frame_dt / self.substeps
+            if not physical:
+                ref = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held, material=mat)
+                dt_ref, _ = scale_masses(ref, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0)
+                builder.damping_rate = mat.damping / dt_ref
+        self.builder = builder
         self.model = builder.finalize(device)
         self.device = self.model.device
         self.jaw = fr.jaw
         self.jaw_stage = JawStage(self.jaw, fr.jaw_nodes, fr.jaw_amount, self.model.rest_positions, self.device)
-        k_support = float(self.model.vertex_hold_stiffness.numpy().max()) if fr.held.any() else 0.0
-        self.support = SupportStage(self.jaw, fr.support_nodes, fr.support_normal, fr.support_amount,
-                                    support_stiffness if support_stiffness is not None else k_support,
+        self.support = SupportStage(self.jaw, fr.support_nodes, fr.support_normal, fr.support_amount, k_support,
                                     self.model.rest_positions, self.device)
         node_jaw = node_jaw_amounts(fr)
-        self.muscles = MuscleStage(fr.rig, self.jaw, self.device, node_amount=node_jaw)
+        self.muscles = MuscleStage(rig, self.jaw, self.device, node_amount=node_jaw)
         carried = np.flatnonzero((node_jaw > 0) & ~fr.fixed)
         self.carry = CarryStage(self.jaw, carried, node_jaw[carried], self.device)
-        self.solver = SolverVerlet(self.model, stages=[self.carry, self.jaw_stage, self.support, self.muscles])
+        stages = [self.carry, self.jaw_stage, self.support, self.muscles]
+        if solver == "verlet":
+            self.solver = SolverVerlet(self.model, stages=stages)
+        else:
+            opts = {}
+            if tolerance is not None:
+                opts["tolerance"] = tolerance
+            self.solver = SolverImplicit(self.model, stages=stages, method=method, iterations=iterations,
+                                         **{"tolerance": 3e-5, **opts})
         self.state = self.model.state()
         self.scratch = self.model.state()
         self.control = self.model.control()
         self.use_graph = bool(self.device.is_cuda)
         self._graphs: dict[int, object] = {}
         self._wp = wp
+        self.step_seconds = 0.0
         # head surface <- outer nodes
         sv = fr.surface_vertex
         self.node_of_vertex = np.where(sv >= 0)[0]
@@ -245,6 +337,7 @@ class FaceSimulator:
             if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
                 raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
             n = max(1, int(round(float(dt) / self.dt)))
+        t0 = time.perf_counter()
         chunks = max(1, min(n, self.CONTROL_CHUNKS))
         bounds = np.linspace(0, n, chunks + 1).round().astype(int)
         a0, j0 = self._a, self._j
@@ -255,7 +348,8 @@ class FaceSimulator:
             self._run_substeps(int(bounds[c + 1] - bounds[c]))
         self._a, self._j = self._target_a.copy(), self._target_j.copy()
         self._steps_taken += n
-        self.solver.check(self.state)
+        self.solver.check(self.state)  # a host read: also waits for the device
+        self.step_seconds += time.perf_counter() - t0
 
     def advance(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``1 / fps`` with the current controls."""
@@ -351,6 +445,7 @@ class FaceSimulator:
         curves = np.zeros((nf, len(names), curve_samples, 3), np.float32)
         parts_frames = {k: np.zeros((nf, len(V), 3), np.float32) for k, (V, _) in fr.parts.items()}
         t0 = time.perf_counter()
+        step0 = self.step_seconds
         e0 = timeline.sample(0.0)
         self._a = self._target_a = _activation_vector(names, e0)
         self._j = self._target_j = np.array([e0.jaw_u, e0.jaw_v], np.float32)
@@ -368,10 +463,13 @@ class FaceSimulator:
             if progress:
                 progress(k, nf)
         wall = time.perf_counter() - t0
+        stepping = max(self.step_seconds - step0, 1e-9)
         fdp = self._fdp_points(pts, parts_frames)
         return Frames(times, pts, fr.head_faces, fr.fdp_ids, fdp,
                       {k: (v, fr.parts[k][1]) for k, v in parts_frames.items()}, list(names), curves, acts, jaws,
-                      self._steps_taken / max(wall, 1e-9), self.substeps, self.dt)
+                      self._steps_taken / max(wall, 1e-9), self.substeps, self.dt,
+                      frames_per_second=(nf - 1) / stepping, realtime_factor=(nf - 1) / self.fps / stepping,
+                      solver=self.solver_name, material=self.material.name)
 
     def _curves(self, samples: int) -> np.ndarray:
         from ..physics.muscle_stage import _bezier_np

@@ -1,0 +1,160 @@
+"""``facewarp retarget``: one activation sequence played on several heads (thesis Ch. 7).
+
+Every head gets the same timeline (a sequence file, a preset or ``"sequence"``) and the same
+physical parameters (the simulator's defaults: material, muscle stiffness, jaw); only its own
+anatomy differs. Each head's animation streams into ``<name>.usdc`` as it is simulated
+(:mod:`~facewarp._src.jobs.animation`); ``retarget.png`` shows the heads in rows at rest and at
+the peak of each segment (front views), and ``report.json`` the speed and the largest motion of
+a few FDPs per head.
+
+Heads are ``facewarp build`` outputs (``face_rig.npz``) or anything :func:`~facewarp.load_head`
+takes (template folders, ``adapt`` outputs, ``"default[:LEVEL]"``), whose anatomy is then built
+in memory.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..adapt.transfer import load_head
+from ..core.errors import InputError
+from ..core.fileio import write_json
+from ..expressions import PRESETS, load_sequence, timeline_from_spec
+from ..physics.face_rig import build_face, load_face_rig
+from ..present.animation import FaceView, label_grid
+from ..present.render import save_png
+from ..sim.simulator import FaceSimulator
+from .animation import UsdAnimation, part_transforms, play_timeline, sim_controls
+from .checks import check_out_dir, make_out_dir
+
+__all__ = ["RELAX_SECONDS", "TRACKED_FDPS", "load_rig", "retarget_files"]
+
+RELAX_SECONDS = 0.5
+"""Time after a sequence file's last segment in the default length [s]."""
+
+TRACKED_FDPS = ("2.1", "4.1", "4.2", "8.3", "8.4")
+"""FDPs whose largest motion the report gives per head: chin, inner brows, lip corners."""
+
+
+def load_rig(head):
+    """The face rig of ``head``: a ``build`` output folder, or a head :func:`~facewarp.load_head`
+    takes (anatomy built in memory)."""
+    p = Path(str(head))
+    if p.is_dir() and (p / "face_rig.npz").is_file():
+        return load_face_rig(p)
+    return build_face(load_head(head))
+
+
+def _default_seconds(expression: str) -> float:
+    if expression in PRESETS:
+        return 2.0
+    if expression == "sequence":
+        return 8.0
+    return load_sequence(expression).duration + RELAX_SECONDS
+
+
+def _names(heads) -> list[str]:
+    """File-safe, unique names of the heads (folder names; ``default:0`` -> ``default_0``)."""
+    out: list[str] = []
+    for h in heads:
+        base = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(str(h).rstrip("/")).name or str(h)).strip("._") or "head"
+        name, i = base, 2
+        while name.lower() in (o.lower() for o in out):  # one file per head, also where case is ignored
+            name, i = f"{base}_{i}", i + 1
+        out.append(name)
+    return out
+
+
+class _Tracker:
+    """Largest distance from rest of the tracked FDPs, and the frames of the strip."""
+
+    def __init__(self, sim, want: set):
+        ids = [str(k) for k in sim.fr.fdp_ids]
+        self.ids = [k for k in TRACKED_FDPS if k in ids]
+        self.idx = [ids.index(k) for k in self.ids]
+        self.rest = sim.fdp_points()[self.idx]
+        self.moved = np.zeros(len(self.idx))
+        self.want = want
+        self.frames: dict = {}
+
+    def __call__(self, sim, k: int, t: float) -> None:
+        d = np.linalg.norm(sim.fdp_points()[self.idx] - self.rest, axis=1)
+        np.maximum(self.moved, d, out=self.moved)
+        if k in self.want:
+            self.frames[k] = (sim.surface(), part_transforms(sim.fr, sim_controls(sim)[1]))
+
+
+def retarget_files(expression, heads, out, *, seconds: float | None = None, fps: float = 30.0, device: str = "cpu",
+                   size: int = 280, progress=None, frame_progress=None) -> dict:
+    """Play ``expression`` on every head of ``heads`` into ``out`` (see the module docstring).
+
+    Args:
+        expression: A sequence ``.json`` file, a preset name or ``"sequence"``.
+        heads: At least one head (see the module docstring).
+        out: Output folder.
+        seconds: Length [s] (> 0); default a sequence file's length plus :data:`RELAX_SECONDS`,
+            2 s for a preset, 8 s for ``"sequence"``.
+        fps: Frames per second.
+        device: Warp device.
+        size: Height and width of each picture in the strip [px].
+        progress: Optional ``progress(message)``; ``frame_progress(k, frame_count)`` while simulating.
+
+    Returns:
+        The report (also written as ``report.json``).
+
+    Raises:
+        InputError: a missing or bad sequence file or head, a bad number.
+    """
+    step = progress or (lambda msg: None)
+    out = check_out_dir(out)
+    heads = list(heads)
+    if not heads:
+        raise InputError("heads: expected at least one head")
+    if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
+        raise InputError(f"fps: expected a finite number > 0, got {fps!r}")
+    expression = str(expression)
+    if seconds is None:
+        seconds = _default_seconds(expression)
+    timeline = timeline_from_spec(expression, seconds)  # checks seconds and reads the file
+    for h in heads:  # missing heads fail before any simulation
+        p = Path(str(h))
+        if not (str(h) == "default" or str(h).startswith("default:")) and not p.exists():
+            raise InputError(f"{h}: no such head folder")
+    labels = [("rest", 0)] + [(s.expression.name, int(round((s.start + s.attack + 0.5 * s.hold) * fps)))
+                              for s in timeline.segments if s.start + s.attack + 0.5 * s.hold <= seconds][:6]
+    make_out_dir(out)
+    names = _names(heads)
+    rows, per_head = [], []
+    for i, (head, name) in enumerate(zip(heads, names)):
+        step(f"{name} ({i + 1}/{len(heads)}): anatomy")
+        fr = load_rig(head)
+        sim = FaceSimulator(fr, device=device, fps=fps)
+        track = _Tracker(sim, {k for _, k in labels})
+        lm = dict(zip((str(k) for k in fr.fdp_ids), sim.fdp_points()))
+        step(f"{name} ({i + 1}/{len(heads)}): simulating")
+        with UsdAnimation(out / f"{name}.usdc", sim) as usd:
+            stats = play_timeline(sim, timeline, seconds, on_frame=(lambda s, k, t: usd.add(s, t), track),
+                                  progress=frame_progress)
+        view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, device=device)
+        used = np.concatenate([P[view.used] for P, _ in track.frames.values()])
+        view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, device=device,
+                        bounds=np.stack([used.min(0) - 0.004, used.max(0) + 0.004]))
+        rows.append([view.render(*track.frames[k]) for _, k in labels if k in track.frames])
+        per_head.append({
+            "head": str(head), "name": name, "usd": str(out / f"{name}.usdc"), "vertex_count": int(len(fr.head_vertices)),
+            "tets": int(len(fr.tets)), "frames": stats["frames"], "frames_per_second": stats["frames_per_second"],
+            "steps_per_second": stats["steps_per_second"], "substeps": stats["substeps"],
+            "max_fdp_motion_mm": {k: float(v * 1e3) for k, v in zip(track.ids, track.moved)},
+        })
+    step("picture")
+    grid = label_grid(rows, column_labels=[n for n, k in labels], row_labels=names)
+    save_png(out / "retarget.png", grid, title=f"{Path(expression).name} on {len(heads)} heads")
+    report = {"expression": expression, "seconds": float(seconds), "fps": float(fps), "device": device,
+              "heads": per_head, "files": [h["usd"] for h in per_head] + [str(out / "retarget.png"),
+                                                                         str(out / "report.json")]}
+    write_json(out / "report.json", report)
+    return report

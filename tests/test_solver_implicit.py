@@ -1,0 +1,372 @@
+"""The implicit solver, its potential and the material profiles (issue 10).
+
+Small meshes only (one tet, a few Kuhn cubes): finite-difference gradients and Hessians of every
+energy term of the step's potential (the float64 NumPy reference), the Warp kernels against that
+reference (muscle springs included), momentum conservation, rest, step-count independence, damping
+relative to the cranium, and bad parameters.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from facewarp import InputError, SimulationError
+from facewarp.geometry import signed_tet_volumes
+from facewarp.physics import (MaterialPhysical, MaterialThesis, ModelBuilder, SolverImplicit, SolverVerlet,
+                              StepPotential, isotropic_moduli, material_profile, simulate, stable_dt)
+
+CM = 0.01
+
+
+def one_tet(edge: float = CM):
+    V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, np.sqrt(3) / 2, 0.0], [0.5, np.sqrt(3) / 6, np.sqrt(2 / 3)]])
+    return V * edge, np.array([[0, 1, 2, 3]])
+
+
+def grid_tets(nx, ny, nz, h=CM):
+    """nx x ny x nz cubes of side h, 6 Kuhn tets each, positively oriented."""
+    g = np.stack(np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij"), -1)
+    V = g.transpose(2, 1, 0, 3).reshape(-1, 3).astype(np.float64) * h
+
+    def vid(i, j, k):
+        return (k * (ny + 1) + j) * (nx + 1) + i
+
+    T = []
+    for i, j, k in itertools.product(range(nx), range(ny), range(nz)):
+        for perm in itertools.permutations(range(3)):
+            c = np.array([i, j, k])
+            tet = [vid(*c)]
+            for axis in perm:
+                c = c.copy()
+                c[axis] += 1
+                tet.append(vid(*c))
+            T.append(tet)
+    T = np.array(T)
+    neg = signed_tet_volumes(V, T) < 0
+    T[neg] = T[neg][:, [0, 2, 1, 3]]
+    return V, T
+
+
+def layers(V):
+    return np.where(np.isclose(V[:, 2], V[:, 2].max()), 0, 1)
+
+
+def perturbed(V, rel, seed):
+    rng = np.random.default_rng(seed)
+    return V + rng.normal(scale=rel * CM, size=V.shape)
+
+
+# ----------------------------------------------------------------------------------------
+# materials
+
+
+def test_physical_masses_and_stiffness_do_not_depend_on_the_mesh():
+    mat = MaterialPhysical()
+    coarse = ModelBuilder(*grid_tets(1, 1, 1, 2 * CM), material=mat)
+    fine = ModelBuilder(*grid_tets(2, 2, 2, CM), material=mat)
+    for b in (coarse, fine):
+        assert b.mass.sum() == pytest.approx(mat.density * (2 * CM) ** 3, rel=1e-6)  # lumped: rho V
+    # a uniform stretch of 5 % along x stores the same energy in both (moduli per volume share)
+    def stretch_energy(b):
+        X = b.vertices * [1.05, 1.0, 1.0]
+        P = StepPotential(b.finalize("cpu"))
+        d = P.begin_step(b.vertices, b.vertices, 1e6, b.vertices)  # h huge: no inertia, no dashpots
+        return P.energy(X, d) - 0.5 * np.sum(d.mu[:, None] * (X - d.z) ** 2)
+
+    assert stretch_energy(fine) == pytest.approx(stretch_energy(coarse), rel=1e-4)
+    # the thesis profile's per-element joules stiffen as the mesh is refined
+    tc = ModelBuilder(*grid_tets(1, 1, 1, 2 * CM), material="thesis")
+    tf = ModelBuilder(*grid_tets(2, 2, 2, CM), material="thesis")
+    assert stretch_energy(tf) > 1.9 * stretch_energy(tc)
+
+
+def test_material_profiles_and_isotropic_moduli():
+    E, nu = MaterialPhysical().young_poisson(0)
+    assert 5e4 < E < 2e5 and 0.4 < nu < 0.5  # skin in vivo: 1e4-1e6 Pa, nearly incompressible
+    # the volume term alone is a bulk modulus: lambda = K, G = 0 -> nu = 0.5
+    assert isotropic_moduli(0.0, 0.0, 1e5)[1] == pytest.approx(0.5)
+    # springs alone obey the Cauchy relation (lambda = G): nu = 1/4
+    assert isotropic_moduli(1e5, 0.0, 0.0)[1] == pytest.approx(0.25)
+    assert material_profile("thesis") == MaterialThesis()
+    b = ModelBuilder(*one_tet(), material="physical")
+    assert b.damping_rate == 50.0 and b.stiffness_damping == 2e-5
+    np.testing.assert_allclose(b.edge_damping_coef, 2e-5 * b.edge_k0)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(density=-1.0), "density must be finite and > 0"),
+    (dict(distance_modulus=(0, 0, 0), area_modulus=0.0, volume_modulus=0.0), "no stiffness"),
+    (dict(distance_modulus=(1e5, 1e5)), "distance_modulus must be 3 values"),
+    (dict(damping_rate=float("nan")), "damping_rate must be finite"),
+])
+def test_bad_material_is_an_input_error(kwargs, match):
+    with pytest.raises(InputError, match=match):
+        MaterialPhysical(**kwargs)
+
+
+def test_bad_step_arguments_are_input_errors():
+    V, T = grid_tets(1, 1, 1)
+    model = ModelBuilder(V, T, material="physical").finalize("cpu")
+    solver = SolverImplicit(model)
+    a, b, c = model.state(), model.state(), model.control()
+    for dt in (0.0, -1.0, float("nan")):
+        with pytest.raises(InputError, match="dt must be a positive number"):
+            solver.step(a, b, c, dt)
+    with pytest.raises(InputError, match="different State buffers"):
+        solver.step(a, a, c, 0.01)
+    with pytest.raises(InputError, match="method"):
+        SolverImplicit(model, method="jacobi")
+    with pytest.raises(InputError, match="tolerance"):
+        SolverImplicit(model, tolerance=-1.0)
+
+
+def test_nan_control_is_a_simulation_error_not_a_nan_frame():
+    V, T = grid_tets(1, 1, 1)
+    model = ModelBuilder(V, T, material="physical").finalize("cpu")
+    solver = SolverImplicit(model)
+    a, b, c = model.state(), model.state(), model.control()
+    f = np.zeros((len(V), 3), np.float32)
+    f[0] = np.nan
+    c.external_force.assign(f)
+    with pytest.raises(SimulationError, match="not finite"):
+        solver.step(a, b, c, 0.01)
+    assert np.isfinite(b.positions.numpy()).all()
+
+
+# ----------------------------------------------------------------------------------------
+# the step's potential: finite differences of every term
+
+
+def springs_for(V, rng):
+    """A distance spring (muscle-like) and an axis spring (support-like) on a few nodes."""
+    node = np.array([0, 2, 3])
+    point = V[node] + rng.normal(scale=0.3 * CM, size=(3, 3))
+    axis = rng.normal(size=(3, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    return [(node, point, np.array([50.0, 80.0, 30.0]), np.full(3, 0.2 * CM), None),
+            (node, point, np.array([40.0, 20.0, 60.0]), None, axis)]
+
+
+TERMS = {
+    "distance": dict(k_area=0.0, k_volume=0.0, damping_rate=0.0),
+    "area": dict(k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_volume=0.0, damping_rate=0.0),
+    "volume": dict(k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_area=0.0, damping_rate=0.0),
+    "dashpots_inertia": dict(stiffness_damping=3e-3, damping_rate=7.0),
+}
+
+
+def potential_case(term, seed):
+    V, T = one_tet()
+    b = ModelBuilder(V, T, layer=[0, 0, 1, 1], material="physical", held=[False, True, False, False],
+                     **TERMS[term])
+    P = StepPotential(b.finalize("cpu"))
+    rng = np.random.default_rng(seed)
+    Xn, Xp = perturbed(V, 0.1, seed), perturbed(V, 0.1, seed + 10)
+    data = P.begin_step(Xn, Xp, 0.01, perturbed(V, 0.05, seed + 20), force=rng.normal(size=V.shape) * 1e-3,
+                        springs=springs_for(V, rng), cranium_velocity=[[0.01, 0.0, 0.0], [0.0, 0.0, 0.5]])
+    return P, data, perturbed(V, 0.15, seed + 30)
+
+
+@pytest.mark.parametrize("term", list(TERMS))
+@pytest.mark.parametrize("seed", [0, 1])
+def test_potential_gradient_is_its_finite_difference(term, seed):
+    P, data, X = potential_case(term, seed)
+    e, G = P.gradient(X, data)
+    assert e == pytest.approx(P.energy(X, data), rel=1e-12)
+    h = 1e-8
+    FD = np.zeros_like(X)
+    for a, d in itertools.product(range(len(X)), range(3)):
+        Xp, Xm = X.copy(), X.copy()
+        Xp[a, d] += h
+        Xm[a, d] -= h
+        FD[a, d] = (P.energy(Xp, data) - P.energy(Xm, data)) / (2 * h)
+    np.testing.assert_allclose(G, FD, rtol=1e-5, atol=1e-6 * np.abs(FD).max(), err_msg=f"{term} gradient")
+
+
+def test_potential_hessian_is_the_finite_difference_where_exact():
+    """Exact for the distance energy (stretched), springs (stretched), holds and inertia; the
+    area and volume terms are Gauss-Newton, exact at rest (C = 0)."""
+    V, T = one_tet()
+    rng = np.random.default_rng(3)
+    cases = []
+    b = ModelBuilder(V, T, material="physical", k_area=0.0, k_volume=0.0, held=[0, 1, 0, 0], stiffness_damping=1e-3)
+    X = V * 1.1 + rng.normal(scale=1e-4, size=V.shape)  # every edge stretched
+    cases.append(("distance, holds, springs (stretched)", b, X, springs_for(V * 1.5, rng)[:1] + springs_for(V, rng)[1:]))
+    b = ModelBuilder(V, T, material="physical", k0_outer=0.0, k0_inner=0.0, k0_cross=0.0)
+    cases.append(("area, volume at rest", b, V.copy(), []))
+    for name, b, X, springs in cases:
+        P = StepPotential(b.finalize("cpu"))
+        data = P.begin_step(V, V, 0.02, V, springs=springs)
+        H = P.hessian(X, data).toarray()
+        h = 1e-7
+        FD = np.zeros((12, 12))
+        for k in range(12):
+            Xp, Xm = X.copy(), X.copy()
+            Xp.flat[k] += h
+            Xm.flat[k] -= h
+            FD[:, k] = (P.gradient(Xp, data)[1] - P.gradient(Xm, data)[1]).ravel() / (2 * h)
+        np.testing.assert_allclose(H, FD, rtol=1e-4, atol=1e-5 * np.abs(FD).max(), err_msg=name)
+        assert np.linalg.eigvalsh(H).min() > -1e-9 * np.abs(H).max(), f"{name}: not PSD"
+
+
+@pytest.mark.parametrize("method", ["lbfgs", "newton-pcg"])
+def test_kernels_evaluate_the_reference_potential(method):
+    """The solver's Warp kernels (energy, gradient, Hessian) equal the float64 NumPy reference."""
+    V, T = grid_tets(2, 1, 1)
+    bottom = np.isclose(V[:, 2], 0.0)
+    held = np.zeros(len(V), bool)
+    held[[9, 11]] = True
+    b = ModelBuilder(V, T, layer=layers(V), fixed=bottom, held=held, material="physical")
+    model = b.finalize("cpu")
+    solver = SolverImplicit(model, method=method)
+    state, control = model.state(), model.control()
+    Xn, Xp = perturbed(V, 0.03, 1), perturbed(V, 0.03, 2)
+    Xn[bottom] = Xp[bottom] = V[bottom]
+    state.positions.assign(Xn.astype(np.float32))
+    state.prev_positions.assign(Xp.astype(np.float32))
+    f = np.random.default_rng(4).normal(size=V.shape).astype(np.float32) * 1e-3
+    control.external_force.assign(f)
+    control.cranium_velocity.assign(np.array([[0.0, 0.01, 0.0], [0.2, 0.0, 0.0]], np.float32))
+    X = perturbed(V, 0.05, 5)
+    e, G, H = solver.potential(state, control, 0.01, X, hessian=True)
+    X32 = X.astype(np.float32).astype(np.float64)
+    X32[bottom] = V[bottom].astype(np.float32)
+    P = StepPotential(model)
+    data = P.begin_step(state.positions.numpy(), state.prev_positions.numpy(), 0.01, V, force=f,
+                        cranium_velocity=control.cranium_velocity.numpy())
+    e_ref, G_ref = P.gradient(X32, data)
+    G_ref[bottom] = 0.0
+    assert e == pytest.approx(e_ref, rel=2e-4, abs=1e-6 * np.abs(G_ref).max() * CM)
+    np.testing.assert_allclose(G, G_ref, rtol=2e-3, atol=2e-3 * np.abs(G_ref).max(), err_msg="gradient")
+    free = np.repeat(~bottom, 3)
+    H_ref = P.hessian(X32, data).toarray()
+    np.testing.assert_allclose(H.toarray()[np.ix_(free, free)], H_ref, rtol=2e-3, atol=1e-4 * np.abs(H_ref).max())
+
+
+# ----------------------------------------------------------------------------------------
+# the solver
+
+
+@pytest.mark.parametrize("method", ["lbfgs", "newton", "newton-pcg"])
+def test_rest_stays_at_rest(method):
+    V, T = grid_tets(2, 2, 1)
+    model = ModelBuilder(V, T, layer=layers(V), fixed=np.isclose(V[:, 2], 0.0), material="physical").finalize("cpu")
+    solver = SolverImplicit(model, method=method)
+    a, b, c = model.state(), model.state(), model.control()
+    for _ in range(5):
+        solver.step(a, b, c, 1 / 30)
+        a, b = b, a
+    solver.check(a)
+    np.testing.assert_allclose(a.positions.numpy(), V, atol=1e-7, err_msg="rest drifted")
+
+
+def test_momentum_is_conserved_without_fixed_nodes_and_damping():
+    V, T = grid_tets(2, 1, 1)
+    model = ModelBuilder(V, T, layer=layers(V), material=MaterialPhysical(damping_rate=0.0, stiffness_damping=0.0),
+                         ).finalize("cpu")
+    solver = SolverImplicit(model, tolerance=1e-9, max_iterations=200)
+    m = model.vertex_mass.numpy().astype(np.float64)
+    h = 1e-3
+    a, b, c = model.state(), model.state(), model.control()
+    X = perturbed(V, 0.05, 7)
+    v0 = np.random.default_rng(8).normal(scale=0.02, size=V.shape)
+    a.positions.assign(X.astype(np.float32))
+    a.prev_positions.assign((X - h * v0).astype(np.float32))
+    p0 = (m[:, None] * (a.positions.numpy() - a.prev_positions.numpy())).sum(0) / h
+    for _ in range(10):
+        solver.step(a, b, c, h)
+        a, b = b, a
+    p = (m[:, None] * (a.positions.numpy().astype(np.float64) - a.prev_positions.numpy())).sum(0) / h
+    assert np.abs(p - p0).max() < 1e-3 * np.abs(m[:, None] * v0).sum(), (p, p0)
+    assert np.abs(a.positions.numpy() - X).max() > 1e-4  # it moved
+
+
+def test_damping_acts_on_velocity_relative_to_the_cranium():
+    """A free body carried at the cranium's velocity keeps it; a body moving against a still cranium slows."""
+    V, T = grid_tets(1, 1, 1)
+    model = ModelBuilder(V, T, material=MaterialPhysical(damping_rate=30.0)).finalize("cpu")
+    u = np.array([0.05, -0.02, 0.01], np.float32)
+    h = 1 / 30
+    for cranium, expect_kept in ((u, True), (np.zeros(3, np.float32), False)):
+        for solver in (SolverImplicit(model, tolerance=1e-9), SolverVerlet(model)):
+            a, b, c = model.state(), model.state(), model.control()
+            c.cranium_velocity.assign(np.array([cranium, [0, 0, 0]], np.float32))
+            dt = h if isinstance(solver, SolverImplicit) else 1e-4
+            a.prev_positions.assign((V - dt * u).astype(np.float32))
+            for _ in range(5):
+                solver.step(a, b, c, dt)
+                a, b = b, a
+            v = (a.positions.numpy() - a.prev_positions.numpy()).mean(0) / dt
+            if expect_kept:
+                np.testing.assert_allclose(v, u, rtol=1e-3, atol=1e-5, err_msg=type(solver).__name__)
+            else:
+                assert np.linalg.norm(v) < 0.99 * np.linalg.norm(u), type(solver).__name__
+
+
+def loaded_slab(material="physical"):
+    """A 3 x 2 x 1 slab, bottom fixed, two top corners held, the top pushed up and sideways."""
+    V, T = grid_tets(3, 2, 1)
+    bottom = np.isclose(V[:, 2], 0.0)
+    held = np.zeros(len(V), bool)
+    held[[12, 15]] = True
+    b = ModelBuilder(V, T, layer=layers(V), fixed=bottom, held=held, material=material)
+    f = np.zeros((len(V), 3), np.float32)
+    f[~bottom] = [0.4, 0.0, 1.0]
+    return V, b, f * (1e-2 if material == "physical" else 20.0)
+
+
+def test_static_shape_independent_of_steps_per_frame_and_equal_to_verlet():
+    V, b, f = loaded_slab()
+    model = b.finalize("cpu")
+    frame = 1 / 30
+    shapes = []
+    for steps in (1, 2, 4, 8):
+        solver = SolverImplicit(model, tolerance=1e-9)
+        a, s, c = model.state(), model.state(), model.control()
+        c.external_force.assign(f)
+        for _ in range(6 * steps):
+            solver.step(a, s, c, frame / steps)
+            a, s = s, a
+        shapes.append(a.positions.numpy().astype(np.float64))
+    moved = np.abs(shapes[0] - V).max()
+    assert moved > 1e-4
+    for k, X in zip((2, 4, 8), shapes[1:]):
+        np.testing.assert_allclose(X, shapes[0], atol=1e-3 * moved, err_msg=f"{k} steps per frame")
+    # the Verlet reference run to rest
+    ref = model.state()
+    c = model.control()
+    c.external_force.assign(f)
+    simulate(model, ref, c, stable_dt(b), 500, frames=8)
+    np.testing.assert_allclose(ref.positions.numpy(), shapes[0], atol=5e-3 * moved, err_msg="Verlet at rest")
+
+
+def test_newton_pcg_reaches_the_direct_solution():
+    V, b, f = loaded_slab()
+    model = b.finalize("cpu")
+    out = {}
+    for method, kw in (("lbfgs", dict(tolerance=1e-9)), ("newton-pcg", dict(iterations=6, linear_iterations=300))):
+        solver = SolverImplicit(model, method=method, **kw)
+        a, s, c = model.state(), model.state(), model.control()
+        c.external_force.assign(f)
+        for _ in range(3):
+            solver.step(a, s, c, 1 / 30)
+            a, s = s, a
+        out[method] = a.positions.numpy().astype(np.float64)
+    moved = np.abs(out["lbfgs"] - V).max()
+    np.testing.assert_allclose(out["newton-pcg"], out["lbfgs"], atol=2e-3 * moved)
+
+
+def test_interactive_mode_runs_a_fixed_iteration_count():
+    V, b, f = loaded_slab()
+    model = b.finalize("cpu")
+    solver = SolverImplicit(model, iterations=2)
+    a, s, c = model.state(), model.state(), model.control()
+    c.external_force.assign(f)
+    for _ in range(4):
+        solver.step(a, s, c, 1 / 30)
+        a, s = s, a
+        assert solver.last_iterations == 2
+    solver.check(a)
