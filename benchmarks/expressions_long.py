@@ -1,10 +1,12 @@
 """All Table 6.4 presets and the Fig. 6.16 sequence for 10 simulated seconds each: no NaN, no inverted tet.
 
     python -m benchmarks.expressions_long [--device cpu|cuda] [--seconds 10] [--head default|BUILD_DIR] [--name NAME]
+                                          [--solver implicit|verlet] [--material physical|thesis]
 
 Each expression ramps up, holds and releases within the run; the solver's guard checks every frame
 for NaN and inverted tets (a failure is recorded with the step and tet it names). Writes
-benchmarks/results/expressions_long_<device>[_<NAME>].json and a frame strip per expression to
+benchmarks/results/expressions_long_<device>[_<solver>_<material>][_<NAME>].json (the suffix for other
+than the default implicit solver and physical material) and a frame strip per expression to
 benchmarks/results/expressions/[<NAME>_]<expression>_<device>.png (NAME defaults to the build folder's
 parent, e.g. identity001 for .../identity001/build; nothing for the default template).
 """
@@ -28,32 +30,35 @@ def main():
     ap.add_argument("--head", default="default")
     ap.add_argument("--name", help="tag of the head in the output names")
     ap.add_argument("--expressions", nargs="+", default=["smile", "laugh", "surprise", "angry", "sad", "sequence"])
+    ap.add_argument("--solver", default="implicit", choices=["implicit", "verlet"])
+    ap.add_argument("--material", default="physical", choices=["physical", "thesis"])
     args = ap.parse_args()
-    from facewarp._src.anatomy.build import build_anatomy
-    from facewarp._src.core.errors import SimulationError
-    from facewarp._src.sim.face import FaceSimulator, face_rig_from_anatomy, load_face_rig
-    from facewarp._src.jobs.files import _timeline, displacement_max, load_head, render_strip
-    from facewarp._src.present.render import save_png
+    from facewarp import (FaceSimulator, SimulationError, build_face, load_face_rig, load_head, render_strip, save_png,
+                          timeline_from_spec)
+    from facewarp.render import displacement_max
 
     if Path(args.head, "face_rig.npz").is_file():
         fr = load_face_rig(args.head)
     else:
-        fr = face_rig_from_anatomy(build_anatomy(load_head(args.head), check_intersections=False))
+        fr = build_face(load_head(args.head))
     rows = []
     outdir = RESULTS / "expressions"
     outdir.mkdir(parents=True, exist_ok=True)
     tag = args.device.split(":")[0]
     head_name = args.name or ("" if args.head == "default" else Path(args.head).resolve().parent.name)
     prefix = f"{head_name}_" if head_name else ""
+    if (args.solver, args.material) != ("implicit", "physical"):
+        prefix += f"{args.solver}_{args.material}_"
     for name in args.expressions:
-        sim = FaceSimulator(fr, device=args.device, fps=args.fps)
+        sim = FaceSimulator(fr, device=args.device, fps=args.fps, solver=args.solver, material=args.material)
         t0 = time.perf_counter()
-        row = {"expression": name, "seconds_simulated": args.seconds, "substeps": sim.substeps, "dt_s": sim.dt,
-               "added_mass_fraction": sim.added_mass_fraction}
+        row = {"expression": name, "seconds_simulated": args.seconds, "solver": args.solver, "material": args.material,
+               "substeps": sim.substeps, "dt_s": sim.dt, "added_mass_fraction": sim.added_mass_fraction}
         try:
-            frames = sim.run(_timeline(name, args.seconds), args.seconds)
+            frames = sim.run(timeline_from_spec(name, args.seconds), args.seconds)
             row.update(ok=True, nan_count=int((~np.isfinite(frames.points)).sum()), inverted_count=0,
-                       steps_per_second=frames.steps_per_second)
+                       steps_per_second=frames.steps_per_second, frames_per_second=frames.frames_per_second,
+                       realtime_factor=frames.realtime_factor)
             moved = np.linalg.norm(frames.fdp_points - frames.fdp_points[:1], axis=2)
             ids = list(map(str, frames.fdp_ids))
             peak = int(np.argmax(moved.max(1)))
@@ -71,7 +76,8 @@ def main():
         row["wall_seconds"] = time.perf_counter() - t0
         print(row if not row.get("ok") else {k: v for k, v in row.items() if k != "peak_fdp_motion_mm"}, flush=True)
         rows.append(row)
-    out = f"expressions_long_{tag}" + (f"_{head_name}" if head_name else "")
+    variant = "" if (args.solver, args.material) == ("implicit", "physical") else f"_{args.solver}_{args.material}"
+    out = f"expressions_long_{tag}{variant}" + (f"_{head_name}" if head_name else "")
     print("wrote", save(out, {"machine": machine(args.device), "head": args.head, "tets": int(len(fr.tets)),
                               "all_ok": all(r.get("ok") for r in rows), "runs": rows}))
 

@@ -1,91 +1,135 @@
-"""Simulated steps per second of the face solver per template level and device, and CPU/CUDA parity.
+"""Frames per second of the face solvers per template level and device, and CPU/CUDA parity.
 
-    python -m benchmarks.physics_steps [--levels 0 1 2] [--device cpu|cuda] [--steps 2000] [--parity]
+    python -m benchmarks.physics_steps [--levels 0 1] [--device cpu|cuda] [--seconds 2]
+                                       [--expression laugh] [--verlet-frames 3] [--parity]
 
-Builds the anatomy of the default template at each level, activates the smile preset and times
-substeps (after a warm-up that compiles the kernels and, on CUDA, records the graphs). With
-``--parity`` (needs CUDA) it runs 1,000 identical substeps on "cpu" and "cuda:0" and reports the
-relative difference of the node positions (laugh: muscles and a 30 deg jaw), relative to the
-largest displacement. Writes benchmarks/results/physics_steps_<device>.json.
+Builds the default head at each level and plays ``expression`` (default laugh: muscles and a
+30 degree jaw) for ``seconds`` at 30 fps through :class:`facewarp.FaceSimulator`:
+
+* ``implicit`` (the default solver; physical material; on CUDA the device method, every frame one
+  replayed CUDA graph): frames per second of the stepping, real-time factor, iterations and
+  factorisations, and where the time goes (stage preparation, gradients, solves, factorisations);
+* ``interactive_1`` / ``interactive_2``: the same with a fixed 1 or 2 iterations per frame;
+* ``verlet``: the explicit reference (thesis and physical profiles) over ``--verlet-frames``
+  frames: substeps per frame and per second, real-time factor.
+
+A first frame (kernel compilation, graph capture, first factorisation) is run and discarded.
+With ``--parity`` (needs CUDA) the laugh ramp is run with the device method on "cpu" and "cuda:0"
+and the node positions compared, relative to the largest displacement.
+Writes benchmarks/results/physics_steps_<device>.json.
 """
 
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
 
 from benchmarks._common import machine, save
 
 
-def _sim(level: int, device: str, ramp: int = 20, chunk: int = 100, expression: str = "smile"):
-    from facewarp import default_template
-    from facewarp._src.anatomy.build import build_anatomy
-    from facewarp._src.expressions import preset
-    from facewarp._src.sim.face import FaceSimulator, _activation_vector, face_rig_from_anatomy
+def _frames(fr, device, expression, seconds, **kw) -> dict:
+    import facewarp
 
-    fr = face_rig_from_anatomy(build_anatomy(default_template(level), check_intersections=False))
-    sim = FaceSimulator(fr, device=device)
-    e = preset(expression)
-    a = _activation_vector(fr.rig.names, e)
-    for k in range(1, ramp + 1):  # ramp the expression in (a step would jolt the skin)
-        sim.control.activations.assign(a * (k / ramp))
-        sim.control.jaw_angles.assign(np.array([e.jaw_u * k / ramp, 0.0], np.float32))
-        sim.advance(chunk)
-    return fr, sim
+    tl = facewarp.timeline_from_spec(expression, seconds)
+    sim = facewarp.FaceSimulator(fr, device=device, **kw)
+    sim.step()  # warm-up: kernels, graphs, the first factorisation
+    sim.reset()
+    solver = sim.solver
+    if hasattr(solver, "timings"):
+        solver.timings = {k: 0.0 for k in solver.timings}
+        f0 = solver.factorizations
+    frames = sim.run(tl, seconds)
+    nf = len(frames.times) - 1
+    out = {"solver": sim.solver_name, "material": sim.material.name, "steps_per_frame": sim.substeps,
+           "dt_s": sim.dt, "frames": nf, "frames_per_second": round(frames.frames_per_second, 3),
+           "realtime_factor": round(frames.realtime_factor, 4), "ms_per_frame": round(1e3 / frames.frames_per_second, 2)}
+    if hasattr(solver, "timings"):
+        out["method"] = solver.method
+        out["factorizations"] = solver.factorizations - f0
+        out["ms_per_frame_in"] = {k: round(v / nf * 1e3, 2) for k, v in solver.timings.items()}
+    return out
 
 
-def time_level(level: int, device: str, steps: int) -> dict:
-    import warp as wp
+def _verlet(fr, device, expression, frames, material) -> dict:
+    import time
 
-    fr, sim = _sim(level, device)
-    chunk = 100
-    wp.synchronize_device(sim.device)  # the ramp in _sim compiled the kernels and recorded the graph
-    n = max(chunk, (steps // chunk) * chunk)
+    import facewarp
+
+    sim = facewarp.FaceSimulator(fr, device=device, solver="verlet", material=material)
+    e = facewarp.preset(expression)
+    sim.set_activations(e)
+    sim.set_jaw(e.jaw_u * 0.5)
+    sim.step()  # warm-up
     t0 = time.perf_counter()
-    for _ in range(n // chunk):
-        sim.advance(chunk)
-    wp.synchronize_device(sim.device)
-    dt = time.perf_counter() - t0
-    sim.solver.check(sim.state)
-    return {"level": level, "nodes": int(len(fr.nodes)), "tets": int(len(fr.tets)), "steps": n,
-            "seconds": dt, "steps_per_second": n / dt, "dt_s": sim.dt,
-            "realtime_factor_at_stable_dt": n / dt * sim.dt}
+    for _ in range(frames):
+        sim.step()
+    wall = time.perf_counter() - t0
+    return {"solver": "verlet", "material": material, "steps_per_frame": sim.substeps, "dt_s": sim.dt,
+            "frames": frames, "frames_per_second": round(frames / wall, 4),
+            "steps_per_second": round(frames * sim.substeps / wall, 1),
+            "realtime_factor": round(frames / sim.fps / wall, 5), "added_mass_fraction": sim.added_mass_fraction}
 
 
-def parity(level: int = 0, steps: int = 1000) -> dict:
+def time_level(level: int, device: str, expression: str, seconds: float, verlet_frames: int) -> dict:
+    import facewarp
+
+    fr = facewarp.build_face(facewarp.default_template(level))
+    row = {"level": level, "nodes": int(len(fr.nodes)), "tets": int(len(fr.tets))}
+    row["implicit"] = _frames(fr, device, expression, seconds)
+    print(row, flush=True)
+    row["interactive_1"] = _frames(fr, device, expression, seconds, iterations=1)
+    row["interactive_2"] = _frames(fr, device, expression, seconds, iterations=2)
+    row["implicit_thesis"] = _frames(fr, device, expression, seconds, material="thesis")
+    if verlet_frames > 0:
+        row["verlet_thesis"] = _verlet(fr, device, expression, verlet_frames, "thesis")
+        row["verlet_physical"] = _verlet(fr, device, expression, verlet_frames, "physical")
+    print(row, flush=True)
+    return row
+
+
+def parity(level: int = 0, frames: int = 6) -> dict:
+    import facewarp
+
+    fr = facewarp.build_face(facewarp.default_template(level))
+    e = facewarp.preset("laugh")
     out = {}
     for dev in ("cpu", "cuda:0"):
-        fr, sim = _sim(level, dev, ramp=10, chunk=steps // 10, expression="laugh")
-        sim.solver.check(sim.state)
-        out[dev] = sim.state.positions.numpy().astype(np.float64)
-        rest = fr.nodes
-    disp = out["cpu"] - rest
+        sim = facewarp.FaceSimulator(fr, device=dev, method="newton-pcg")
+        for k in range(1, frames + 1):
+            sim.set_activations({m: v * k / frames for m, v in e.activations.items()})
+            sim.set_jaw(e.jaw_u * k / frames)
+            sim.step()
+        out[dev] = sim.positions()
     diff = np.linalg.norm(out["cpu"] - out["cuda:0"], axis=1).max()
-    scale = np.linalg.norm(disp, axis=1).max()
-    return {"level": level, "steps": steps, "max_abs_difference_m": float(diff), "max_displacement_m": float(scale),
-            "relative_difference": float(diff / max(scale, 1e-30)), "within_1e-4": bool(diff / max(scale, 1e-30) <= 1e-4)}
+    scale = np.linalg.norm(out["cpu"] - fr.nodes, axis=1).max()
+    return {"level": level, "frames": frames, "method": "newton-pcg", "max_abs_difference_m": float(diff),
+            "max_displacement_m": float(scale), "relative_difference": float(diff / max(scale, 1e-30)),
+            "within_1e-4": bool(diff / max(scale, 1e-30) <= 1e-4)}
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--levels", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--device", default="cpu")
-    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--expression", default="laugh")
+    ap.add_argument("--seconds", type=float, default=2.0)
+    ap.add_argument("--verlet-frames", type=int, default=2)
     ap.add_argument("--parity", action="store_true")
     args = ap.parse_args()
-    rows = []
-    from facewarp._src.core.errors import SimulationError
+    from facewarp import SimulationError
+    from facewarp.physics import factorization_backend
 
+    rows = []
     for lv in args.levels:
         try:
-            r = time_level(lv, args.device, args.steps if lv < 2 or args.device != "cpu" else max(200, args.steps // 10))
+            r = time_level(lv, args.device, args.expression, args.seconds,
+                           args.verlet_frames if lv < 2 or args.device != "cpu" else 0)
         except SimulationError as e:
             r = {"level": lv, "error": str(e)}
-        print(r, flush=True)
         rows.append(r)
-    result = {"machine": machine(args.device), "levels": rows}
+    result = {"machine": machine(args.device), "expression": args.expression, "seconds": args.seconds,
+              "factorization_backend": factorization_backend(), "levels": rows}
     if args.parity:
         result["parity_cpu_cuda"] = parity()
         print(result["parity_cpu_cuda"])

@@ -64,6 +64,8 @@ _NAMES = {
     "MUSCLES": "expressions", "PRESETS": "expressions", "Expression": "expressions", "Segment": "expressions",
     "Timeline": "expressions", "blend": "expressions", "load_sequence": "expressions", "preset": "expressions",
     "thesis_sequence": "expressions", "timeline_for": "expressions", "timeline_from_spec": "expressions",
+    "jaw_angle_for_drop": "expressions", "jaw_lever": "expressions", "expression_from_activations": "expressions",
+    "REFERENCE_JAW_LEVER": "expressions",
     # simulation
     "FaceRig": "physics.face_rig", "build_face": "physics.face_rig", "face_rig_from_anatomy": "physics.face_rig",
     "load_face_rig": "physics.face_rig", "save_face_rig": "physics.face_rig",
@@ -117,6 +119,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.coupling.kinematic import CarryStage, JawStage
     from ._src.coupling.mjcf import head_mjcf, write_head_mjcf
     from ._src.coupling.mujoco import MujocoJaw
+    from ._src.expressions import REFERENCE_JAW_LEVER, expression_from_activations, jaw_angle_for_drop, jaw_lever
     from ._src.expressions import (MUSCLES, PRESETS, Expression, Segment, Timeline, blend, load_sequence, preset,
                                    thesis_sequence, timeline_for, timeline_from_spec)
     from ._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json

@@ -240,6 +240,25 @@ def cmd_landmarks_check(args):
     _emit(args, data, lines)
 
 
+def cmd_landmarks_detect(args):
+    from ._src.jobs.adapt import detect_landmarks_files
+
+    if args.template_mesh is not None and args.template is not None:
+        raise FacewarpError("give --template or --template-mesh, not both")
+    if (args.template_mesh is None) != (args.template_landmarks is None):
+        raise FacewarpError("--template-mesh and --template-landmarks go together (a mesh and its FDPs)")
+    prog = _Progress(3, "detect", not args.json)
+    rep = detect_landmarks_files(args.scan, args.out, units=args.units, template_dir=args.template,
+                                 template_mesh=args.template_mesh, template_landmarks=args.template_landmarks,
+                                 template_units=args.template_units, device=args.device, progress=prog)
+    prog.close()
+    conf = rep["confidence"]
+    _emit(args, rep, [f"found {len(rep['landmarks'])} FDPs on {args.scan} (confidence 0..1):"]
+          + [f"  {k:>5} {conf.get(k, 0.0):.2f}  " + " ".join(f"{x:+.4g}" for x in v) + f" {args.units}"
+             for k, v in rep["landmarks"].items()]
+          + [f"  wrote {rep['path']} and {rep['confidence_path']}"])
+
+
 # ----------------------------------------------------------------------------- adapt, build, simulate
 def _refinement_summary(levels: list[dict], requested: int) -> str:
     """'FDP level + 3 of 5 refinement levels (level 5 raised E and was undone)'."""
@@ -273,8 +292,11 @@ def cmd_adapt(args):
         f"  {_refinement_summary(rep['levels'], args.levels)}; final FPs {rep['fp_count']}, "
         f"E_d {last.get('E_d', float('nan')):.3g} m^2",
         f"  distance to scan: median {d['median'] * 1e3:.2f} mm, RMS {d['rms'] * 1e3:.2f} mm",
+        f"  surface: {rep['quality']['surface']['folds']} folds; template edges stretched "
+        f"{rep['quality']['distortion']['all']['stretch_rms'] * 100:.1f} % RMS (report.json: per region)",
         f"  wrote {args.out}/adapted.obj, adapted_scan_frame.obj, adapted_landmarks.json, report.json, "
-        "error_heatmap.png, error_curve.png",
+        "error_heatmap.png, quality_heatmap.png, distortion_heatmap.png, error_curve.png"
+        + (", detected_landmarks.json" if "detected_landmarks" in rep else ""),
     ])
 
 
@@ -293,18 +315,28 @@ def cmd_build(args):
 
 
 def cmd_simulate(args):
+    from ._src.core.errors import InputError
     from ._src.jobs.face import simulate_files
 
+    if (args.expression is None) == (args.activations is None):
+        raise InputError("simulate: give exactly one of expression or activations")
+    expression = args.expression if args.activations is None else args.activations
+    if args.activations is not None and "=" not in expression:
+        raise InputError(f"activations: expected 'muscle=value,...', got {expression!r}")
     bar = _FrameBar(not args.json)
     try:
-        rep = simulate_files(args.head, args.expression, args.out, seconds=args.seconds, fps=args.fps,
-                             substeps=args.substeps, device=args.device, usd=args.usd, tets=args.tets, progress=bar)
+        rep = simulate_files(args.head, expression, args.out, seconds=args.seconds, fps=args.fps,
+                             substeps=args.substeps, device=args.device, usd=args.usd, tets=args.tets, progress=bar,
+                             solver=args.solver, material=args.material, jaw=args.jaw)
     finally:
         bar.close()
     _emit(args, rep, [
         f"simulated {rep['expression']} for {rep['seconds']} s on {rep['device']}: {rep['frames']} frames x "
         f"{rep['substeps']} substeps (dt {rep['dt_s']:.2e} s), {rep['nodes']} nodes, {rep['tets']} tets",
-        f"  {rep['steps_per_second']:.0f} simulated steps per second",
+        f"  {rep.get('solver', 'implicit')} solver, {rep.get('material', 'physical')} material, "
+        f"{rep.get('jaw', 'kinematic')} jaw: {rep.get('frames_per_second', float('nan')):.1f} frames/s "
+        f"({rep.get('frames_per_second', float('nan')) / rep['fps']:.2f}x real time), "
+        f"{rep['steps_per_second']:.0f} steps/s",
         "  wrote " + ", ".join(rep["files"]),
     ])
 
@@ -458,13 +490,25 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("landmarks", type=Path, help='JSON {"3.7": [x, y, z], ...} or MeshLab picked points .pp')
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=cmd_landmarks_check)
+    dt = lsub.add_parser("detect", help="find the FDPs on a scan in any pose, without a person (symmetry plane, "
+                         "coarse fit of the template, non-rigid fit); writes a landmarks JSON and confidences")
+    dt.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
+    dt.add_argument("--out", required=True, type=Path, help="landmarks JSON to write (confidences go beside it, "
+                    "NAME_confidence.json)")
+    dt.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan (and of the written landmarks)")
+    dt.add_argument("--template", type=Path, help="template folder whose FDPs to find (default: the built-in level 0)")
+    dt.add_argument("--template-mesh", type=Path, help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
+    dt.add_argument("--template-landmarks", type=Path, help="FDPs of --template-mesh (JSON or .pp)")
+    dt.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
+    dt.set_defaults(func=cmd_landmarks_detect)
 
     a = sub.add_parser("adapt", help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)",
                        epilog="Inputs are checked before the adaptation: scan and landmarks in the same units, at "
                               "least 4 FDPs shared with the template and not coplanar, every landmark near the scan "
                               "surface.")
     a.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
-    a.add_argument("--landmarks", required=True, type=Path, help="FDPs on the scan (JSON or .pp), in --units")
+    a.add_argument("--landmarks", type=Path, help="FDPs on the scan (JSON or .pp), in --units (default: found on the "
+                   "scan as by `facewarp landmarks detect`, written to detected_landmarks.json)")
     a.add_argument("--out", required=True, type=Path, help="output folder")
     a.add_argument("--template", type=Path, help="template folder from `facewarp template export` (default: the built-in level 0)")
     a.add_argument("--template-mesh", type=Path, help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
@@ -472,12 +516,12 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--method", choices=["rbf", "csrbf", "multilevel"], default="multilevel",
                    help="multilevel (default: global RBF while the feature points are few, then compactly "
                         "supported RBF), rbf or csrbf at every level")
-    a.add_argument("--levels", type=_positive_int, metavar="N", default=5,
+    a.add_argument("--levels", type=_positive_int, metavar="N", default=2,
                    help="refinement levels after the FDP level, each adding feature points from the feature mesh "
-                        "and the curvature search (Sec. 4.5); whole number >= 1, default 5; stops early when the "
+                        "and the curvature search (Sec. 4.5); whole number >= 1, default 2; stops early when the "
                         "error E (Eq. 5.2.3) rises. report.json numbers them 2..N+1 after level 0 (the calibrated "
-                        "template) and level 1 (the FDPs), then the final stages (non-rigid refinement, "
-                        "projection, relax)")
+                        "template) and level 1 (the FDPs), then the final stages (field: a smooth field fitted to "
+                        "point-to-plane pairs; land: onto the scan along the normals; relax)")
     a.add_argument("--markers", type=Path, help="FDPs held out of training, for the marker error E_m")
     a.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan and its landmarks")
     a.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
@@ -493,8 +537,11 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
                        epilog_factory=_simulate_epilog, formatter_class=_HelpFormatter)
     s.add_argument("head", type=Path, help="a `facewarp build` output folder")
-    s.add_argument("--expression", required=True, metavar="NAME|sequence|FILE.json",
-                   help="a preset, 'sequence' or a sequence file (see below)")
+    s.add_argument("--expression", metavar="NAME|sequence|FILE.json",
+                   help="a preset, 'sequence' or a sequence file (see below); or use --activations")
+    s.add_argument("--activations", metavar="MUSCLE=V,...",
+                   help="your own expression instead of --expression: muscle=activation (0..1) items, "
+                        "e.g. zygomatic_major=0.6,corrugator_L=0.3,jaw_drop_mm=10")
     s.add_argument("--seconds", type=_finite_positive, metavar="S", default=2.0, help="simulated time [s], > 0 (default 2)")
     s.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0, help="frames per second, > 0 (default 30)")
     s.add_argument("--substeps", type=_positive_int, metavar="N",
@@ -507,6 +554,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "as moving parts, muscles with activations), streamed while simulating")
     s.add_argument("--tets", action="store_true",
                    help="put the skin's tet layer into the USD too (a TetMesh of purpose guide, hidden by default)")
+    s.add_argument("--solver", choices=["implicit", "verlet"], default="implicit",
+                   help="implicit (default: backward Euler, one step per frame) or verlet (the thesis's explicit "
+                        "reference, ~1,000 substeps per frame)")
+    s.add_argument("--material", choices=["physical", "thesis"], default="physical",
+                   help="physical (default: tissue density and moduli in SI) or thesis (Table 6.3 as printed)")
+    s.add_argument("--jaw", choices=["mujoco", "kinematic"], default="mujoco",
+                   help="mujoco (default: the mandible is the hinge body of the build's head.xml, two-way coupled "
+                        "to the skin) or kinematic (Eq. 6.4.9 angles imposed)")
     s.set_defaults(func=cmd_simulate)
 
     d = sub.add_parser("demo", help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "
@@ -520,8 +575,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--quick", action="store_true", help="a smoke run: 0.2 s of sequence, small pictures")
     d.add_argument("--seed", type=_non_negative_int, metavar="N", default=0,
                    help="seed of the synthetic scan (face proportions, noise, holes, pose), default 0")
-    d.add_argument("--jaw", choices=["kinematic", "mujoco"], default="kinematic",
-                   help="the jaw: kinematic (Eq. 6.4.9, default) or the MuJoCo hinge body of head.xml")
+    d.add_argument("--jaw", choices=["mujoco", "kinematic"], default="mujoco",
+                   help="the jaw: the MuJoCo hinge body of head.xml, two-way coupled (default), or kinematic (Eq. 6.4.9)")
     d.set_defaults(func=cmd_demo)
 
     mo = sub.add_parser("morph", help="in-between heads of two heads of the same topology, as one USD",

@@ -3,6 +3,8 @@
 Template: the default head at level 0; scan: the same head moved by a known smooth field with a
 large tangential part, subdivided (another tessellation of the same surface), posed."""
 
+import json
+
 import numpy as np
 import pytest
 import trimesh
@@ -114,3 +116,28 @@ def test_detects_fdps_in_any_pose(head):
     assert len(ids) >= 10
     assert np.median(err) < 3e-3, dict(zip(ids, np.round(np.array(err) * 1e3, 1)))
     assert all(0.0 <= conf[k] <= 1.0 for k in conf)
+
+
+def test_cli_detects_then_adapts_without_landmarks(head, tmp_path, capsys):
+    """`facewarp landmarks detect` writes loadable landmarks with confidences; `facewarp adapt` without
+    --landmarks finds them itself and writes the quality pictures."""
+    from facewarp import load_landmarks, save_obj
+    from facewarp.cli import main
+
+    t, tl, truth, SV, SF, sl = head
+    c, s = np.cos(1.1), np.sin(1.1)
+    pose = Similarity(1000.0, [[c, 0, s], [0, 1, 0], [-s, 0, c]], [10.0, -20.0, 5.0])  # metres -> posed mm
+    save_obj(tmp_path / "scan.obj", pose.apply(SV) * 1e-3, SF, units="mm")
+    assert main(["landmarks", "detect", str(tmp_path / "scan.obj"), "--units", "mm", "--out", str(tmp_path / "lm.json")]) == 0
+    lm = load_landmarks(tmp_path / "lm.json", units="mm")
+    conf = json.loads((tmp_path / "lm_confidence.json").read_text())["confidence"]
+    err = [np.linalg.norm(lm[k] * 1e3 - pose.apply(sl[k])) for k in ("3.7", "3.12", "8.3", "8.4", "9.3", "2.1")]
+    assert np.median(err) < 3.0, err  # mm
+    assert set(conf) == set(lm) and all(0.0 <= v <= 1.0 for v in conf.values())
+    out = tmp_path / "ad"
+    assert main(["adapt", str(tmp_path / "scan.obj"), "--units", "mm", "--out", str(out)]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert "detected_landmarks" in rep and rep["quality"]["surface"]["folds"] == 0
+    for f in ("detected_landmarks.json", "quality_heatmap.png", "distortion_heatmap.png", "error_heatmap.png"):
+        assert (out / f).is_file(), f
+    capsys.readouterr()

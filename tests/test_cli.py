@@ -180,7 +180,7 @@ def test_help_texts(capsys):
         assert word in out, word
     assert "zygomatic_major" in out
     code, out, _ = run(capsys, "adapt", "--help")
-    assert code == 0 and "refinement levels after the FDP level" in out and "default 5" in out
+    assert code == 0 and "refinement levels after the FDP level" in out and "default 2" in out
 
 
 def test_mesh_check_reports(tmp_path, capsys):

@@ -109,3 +109,87 @@ def test_head_pose_inertial_forces():
     np.testing.assert_allclose(f, R.T @ [0, -9.81, 0] - np.array([0, -9.81, 0]), atol=1e-9)
     with pytest.raises(fw.InputError, match="rotation"):
         hp.set(np.eye(3) * 2, np.zeros(3))
+
+
+# ------------------------------------------------------------------------ skin coupled to MuJoCo
+@pytest.fixture(scope="module")
+def rig(head):
+    return fw.build_face(head)
+
+
+def _coupled(head, rig, **kw):
+    sim = fw.FaceSimulator(rig)
+    m = mujoco.MjModel.from_xml_string(head_mjcf(head, **kw))
+    d = mujoco.MjData(m)
+    return sim, m, d, fw.MujocoJaw(sim, m, d)
+
+
+def test_skin_resists_a_constant_torque(head, rig):
+    """Under the same constant torque the jaw opens less with the skin attached."""
+    torque = 0.5  # N m about the opening hinge
+    opened = {}
+    for skin in (False, True):
+        sim, m, d, cpl = _coupled(head, rig, kp=0.0)
+        b = m.body("mandible").id
+        u = np.asarray(rig.jaw_u)
+        for _ in range(30):  # 1 s
+            d.xfrc_applied[b, 3:] = torque * u
+            if skin:
+                cpl.step()
+            else:
+                for _ in range(round(1 / 30 / m.opt.timestep)):
+                    d.xfrc_applied[b, 3:] = torque * u
+                    mujoco.mj_step(m, d)
+        opened[skin] = float(d.qpos[0])
+    assert 0.0 < opened[True] < opened[False] - math.radians(2.0), opened
+
+
+def test_position_target_reached_with_skin(head, rig):
+    sim, m, d, cpl = _coupled(head, rig)
+    chin0 = sim.fdp("2.1").copy()
+    d.ctrl[0] = 0.25
+    for _ in range(30):
+        cpl.step()
+    assert abs(d.qpos[0] - 0.25) < math.radians(1.0), d.qpos[0]
+    assert cpl.torque[0] < 0.0  # the skin pulls the jaw closed
+    chin = sim.fdp("2.1")
+    assert chin[1] < chin0[1] - 5e-3 and chin[2] < chin0[2] - 5e-3  # down and back
+    cpl.detach()
+    assert m.jnt_stiffness[0] == 0.0 and d.qfrc_applied[0] == 0.0
+
+
+def test_mujoco_and_kinematic_jaw_agree_at_small_angles(head, rig):
+    sim, m, d, cpl = _coupled(head, rig)
+    d.ctrl[0] = math.radians(5.0)
+    for _ in range(20):
+        cpl.step()
+    angle = float(d.qpos[0])
+    kin = fw.FaceSimulator(rig)
+    kin.set_jaw(angle)
+    kin.advance(3)
+    assert np.linalg.norm(sim.fdp("2.1") - kin.fdp("2.1")) < 0.5e-3
+
+
+def test_head_moving_at_constant_velocity_leaves_face_undeformed(rig):
+    sim = fw.FaceSimulator(rig)
+    rest = sim.positions()
+    v = np.array([0.3, -0.1, 0.2])  # m/s
+    for k in range(1, 11):
+        sim.set_head_pose(np.eye(3), v * k / sim.fps)
+        sim.step()
+    assert np.abs(sim.positions() - rest).max() < 1e-4
+    np.testing.assert_allclose(sim.fdp("2.1"), sim.fdp_points()[list(map(str, rig.fdp_ids)).index("2.1")])
+    # world frame: the chin moved with the head
+    sim2 = fw.FaceSimulator(rig)
+    np.testing.assert_allclose(sim.fdp("2.1") - sim2.fdp("2.1"), v * 10 / sim.fps, atol=1e-4)
+
+
+def test_accelerating_head_deforms_the_face(rig):
+    sim = fw.FaceSimulator(rig)
+    rest = sim.positions()
+    for k in range(1, 11):  # 5 m/s^2 forward
+        sim.set_head_pose(np.eye(3), np.array([0.0, 0.0, 0.5 * 5.0 * (k / sim.fps) ** 2]))
+        sim.step()
+    assert np.abs(sim.positions() - rest).max() > 1e-5
+    with pytest.raises(fw.InputError, match="rotation"):
+        sim.set_head_pose(np.ones((3, 3)), np.zeros(3))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from facewarp import JawKinematic
 from facewarp.anatomy import bezier_quadratic, ellipsoid_points
@@ -81,8 +80,6 @@ def test_rational_bezier_ring_is_a_circle():
 
 
 def test_kernels_match_reference(device):
-    import warp as wp
-
     V, T, layer = slab()
     inner = np.where(layer == 1)[0]
     rig = small_rig(inner, V[inner])

@@ -43,3 +43,27 @@ def test_template_preview(tmp_path):
     front, back = (np.asarray(Image.open(out / n).convert("RGB"), dtype=float) for n in names)
     assert front.std() > 5 and back.std() > 5  # a head, not a blank picture
     assert np.abs(front - back).mean() > 1  # two different views
+
+
+def test_jaw_scene(tmp_path):
+    out = tmp_path / "jaw"
+    run_scene("jaw", "--seconds", 0.5, "--size", 64, "--out", out)
+    assert {p.name for p in out.iterdir()} == {"jaw.png", "jaw.json"}
+    log = json.loads((out / "jaw.json").read_text())["frames"]
+    assert len(log) == 15
+    peak = max(r["angle_rad"] for r in log)
+    assert 0.15 < peak < 0.32  # opening toward the 0.3 rad target, no overshoot
+    assert min(r["skin_torque_Nm"] for r in log) < 0  # the skin pulls the jaw closed
+    assert log[-1]["angle_rad"] < peak  # closing again in the second half
+
+
+def test_robot_head_scene(tmp_path):
+    out = tmp_path / "robot"
+    run_scene("robot_head", "--seconds", 0.5, "--size", 64, "--out", out)
+    log = json.loads((out / "robot_head.json").read_text())["frames"]
+    assert len(log) == 15
+    pan = [r["neck_pan"] for r in log]
+    assert max(abs(p) for p in pan) > 0.05  # the neck turned
+    world = np.array([r["chin_world_m"] for r in log])
+    head = np.array([r["chin_head_m"] for r in log])
+    assert np.ptp(world[:, 0]) > 5 * max(np.ptp(head[:, 0]), 1e-4)  # rides the neck, not dragged

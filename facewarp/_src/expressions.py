@@ -5,6 +5,14 @@ both sides unless a side-specific key (``"zygomatic_major_L"``) overrides it. Ja
 radians: ``jaw_u`` opens the mouth about the axis through the condyles (Sec. 6.4.3, 0..60 deg),
 ``jaw_v`` turns the mandible about the vertical axis (+-5 deg).
 
+Presets give the opening as a *chin drop* ``jaw_drop_m`` [m]: the arc the chin (FDP 2.1) travels
+about the condyle u-axis. A head turns it into its own angle with its condyle-to-chin lever
+(:func:`jaw_lever`, the distance of the rest chin from the u-axis): ``angle = drop / lever``
+(:func:`jaw_angle_for_drop`, :meth:`Expression.for_head`, :meth:`Timeline.for_head`). Until an
+expression is converted for a head its ``jaw_u`` uses :data:`REFERENCE_JAW_LEVER` (0.1 m), the
+lever Table 6.4 was written for: its pi/6 is a 52 mm chin drop there, near the widest human
+opening, so the presets use human-sized drops instead (laugh 18 mm, surprise 10 mm, angry 3 mm).
+
 A :class:`Timeline` holds segments (an expression with attack, hold and release times and a
 weight); sampling it at a time gives the activations and jaw angles to feed the solver's Control.
 Overlapping segments add (a blend) and activations are clamped to [0, 1].
@@ -15,7 +23,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,10 +35,14 @@ __all__ = [
     "PRESETS",
     "JAW_U_MAX",
     "JAW_V_MAX",
+    "REFERENCE_JAW_LEVER",
     "Expression",
     "Segment",
     "Timeline",
     "blend",
+    "expression_from_activations",
+    "jaw_angle_for_drop",
+    "jaw_lever",
     "load_sequence",
     "preset",
     "thesis_sequence",
@@ -58,18 +70,77 @@ MUSCLES: tuple[str, ...] = (
 
 JAW_U_MAX = math.radians(60.0)
 JAW_V_MAX = math.radians(5.0)
+REFERENCE_JAW_LEVER = 0.1
+"""Condyle-to-chin lever [m] that converts a chin drop into an angle before a head is known."""
+
+
+def jaw_lever(rig) -> float:
+    """Condyle-to-chin lever [m] of a head: distance of its rest chin (FDP 2.1) from the u-axis.
+
+    Args:
+        rig: A :class:`~facewarp.FaceRig` (its ``jaw_pivot``, ``jaw_u``, FDP surface points on
+            ``head_vertices``), or a lever [m] (a positive number, returned as is).
+
+    Raises:
+        InputError: a non-positive lever, or a rig without the chin FDP 2.1.
+    """
+    if isinstance(rig, (int, float)) and not isinstance(rig, bool):
+        if not (math.isfinite(rig) and rig > 0):
+            raise InputError(f"rig: a lever must be a positive length [m], got {rig!r}")
+        return float(rig)
+    if hasattr(rig, "fr") and not hasattr(rig, "fdp_ids"):  # a FaceSimulator
+        rig = rig.fr
+    for a in ("fdp_ids", "fdp_part", "fdp_face", "fdp_bary", "head_vertices", "head_faces", "jaw_pivot", "jaw_u"):
+        if not hasattr(rig, a):
+            raise InputError(f"rig: expected a FaceRig, a FaceSimulator or a lever [m], got {type(rig).__name__}")
+    ids = [str(k) for k in rig.fdp_ids]
+    if "2.1" not in ids or str(rig.fdp_part[ids.index("2.1")]) != "head":
+        raise InputError("rig: the head has no chin FDP 2.1 on its skin")
+    i = ids.index("2.1")
+    chin = np.asarray(rig.fdp_bary[i], np.float64) @ np.asarray(rig.head_vertices, np.float64)[rig.head_faces[rig.fdp_face[i]]]
+    u = np.asarray(rig.jaw_u, np.float64)
+    u = u / np.linalg.norm(u)
+    d = chin - np.asarray(rig.jaw_pivot, np.float64)
+    lever = float(np.linalg.norm(d - (d @ u) * u))
+    if not lever > 1e-3:
+        raise InputError(f"rig: the chin lies on the jaw axis (lever {lever:.2e} m)")
+    return lever
+
+
+def jaw_angle_for_drop(rig, drop_m: float) -> float:
+    """Jaw opening angle [rad] that moves the chin (FDP 2.1) of ``rig`` by ``drop_m`` [m] along
+    its arc about the condyle u-axis: ``drop_m / jaw_lever(rig)``, clipped to 0..60 deg.
+
+    Args:
+        rig: A FaceRig, a FaceSimulator or a lever [m] (:func:`jaw_lever`).
+        drop_m: Chin drop [m], >= 0.
+    """
+    if not (isinstance(drop_m, (int, float)) and math.isfinite(drop_m) and drop_m >= 0):
+        raise InputError(f"drop_m: expected a non-negative chin drop [m], got {drop_m!r}")
+    return float(min(drop_m / jaw_lever(rig), JAW_U_MAX))
 
 
 @dataclass(frozen=True)
 class Expression:
-    """Muscle activations in [0, 1] (name -> value; missing muscles are 0) and jaw angles [rad]."""
+    """Muscle activations in [0, 1] (name -> value; missing muscles are 0) and jaw angles [rad].
+
+    ``jaw_drop_m`` [m], when given, is the opening as a chin drop; ``jaw_u`` is then derived from
+    it (with :data:`REFERENCE_JAW_LEVER` until :meth:`for_head` uses a head's own lever).
+    """
 
     name: str
     activations: dict = field(default_factory=dict)
     jaw_u: float = 0.0
     jaw_v: float = 0.0
+    jaw_drop_m: float | None = None
 
     def __post_init__(self):
+        if self.jaw_drop_m is not None:
+            d = self.jaw_drop_m
+            if not (isinstance(d, (int, float)) and math.isfinite(d) and d >= 0):
+                raise InputError(f"expression {self.name!r}: jaw_drop_m must be a non-negative length [m], got {d!r}")
+            if self.jaw_u == 0.0:
+                object.__setattr__(self, "jaw_u", float(min(d / REFERENCE_JAW_LEVER, JAW_U_MAX)))
         for k, v in self.activations.items():
             base = k[:-2] if k.endswith(("_L", "_R")) else k
             if base not in MUSCLES:
@@ -87,19 +158,37 @@ class Expression:
             return float(self.activations[f"{muscle}_{side}"])
         return float(self.activations.get(muscle, 0.0))
 
+    def for_head(self, rig) -> Expression:
+        """This expression with ``jaw_u`` computed from its chin drop by the lever of ``rig``
+        (a FaceRig, a FaceSimulator or a lever [m]); unchanged without a chin drop."""
+        if self.jaw_drop_m is None:
+            return self
+        return replace(self, jaw_u=jaw_angle_for_drop(rig, float(self.jaw_drop_m)))
 
-def _table_6_4(name, values, jaw_u):
-    return Expression(name, {m: v for m, v in zip(MUSCLES, values) if v}, jaw_u)
+
+def _table_6_4(name, values, jaw_drop_m):
+    return Expression(name, {m: v for m, v in zip(MUSCLES, values) if v}, jaw_drop_m=jaw_drop_m)
 
 
-# Table 6.4: activations of muscles 01..12 and the u-axis jaw rotation, exactly as printed.
+# Table 6.4: activations of muscles 01..12 as printed. Its u-axis jaw rotations (laugh and
+# surprise pi/6, angry pi/12) are chin drops of 52 and 26 mm on a 0.1 m lever, near the widest
+# human opening; they are replaced by human-sized chin drops (laugh 10-25 mm, surprise 5-15 mm,
+# angry a few mm), converted per head by its lever (:meth:`Expression.for_head`).
 PRESETS: dict[str, Expression] = {
     "neutral": Expression("neutral"),
-    "smile": _table_6_4("smile", (0.3, 0.1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.2), 0.0),
-    "laugh": _table_6_4("laugh", (0.7, 0.2, 0, 0.5, 0, 0.2, 0, 0, 0, 0, 0, 0.1), math.pi / 6),
-    "surprise": _table_6_4("surprise", (0, 0, 0, 0, 0.3, 0.3, 0, 0, 0.2, 0, 0, 0), math.pi / 6),
-    "angry": _table_6_4("angry", (0, 0, 0.3, 0.2, 0, 0.5, 0.4, 0, 0, 0.3, 0.4, 0), math.pi / 12),
-    "sad": _table_6_4("sad", (0, 0, 0.5, 0, 0, 0, 0.6, 0.4, 0.1, 0, 0, 0), 0.0),
+    "smile": _table_6_4("smile", (0.3, 0.1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.2), None),
+    "laugh": _table_6_4("laugh", (0.7, 0.2, 0, 0.5, 0, 0.2, 0, 0, 0, 0, 0, 0.1), 0.018),
+    "surprise": _table_6_4("surprise", (0, 0, 0, 0, 0.3, 0.3, 0, 0, 0.2, 0, 0, 0), 0.010),
+    "angry": _table_6_4("angry", (0, 0, 0.3, 0.2, 0, 0.5, 0.4, 0, 0, 0.3, 0.4, 0), 0.003),
+    "sad": _table_6_4("sad", (0, 0, 0.5, 0, 0, 0, 0.6, 0.4, 0.1, 0, 0, 0), None),
+    # Beyond Table 6.4 (named activation sets). The sphincters (orbicularis oculi / oris) are
+    # driven like the other muscles; their own purse, press and lid-closing actions are not built.
+    "blink": Expression("blink", {"orbicularis_oculi": 1.0}),
+    "squint": Expression("squint", {"orbicularis_oculi": 0.5, "corrugator": 0.2, "zygomatic_minor": 0.2}),
+    "pucker": Expression("pucker", {"orbicularis_oris": 0.8, "mentalis": 0.3}),
+    "jaw_open": Expression("jaw_open", jaw_drop_m=0.020),
+    "smile_L": Expression("smile_L", {"zygomatic_major_L": 0.3, "zygomatic_minor_L": 0.1, "levator_anguli_oris_L": 0.2}),
+    "smile_R": Expression("smile_R", {"zygomatic_major_R": 0.3, "zygomatic_minor_R": 0.1, "levator_anguli_oris_R": 0.2}),
 }
 
 
@@ -113,16 +202,18 @@ def preset(name: str) -> Expression:
 def blend(weights: dict[str, float], *, name: str | None = None) -> Expression:
     """Weighted sum of presets (name -> weight), activations clamped to [0, 1]."""
     acts: dict[str, float] = {}
-    ju = jv = 0.0
+    ju = jv = drop = 0.0
     for pname, w in weights.items():
         e = preset(pname)
         for k, v in e.activations.items():
             acts[k] = acts.get(k, 0.0) + w * v
         ju += w * e.jaw_u
         jv += w * e.jaw_v
+        drop += w * (e.jaw_u * REFERENCE_JAW_LEVER if e.jaw_drop_m is None else e.jaw_drop_m)
     acts = {k: float(np.clip(v, 0.0, 1.0)) for k, v in acts.items()}
     return Expression(name or "+".join(f"{w:g}*{k}" for k, w in weights.items()), acts,
-                      float(np.clip(ju, 0.0, JAW_U_MAX)), float(np.clip(jv, -JAW_V_MAX, JAW_V_MAX)))
+                      float(np.clip(ju, 0.0, JAW_U_MAX)), float(np.clip(jv, -JAW_V_MAX, JAW_V_MAX)),
+                      jaw_drop_m=max(drop, 0.0) if any(preset(p).jaw_drop_m is not None for p in weights) else None)
 
 
 def _smoothstep(x):
@@ -166,6 +257,11 @@ class Timeline:
     @property
     def duration(self) -> float:
         return max((s.end for s in self.segments), default=0.0)
+
+    def for_head(self, rig) -> Timeline:
+        """The timeline with every chin drop turned into the jaw angle of ``rig`` (a FaceRig, a
+        FaceSimulator or a lever [m]; :meth:`Expression.for_head`). Simulators should be fed this."""
+        return Timeline([replace(s, expression=s.expression.for_head(rig)) for s in self.segments])
 
     def sample(self, t: float) -> Expression:
         acts: dict[str, float] = {}
@@ -252,12 +348,52 @@ def load_sequence(path: str | os.PathLike) -> Timeline:
     return Timeline(segs)
 
 
+def expression_from_activations(spec: str, *, name: str = "activations") -> Expression:
+    """A user's own expression from ``"muscle=value,..."``.
+
+    Muscles are Table 6.2 names (both sides) or instance names (``zygomatic_major_L``) with an
+    activation in [0, 1]; ``jaw_drop_mm=D`` (chin drop [mm], converted per head) and
+    ``jaw_deg=A`` / ``jaw_side_deg=A`` (angles) set the jaw.
+
+    Raises:
+        InputError: an empty spec, an item without ``=``, a non-number, an unknown muscle or a
+            value out of range.
+    """
+    if not isinstance(spec, str) or not spec.strip():
+        raise InputError("activations: expected 'muscle=value,...', got an empty string")
+    acts: dict[str, float] = {}
+    jaw: dict[str, float] = {}
+    for item in spec.split(","):
+        if not item.strip():
+            continue
+        key, eq, val = item.partition("=")
+        key = key.strip()
+        try:
+            v = float(val)
+        except ValueError:
+            v = float("nan")
+        if not eq or not key or not math.isfinite(v):
+            raise InputError(f"activations: expected 'muscle=number' items, got {item.strip()!r}")
+        if key in ("jaw_drop_mm", "jaw_deg", "jaw_side_deg"):
+            jaw[key] = v
+        else:
+            acts[key] = v
+    if "jaw_drop_mm" in jaw and "jaw_deg" in jaw:
+        raise InputError("activations: give the jaw as jaw_drop_mm or jaw_deg, not both")
+    if jaw.get("jaw_drop_mm", 0.0) < 0:
+        raise InputError(f"activations: jaw_drop_mm must be >= 0, got {jaw['jaw_drop_mm']:g}")
+    drop = jaw["jaw_drop_mm"] * 1e-3 if "jaw_drop_mm" in jaw else None
+    return Expression(name, acts, math.radians(jaw.get("jaw_deg", 0.0)), math.radians(jaw.get("jaw_side_deg", 0.0)),
+                      jaw_drop_m=drop)
+
+
 def timeline_from_spec(expression: str, seconds: float) -> Timeline:
     """The timeline of ``expression`` over ``seconds`` [s].
 
     Args:
         expression: A preset name (:data:`PRESETS`; attack and release of up to 0.3 s, held in
-            between), ``"sequence"`` (the Fig. 6.16 sequence spread over the time) or the path
+            between), explicit muscles ``"muscle=value,..."`` (:func:`expression_from_activations`,
+            the same envelope), ``"sequence"`` (the Fig. 6.16 sequence spread over the time) or the path
             of a sequence ``.json`` file (:func:`load_sequence`).
         seconds: Length of the animation [s], > 0.
     """
@@ -268,6 +404,10 @@ def timeline_from_spec(expression: str, seconds: float) -> Timeline:
         return timeline_for(expression, attack=ramp, hold=max(seconds - 2 * ramp - 0.1, 0.0), release=ramp, start=0.05)
     if expression == "sequence":
         return thesis_sequence(each=max(seconds / 5 + 0.3, 0.8))
+    if "=" in expression and not expression.lower().endswith(".json"):  # muscle=value,... (a user's own)
+        ramp = min(0.3, seconds / 4)
+        return Timeline([Segment(expression_from_activations(expression), 0.05, ramp,
+                                 max(seconds - 2 * ramp - 0.1, 0.0), ramp)])
     p = Path(expression)
     if p.suffix.lower() == ".json" or p.exists():
         return load_sequence(p)

@@ -191,7 +191,7 @@ def detect_landmarks(V, F, *, template=None, fdps=None, device: str = "cpu", see
     rng = np.random.default_rng(seed)
     # 1. symmetry planes
     n_s, c_s, sym_err = symmetry_plane(SV, seed=seed)
-    n_t, c_t, _ = symmetry_plane(TV, samples=800, directions=250, seed=seed)  # a template is clean
+    n_t, c_t, _ = symmetry_plane(TV, seed=seed)
     # 2. coarse pose: rotations mapping the scan's plane onto the template's, trimmed ICP each;
     # scored by the trimmed scan -> template residual plus that of the template's face
     # (vertices near its FDPs) -> scan, so that a pose matching the head's round back but not

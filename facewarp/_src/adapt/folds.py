@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.surface import vertex_normals
-
 __all__ = ["FoldCheck", "TRI_QUALITY_FLOOR", "relax_squeezed", "tri_quality", "unfold"]
 
 

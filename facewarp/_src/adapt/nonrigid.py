@@ -31,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..geometry.surface import face_normals, vertex_normals
+from ..geometry.surface import vertex_normals
 from .metrics import _on_boundary
 
 __all__ = ["cotan_edge_weights", "field_stage", "land_stage", "vertex_areas"]
@@ -79,6 +79,7 @@ def vertex_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def _laplacian(n: int, E: np.ndarray, w: np.ndarray) -> sp.csr_matrix:
+    """The weighted graph Laplacian L (n, n): (L x)_i = sum_j w_ij (x_i - x_j) over the edges E (e, 2)."""
     i, j = E[:, 0], E[:, 1]
     L = sp.coo_matrix((np.concatenate([-w, -w]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n)).tocsr()
     return L + sp.diags(np.bincount(np.concatenate([i, j]), weights=np.concatenate([w, w]), minlength=n))

@@ -60,6 +60,8 @@ class AdaptResult:
         vertex_curvature_diff: |H_adapted - H_scan| per vertex [1/m], shape (n,), NaN off the scan.
         vertex_stretch: Mean |log(l / l0)| of each vertex's edges, shape (n,), dimensionless.
         template_vertices: The template's vertices [m], shape (n, 3), float64.
+        vertex_distance: Distance of each adapted vertex to the calibrated scan [m] (template
+            frame), shape (n,), inf where no scan surface lies within 1/10 of the head width.
         method: The method used.
         seconds: Total wall time [s].
         per_region: Region label -> distance stats of the final head (when regions were given).
@@ -81,6 +83,7 @@ class AdaptResult:
     vertex_curvature_diff: np.ndarray | None = None
     vertex_stretch: np.ndarray | None = None
     template_vertices: np.ndarray | None = None
+    vertex_distance: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -193,7 +196,7 @@ def adapt(
         rec, de = prob.errors.record(records[-1].level + 1, "relax", Vk, fp_count=len(fps),
                                      seconds=time.perf_counter() - t0)
         records.append(rec)
-    if records[-1].kind in ("none", "rbf", "csrbf") or not records[-1].accepted:
+    if records[-1].kind in ("none", "rbf", "csrbf", "field") or not records[-1].accepted:
         de, _, _ = prob.errors(Vk)
     per_region = de.per_region if region is not None else {}
     # 7. quality figures that need no truth (quality.py)
@@ -219,4 +222,5 @@ def adapt(
         vertex_curvature_diff=dH,
         vertex_stretch=stretch,
         template_vertices=TV,
+        vertex_distance=de.dist,
     )

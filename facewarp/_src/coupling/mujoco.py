@@ -100,12 +100,9 @@ class MujocoJaw:
         self.k_hold = sim.hold_stiffness()[self.nodes]
         self.rest = np.asarray(fr.nodes, np.float64)[self.nodes]
         # the stiffest spring MuJoCo's explicit passive force takes at its step, per hinge
-        mj.mj_forward(model, data)
-        self._k_max = []
-        for d in self.dadr:
-            M = np.zeros((model.nv, model.nv))
-            mj.mj_fullM(model, M, data.qM)
-            self._k_max.append(0.5 * (2.0 / float(model.opt.timestep)) ** 2 * float(M[d, d]))
+        # (1 / dof_invweight0 is the joint's effective inertia at the reference pose)
+        self._k_max = [0.5 * (2.0 / float(model.opt.timestep)) ** 2 / max(float(model.dof_invweight0[d]), 1e-12)
+                       for d in self.dadr]
         self._stiff0 = [float(model.jnt_stiffness[j]) for j in self.joints]
         self._ref0 = [float(model.qpos_spring[a]) for a in self.qadr]
         self._last = None  # (angles, generalised forces) of the previous frame
@@ -150,13 +147,13 @@ class MujocoJaw:
         self.sim.set_jaw(min(max(ang[0], 0.0), math.radians(60.0)), float(np.clip(ang[1], -math.radians(5), math.radians(5))))
         self.sim.step()
         tau, k_bound = self.skin_forces(ang)
-        k = np.zeros(len(self.joints))
+        k = self.stiffness.copy()  # keep the last estimate while the jaw does not move
         if self._last is not None:
             dq = ang[: len(self.joints)] - self._last[0]
             dt = tau - self._last[1]
+            moved = np.abs(dq) > 1e-5
             with np.errstate(divide="ignore", invalid="ignore"):
-                sec = np.where(np.abs(dq) > 1e-6, -dt / dq, 0.0)
-            k = np.clip(sec, 0.0, k_bound)
+                k = np.where(moved, np.clip(-dt / np.where(moved, dq, 1.0), 0.0, k_bound), k)
         k = np.minimum(k, self._k_max)
         self._last = (ang[: len(self.joints)].copy(), tau.copy())
         self.torque, self.stiffness = tau, k

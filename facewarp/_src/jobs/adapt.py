@@ -204,10 +204,7 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     P = sp.positions(res.vertices, TF)
     save_landmarks_json(out / "adapted_landmarks.json", dict(zip(ids, P)))
     # distance of every adapted vertex to the (calibrated) scan for the heat map
-    cal = res.calibration.transform
-    SV = cal.apply(scan_mesh.vertices)
-    q = MeshQuery(SV, scan_mesh.faces, device=device)
-    d = q.closest_point(res.vertices).dist
+    d = res.vertex_distance
     hw = float(np.ptp(TV[:, 0]))
     d_show = np.where(d < 0.1 * hw, d, np.nan)  # holes: no scan surface nearby
     report = res.to_dict()
@@ -237,7 +234,7 @@ def _pictures(out, res, TF, d_show, device) -> None:
 
     V = res.vertices
     vmax = max(float(np.nanpercentile(d_show, 98)) * 1e3, 0.5)
-    heat_map(out / "error_heatmap.png", V, TF, d_show * 1e3, vmax=vmax, unit="mm", size=600,
+    heat_map(out / "error_heatmap.png", V, TF, d_show * 1e3, vmax=vmax, unit="mm", size=500,
              title="distance of the adapted head to the scan", device=device)
     q = res.quality.get("surface", {})
     dH = res.vertex_curvature_diff
@@ -248,11 +245,11 @@ def _pictures(out, res, TF, d_show, device) -> None:
             turned = np.einsum("kd,kd->k", face_normals(V, TF), n0) < np.cos(np.radians(q.get("fold_threshold_deg", 75.0)))
             folds = V[TF[turned]].mean(axis=1)
         hmax = max(float(np.nanpercentile(dH, 98)), 1.0)
-        heat_map(out / "quality_heatmap.png", V, TF, dH, vmax=hmax, unit="1/m", size=450, points=folds,
+        heat_map(out / "quality_heatmap.png", V, TF, dH, vmax=hmax, unit="1/m", size=400, points=folds,
                  title=f"|mean curvature - scan's| ({q.get('folds', 0)} folds as red dots)", device=device)
     if res.vertex_stretch is not None:
         heat_map(out / "distortion_heatmap.png", V, TF, res.vertex_stretch * 100.0, vmax=30.0, unit="% stretch",
-                 size=450, title="stretch of the template's edges (|log(l / l0)|)", device=device)
+                 size=400, title="stretch of the template's edges (|log(l / l0)|)", device=device)
     lv = list(res.levels)
     line_chart(out / "error_curve.png", [r.level for r in lv],
                {"E_d [mm^2]": [r.E_d * 1e6 for r in lv], "E_m [mm^2]": [r.E_m * 1e6 for r in lv],

@@ -81,15 +81,12 @@ def part_transforms(fr, jaw_angles) -> dict:
 def sim_controls(sim) -> tuple[np.ndarray, np.ndarray]:
     """The activations (M,) and jaw angles (2,) [rad] the simulator reached at its last step
     (those :meth:`FaceSimulator.surface` uses)."""
-    # FaceSimulator has no public accessor for its current controls yet; these are the values
-    # its own run() records per frame.
-    return np.asarray(sim._a, np.float32).copy(), np.asarray(sim._j, np.float64).copy()
+    return np.asarray(sim.activations, np.float32), np.asarray(sim.jaw_angles, np.float64)
 
 
 def muscle_curves(sim, samples: int = MUSCLE_SAMPLES) -> np.ndarray:
     """Muscle fibre polylines [m] of the simulator's current state, shape (M, samples, 3)."""
-    public = getattr(sim, "muscle_curves", None)
-    return public(samples) if callable(public) else sim._curves(samples)
+    return sim.muscle_curves(samples)
 
 
 class UsdAnimation:
@@ -172,8 +169,6 @@ class _MujocoJawDriver:
     targets, :class:`~facewarp.coupling.MujocoJaw` steps skin and body together."""
 
     def __init__(self, sim, mjcf):
-        if not hasattr(sim, "set_head_pose"):
-            raise InputError("jaw: the MuJoCo jaw is not wired into FaceSimulator yet; use jaw='kinematic'")
         from ..coupling.mujoco import MujocoJaw, _mujoco
 
         mj = _mujoco()
@@ -216,7 +211,8 @@ def play_timeline(sim, timeline: Timeline, seconds: float, *, on_frame=(), progr
 
     Args:
         sim: The :class:`~facewarp.FaceSimulator` (reset first).
-        timeline: The expressions over time.
+        timeline: The expressions over time (its chin drops are converted by the head's lever,
+            :meth:`Timeline.for_head`).
         seconds: Length [s], > 0.
         on_frame: Callbacks ``f(sim, k, t)``.
         progress: Optional ``progress(k, frame_count)`` after each frame.
@@ -232,6 +228,7 @@ def play_timeline(sim, timeline: Timeline, seconds: float, *, on_frame=(), progr
         raise InputError(f"seconds: expected a finite number > 0, got {seconds!r}")
     driver = jaw_driver(sim, jaw, mjcf=mjcf)
     callbacks = [on_frame] if callable(on_frame) else list(on_frame)
+    timeline = timeline.for_head(sim.fr)  # chin drops -> this head's jaw angles
     sim.reset()
     nf = int(round(seconds * sim.fps)) + 1
     t0 = time.perf_counter()

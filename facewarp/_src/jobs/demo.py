@@ -170,6 +170,7 @@ def _jaw_bounds(fr, view: FaceView, timeline: Timeline, seconds: float, fps: flo
     """The box around the face at rest and with the jaw at the widest opening of ``timeline``
     (the head moved kinematically by its Eq. 6.4.9 amounts): the GIF's fixed framing."""
     times = np.arange(int(round(seconds * fps)) + 1) / fps
+    timeline = timeline.for_head(fr)  # chin drops -> this head's jaw angles
     e = max((timeline.sample(float(t)) for t in times), key=lambda x: x.jaw_u)
     V = fr.head_vertices
     opened = fr.jaw.apply(V, fr.vertex_jaw, e.jaw_u, e.jaw_v) if fr.vertex_jaw is not None else V
@@ -197,7 +198,7 @@ def _expression_strip(fr, landmarks, keys: _KeyFrames, labels: list, path: Path,
 
 
 def demo_files(out, *, seconds: float | None = None, quick: bool = False, device: str = "cpu",
-               jaw: str = "kinematic", seed: int = 0, fps: float = 30.0, progress=None, frame_progress=None) -> dict:
+               jaw: str = "mujoco", seed: int = 0, fps: float = 30.0, progress=None, frame_progress=None) -> dict:
     """Run the demo into the folder ``out`` (see the module docstring); returns the report.
 
     Args:
@@ -207,7 +208,7 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
         quick: A smoke run: :data:`QUICK_SECONDS` of sequence (unless ``seconds`` is given), two
             refinement levels of the adaptation instead of five, smaller pictures.
         device: Warp device for adaptation queries, simulation and pictures.
-        jaw: ``"kinematic"`` (default for now) or ``"mujoco"`` (the hinge body of ``head.xml``).
+        jaw: ``"mujoco"`` (default: the hinge body of ``head.xml``, two-way coupled) or ``"kinematic"``.
         seed: Seed of the synthetic scan (face proportions, noise, holes, pose).
         fps: Frames per second of the animation.
         progress: Optional ``progress(stage)`` with the names of :data:`DEMO_STAGES`.

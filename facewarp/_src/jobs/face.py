@@ -24,7 +24,7 @@ from ..present.anatomy import render_anatomy
 from ..present.render import save_png
 from ..present.strips import displacement_max, render_strip
 from ..sim.simulator import FaceSimulator, save_frames_npz
-from .animation import USD_SUFFIXES, UsdAnimation, check_usd_path, play_timeline
+from .animation import JAWS, USD_SUFFIXES, UsdAnimation, check_usd_path, jaw_driver, play_timeline
 from .checks import check_out_dir, make_out_dir
 
 __all__ = ["MAX_FRAMES", "USD_NAME", "build_files", "build_head_files", "simulate_files"]
@@ -84,8 +84,15 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
 
 def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps: float = 30.0,
                    substeps: int | None = None, device: str = "cpu", usd: bool = False, tets: bool = False,
-                   progress=None) -> dict:
+                   progress=None, solver: str = "implicit", material: str = "physical", jaw: str = "mujoco") -> dict:
     """Simulate ``expression`` on a ``build`` output and write its frames.
+
+    ``solver`` (``"implicit"``, default, or ``"verlet"``) and ``material`` (``"physical"``, default,
+    or ``"thesis"``) choose the :class:`~facewarp.FaceSimulator`'s solver and material profile;
+    ``--solver verlet --material thesis`` is the simulator before issue 10. ``jaw``: ``"mujoco"``
+    (default: the mandible is the hinge body of the build's ``head.xml``, two-way coupled to the
+    skin, the expressions' jaw angles its actuator targets) or ``"kinematic"`` (Eq. 6.4.9 angles
+    imposed directly).
 
     ``out`` is a folder (``frames.npz``, ``frames.png``, and with ``usd`` the USD animation
     :data:`USD_NAME`, streamed while simulating) or a ``.usda`` / ``.usdc`` / ``.usdz`` file: then
@@ -105,11 +112,17 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
     if not usd_out and not seconds * fps < MAX_FRAMES:  # FaceSimulator.run keeps round(seconds * fps) + 1 frames
         raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
                          f"more than {MAX_FRAMES} per run")
+    if jaw not in JAWS:
+        raise InputError(f"jaw: expected one of {', '.join(JAWS)}, got {jaw!r}")
     fr = load_face_rig(head_path)
-    timeline = timeline_from_spec(expression, seconds)
-    sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps)
+    mjcf = (Path(head_path) if Path(head_path).is_dir() else Path(head_path).parent) / "head.xml"
+    if jaw == "mujoco" and not mjcf.is_file():
+        raise InputError(f"{head_path}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, "
+                         "or simulate with the kinematic jaw)")
+    timeline = timeline_from_spec(expression, seconds).for_head(fr)  # chin drops -> this head's angles
+    sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps, solver=solver, material=material)
     if usd_out:
-        return _simulate_to_usd(sim, timeline, seconds, out, expression, progress, tets=tets)
+        return _simulate_to_usd(sim, timeline, seconds, out, expression, progress, tets=tets, jaw=jaw, mjcf=mjcf)
     make_out_dir(out)
     anim = UsdAnimation(out / USD_NAME, sim, tets=tets) if usd else None
 
@@ -120,7 +133,8 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
             progress(k, n)
 
     with anim if anim is not None else contextlib.nullcontext():
-        frames = sim.run(timeline, seconds, progress=on_frame)
+        frames = sim.run(timeline, seconds, progress=on_frame,
+                         jaw=jaw_driver(sim, jaw, mjcf=mjcf) if jaw == "mujoco" else None)
     save_frames_npz(out / "frames.npz", frames)
     nf = len(frames.times)
     idx = np.unique(np.linspace(0, nf - 1, min(6, nf)).round().astype(int))
@@ -136,12 +150,15 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
     return {
         "expression": str(expression), "frames": nf, "seconds": float(seconds), "fps": fps, "substeps": sim.substeps,
         "dt_s": sim.dt, "steps_per_second": frames.steps_per_second, "device": str(sim.device),
+        "solver": sim.solver_name, "material": sim.material.name, "jaw": jaw, "frames_per_second": frames.frames_per_second,
+        "realtime_factor": frames.realtime_factor,
         "nodes": int(len(fr.nodes)), "tets": int(len(fr.tets)), "files": [str(out / w) for w in written],
         "max_fdp_motion_m": {str(k): float(v) for k, v in zip(frames.fdp_ids, moved) if v > 1e-4},
     }
 
 
-def _simulate_to_usd(sim, timeline, seconds: float, path: Path, expression, progress, *, tets: bool = False) -> dict:
+def _simulate_to_usd(sim, timeline, seconds: float, path: Path, expression, progress, *, tets: bool = False,
+                     jaw: str = "kinematic", mjcf=None) -> dict:
     """Stream ``seconds`` of ``timeline`` into the USD file ``path``; the report of :func:`simulate_files`."""
     fr = sim.fr
     rest = sim.fdp_points()
@@ -152,7 +169,7 @@ def _simulate_to_usd(sim, timeline, seconds: float, path: Path, expression, prog
 
     with UsdAnimation(path, sim, tets=tets) as anim:
         stats = play_timeline(sim, timeline, seconds, on_frame=(lambda s, k, t: anim.add(s, t), track),
-                              progress=progress)
+                              progress=progress, jaw=jaw, mjcf=mjcf)
     return {
         "expression": str(expression), "frames": stats["frames"], "seconds": float(seconds), "fps": sim.fps,
         "substeps": sim.substeps, "dt_s": sim.dt, "steps_per_second": stats["steps_per_second"],

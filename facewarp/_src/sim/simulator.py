@@ -19,6 +19,7 @@ from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..core.warp import get_warp
 from ..expressions import MUSCLES, Timeline
+from ..coupling.head_pose import HeadPose
 from ..physics.face_rig import EDGE_DAMPING, FaceRig, node_jaw_amounts
 
 __all__ = ["SOLVERS", "FaceSimulator", "Frames", "save_frames_npz"]
@@ -119,6 +120,8 @@ class FaceSimulator:
         tolerance: Implicit solver: converged when no node moves more than this in an iteration
             [m] (default 3e-5).
         method: Implicit solver method (default: ``"lbfgs"`` on the CPU, ``"newton-pcg"`` on CUDA).
+        solver_options: Further keyword arguments of :class:`~facewarp.physics.SolverImplicit`
+            (e.g. ``max_iterations``, ``spring_tolerance``, ``linear_iterations``).
         support_stiffness: Sliding-support stiffness [N/m] of every supported node (default:
             physical ``support_modulus`` times the node's area; thesis the hold stiffness).
         edge_damping: Edge dashpot [N s/m] (default: thesis 500, physical 0).
@@ -133,7 +136,7 @@ class FaceSimulator:
     def __init__(self, fr: FaceRig, *, device: str = "cpu", solver: str = "implicit", material="physical",
                  dt: float | None = None, substeps: int | None = None, fps: float = 30.0,
                  iterations: int | None = None, tolerance: float | None = None, method: str | None = None,
-                 support_stiffness: float | None = None, edge_damping: float | None = None,
+                 solver_options: dict | None = None, support_stiffness: float | None = None, edge_damping: float | None = None,
                  mass_scaling: bool = True):
         wp = get_warp()
         from dataclasses import replace
@@ -221,11 +224,8 @@ class FaceSimulator:
         if solver == "verlet":
             self.solver = SolverVerlet(self.model, stages=stages)
         else:
-            opts = {}
-            if tolerance is not None:
-                opts["tolerance"] = tolerance
-            self.solver = SolverImplicit(self.model, stages=stages, method=method, iterations=iterations,
-                                         **{"tolerance": 3e-5, **opts})
+            opts = {"tolerance": 3e-5 if tolerance is None else tolerance, **(solver_options or {})}
+            self.solver = SolverImplicit(self.model, stages=stages, method=method, iterations=iterations, **opts)
         self.state = self.model.state()
         self.scratch = self.model.state()
         self.control = self.model.control()
@@ -237,6 +237,7 @@ class FaceSimulator:
         sv = fr.surface_vertex
         self.node_of_vertex = np.where(sv >= 0)[0]
         self.vertex_of_node = sv[self.node_of_vertex]
+        self._pose = HeadPose()
         self.reset()
 
     # ------------------------------------------------------------------------------ controls
@@ -313,6 +314,8 @@ class FaceSimulator:
             s.prev_positions.assign(self.model.rest_positions)
         self.control.activations.zero_()
         self.control.jaw_angles.zero_()
+        self.control.external_force.zero_()
+        self._pose.reset()
         self.carry.reset()
         self.solver.reset()
         self._a = np.zeros(len(self.fr.rig.names), np.float32)
@@ -338,6 +341,9 @@ class FaceSimulator:
                 raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
             n = max(1, int(round(float(dt) / self.dt)))
         t0 = time.perf_counter()
+        if not self._pose.identity:  # the head rides a moving body: loads of the accelerating frame
+            f = self._pose.node_forces(self.positions(), self.builder.mass, n * self.dt)
+            self.control.external_force.assign(f.astype(np.float32))
         chunks = max(1, min(n, self.CONTROL_CHUNKS))
         bounds = np.linspace(0, n, chunks + 1).round().astype(int)
         a0, j0 = self._a, self._j
@@ -347,9 +353,54 @@ class FaceSimulator:
             self.control.jaw_angles.assign((1 - w) * j0 + w * self._target_j)
             self._run_substeps(int(bounds[c + 1] - bounds[c]))
         self._a, self._j = self._target_a.copy(), self._target_j.copy()
+        self._pose.advance()
         self._steps_taken += n
         self.solver.check(self.state)  # a host read: also waits for the device
         self.step_seconds += time.perf_counter() - t0
+
+    def set_head_pose(self, R, t) -> None:
+        """Set the cranium body's pose in the world, reached at the end of the next step.
+
+        The face is simulated in the head's own frame: the fixed border, held nodes and rigid
+        parts stay put there, so a head moving rigidly does not drag its skin; the motion acts
+        through the loads of the accelerating frame (linear and angular acceleration,
+        centrifugal, and the change of gravity; :class:`~facewarp.HeadPose`). :meth:`surface`,
+        :meth:`fdp` and :meth:`fdp_points` answer in the world frame (``R x + t``);
+        :meth:`positions` stays in the head frame.
+
+        Args:
+            R: Rotation, shape (3, 3), float (orthonormal, det +1).
+            t: Translation [m], shape (3,).
+
+        Raises:
+            InputError: R not a rotation, or non-finite values.
+        """
+        self._pose.set(R, t)
+
+    @property
+    def head_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The current head pose (R (3, 3), t (3,) [m]) set by :meth:`set_head_pose`."""
+        return self._pose.R.copy(), self._pose.t.copy()
+
+    @property
+    def activations(self) -> np.ndarray:
+        """Activations reached by the last step, shape (M,), float32 (:attr:`muscle_names` order)."""
+        return self._a.copy()
+
+    @property
+    def jaw_angles(self) -> np.ndarray:
+        """Jaw angles reached by the last step [rad], (opening, side), float32."""
+        return self._j.copy()
+
+    def hold_stiffness(self) -> np.ndarray:
+        """Stiffness of each node's hold spring [N/m], shape (p,), float64 (0 for free nodes)."""
+        return np.asarray(self.builder.hold_stiffness, np.float64).copy()
+
+    def muscle_curves(self, samples: int = 24) -> np.ndarray:
+        """Muscle fibre polylines at the current state [m], shape (M, samples, 3), float64, in
+        the world frame."""
+        C = self._curves(samples)
+        return self._pose.to_world(C.reshape(-1, 3)).reshape(C.shape)
 
     def advance(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``1 / fps`` with the current controls."""
@@ -390,14 +441,18 @@ class FaceSimulator:
         the next step)."""
         return self.state.positions
 
-    def surface(self, X: np.ndarray | None = None, jaw_angles=None) -> np.ndarray:
+    def surface(self, X: np.ndarray | None = None, jaw_angles=None, *, frame: str = "world") -> np.ndarray:
         """Head vertices [m], shape (n, 3), float64: the simulated outer nodes written in, the
         rest of the head moved kinematically by the jaw (its per-vertex amount).
 
         Args:
-            X: Node positions (p, 3) [m]; default the current state.
+            X: Node positions (p, 3) [m], head frame; default the current state.
             jaw_angles: (u, v) [rad]; default the current jaw.
+            frame: ``"world"`` (the head pose of :meth:`set_head_pose` applied; the same as
+                ``"head"`` while the head has not moved) or ``"head"``.
         """
+        if frame not in ("world", "head"):
+            raise InputError(f"frame: expected 'world' or 'head', got {frame!r}")
         fr = self.fr
         X = self.positions() if X is None else X
         ja = self._j if jaw_angles is None else jaw_angles
@@ -406,7 +461,7 @@ class FaceSimulator:
             m = fr.vertex_jaw > 0
             V[m] = self.jaw.apply(V[m], fr.vertex_jaw[m], float(ja[0]), float(ja[1]))
         V[self.vertex_of_node] = X[self.node_of_vertex]
-        return V
+        return self._pose.to_world(V) if frame == "world" else V
 
     def fdp(self, fdp_id: str) -> np.ndarray:
         """Current position [m] of one FDP (e.g. ``"2.1"``, the chin), shape (3,), float64."""
@@ -421,17 +476,24 @@ class FaceSimulator:
         parts = self._parts_now(self._j)
         return self._fdp_points(V[None], {k: P[None] for k, P in parts.items()})[0].astype(np.float64)
 
-    def _parts_now(self, j) -> dict:
+    def _parts_now(self, j, *, frame: str = "world") -> dict:
         fr = self.fr
         out = {}
         for name, (V, _) in fr.parts.items():
             amt = fr.part_jaw.get(name, 0.0)
-            out[name] = self.jaw.apply(V, np.full(len(V), amt), float(j[0]), float(j[1])) if amt else V
+            P = self.jaw.apply(V, np.full(len(V), amt), float(j[0]), float(j[1])) if amt else V
+            out[name] = self._pose.to_world(P) if frame == "world" else P
         return out
 
-    def run(self, timeline: Timeline, seconds: float, *, progress=None, curve_samples: int = 24) -> Frames:
+    def run(self, timeline: Timeline, seconds: float, *, progress=None, curve_samples: int = 24, jaw=None) -> Frames:
         """Simulate ``seconds`` of ``timeline`` from rest (it calls :meth:`reset`); one frame
-        every 1/fps s, frame 0 at rest."""
+        every 1/fps s, frame 0 at rest.
+
+        Args:
+            jaw: None (the kinematic jaw: the timeline's angles), or a driver with
+                ``step(expression)`` that sets the jaw and steps this simulator one frame (the MuJoCo
+                jaw of ``facewarp simulate --jaw mujoco``).
+        """
         if not (isinstance(seconds, (int, float)) and np.isfinite(seconds) and seconds > 0):
             raise InputError(f"seconds: expected a positive number, got {seconds!r}")
         fr = self.fr
@@ -454,7 +516,10 @@ class FaceSimulator:
                 e = timeline.sample(float(t))
                 self._target_a = _activation_vector(names, e)
                 self._target_j = np.array([e.jaw_u, e.jaw_v], np.float32)
-                self.step()
+                if jaw is None:
+                    self.step()
+                else:  # e.g. the MuJoCo jaw: it sets the angles it reached and steps
+                    jaw.step(e)
             pts[k] = self.surface()
             acts[k], jaws[k] = self._a, self._j
             curves[k] = self._curves(curve_samples)

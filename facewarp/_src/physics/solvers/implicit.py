@@ -6,44 +6,51 @@ Eq. 6.4.4-6.4.8, muscle springs of Eq. 6.4.1, holds, supports, damping): one ste
 incremental potential Phi of backward Euler (:mod:`facewarp._src.physics.potential`, kernels in
 :mod:`.kernels_implicit`), which is stable for any step, so a 30 fps frame can be one step.
 
-Why this method (measured on the 2-core CPU box, default head level 0, 6.7k tets, physical
-profile, smile / laugh with the jaw; ``benchmarks/solver_methods.py``)
---------------------------------------------------------------------------------------------
+Why this method (measured on the 2-core CPU box, default head level 0: 2,448 nodes, 6,738 tets,
+presets with muscles and a 30 degree jaw; ``benchmarks/solver_accuracy.py``, ``physics_steps.py``)
+----------------------------------------------------------------------------------------------
 The skin is a thin stiff layer driven quasi-statically: at 30 fps the mass term ``M / h^2`` is
 ~1e-4 of the stiffness, so a step is practically a static solve whose error modes span the whole
 face. Sweep methods (Jacobi, Gauss-Seidel / VBD colour sweeps, XPBD) reduce such smooth modes by
-a factor ~(1 - (edge / region)^2) per sweep and need hundreds of sweeps per frame here; so does
-conjugate gradients with a Jacobi preconditioner inside Newton (the GPU path below). A global
-direct solve removes all modes at once. Newton with a fresh sparse factorisation per iteration
-converges in 2-6 iterations but a factorisation costs 50-200 ms at level 0. The default is
+about (edge / region)^2 per sweep and need hundreds of sweeps per frame here; so does conjugate
+gradients with a block-Jacobi preconditioner inside Newton (the GPU path below, 200 iterations
+per Newton iteration). A global direct solve removes all modes at once. Newton with a fresh
+sparse factorisation per iteration converges in 3-30 iterations (the compressed lips near a
+buckling mode converge linearly) at 50-200 ms per factorisation: 1-4 frames/s. The default is
 therefore the quasi-Newton method of Liu, Bouaziz & Kavan 2017 ("Quasi-Newton methods for
 real-time simulation of hyperelastic materials"): L-BFGS whose initial inverse Hessian is a sparse
-Cholesky / LU factorisation of the PSD Hessian ``M / h^2 + K`` made once (at the first step) and
-reused, with energy-decreasing backtracking. Its gradient and energy are Warp kernels (one launch
-per element kind, ~1 ms at level 0 on one CPU thread); the factor's back-substitution is the
-other half of an iteration. From the previous motion extrapolated, 1-3 iterations per frame keep
-every node within 0.1 mm of the converged step, and the factorisation is renewed at the current
-shape only when an expression (jaw rotation, muscle springs switching on) makes the old one a poor
-model: when the iterations beyond one per step since the last factorisation add up to
-``refactor_after`` (20: at levels 0 and 1 a factorisation costs about as much as 20-25 iterations),
-or within a step that stalls for as many. The rule counts iterations, not seconds, so a run
-repeats bit for bit.
+LDL^T / LU factorisation of the PSD Hessian ``M / h^2 + K`` made at the first step and reused,
+with backtracking on the energy that also rejects any step inverting a tet. Its energy and
+gradient are Warp kernels (~1 ms per evaluation at level 0 on one CPU thread), the factor's
+back-substitution (~1.4 ms with QDLDL) is the other half of an iteration. A converged frame
+(every node within ``tolerance`` 3e-5 m of its last iterate) takes 2-7 iterations: 15-55
+frames/s at level 0, every FDP within 0.03 mm of the fully converged step. The curvature pairs
+carry over from step to step, and the factorisation is renewed at the current shape only when
+the old one has become a poor model (the jaw turned, muscle springs switched on): when the
+iterations beyond one per step since the last factorisation add up to ``refactor_after`` (20: at
+levels 0 and 1 a factorisation costs about as much as 20-25 iterations), or within a step that
+stalls for as many. The rule counts iterations, not seconds, so a run repeats bit for bit.
 
 Methods (``method=``):
 
-* ``"lbfgs"`` (default on the CPU): the above; host factorisation (CHOLMOD from scikit-sparse, or
-  QDLDL, when installed, else SuperLU from SciPy) on zero-copy views of the Warp arrays.
-* ``"newton"`` (CPU): Newton with a fresh factorisation every iteration and backtracking: the
-  "fully converged" reference of the benchmarks.
+* ``"lbfgs"`` (default on the CPU): the above; host factorisation (QDLDL or CHOLMOD when
+  installed, else SciPy's SuperLU; :func:`factorization_backend`) on zero-copy views of the Warp
+  arrays. ``iterations=k`` is the interactive mode: k iterations per frame whatever the residual
+  (measured lag: 0.1-0.5 mm on smile and sad at 2-3 iterations, 1-3 mm on the lips during the
+  jaw's 0.3 s opening of laugh and surprise, none once the expression is held).
+* ``"newton"`` (CPU): Newton with a fresh factorisation every iteration and the same line search.
 * ``"newton-pcg"`` (default on CUDA, runs on the CPU too): a fixed number of Newton iterations,
   each with a fixed number of block-Jacobi preconditioned conjugate-gradient iterations
   (``warp.optim.linear.cg``) on the block-sparse Hessian assembled by kernels, and a backtracking
   line search decided on the device: no host round trip, so a whole frame can be captured in one
-  CUDA graph (:meth:`SolverImplicit.step` allocates nothing).
+  CUDA graph (:meth:`SolverImplicit.step` allocates nothing on that path).
 
 The muscle springs' fibre cosine of Eq. 6.4.1 is taken at the step's start and held over the
-step (see ``kernels_muscle._muscle_springs``): a conservative spring within the step, Eq. 6.4.1
-exactly at rest.
+solve (see ``kernels_muscle._muscle_springs``): within the solve a conservative spring
+``1/2 k_m w (l - l0)^2`` with an exact gradient and Hessian. The CPU methods then re-evaluate the
+cosine at the solution and solve again until it no longer changes (``spring_updates``), so the
+step ends at a fixed point of Eq. 6.4.1 as printed; the device method re-evaluates it before every
+Newton iteration.
 """
 
 from __future__ import annotations
@@ -55,7 +62,6 @@ import numpy as np
 
 from ...core.errors import InputError, SimulationError
 from ...core.warp import get_warp
-from .. import kernels_tissue as kt
 from ..model import Control, Model, State, group_indices
 from . import kernels_implicit as ki
 from .base import SolverBase, check_step_args
@@ -148,8 +154,11 @@ class SolverImplicit(SolverBase):
         iterations: A fixed count per step instead (the interactive mode: a fixed cost per
             frame, no convergence test). ``"newton-pcg"`` always runs a fixed count (default 3).
         history: L-BFGS memory (default 8 pairs).
-        extrapolate: The first guess is ``x_n + extrapolate (x_n - x_prev)`` (default 1: the
-            previous step's motion continued).
+        extrapolate: The first guess is ``x_n + extrapolate (x_n - x_prev)`` (the previous step's
+            motion, in the jaw-carried frame, continued; a guess that inverts a tet falls back to
+            x_n). Default: 0.5 with a fixed ``iterations`` (measured on the laugh preset: the
+            lag of the interactive mode during the jaw's opening drops from 2.9 to 1.9 mm at 2
+            iterations; 1.0 overshoots and rings), 0 otherwise (converged steps gain nothing).
         linear_iterations: Conjugate-gradient iterations per Newton iteration (``"newton-pcg"``,
             default 200).
         refactor_after: ``"lbfgs"`` renews the factorisation at the current shape when the
@@ -172,7 +181,7 @@ class SolverImplicit(SolverBase):
 
     def __init__(self, model: Model, *, stages=(), method: str | None = None, tolerance: float = 1e-5,
                  max_iterations: int = 50, iterations: int | None = None, history: int = 8,
-                 extrapolate: float = 0.0, linear_iterations: int = 200, refactor_after: int = 20,
+                 extrapolate: float | None = None, linear_iterations: int = 200, refactor_after: int = 20,
                  spring_updates: int = 4, spring_tolerance: float = 0.01, backend: str | None = None):
         super().__init__(model, stages=stages)
         wp = get_warp()
@@ -183,6 +192,8 @@ class SolverImplicit(SolverBase):
         if method != "newton-pcg" and self.device.is_cuda:
             raise InputError(f"method {method!r} factorises on the host and runs on the CPU only; "
                              "use method='newton-pcg' on CUDA")
+        if extrapolate is None:
+            extrapolate = 0.5 if iterations is not None else 0.0
         for name, val in (("tolerance", tolerance), ("extrapolate", extrapolate)):
             if not (np.isfinite(val) and val >= 0):
                 raise InputError(f"{name}: expected a finite number >= 0, got {val!r}")
@@ -220,6 +231,8 @@ class SolverImplicit(SolverBase):
         self.backend = backend or factorization_backend()
         self.last_iterations = 0
         self._last_step_size = 0.0
+        self._inverted = False
+        self._history = ([], [], [])
         self.factorizations = 0
         self.timings = {"prepare": 0.0, "gradient": 0.0, "solve": 0.0, "factor": 0.0}
 
@@ -234,6 +247,7 @@ class SolverImplicit(SolverBase):
         self.c_edge = wp.zeros(m.edge_count, dtype=float, device=dev)
         self.c_face = wp.zeros(m.face_count, dtype=float, device=dev)
         self.c_tet = wp.zeros(m.tet_count, dtype=float, device=dev)
+        self.c_tet_trial = wp.zeros(m.tet_count, dtype=float, device=dev)
         self.nodes = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=dev)
         # one energy array: edges, faces, tets, nodes, then each spring set
         sizes = [m.edge_count, m.face_count, m.tet_count, n] + [s.count for s in self.springs]
@@ -361,7 +375,7 @@ class SolverImplicit(SolverBase):
         wp.launch(ki._tet_energy, dim=m.tet_count,
                   inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, self.c_tet, ih,
                           2 * m.edge_count + 3 * m.face_count, x],
-                  outputs=[et, self.slots], device=dev)
+                  outputs=[et, self.slots, self.c_tet_trial], device=dev)
         wp.launch(ki._node_energy, dim=m.vertex_count,
                   inputs=[m.vertex_mass, m.vertex_fixed, m.vertex_hold_stiffness, self._mass_scale(h), self.z,
                           self.targets, control.external_force, x],
@@ -449,7 +463,7 @@ class SolverImplicit(SolverBase):
         if self.method == "newton-pcg":
             self._step_pcg(control, h)
         else:
-            self._step_host(control, h)
+            self._step_host(state_in, control, h)
         self._finish(state_in, state_out)
 
     # ------------------------------------------------------------------------------ device method
@@ -481,7 +495,8 @@ class SolverImplicit(SolverBase):
 
     # ------------------------------------------------------------------------------ host methods
     def _host_eval(self, x64: np.ndarray, control: Control, h: float) -> tuple[float, np.ndarray, float]:
-        """Energy, gradient (3n,) and the energy's float32 rounding scale at positions x64 (n, 3)."""
+        """Energy, gradient (3n,) and the energy's float32 rounding scale at positions x64 (n, 3);
+        :attr:`_inverted` tells whether a tet is inverted there."""
         t0 = time.perf_counter()
         self.x.numpy()[:] = x64
         self._launch_energy(self.x, control, h)
@@ -489,6 +504,7 @@ class SolverImplicit(SolverBase):
         g = self.grad.numpy().astype(np.float64).ravel()
         total = float(np.sum(e, dtype=np.float64))
         noise = 4.0 * 1.2e-7 * float(np.sum(np.abs(e), dtype=np.float64)) + 1e-30
+        self._inverted = bool(self.c_tet_trial.numpy().min() <= -1.0)
         self.timings["gradient"] += time.perf_counter() - t0
         return total, g, noise
 
@@ -502,24 +518,34 @@ class SolverImplicit(SolverBase):
         vals = self.block_values.numpy().astype(np.float64)
         A = sp.bsr_matrix((vals, self._bsr_columns, self._bsr_offsets), shape=(3 * n, 3 * n))
         solve = _factorize(A, self.backend)
+        self._clear_history()
         self.factorizations += 1
         self._excess = 0
         self.timings["factor"] += time.perf_counter() - t0
         return solve
 
     def _line_search(self, x64, d, e, g, noise, control, h):
-        """Backtracking from t = 1 on the energy; returns (t, x, e, g, noise) at the accepted point."""
+        """Backtracking from t = 1 on the energy (Armijo, within float32 rounding), rejecting any
+        step that inverts a tet; returns (t, x, e, g, noise) at the accepted point (t = 0: none)."""
         gd = _dot(g, d)
         t = 1.0
         for _ in range(12):
             xt = x64 + t * d.reshape(-1, 3)
             et, gt, nt = self._host_eval(xt, control, h)
-            if et <= e + 1e-4 * t * gd + noise:
+            if et <= e + 1e-4 * t * gd + noise and not self._inverted:
                 return t, xt, et, gt, nt
             t *= 0.5
+        self._host_eval(x64, control, h)  # leave the buffers at the current point
         return 0.0, x64, e, g, noise
 
-    def _step_host(self, control: Control, h: float) -> None:
+    def _step_host(self, state_in: State, control: Control, h: float) -> None:
+        if self.extrapolate > 0.0:
+            self._host_eval(self.x.numpy().astype(np.float64), control, h)
+            if self._inverted:  # the extrapolated guess inverts a tet: start from x_n instead
+                get_warp().launch(ki._initial_guess, dim=self.model.vertex_count,
+                                  inputs=[self.model.vertex_fixed, 0.0, self.targets, state_in.positions,
+                                          state_in.prev_positions],
+                                  outputs=[self.x], device=self.device)
         x64 = self.x.numpy().astype(np.float64)
         if self.method == "lbfgs" and (self._solve0 is None or self._h != h):
             self._solve0 = self._host_factor(x64, h)
@@ -564,6 +590,9 @@ class SolverImplicit(SolverBase):
                 change = max(change, float(np.abs(k - b).max() / max(float(np.abs(b).max()), float(np.abs(k).max()), 1e-30)))
         return change > self.spring_tolerance
 
+    def _clear_history(self) -> None:
+        self._history = ([], [], [])
+
     def _converged(self, step: np.ndarray) -> bool:
         return self.iterations is None and float(np.abs(step).max(initial=0.0)) < self.tolerance
 
@@ -581,7 +610,10 @@ class SolverImplicit(SolverBase):
         return its, x64
 
     def _lbfgs(self, x64, e, g, noise, control, h) -> tuple[int, np.ndarray]:
-        S, Y, R = [], [], []
+        # the curvature pairs carry over from step to step (consecutive steps have nearly the
+        # same Hessian): with one or two iterations per frame, the interactive mode keeps
+        # learning the soft modes the factorised Hessian misses
+        S, Y, R = self._history
         its = self.iterations or self.max_iterations
         solve0 = self._solve0
         self._last_step_size = 0.0
@@ -590,7 +622,7 @@ class SolverImplicit(SolverBase):
                 # stalled (a large change of shape, e.g. a jump of the controls): a fresh
                 # factorisation at the current shape, history cleared
                 solve0 = self._solve0 = self._host_factor(x64, h)
-                S, Y, R = [], [], []
+                S, Y, R = self._history
             t0 = time.perf_counter()
             q = -g
             alphas = []
@@ -603,16 +635,22 @@ class SolverImplicit(SolverBase):
                 r = r + s_ * (a - rho * _dot(y_, r))
             d = r
             if _dot(g, d) >= 0.0:  # not a descent direction: restart from the factorised Hessian
-                S, Y, R = [], [], []
+                self._clear_history()
+                S, Y, R = self._history
                 d = solve0(-g)
             self.timings["solve"] += time.perf_counter() - t0
             t, xn, en, gn, nn = self._line_search(x64, d, e, g, noise, control, h)
             if t == 0.0:
-                return k + 1, x64
+                if not S:
+                    return k + 1, x64
+                self._clear_history()  # a stale pair spoilt the direction: retry from the factorisation
+                S, Y, R = self._history
+                continue
             s_ = t * d
             y_ = gn - g
             sy = _dot(s_, y_)
-            if sy > 1e-12 * np.sqrt(_dot(s_, s_) * _dot(y_, y_)):
+            # keep only pairs measured above float32 rounding (a step that really lowered the energy)
+            if e - en > nn and sy > 1e-12 * np.sqrt(_dot(s_, s_) * _dot(y_, y_)):
                 S.append(s_)
                 Y.append(y_)
                 R.append(1.0 / sy)
@@ -670,6 +708,7 @@ class SolverImplicit(SolverBase):
         """Back to the rest pose (targets, counter, guard); the factorisation is kept."""
         super().reset()
         self.last_iterations = 0
+        self._clear_history()
 
     def _advice(self) -> str:
         return "lower the activation or jaw speed, or take smaller steps"

@@ -183,6 +183,7 @@ def _tet_energy(
     positions: wp.array(dtype=wp.vec3),
     energy_out: wp.array(dtype=float),
     slots_out: wp.array(dtype=wp.vec3),
+    c_out: wp.array(dtype=float),
 ):
     t = wp.tid()
     o = slot_offset + 4 * t
@@ -192,6 +193,7 @@ def _tet_energy(
     e3 = positions[tet_indices[t][3]] - xi
     v0 = tet_rest_volume[t]
     c = wp.dot(e1, wp.cross(e2, e3)) / 6.0 / v0 - 1.0
+    c_out[t] = c  # C <= -1: inverted (the host line search rejects such a step)
     dc = c - tet_c_start[t]
     dmp = tet_damping[t] * inv_h
     energy_out[t] = 0.5 * tet_k[t] * c * c + 0.5 * dmp * dc * dc

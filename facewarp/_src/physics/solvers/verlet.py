@@ -34,7 +34,7 @@ import numpy as np
 
 from ...core.warp import get_warp
 from .. import kernels_tissue as kt
-from ...core.errors import InputError, SimulationError
+from ...core.errors import InputError
 from ...geometry.tets import tet_heights
 from ..model import DT_STABLE_1CM, Control, Model, State, thesis_substep
 from .base import SolverBase, SolverStage, check_step_args  # noqa: F401 (re-exported)

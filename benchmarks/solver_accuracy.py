@@ -1,0 +1,158 @@
+"""Accuracy of the implicit solver (issue 10): per frame, at rest, across steps per frame and levels.
+
+    python -m benchmarks.solver_accuracy [--materials physical thesis] [--parts frames static levels]
+                                         [--presets smile laugh surprise angry sad] [--device cpu]
+
+* ``frames``: each Table 6.4 preset (attack 0.3 s, hold 0.7 s, release 0.3 s) on the default head
+  (level 0) with the default solver (tolerance 3e-5 m), the interactive mode (1, 2, 3 iterations
+  per frame) and the fully converged solution of the same steps (tolerance 1e-7 m, springs to
+  1e-4); per phase, the largest distance of any of the 84 FDPs from the converged one, and whether
+  every FDP is within 0.5 mm or 10 % of its displacement from rest; frames per second of each.
+* ``static``: each preset ramped in over 0.3 s and held 0.5 s, at 1, 2, 4 and 8 steps per frame,
+  against the Verlet reference of the same model (same profile, energies, muscles) run the same
+  way: the largest FDP distance at rest [mm] and relative to the FDP's displacement.
+* ``levels``: the same static shapes on level 1 (27k tets) against level 0: the relative difference
+  of the FDP displacements (FDPs moving more than 1 mm on level 0).
+
+Writes benchmarks/results/solver_accuracy_<device>.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from benchmarks._common import machine, save
+
+PRESETS = ("smile", "laugh", "surprise", "angry", "sad")
+ATTACK, HOLD, RELEASE, START = 0.3, 0.7, 0.3, 0.1
+
+
+def _rig(level: int):
+    import facewarp
+
+    return facewarp.build_face(facewarp.default_template(level))
+
+
+def _run(fr, timeline, seconds, **kw):
+    import facewarp
+
+    sim = facewarp.FaceSimulator(fr, **kw)
+    frames = sim.run(timeline, seconds)
+    return frames, sim
+
+
+def _within(err, disp, mm=5e-4, rel=0.1):
+    """Every FDP within ``mm`` metres or ``rel`` of its displacement."""
+    return bool(np.all((err <= mm) | (err <= rel * disp)))
+
+
+def part_frames(fr, material, presets, device) -> list:
+    import facewarp
+
+    rows = []
+    seconds = START + ATTACK + HOLD + RELEASE + 0.2
+    for name in presets:
+        tl = facewarp.timeline_for(name, attack=ATTACK, hold=HOLD, release=RELEASE, start=START)
+        conv, _ = _run(fr, tl, seconds, device=device, material=material, tolerance=1e-7,
+                       solver_options=dict(spring_tolerance=1e-4, max_iterations=500))
+        t = conv.times
+        phase = np.where(t < START + ATTACK, "attack", np.where(t < START + ATTACK + HOLD, "hold", "release"))
+        disp = np.linalg.norm(conv.fdp_points - conv.fdp_points[:1], axis=2)
+        row = {"preset": name, "material": material, "frames": int(len(t)),
+               "max_fdp_displacement_mm": round(float(disp.max()) * 1e3, 3),
+               "converged_fps": round(conv.frames_per_second, 2)}
+        for label, kw in (("default", {}), ("iterations_1", dict(iterations=1)), ("iterations_2", dict(iterations=2)),
+                          ("iterations_3", dict(iterations=3))):
+            frames, sim = _run(fr, tl, seconds, device=device, material=material, **kw)
+            err = np.linalg.norm(frames.fdp_points - conv.fdp_points, axis=2)  # (f, 84)
+            r = {"fps": round(frames.frames_per_second, 2), "realtime_factor": round(frames.realtime_factor, 3),
+                 "max_error_mm": round(float(err.max()) * 1e3, 4), "within_0.5mm_or_10pct": _within(err, disp)}
+            for ph in ("attack", "hold", "release"):
+                m = phase == ph
+                r[f"{ph}_max_error_mm"] = round(float(err[m].max()) * 1e3, 4)
+                r[f"{ph}_within"] = _within(err[m], disp[m])
+            if label == "default":
+                r["factorizations"] = sim.solver.factorizations
+                r["seconds_per_frame"] = {k: round(v / (len(t) - 1) * 1e3, 2) for k, v in sim.solver.timings.items()}
+            row[label] = r
+        print(row, flush=True)
+        rows.append(row)
+    return rows
+
+
+def _static(fr, name, material, device, **kw):
+    import facewarp
+
+    tl = facewarp.timeline_for(name, attack=0.3, hold=10.0, release=0.3, start=0.0)
+    frames, sim = _run(fr, tl, 0.8, device=device, material=material, **kw)
+    return frames.fdp_points[-1].astype(np.float64), frames.fdp_points[0].astype(np.float64), sim
+
+
+def part_static(fr, material, presets, device) -> list:
+    rows = []
+    for name in presets:
+        t0 = time.perf_counter()
+        ref, rest, sim = _static(fr, name, material, device, solver="verlet")
+        tv = time.perf_counter() - t0
+        disp = np.linalg.norm(ref - rest, axis=1)
+        row = {"preset": name, "material": material, "verlet_substeps_per_frame": sim.substeps,
+               "verlet_seconds": round(tv, 1), "max_fdp_displacement_mm": round(float(disp.max()) * 1e3, 3)}
+        for steps in (1, 2, 4, 8):
+            x, _, _ = _static(fr, name, material, device, substeps=steps, tolerance=1e-6)
+            err = np.linalg.norm(x - ref, axis=1)
+            moving = disp > 1e-3
+            row[f"steps_{steps}"] = {
+                "max_error_mm": round(float(err.max()) * 1e3, 4),
+                "max_relative_error": round(float((err[moving] / disp[moving]).max()) if moving.any() else 0.0, 4),
+                "within_0.2mm_or_3pct": _within(err, disp, 2e-4, 0.03)}
+        print(row, flush=True)
+        rows.append(row)
+    return rows
+
+
+def part_levels(fr0, material, presets, device) -> list:
+    fr1 = _rig(1)
+    rows = []
+    for name in presets:
+        x0, r0, _ = _static(fr0, name, material, device, tolerance=1e-6)
+        x1, r1, _ = _static(fr1, name, material, device, tolerance=1e-6)
+        d0, d1 = x0 - r0, x1 - r1
+        n0 = np.linalg.norm(d0, axis=1)
+        moving = n0 > 1e-3
+        rel = np.linalg.norm(d1 - d0, axis=1)[moving] / n0[moving]
+        row = {"preset": name, "material": material, "fdps_moving_over_1mm": int(moving.sum()),
+               "median_relative_difference": round(float(np.median(rel)), 4) if moving.any() else None,
+               "max_relative_difference": round(float(rel.max()), 4) if moving.any() else None,
+               "displacement_norm_ratio_l1_over_l0": round(float(np.linalg.norm(d1[moving]) / np.linalg.norm(d0[moving])), 4)
+               if moving.any() else None}
+        print(row, flush=True)
+        rows.append(row)
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--materials", nargs="+", default=["physical", "thesis"])
+    ap.add_argument("--parts", nargs="+", default=["frames", "static", "levels"])
+    ap.add_argument("--presets", nargs="+", default=list(PRESETS))
+    ap.add_argument("--name", default=None, help="result file suffix")
+    args = ap.parse_args()
+    from facewarp.physics import factorization_backend
+
+    fr = _rig(0)
+    result = {"machine": machine(args.device), "factorization_backend": factorization_backend(),
+              "level0_tets": int(len(fr.tets))}
+    for mat in args.materials:
+        for part in args.parts:
+            fn = {"frames": part_frames, "static": part_static, "levels": part_levels}[part]
+            result[f"{part}_{mat}"] = fn(fr, mat, args.presets, args.device)
+    name = "solver_accuracy_" + args.device.split(":")[0] + (f"_{args.name}" if args.name else "")
+    print("wrote", save(name, result))
+
+
+if __name__ == "__main__":
+    main()
