@@ -425,7 +425,10 @@ def _simulate_epilog() -> str:
                             initial_indent="  ", subsequent_indent="    ")
     return f"""\
 expressions:
-  presets      {', '.join(PRESETS)} (Table 6.4; ramp up 0.3 s, hold, ramp down)
+  presets      {', '.join(PRESETS)}
+               (Table 6.4 and named activation sets; ramp up 0.3 s, hold, ramp down; jaw openings
+               are chin drops in mm turned into this head's angle by its condyle-to-chin lever)
+  --activations MUSCLE=V,...  your own: e.g. zygomatic_major_L=0.8,frontalis_inner=0.5,jaw_drop_mm=12
   sequence     Fig. 6.16: smile, laugh, surprise, angry, sad, each ramping into the next,
                spread over --seconds
   FILE.json    a sequence file:
@@ -433,8 +436,8 @@ expressions:
       {{"expression": "smile", "start": 0.5, "attack": 0.3, "hold": 1.0, "release": 0.3, "weight": 1.0}},
       {{"expression": {{"blend": {{"smile": 0.5, "surprise": 0.5}}}}, "start": 2.0}},
       {{"expression": {{"muscles": {{"zygomatic_major": 0.6, "corrugator_L": 0.3}}, "jaw_deg": 10}}, "start": 3.5}}]}}
-    expression: a preset name, {{"blend": {{preset: weight}}}}, or {{"muscles": {{name: 0..1}}, "jaw_deg": 0..60,
-    "jaw_side_deg": -5..5}}; times in seconds >= 0 (defaults: start 0, attack 0.3, hold 1, release 0.3),
+    expression: a preset name, {{"blend": {{preset: weight}}}}, or {{"muscles": {{name: 0..1}}, "jaw_deg": 0..60
+    or "jaw_drop_mm": chin drop, "jaw_side_deg": -5..5}}; times in seconds >= 0 (defaults: start 0, attack 0.3, hold 1, release 0.3),
     weight >= 0 (default 1). Overlapping segments add; activations are clamped to 0..1.
     The run lasts --seconds whatever the segments' end.
 {muscles}"""

@@ -45,6 +45,12 @@ def test_simulate_outputs(built, tmp_path, capsys):
     assert z["points"].shape[0] == 5 and z["fdp_points"].shape == (5, 84, 3) and z["times"].shape == (5,)
     assert len(z["fdp_ids"]) == 84
     assert (out / "frames.png").is_file() and (out / "animation.usdc").is_file()
+    own = tmp_path / "own"  # a user's own expression: muscles and a chin drop
+    code = main(["--json", "simulate", str(built), "--activations", "zygomatic_major_L=0.8,jaw_drop_mm=10",
+                 "--seconds", "0.15", "--fps", "20", "--out", str(own)])
+    assert code == 0, capsys.readouterr().err
+    z = np.load(own / "frames.npz")
+    assert (own / "frames.png").is_file() and z["points"].shape[0] == 4
 
 
 def test_errors(built, tmp_path, capsys):
@@ -63,7 +69,8 @@ def test_errors(built, tmp_path, capsys):
         (["simulate", str(built), "--expression", "smile", "--seconds", "nan", "--out", o], "--seconds"),
         (["simulate", str(built), "--expression", "smile", "--seconds", "1e9", "--fps", "1e9", "--out", o], "frames"),
         (["simulate", str(tmp_path), "--expression", "smile", "--out", o], "face_rig"),
-        (["simulate", str(built), "--expression", "smile", "--substeps", "1", "--out", o], "substeps"),
+        (["simulate", str(built), "--expression", "smile", "--solver", "verlet", "--substeps", "1", "--out", o],
+         "substeps"),
         (["simulate", str(built), "--expression", str(seq), "--out", o], "blend"),
         (["simulate", str(built), "--expression", str(seq2), "--out", o], "muscles"),
         (["simulate", str(built), "--expression", "smile", "--out", str(afile)], "not a folder"),
@@ -75,6 +82,22 @@ def test_errors(built, tmp_path, capsys):
         assert code == 2, (argv, err)
         assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and needle in err, err
     assert not (tmp_path / "o").exists()  # every error came before the output folder was made
+
+
+def test_simulate_activation_errors(built, tmp_path, capsys):
+    o = str(tmp_path / "o")
+    for argv, needle in [
+        (["simulate", str(built), "--out", o], "expression or activations"),
+        (["simulate", str(built), "--expression", "smile", "--activations", "corrugator=1", "--out", o], "exactly one"),
+        (["simulate", str(built), "--activations", "corrugator=2", "--out", o], "[0, 1]"),
+        (["simulate", str(built), "--activations", "nose=0.5", "--out", o], "nose"),
+        (["simulate", str(built), "--activations", "smile", "--out", o], "muscle=value"),
+    ]:
+        code = main(argv)
+        err = capsys.readouterr().err
+        assert code == 2, (argv, err)
+        assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and needle in err, err
+    assert not (tmp_path / "o").exists()
 
 
 def test_build_rejects_mismatched_topology(tmp_path, capsys):

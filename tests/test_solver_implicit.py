@@ -347,7 +347,7 @@ def test_newton_pcg_reaches_the_direct_solution():
     V, b, f = loaded_slab()
     model = b.finalize("cpu")
     out = {}
-    for method, kw in (("lbfgs", dict(tolerance=1e-9)), ("newton-pcg", dict(iterations=6, linear_iterations=300))):
+    for method, kw in (("lbfgs", dict(tolerance=1e-9)), ("newton-pcg", dict(iterations=4, linear_iterations=100))):
         solver = SolverImplicit(model, method=method, **kw)
         a, s, c = model.state(), model.state(), model.control()
         c.external_force.assign(f)

@@ -11,7 +11,7 @@ about the condyle u-axis. A head turns it into its own angle with its condyle-to
 (:func:`jaw_angle_for_drop`, :meth:`Expression.for_head`, :meth:`Timeline.for_head`). Until an
 expression is converted for a head its ``jaw_u`` uses :data:`REFERENCE_JAW_LEVER` (0.1 m), the
 lever Table 6.4 was written for: its pi/6 is a 52 mm chin drop there, near the widest human
-opening, so the presets use human-sized drops instead (laugh 18 mm, surprise 10 mm, angry 3 mm).
+opening, so the presets use human-sized drops instead (laugh 22 mm, surprise 12 mm, angry none).
 
 A :class:`Timeline` holds segments (an expression with attack, hold and release times and a
 weight); sampling it at a time gives the activations and jaw angles to feed the solver's Control.
@@ -97,7 +97,8 @@ def jaw_lever(rig) -> float:
     if "2.1" not in ids or str(rig.fdp_part[ids.index("2.1")]) != "head":
         raise InputError("rig: the head has no chin FDP 2.1 on its skin")
     i = ids.index("2.1")
-    chin = np.asarray(rig.fdp_bary[i], np.float64) @ np.asarray(rig.head_vertices, np.float64)[rig.head_faces[rig.fdp_face[i]]]
+    tri = np.asarray(rig.head_vertices, np.float64)[rig.head_faces[rig.fdp_face[i]]]
+    chin = np.asarray(rig.fdp_bary[i], np.float64) @ tri
     u = np.asarray(rig.jaw_u, np.float64)
     u = u / np.linalg.norm(u)
     d = chin - np.asarray(rig.jaw_pivot, np.float64)
@@ -170,25 +171,31 @@ def _table_6_4(name, values, jaw_drop_m):
     return Expression(name, {m: v for m, v in zip(MUSCLES, values) if v}, jaw_drop_m=jaw_drop_m)
 
 
-# Table 6.4: activations of muscles 01..12 as printed. Its u-axis jaw rotations (laugh and
-# surprise pi/6, angry pi/12) are chin drops of 52 and 26 mm on a 0.1 m lever, near the widest
-# human opening; they are replaced by human-sized chin drops (laugh 10-25 mm, surprise 5-15 mm,
-# angry a few mm), converted per head by its lever (:meth:`Expression.for_head`).
+# Table 6.4: activations of muscles 01..12. Its u-axis jaw rotations (laugh and surprise pi/6,
+# angry pi/12) are chin drops of 52 and 26 mm on a 0.1 m lever, near the widest human opening;
+# they are replaced by human-sized chin drops (laugh 10-25 mm, surprise 5-15 mm, angry none),
+# converted per head by its lever (:meth:`Expression.for_head`). With the muscles calibrated to
+# the recorded human rig (activation 1.0 = the full-weight ICT blendshape, ``muscle_defs.json``),
+# some printed activations gave shapes outside the issue-12 targets and were replaced; the old
+# and new values and the reasons are in ``muscle_defs.json`` under ``preset_changes``.
 PRESETS: dict[str, Expression] = {
     "neutral": Expression("neutral"),
-    "smile": _table_6_4("smile", (0.3, 0.1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.2), None),
-    "laugh": _table_6_4("laugh", (0.7, 0.2, 0, 0.5, 0, 0.2, 0, 0, 0, 0, 0, 0.1), 0.018),
-    "surprise": _table_6_4("surprise", (0, 0, 0, 0, 0.3, 0.3, 0, 0, 0.2, 0, 0, 0), 0.010),
-    "angry": _table_6_4("angry", (0, 0, 0.3, 0.2, 0, 0.5, 0.4, 0, 0, 0.3, 0.4, 0), 0.003),
-    "sad": _table_6_4("sad", (0, 0, 0.5, 0, 0, 0, 0.6, 0.4, 0.1, 0, 0, 0), None),
+    #                          01   02   03   04   05   06   07   08   09   10   11   12
+    "smile": _table_6_4("smile", (0.6, 0.1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.2), None),
+    "laugh": _table_6_4("laugh", (0.7, 0.2, 0, 0.5, 0, 0.2, 0, 0, 0, 0, 0, 0.1), 0.022),
+    "surprise": _table_6_4("surprise", (0, 0, 0, 0, 0.3, 0.3, 0, 1.0, 0.6, 0.6, 0, 0), 0.012),
+    "angry": _table_6_4("angry", (0, 0, 0.3, 0.2, 0, 0.5, 1.0, 0, 0, 0, 0.4, 0), None),
+    "sad": _table_6_4("sad", (0, 0, 1.0, 0, 0, 0, 0.6, 1.0, 0.1, 0, 0, 0), None),
     # Beyond Table 6.4 (named activation sets). The sphincters (orbicularis oculi / oris) are
     # driven like the other muscles; their own purse, press and lid-closing actions are not built.
     "blink": Expression("blink", {"orbicularis_oculi": 1.0}),
     "squint": Expression("squint", {"orbicularis_oculi": 0.5, "corrugator": 0.2, "zygomatic_minor": 0.2}),
     "pucker": Expression("pucker", {"orbicularis_oris": 0.8, "mentalis": 0.3}),
     "jaw_open": Expression("jaw_open", jaw_drop_m=0.020),
-    "smile_L": Expression("smile_L", {"zygomatic_major_L": 0.3, "zygomatic_minor_L": 0.1, "levator_anguli_oris_L": 0.2}),
-    "smile_R": Expression("smile_R", {"zygomatic_major_R": 0.3, "zygomatic_minor_R": 0.1, "levator_anguli_oris_R": 0.2}),
+    "smile_L": Expression("smile_L", {"zygomatic_major_L": 0.6, "zygomatic_minor_L": 0.1,
+                                          "levator_anguli_oris_L": 0.2}),
+    "smile_R": Expression("smile_R", {"zygomatic_major_R": 0.6, "zygomatic_minor_R": 0.1,
+                                          "levator_anguli_oris_R": 0.2}),
 }
 
 
@@ -313,7 +320,8 @@ def load_sequence(path: str | os.PathLike) -> Timeline:
         ]}
 
     ``expression`` is a preset name, a blend ``{"blend": {"smile": 0.5, "surprise": 0.5}}`` or
-    explicit muscles with optional ``jaw_deg`` / ``jaw_side_deg``.
+    explicit muscles with optional ``jaw_deg`` or ``jaw_drop_mm`` (chin drop [mm], converted per
+    head) and ``jaw_side_deg``.
     """
     path = Path(path)
     if not path.is_file():
@@ -339,8 +347,11 @@ def load_sequence(path: str | os.PathLike) -> Timeline:
         elif isinstance(e, dict) and "muscles" in e:
             if not isinstance(e["muscles"], dict):
                 raise InputError(f'{src}: muscles must be an object {{"muscle": activation, ...}}')
+            if "jaw_deg" in e and "jaw_drop_mm" in e:
+                raise InputError(f"{src}: give jaw_deg or jaw_drop_mm, not both")
+            drop = _num(src, e, "jaw_drop_mm", 0.0) * 1e-3 if "jaw_drop_mm" in e else None
             expr = Expression(f"segment{i}", dict(e["muscles"]), math.radians(_num(src, e, "jaw_deg", 0.0)),
-                              math.radians(_num(src, e, "jaw_side_deg", 0.0, signed=True)))
+                              math.radians(_num(src, e, "jaw_side_deg", 0.0, signed=True)), jaw_drop_m=drop)
         else:
             raise InputError(f"{src}: expression must be a preset name, a blend or muscles")
         segs.append(Segment(expr, _num(src, s, "start", 0.0), _num(src, s, "attack", 0.3), _num(src, s, "hold", 1.0),
@@ -411,4 +422,5 @@ def timeline_from_spec(expression: str, seconds: float) -> Timeline:
     p = Path(expression)
     if p.suffix.lower() == ".json" or p.exists():
         return load_sequence(p)
-    raise InputError(f"expression {expression!r}: not a preset ({', '.join(PRESETS)}), 'sequence', or a sequence .json file")
+    raise InputError(f"expression {expression!r}: not a preset ({', '.join(PRESETS)}), 'sequence', "
+                     "a sequence .json file or 'muscle=value,...'")

@@ -87,6 +87,10 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
                    progress=None, solver: str = "implicit", material: str = "physical", jaw: str = "mujoco") -> dict:
     """Simulate ``expression`` on a ``build`` output and write its frames.
 
+    ``expression`` is what :func:`~facewarp.timeline_from_spec` reads: a preset, ``"sequence"``,
+    a sequence file, or a user's own ``"muscle=value,...,jaw_drop_mm=D"``; chin drops become this
+    head's jaw angles by its condyle-to-chin lever (:meth:`~facewarp.Timeline.for_head`).
+
     ``solver`` (``"implicit"``, default, or ``"verlet"``) and ``material`` (``"physical"``, default,
     or ``"thesis"``) choose the :class:`~facewarp.FaceSimulator`'s solver and material profile;
     ``--solver verlet --material thesis`` is the simulator before issue 10. ``jaw``: ``"mujoco"``

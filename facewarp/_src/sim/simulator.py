@@ -497,6 +497,7 @@ class FaceSimulator:
         if not (isinstance(seconds, (int, float)) and np.isfinite(seconds) and seconds > 0):
             raise InputError(f"seconds: expected a positive number, got {seconds!r}")
         fr = self.fr
+        timeline = timeline.for_head(fr)  # chin drops -> this head's jaw angles (idempotent)
         self.reset()
         nf = int(round(seconds * self.fps)) + 1
         times = np.arange(nf) / self.fps
