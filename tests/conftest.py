@@ -5,7 +5,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import itertools
+
+import numpy as np
 import pytest
+
+from facewarp.geometry import signed_tet_volumes
 
 
 def shared_dir() -> Path:
@@ -43,3 +48,29 @@ def pytest_generate_tests(metafunc):
     """Run every test that takes a ``device`` argument on each of :func:`warp_devices`."""
     if "device" in metafunc.fixturenames:
         metafunc.parametrize("device", warp_devices())
+
+
+def grid_tets(nx: int, ny: int, nz: int, h: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+    """Test fixture: a box of nx x ny x nz cubes of side h, each split into 6 tets (Kuhn), all oriented
+    positively; vertex index = (k * (ny + 1) + j) * (nx + 1) + i."""
+    g = np.stack(np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij"), -1)
+    V = g.transpose(2, 1, 0, 3).reshape(-1, 3).astype(np.float64) * h
+
+    def vid(i, j, k):
+        return (k * (ny + 1) + j) * (nx + 1) + i
+
+    T = []
+    for i, j, k in itertools.product(range(nx), range(ny), range(nz)):
+        for perm in itertools.permutations(range(3)):
+            c = np.array([i, j, k])
+            tet = [vid(*c)]
+            for axis in perm:
+                c = c.copy()
+                c[axis] += 1
+                tet.append(vid(*c))
+            T.append(tet)
+    T = np.array(T)
+    neg = signed_tet_volumes(V, T) < 0
+    T[neg] = T[neg][:, [0, 2, 1, 3]]
+    return V, T
+

@@ -8,12 +8,12 @@ Runs on every device of the ``device`` fixture (CPU always, CUDA when present).
 
 from __future__ import annotations
 
-import itertools
 
 import numpy as np
 import pytest
 import warp as wp
 
+from conftest import grid_tets
 from facewarp import InputError, SimulationError
 from facewarp.geometry import signed_tet_volumes as signed_volumes
 from facewarp.physics import (DT_STABLE_1CM, EDGE_CROSS, EDGE_INNER, EDGE_OUTER, ModelBuilder, SolverVerlet,
@@ -34,29 +34,6 @@ def one_tet(edge: float = CM) -> tuple[np.ndarray, np.ndarray]:
     return V * edge, np.array([[0, 1, 2, 3]])
 
 
-def grid_tets(nx: int, ny: int, nz: int, h: float = CM) -> tuple[np.ndarray, np.ndarray]:
-    """A box of nx x ny x nz cubes of side h, each split into 6 tets (Kuhn), all oriented
-    positively; vertex index = (k * (ny + 1) + j) * (nx + 1) + i."""
-    g = np.stack(np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij"), -1)
-    V = g.transpose(2, 1, 0, 3).reshape(-1, 3).astype(np.float64) * h
-
-    def vid(i, j, k):
-        return (k * (ny + 1) + j) * (nx + 1) + i
-
-    T = []
-    for i, j, k in itertools.product(range(nx), range(ny), range(nz)):
-        for perm in itertools.permutations(range(3)):
-            c = np.array([i, j, k])
-            tet = [vid(*c)]
-            for axis in perm:
-                c = c.copy()
-                c[axis] += 1
-                tet.append(vid(*c))
-            T.append(tet)
-    T = np.array(T)
-    neg = signed_volumes(V, T) < 0
-    T[neg] = T[neg][:, [0, 2, 1, 3]]
-    return V, T
 
 
 def slab_layers(V: np.ndarray) -> np.ndarray:

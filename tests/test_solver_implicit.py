@@ -13,6 +13,7 @@ import itertools
 import numpy as np
 import pytest
 
+from conftest import grid_tets
 from facewarp import InputError, SimulationError
 from facewarp.geometry import signed_tet_volumes
 from facewarp.physics import (MaterialPhysical, MaterialThesis, ModelBuilder, SolverImplicit, SolverVerlet,
@@ -26,28 +27,6 @@ def one_tet(edge: float = CM):
     return V * edge, np.array([[0, 1, 2, 3]])
 
 
-def grid_tets(nx, ny, nz, h=CM):
-    """nx x ny x nz cubes of side h, 6 Kuhn tets each, positively oriented."""
-    g = np.stack(np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij"), -1)
-    V = g.transpose(2, 1, 0, 3).reshape(-1, 3).astype(np.float64) * h
-
-    def vid(i, j, k):
-        return (k * (ny + 1) + j) * (nx + 1) + i
-
-    T = []
-    for i, j, k in itertools.product(range(nx), range(ny), range(nz)):
-        for perm in itertools.permutations(range(3)):
-            c = np.array([i, j, k])
-            tet = [vid(*c)]
-            for axis in perm:
-                c = c.copy()
-                c[axis] += 1
-                tet.append(vid(*c))
-            T.append(tet)
-    T = np.array(T)
-    neg = signed_tet_volumes(V, T) < 0
-    T[neg] = T[neg][:, [0, 2, 1, 3]]
-    return V, T
 
 
 def layers(V):
