@@ -185,7 +185,7 @@ PRESETS: dict[str, Expression] = {
     "laugh": _table_6_4("laugh", (0.7, 0.2, 0, 0.5, 0, 0.2, 0, 0, 0, 0, 0, 0.1), 0.022),
     "surprise": _table_6_4("surprise", (0, 0, 0, 0, 0.3, 0.3, 0, 1.0, 0.6, 0.6, 0, 0), 0.012),
     "angry": _table_6_4("angry", (0, 0, 0.3, 0.2, 0, 0.5, 1.0, 0, 0, 0, 0.4, 0), None),
-    "sad": _table_6_4("sad", (0, 0, 1.0, 0, 0, 0, 0.6, 1.0, 0.1, 0, 0, 0), None),
+    "sad": _table_6_4("sad", (0, 0, 0.8, 0, 0, 0, 0.6, 1.0, 0.1, 0, 0, 0), None),
     # Beyond Table 6.4 (named activation sets). The sphincters (orbicularis oculi / oris) are
     # driven like the other muscles; their own purse, press and lid-closing actions are not built.
     "blink": Expression("blink", {"orbicularis_oculi": 1.0}),

@@ -177,7 +177,9 @@ def _simulate_to_usd(sim, timeline, seconds: float, path: Path, expression, prog
     return {
         "expression": str(expression), "frames": stats["frames"], "seconds": float(seconds), "fps": sim.fps,
         "substeps": sim.substeps, "dt_s": sim.dt, "steps_per_second": stats["steps_per_second"],
-        "frames_per_second": stats["frames_per_second"], "device": str(sim.device), "nodes": int(len(fr.nodes)),
+        "frames_per_second": stats["frames_per_second"], "realtime_factor": stats["frames_per_second"] / sim.fps,
+        "solver": sim.solver_name, "material": sim.material.name, "jaw": jaw,
+        "device": str(sim.device), "nodes": int(len(fr.nodes)),
         "tets": int(len(fr.tets)), "files": [str(path)],
         "max_fdp_motion_m": {str(k): float(v) for k, v in zip(fr.fdp_ids, moved) if v > 1e-4},
     }
