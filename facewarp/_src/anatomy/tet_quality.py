@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import InputError
+from ..geometry.surface import check_cells
 from ..geometry.tets import signed_tet_volumes
 
 __all__ = [
@@ -24,18 +25,7 @@ __all__ = [
 
 
 def _check_VT(V, T) -> tuple[np.ndarray, np.ndarray]:
-    V = np.asarray(V, dtype=np.float64)
-    T = np.asarray(T)
-    if V.ndim != 2 or V.shape[1] != 3:
-        raise InputError(f"V must have shape (n, 3), got {V.shape}")
-    if T.ndim != 2 or T.shape[1] != 4:
-        raise InputError(f"T must have shape (k, 4), got {T.shape}")
-    if T.size and not np.issubdtype(T.dtype, np.integer):
-        raise InputError(f"T must be an integer array, got dtype {T.dtype}")
-    T = T.astype(np.int64, copy=False)
-    if T.size and (T.min() < 0 or T.max() >= len(V)):
-        raise InputError(f"T indexes vertices {T.min()}..{T.max()}, but V has {len(V)} vertices")
-    return V, T
+    return check_cells(V, T, 4, "T")
 
 
 def tet_volumes(V, T) -> np.ndarray:

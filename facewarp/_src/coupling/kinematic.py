@@ -11,10 +11,11 @@ from ..physics.model import Model
 __all__ = ["CarryStage", "JawStage"]
 
 
-class JawStage:
-    """Moves the targets of the jaw-carried held nodes (Eq. 6.4.9) each substep (solver stage)."""
+class _JawNodes:
+    """Nodes moved by the jaw with their Eq. 6.4.9 amounts (those with amount > 0), on the device,
+    with the jaw's pivot and axes."""
 
-    def __init__(self, jaw, nodes, amounts, rest_positions, device):
+    def __init__(self, jaw, nodes, amounts, device):
         wp = get_warp()
         from ..physics import kernels_muscle as km
 
@@ -24,8 +25,15 @@ class JawStage:
         self.count = int(keep.sum())
         self.nodes = wp.array(np.asarray(nodes)[keep].astype(np.int32), dtype=wp.int32, device=device)
         self.amounts = wp.array(np.asarray(amounts)[keep].astype(np.float32), dtype=float, device=device)
-        self.rest = rest_positions
         self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+
+
+class JawStage(_JawNodes):
+    """Moves the targets of the jaw-carried held nodes (Eq. 6.4.9) each substep (solver stage)."""
+
+    def __init__(self, jaw, nodes, amounts, rest_positions, device):
+        super().__init__(jaw, nodes, amounts, device)
+        self.rest = rest_positions
 
     def prepare(self, model: Model, state_in, control, dt, targets) -> None:
         """Implicit solvers: the same targets, once per step."""
@@ -39,7 +47,7 @@ class JawStage:
                      outputs=[targets], device=self.device)
 
 
-class CarryStage:
+class CarryStage(_JawNodes):
     """Carries the free mass points of the jaw regions with the jaw (Eq. 6.4.9; solver stage).
 
     Sec. 6.4.3 applies the jaw rotation to the *mass points* of the lip-corner, upper-lip,
@@ -53,17 +61,8 @@ class CarryStage:
     """
 
     def __init__(self, jaw, nodes, amounts, device):
-        wp = get_warp()
-        from ..physics import kernels_muscle as km
-
-        self.km = km
-        self.device = device
-        keep = np.asarray(amounts) > 0
-        self.count = int(keep.sum())
-        self.nodes = wp.array(np.asarray(nodes)[keep].astype(np.int32), dtype=wp.int32, device=device)
-        self.amounts = wp.array(np.asarray(amounts)[keep].astype(np.float32), dtype=float, device=device)
-        self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
-        self.prev = wp.zeros(2, dtype=float, device=device)
+        super().__init__(jaw, nodes, amounts, device)
+        self.prev = get_warp().zeros(2, dtype=float, device=device)
 
     def reset(self, angles=(0.0, 0.0)) -> None:
         """Set the remembered jaw angles [rad] (those the state's positions correspond to)."""

@@ -11,6 +11,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+
+from ..core.errors import InputError
 from ..core.warp import get_warp
 
 __all__ = [
@@ -31,19 +33,25 @@ __all__ = [
 # input normalisation
 
 
-def _check_VF(V, F) -> tuple[np.ndarray, np.ndarray]:
+def check_cells(V, C, arity: int, letter: str) -> tuple[np.ndarray, np.ndarray]:
+    """V (n, 3) float64 and cells C (k, arity) int64 indexing V, or an :class:`InputError` naming
+    ``letter`` ("F" for triangles, "T" for tets) and what was expected."""
     V = np.asarray(V, dtype=np.float64)
-    F = np.asarray(F)
+    C = np.asarray(C)
     if V.ndim != 2 or V.shape[1] != 3:
-        raise ValueError(f"V must have shape (n, 3), got {V.shape}")
-    if F.ndim != 2 or F.shape[1] != 3:
-        raise ValueError(f"F must have shape (m, 3), got {F.shape}")
-    if F.size and not np.issubdtype(F.dtype, np.integer):
-        raise ValueError(f"F must be an integer array, got dtype {F.dtype}")
-    F = F.astype(np.int64, copy=False)
-    if F.size and (F.min() < 0 or F.max() >= len(V)):
-        raise ValueError(f"F indexes vertices {F.min()}..{F.max()}, but V has {len(V)} vertices")
-    return V, F
+        raise InputError(f"V must have shape (n, 3), got {V.shape}")
+    if C.ndim != 2 or C.shape[1] != arity:
+        raise InputError(f"{letter} must have shape ({'m' if arity == 3 else 'k'}, {arity}), got {C.shape}")
+    if C.size and not np.issubdtype(C.dtype, np.integer):
+        raise InputError(f"{letter} must be an integer array, got dtype {C.dtype}")
+    C = C.astype(np.int64, copy=False)
+    if C.size and (C.min() < 0 or C.max() >= len(V)):
+        raise InputError(f"{letter} indexes vertices {C.min()}..{C.max()}, but V has {len(V)} vertices")
+    return V, C
+
+
+def _check_VF(V, F) -> tuple[np.ndarray, np.ndarray]:
+    return check_cells(V, F, 3, "F")
 
 
 def _check_points(P, name: str) -> np.ndarray:
