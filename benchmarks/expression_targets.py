@@ -4,7 +4,7 @@
 
 Builds the default head, plays each preset (and zygomatic major / inner frontalis alone at
 activation 1.0, the recorded human rig's full-weight smile and brow raise) ramped in over 0.3 s
-and held, with the default simulator (implicit solver, physical material, kinematic jaw), and
+and held, with the default simulator (implicit solver, physical material, contact, kinematic jaw), and
 records the displacement [mm] of the lip corners (8.3/8.4), chin (2.1), brows (4.1-4.6) and
 cheeks (5.1/5.2), the lid fissures (3.1-3.3, 3.2-3.4), the lip gap (2.2-2.3), the mouth width
 (8.3-8.4), and the inverted tets at the end. Writes benchmarks/results/expression_targets_L<level>.json.
@@ -28,6 +28,9 @@ TARGETS = {
     "sad": "inner brows 4.1/4.2 up >= 2 mm; lip corners down >= 2 mm",
     "angry": "inner brows toward the midline and down, >= 1 mm each way (>= 1.5 mm in all)",
     "blink": "lid fissures 3.1-3.3 and 3.2-3.4 within 1 mm",
+    "squint": "lid fissures narrowed (orbicularis oculi 0.3) but open",
+    "pucker": "orbicularis oris: the mouth 8.3-8.4 narrows, the corners come forward",
+    "press": "orbicularis oris: the lips touch (2.2-2.3 gap near 0, kept by the lip contact)",
     "zygomatic_major=1": "ICT mouthSmile at full weight: lip corners 15.6 mm (up 10.5, back 9.1, out 7.1), within 25 %",
     "frontalis_inner=1": "ICT browInnerUp at full weight: inner brows 4.5 mm up, within 25 %",
 }
@@ -72,6 +75,8 @@ def main() -> None:
     save(f"expression_targets_L{args.level}", {
         "machine": machine(args.device), "level": args.level, "seconds": args.seconds,
         "jaw_lever_m": facewarp.jaw_lever(rig), "solver": "implicit", "material": "physical", "jaw": "kinematic",
+        "contact": True,
+        "muscles": "two-way anchors, Fig. 6.4 region filter, saturating activation curve (muscle_defs.json)",
         "note": "displacements [mm] at the end (x left, y up, z out); distances [mm] at rest and at the end",
         "presets": rows})
 

@@ -17,6 +17,16 @@ A first frame (kernel compilation, graph capture, first factorisation) is run an
 With ``--parity`` (needs CUDA) the laugh ramp is run with the device method on "cpu" and "cuda:0"
 and the node positions compared, relative to the largest displacement.
 Writes benchmarks/results/physics_steps_<device>.json.
+
+    python -m benchmarks.physics_steps --contact [--levels 0] [--expressions laugh pucker blink smile]
+                                       [--head default|BUILD_DIR ...] [--method lbfgs|newton-pcg] [--tag T]
+
+The cost and the effect of the contact stage (issue 12): each expression on each head with the
+contact on and off (``FaceSimulator(contact=...)``): frames per second of the stepping and, every
+frame, the crossings (:func:`facewarp.physics.contact_crossings`: lip nodes inside the other lip,
+nodes inside the teeth, lid nodes deeper inside an eyeball than at rest, and the deepest of each).
+Writes benchmarks/results/physics_steps_contact_<device>[_<heads>][_<tag>].json (the heads' names
+when not the default head).
 """
 
 from __future__ import annotations
@@ -108,6 +118,67 @@ def parity(level: int = 0, frames: int = 6) -> dict:
             "within_1e-4": bool(diff / max(scale, 1e-30) <= 1e-4)}
 
 
+def contact_cost(fr, device, expression, seconds, contact, method=None) -> dict:
+    """One expression with the contact on or off: stepping fps and the worst crossings of any frame."""
+    import facewarp
+
+    tl = facewarp.timeline_from_spec(expression, seconds).for_head(fr)
+    sim = facewarp.FaceSimulator(fr, device=device, contact=contact, method=method)
+    sim.step()  # warm-up: kernels, the first factorisation
+    sim.reset()
+    s0 = sim.step_seconds
+    nf = int(round(seconds * sim.fps))
+    worst = {}
+    for k in range(1, nf + 1):
+        e = tl.sample(k / sim.fps)
+        sim.set_activations(e)
+        sim.set_jaw(e.jaw_u, e.jaw_v)
+        sim.step()
+        for key, v in sim.contact_crossings().items():
+            worst[key] = max(worst.get(key, 0), v)
+        if not np.isfinite(sim.positions()).all():
+            worst["nan_frames"] = worst.get("nan_frames", 0) + 1
+    fps = nf / max(sim.step_seconds - s0, 1e-9)
+    row = {"expression": expression, "contact": contact, "method": sim.solver.method, "frames": nf,
+           "frames_per_second": round(fps, 2), "worst_per_frame": {k: (round(v * 1e3, 4) if k.endswith("_m") else v)
+                                                                  for k, v in worst.items()}}
+    row["worst_per_frame"] = {(k[:-2] + "_mm" if k.endswith("_m") else k): v for k, v in row["worst_per_frame"].items()}
+    if contact:
+        row["candidates"] = sim.contact.counts
+    print(row, flush=True)
+    return row
+
+
+def main_contact(args):
+    from pathlib import Path
+
+    import facewarp
+    from facewarp import SimulationError
+
+    rows = []
+    heads = args.head or ["default"]
+    for head in heads:
+        for lv in (args.levels if head == "default" else [None]):
+            if head == "default":
+                fr, name = facewarp.build_face(facewarp.default_template(lv)), f"default_L{lv}"
+            elif Path(head, "face_rig.npz").is_file():
+                fr, name = facewarp.load_face_rig(head), Path(head).resolve().parent.name
+            else:
+                fr, name = facewarp.build_face(facewarp.load_head(head)), Path(head).resolve().parent.name
+            for ex in args.expressions:
+                for contact in (False, True):
+                    try:
+                        r = contact_cost(fr, args.device, ex, args.seconds, contact, args.method)
+                    except SimulationError as e:
+                        r = {"expression": ex, "contact": contact, "error": str(e)}
+                        print(r, flush=True)
+                    rows.append({"head": name, **r})
+    result = {"machine": machine(args.device), "seconds": args.seconds, "rows": rows}
+    tag = "" if heads == ["default"] else "_" + "_".join(r["head"] for r in rows[:: 2 * len(args.expressions)])
+    tag += f"_{args.tag}" if args.tag else ""
+    print("wrote", save("physics_steps_contact_" + args.device.split(":")[0] + tag, result))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--levels", type=int, nargs="+", default=[0, 1])
@@ -116,7 +187,14 @@ def main():
     ap.add_argument("--seconds", type=float, default=2.0)
     ap.add_argument("--verlet-frames", type=int, default=2)
     ap.add_argument("--parity", action="store_true")
+    ap.add_argument("--contact", action="store_true", help="the contact stage's cost and crossings, on and off")
+    ap.add_argument("--expressions", nargs="+", default=["laugh", "pucker", "blink", "smile"])
+    ap.add_argument("--head", nargs="+", help="with --contact: heads (default, a head folder or a build folder)")
+    ap.add_argument("--method", help="with --contact: the implicit method (default: the device's)")
+    ap.add_argument("--tag", help="with --contact: a suffix of the results file's name")
     args = ap.parse_args()
+    if args.contact:
+        return main_contact(args)
     from facewarp import SimulationError
     from facewarp.physics import factorization_backend
 

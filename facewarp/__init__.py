@@ -103,7 +103,8 @@ def __getattr__(name: str):
 
 
 def __dir__():
-    return sorted([*globals(), *_NAMES, *_SUBMODULES])
+    # the public names only (not this module's own helpers such as importlib or TYPE_CHECKING)
+    return sorted({*__all__, *_SUBMODULES, "__doc__", "__file__", "__name__", "__path__", "__version__"})
 
 
 if TYPE_CHECKING:  # static analysers and IDEs see the real definitions

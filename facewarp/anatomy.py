@@ -8,11 +8,16 @@
 - muscle fibres and segments (Sec. 6.3): :func:`bezier_quadratic`, :func:`arc_length_params`,
   :class:`Ellipsoids`, :func:`segment_ellipsoids`, :func:`ellipsoid_points`,
   :func:`closest_point_on_ellipsoid`, :func:`ellipsoid_radii_for_length`;
-- skin attachment (Fig. 6.4): :func:`attach_nodes`, :class:`MuscleAttachment`;
+- skin attachment (Fig. 6.4): :func:`attach_nodes`, :class:`MuscleAttachment`, by area:
+  :func:`sheet_samples`, :class:`SheetSamples`, :func:`attach_by_area`;
 - the muscles of a head: :func:`load_muscle_defs`, :func:`build_muscles`, :class:`MuscleSet`,
-  :class:`Muscle`, :class:`Anchor`, :func:`make_linear_muscle`, :func:`muscles_to_json`;
+  :class:`Muscle`, :class:`Anchor`, :func:`make_linear_muscle`, :func:`muscles_to_json`,
+  :func:`node_regions` (the template regions of every skin node, Fig. 6.4's region filter);
 - the whole anatomy: :func:`build_anatomy`, :func:`write_anatomy`, :func:`slab_anatomy`;
-- the kinematic jaw (Sec. 6.4.3): :class:`JawKinematic`, :func:`rotate_about`.
+- the kinematic jaw (Sec. 6.4.3): :class:`JawKinematic`, :func:`rotate_about`;
+- the lips: :func:`mouth_slit`, :func:`lip_sides`, :func:`lip_tets`, :func:`lip_crossings`,
+  :func:`points_in_tets`, :func:`separate_lips`, :func:`separate_skin_lips` (lips that cross at
+  rest, moved apart by ``build``).
 
 Re-exports of ``facewarp._src``; see each name's docstring for shapes and units."""
 
@@ -50,7 +55,10 @@ from ._src.anatomy.ellipsoids import (  # noqa: F401
 )
 from ._src.anatomy.attach import (  # noqa: F401
     MuscleAttachment,
+    SheetSamples,
+    attach_by_area,
     attach_nodes,
+    sheet_samples,
 )
 from ._src.anatomy.muscles import (  # noqa: F401
     DEFAULT_MUSCLE_DEFS,
@@ -62,6 +70,7 @@ from ._src.anatomy.muscles import (  # noqa: F401
     load_muscle_defs,
     make_linear_muscle,
     muscles_to_json,
+    node_regions,
 )
 from ._src.anatomy.build import (  # noqa: F401
     Anatomy,
@@ -72,6 +81,16 @@ from ._src.anatomy.build import (  # noqa: F401
     slab_anatomy,
     write_anatomy,
 )
+from ._src.anatomy.lips import (  # noqa: F401
+    LIP_CLEARANCE,
+    lip_crossings,
+    lip_sides,
+    lip_tets,
+    mouth_slit,
+    points_in_tets,
+    separate_lips,
+    separate_skin_lips,
+)
 from ._src.anatomy.jaw import (  # noqa: F401
     JawKinematic,
     JAW_REGIONS,
@@ -79,11 +98,12 @@ from ._src.anatomy.jaw import (  # noqa: F401
     rotate_about,
 )
 
-__all__ = ["Anatomy", "Anchor", "DEFAULT_MUSCLE_DEFS", "Ellipsoids", "JAW_REGIONS", "JawKinematic", "Muscle",
-           "MuscleAttachment", "MuscleKind", "MuscleSet", "SkinLayer", "SlabHead", "TET_QUALITY_FLOOR",
-           "anatomy_report", "arc_length_params", "attach_nodes", "bezier_quadratic", "boundary_faces",
+__all__ = ["Anatomy", "Anchor", "DEFAULT_MUSCLE_DEFS", "Ellipsoids", "JAW_REGIONS", "JawKinematic", "LIP_CLEARANCE",
+           "Muscle", "MuscleAttachment", "MuscleKind", "MuscleSet", "SheetSamples", "SkinLayer", "SlabHead", "TET_QUALITY_FLOOR",
+           "anatomy_report", "arc_length_params", "attach_by_area", "attach_nodes", "bezier_quadratic", "boundary_faces",
            "boundary_self_intersections", "build_anatomy", "build_muscles", "build_skin_layer", "check_head",
            "closest_point_on_ellipsoid", "ellipsoid_points", "ellipsoid_radii_for_length", "extrude_skin_layer",
-           "jaw_rotation", "load_muscle_defs", "make_linear_muscle", "muscles_to_json", "rotate_about",
-           "segment_ellipsoids", "skin_layer_quality", "slab_anatomy", "split_prisms", "tet_conformity",
-           "tet_dihedral_angles", "tet_mean_ratio", "tet_quality", "tet_volumes", "write_anatomy"]
+           "jaw_rotation", "lip_crossings", "lip_sides", "lip_tets", "load_muscle_defs", "make_linear_muscle",
+           "mouth_slit", "muscles_to_json", "node_regions", "points_in_tets", "rotate_about", "sheet_samples", "segment_ellipsoids",
+           "separate_lips", "separate_skin_lips", "skin_layer_quality", "slab_anatomy", "split_prisms",
+           "tet_conformity", "tet_dihedral_angles", "tet_mean_ratio", "tet_quality", "tet_volumes", "write_anatomy"]

@@ -11,20 +11,28 @@ from ._src.present.render import (  # noqa: F401
     render_mesh,
     render_views,
     save_png,
+    view_axes,
 )
 from ._src.present.strips import (  # noqa: F401
     displacement_max,
+    expression_sheet,
+    frames_sheet,
     render_strip,
+    sheet_font_size,
 )
 from ._src.present.anatomy import (  # noqa: F401
     render_anatomy,
 )
 from ._src.present.template import (  # noqa: F401
+    CAVITY,
     LIPS,
+    MOUTH,
     SKIN,
     TEETH,
     TONGUE,
     colored_scene,
+    head_colors,
+    part_colors,
     render_previews,
     vermilion_weight,
 )
@@ -32,11 +40,14 @@ from ._src.present.plot import (  # noqa: F401
     line_chart,
 )
 from ._src.present.animation import (  # noqa: F401
+    FACE_HEIGHT,
     FaceView,
     label_grid,
     save_gif,
 )
 
-__all__ = ["LIPS", "SKIN", "SKIN_COLOR", "TEETH", "TONGUE", "VIEWS", "FaceView", "colored_scene", "colormap",
-           "displacement_max", "label_grid", "line_chart", "render_anatomy", "render_mesh", "render_previews",
-           "render_strip", "render_views", "save_gif", "save_png", "vermilion_weight"]
+__all__ = ["CAVITY", "FACE_HEIGHT", "LIPS", "MOUTH", "SKIN", "SKIN_COLOR", "TEETH", "TONGUE", "VIEWS", "FaceView",
+           "colored_scene", "colormap", "displacement_max", "expression_sheet", "frames_sheet", "head_colors",
+           "label_grid", "line_chart", "part_colors", "render_anatomy", "render_mesh", "render_previews",
+           "render_strip", "render_views", "save_gif", "save_png", "sheet_font_size", "vermilion_weight",
+           "view_axes"]

@@ -47,6 +47,8 @@ class JawScene:
         self.frame = 0
         self.rest = self.sim.surface()
         self.log = []
+        landmarks = dict(zip((str(k) for k in self.rig.fdp_ids), self.sim.fdp_points()))
+        self._landmarks, self._rest_head, self._views = landmarks, self.rest, {}
 
     @property
     def time(self) -> float:
@@ -62,23 +64,30 @@ class JawScene:
                          "skin_torque_Nm": float(self.coupler.torque[0]),
                          "chin_m": self.sim.fdp("2.1").tolist()})
 
+    def view(self, size: int):
+        """The fixed camera of ``size``-pixel renders on the whole head (eyes, teeth, tongue)."""
+        if size not in self._views:
+            self._views[size] = fw.render.FaceView(self._rest_head, self.rig.head_faces, self._landmarks,
+                                                   self.rig.parts, view="three_quarter", size=size, aspect=1.0,
+                                                   reach=0.01, device=self.sim.device)
+        return self._views[size]
+
     def render(self, *, size: int = 320) -> np.ndarray:
         """The face now beside its displacement heat map, RGB (size, 2 size, 3) uint8."""
         V = self.sim.surface()
-        F = self.rig.head_faces
         d = np.linalg.norm(V - self.rest, axis=1)
-        extra = [(P, Fp, (0.96, 0.96, 0.94)) for P, Fp in self._parts()]
-        face = fw.render_mesh(V, F, view="three_quarter", width=size, height=size, extra_meshes=extra,
-                              device=self.sim.device)
-        heat = fw.render_mesh(V, F, view="three_quarter", width=size, height=size,
-                              vertex_colors=fw.colormap(d, 0.0, 0.03), extra_meshes=extra, device=self.sim.device)
+        view, parts = self.view(int(size)), self._parts()
+        face = view.render(V, part_points=parts)
+        heat = view.render(V, part_points=parts, heat=d, heat_max=0.03)
         return np.concatenate([face, heat], axis=1)
 
-    def _parts(self):
+    def _parts(self) -> dict:
         u, v = (float(a) for a in self.sim.jaw_angles)
-        for name, (P, Fp) in self.rig.parts.items():
+        out = {}
+        for name, (P, _) in self.rig.parts.items():
             amt = self.rig.part_jaw.get(name, 0.0)
-            yield (self.sim.jaw.apply(P, np.full(len(P), amt), u, v) if amt else P), Fp
+            out[name] = self.sim.jaw.apply(P, np.full(len(P), amt), u, v) if amt else P
+        return out
 
 
 def main(argv=None) -> int:

@@ -46,6 +46,9 @@ class RobotHead:
         self.jaw, self.seconds = float(jaw), float(seconds)
         self.frame = 0
         self.log = []
+        landmarks = dict(zip((str(k) for k in self.rig.fdp_ids), self.sim.fdp_points()))
+        rest = self.sim.surface()
+        self._landmarks, self._rest_head, self._views = landmarks, rest, {}
 
     @property
     def time(self) -> float:
@@ -71,18 +74,25 @@ class RobotHead:
                          "jaw": float(self.data.qpos[2]), "chin_world_m": chin.tolist(),
                          "chin_head_m": (R.T @ (chin - t)).tolist()})
 
+    def view(self, size: int):
+        """The fixed world camera of ``size``-pixel renders on the whole head (room to nod and turn)."""
+        if size not in self._views:
+            self._views[size] = fw.render.FaceView(self._rest_head, self.rig.head_faces, self._landmarks,
+                                                   self.rig.parts, view="front", size=size, aspect=1.0, reach=0.06,
+                                                   device=self.sim.device)
+        return self._views[size]
+
     def render(self, *, size: int = 320) -> np.ndarray:
         """The head in the world, front view, RGB (size, size, 3) uint8."""
         V = self.sim.surface()
         R, t = self.sim.head_pose
         u, v = (float(a) for a in self.sim.jaw_angles)
-        extra = []
-        for name, (P, Fp) in self.rig.parts.items():
+        parts = {}
+        for name, (P, _) in self.rig.parts.items():
             amt = self.rig.part_jaw.get(name, 0.0)
             Q = self.sim.jaw.apply(P, np.full(len(P), amt), u, v) if amt else P
-            extra.append((Q @ R.T + t, Fp, (0.96, 0.96, 0.94)))
-        return fw.render_mesh(V, self.rig.head_faces, view="front", width=size, height=size, extra_meshes=extra,
-                              device=self.sim.device)
+            parts[name] = Q @ R.T + t
+        return self.view(int(size)).render(V, part_points=parts)
 
 
 def main(argv=None) -> int:

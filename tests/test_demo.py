@@ -67,7 +67,10 @@ def test_demo_head_xml_and_pictures(demo):
     assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "jaw_open") >= 0
     gif = Image.open(out / "sequence.gif")
     assert gif.n_frames == 4  # every other of the 7 frames
-    assert Image.open(out / "expressions.png").size[0] > Image.open(out / "expressions.png").size[1]
+    assert gif.size[1] > 1.5 * gif.size[0]  # the whole head, crown to neck cut, from the front
+    # five expressions, three per row: two bands of (front, 3/4, heat) rows of rest | peak pairs
+    w, h = Image.open(out / "expressions.png").size
+    assert h > w > 6 * gif.size[0], (w, h)
 
 
 def test_simulate_streams_usd(demo, tmp_path, capsys):

@@ -19,7 +19,10 @@ def test_table_6_4_exact():
     assert PRESETS["laugh"].jaw_u == pytest.approx(0.022 / facewarp.REFERENCE_JAW_LEVER)
     assert PRESETS["sad"].activation("corrugator") == 0.6 and PRESETS["sad"].activation("frontalis_inner") == 1.0
     assert PRESETS["surprise"].activation("mentalis") == 0.3
-    for name in ("blink", "squint", "pucker", "jaw_open", "smile_L", "smile_R"):
+    assert PRESETS["surprise"].activation("frontalis_major") == 0.2
+    assert PRESETS["sad"].activation("depressor_anguli_oris") == 0.5  # Table 6.4's value (two-way anchors)
+    assert PRESETS["laugh"].activation("zygomatic_major") == 1.0 and PRESETS["laugh"].activation("risorius") == 0.3
+    for name in ("blink", "squint", "pucker", "press", "jaw_open", "smile_L", "smile_R"):
         assert name in PRESETS
 
 

@@ -46,6 +46,16 @@ def test_rest_stays_at_rest(rig):
     assert np.abs(frames.points - frames.points[0]).max() < 1e-6
 
 
+def test_first_frame_draws_the_rest_fibres(rig):
+    """Frame 0 of a run holds the muscles' rest curves (not zeros), for viewers and USD."""
+    _, frames = motion(rig, preset("smile"), seconds=2 / 30)
+    C = frames.muscle_curves
+    head = np.asarray(rig.head_vertices)
+    lo, hi = head.min(0) - 0.01, head.max(0) + 0.01
+    assert ((C[0] >= lo) & (C[0] <= hi)).all()  # every fibre point of frame 0 lies in the head's box
+    assert np.abs(C[1] - C[0]).max() < 0.01  # one frame into the attack: the fibres barely moved
+
+
 @pytest.mark.parametrize("solver, material", [("implicit", "physical"), ("implicit", "thesis"), ("verlet", "thesis")])
 def test_smile_raises_lip_corners_outward(rig, solver, material):
     seconds = SECONDS if solver == "implicit" else 0.2  # Verlet: ~1,000 substeps per frame

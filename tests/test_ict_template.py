@@ -9,6 +9,8 @@ import json
 
 import numpy as np
 import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from facewarp import (FDP_CATALOGUE, FDP_IDS, FRONTAL_REGIONS, ICT_FDP_VERTICES, ICT_INNER_LIP_VERTICES, ICT_PART_RANGES,
                       ICT_SKIN_VERTICES, REGIONS, InputError, build_anatomy, default_template, import_ict, load_mesh,
@@ -89,15 +91,32 @@ def test_regions_and_frontal(ict):
     ratio = _area(t.vertices, t.faces)[t.frontal].sum() / _area(d.vertices, d.faces)[d.frontal].sum()
     assert 0.75 < ratio < 1.35, ratio
     # left out of the frontal face: the inside of the closed mouth, the lip-corner creases and
-    # the lid margins curling into the eye sockets and the nostril rims; nothing else
+    # the lid margins curling into the eye sockets and the nostril rims; elsewhere only the few
+    # border triangles that hung on the frontal face by a vertex
     left_out = np.isin(t.face_region, frontal_ids) & ~t.frontal
-    assert left_out.sum() < 0.15 * t.frontal.sum()
+    assert left_out.sum() < 0.17 * t.frontal.sum()  # 1,808 of 11,279 (the mouth interior the most)
     C = t.vertices[t.faces[left_out]].mean(1)
     lm = t.landmarks()
     near_mouth = np.abs(C[:, 1] - lm["2.2"][1]) < 0.01
     near_eye = np.minimum(np.linalg.norm(C - lm["3.5"], axis=1), np.linalg.norm(C - lm["3.6"], axis=1)) < 0.03
     near_nostrils = np.linalg.norm(C - lm["9.15"], axis=1) < 0.02
-    assert np.all(near_mouth | near_eye | near_nostrils)
+    assert (~(near_mouth | near_eye | near_nostrils)).sum() <= 10
+    # the frontal face is one piece joined through edges, each vertex's triangles one fan: a
+    # triangle hanging by a vertex extrudes into a hinged flap that stalls the implicit solver
+    F = t.faces[t.frontal]
+    m = len(F)
+    a, b = F.ravel(), F[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * len(t.vertices) + np.maximum(a, b)
+    o = np.argsort(key, kind="stable")
+    i = np.flatnonzero(key[o][1:] == key[o][:-1])
+    h1, h2 = o[i], o[i + 1]
+    assert connected_components(coo_matrix((np.ones(len(i)), (h1 // 3, h2 // 3)), shape=(m, m)))[0] == 1
+    nxt = 3 * (h2 // 3) + (h2 % 3 + 1) % 3
+    same = a[h1] == a[h2]  # the corners of one vertex on both faces of an edge are one fan
+    c1 = np.r_[h1, 3 * (h1 // 3) + (h1 % 3 + 1) % 3]
+    c2 = np.r_[np.where(same, h2, nxt), np.where(same, nxt, h2)]
+    fans = connected_components(coo_matrix((np.ones(len(c1)), (c1, c2)), shape=(3 * m, 3 * m)))[1]
+    assert len(np.unique(np.stack([a, fans], 1), axis=0)) == len(np.unique(a))
 
 
 def test_anatomy_builds(ict):

@@ -76,6 +76,24 @@ def test_neck_scene_has_pan_and_tilt(head):
     assert abs(d.qpos[m.joint("neck_pan").qposadr[0]] - 0.4) < math.radians(2.0)
 
 
+def test_head_frame_on_a_neck_is_the_template_frame(head, rig):
+    """On a neck the cranium body's frame sits at the neck pivot; the coupler hands the skin the
+    head_origin site's pose, which is the identity at zero neck angles and turns about the pivot."""
+    m = mujoco.MjModel.from_xml_string(head_mjcf(head, neck=True))
+    d = mujoco.MjData(m)
+    coupler = fw.MujocoJaw(fw.FaceSimulator(rig), m, d)
+    mujoco.mj_kinematics(m, d)
+    R, t = coupler.head_pose()
+    np.testing.assert_allclose(R, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(t, 0.0, atol=1e-12)
+    d.qpos[m.joint("neck_tilt").qposadr[0]] = 0.3
+    mujoco.mj_kinematics(m, d)
+    R, t = coupler.head_pose()
+    pivot = d.xpos[m.body("cranium").id]  # the neck joint's position (fixed in the world)
+    np.testing.assert_allclose(R @ pivot + t, pivot, atol=1e-9)  # a rotation about the pivot
+    assert math.isclose(math.degrees(math.acos((np.trace(R) - 1) / 2)), math.degrees(0.3), abs_tol=1e-6)
+
+
 def test_bad_gains_are_input_errors(head):
     with pytest.raises(fw.InputError, match="kp"):
         head_mjcf(head, kp=float("nan"))

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+import facewarp
 from facewarp import JawKinematic
 from facewarp.anatomy import bezier_quadratic, ellipsoid_points
 from facewarp.physics import (CarryStage, JawStage, ModelBuilder, MuscleRig, MuscleStage, SolverImplicit,
-                              SolverVerlet, ellipsoid_uv, rig_reference, segment_frames)
+                              SolverVerlet, contraction_curve, ellipsoid_uv, rig_reference, segment_frames)
 
 S2 = np.sqrt(0.5)
 
@@ -56,7 +58,7 @@ def small_rig(nodes, node_pos):
         seg_curve=np.array([0, 0, 0, 1, 2, 3, 4]),
         seg_t=np.array([[0, 1 / 3], [1 / 3, 2 / 3], [2 / 3, 1], [0, 1], [0, 1], [0, 1], [0, 1]], float),
         seg_rest_radii=np.zeros((7, 3)),
-        anchor_dst=np.array([3]), anchor_src=np.array([0]), anchor_weight=np.array([1.0]),
+        anchor_ctrl=np.array([3, 0]), anchor_group=np.array([0, 0]), anchor_passive=np.array([0.1, 0.1]),
     )
     c0, f0, r0 = segment_frames(rig, rig.ctrl_rest)
     rig.seg_rest_radii = np.c_[r0[:, 0], np.full(7, 0.003), np.full(7, 0.003)]
@@ -88,6 +90,7 @@ def test_kernels_match_reference(device):
     jaw = JawKinematic(np.array([0.02, 0.05, 0.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
                        np.array([[0.03, 0, 0], [0.01, 0, 0]]), np.array([0.02, 0, 0]))
     rig.ctrl_jaw = np.linspace(0, 1, 11)
+    rig.saturation = np.array([2.0, 0.5])  # the saturating activation curve, both muscles
     stage = MuscleStage(rig, jaw, model.device)
     control = model.control()
     acts, angles = np.array([0.8, 0.5]), np.array([0.3, 0.05])
@@ -217,13 +220,16 @@ def test_muscle_force_is_eq_6_4_1(device):
     length = np.linalg.norm(d, axis=1)
     n = d / length[:, None]
     cos = np.abs(np.einsum("ij,ij->i", n, fibre))
-    f = (rig.att_stiffness * cos * (length - rig.att_rest_length))[:, None] * n
+    across = rig.attachment_across() == 1  # a sphincter's springs pull across its fibre: w = 1
+    assert across.any() and (~across).any()
+    w = np.where(across, 1.0, cos)
+    f = (rig.att_stiffness * w * (length - rig.att_rest_length))[:, None] * n
     expect = np.zeros_like(F)
     np.add.at(expect, rig.att_node, f)
     assert np.abs(expect).max() > 1e-2, "the contraction must strain the springs"
     np.testing.assert_allclose(F, expect, atol=1e-4 * np.abs(expect).max(), err_msg="Eq. 6.4.1")
     # a spring along the fibre gets |cos| = 1, one across it 0: spot-check the extremes exist
-    assert cos.max() > 0.5 and cos.min() < 0.2
+    assert cos[~across].max() > 0.5 and cos[~across].min() < 0.2
 
 
 def test_implicit_muscle_energy_gradient_is_the_eq_6_4_1_force(device):
@@ -254,3 +260,113 @@ def test_implicit_muscle_energy_gradient_is_the_eq_6_4_1_force(device):
     em0, _ = SolverImplicit(model).potential(state, control, 1.0, X - D)
     fd = ((ep - ep0) - (em - em0)) / 2.0
     np.testing.assert_allclose(fd, np.sum((g1 - g0) * D), rtol=2e-2)
+
+
+def test_contraction_curve_saturates():
+    a = np.linspace(0.0, 1.0, 11)
+    c = contraction_curve(a, 0.5, 2.0)
+    assert c[0] == 0.0 and c[-1] == pytest.approx(0.5)
+    np.testing.assert_allclose(c, 0.5 * (1 - np.exp(-2 * a)) / (1 - np.exp(-2.0)), rtol=1e-12)
+    assert (np.diff(c, 2) < 0).all(), "saturating: concave"
+    assert c[5] == pytest.approx(0.5 * 0.731, rel=1e-3)  # half the activation, 73 % of the contraction
+    np.testing.assert_allclose(contraction_curve(a, 0.5, 0.0), 0.5 * a, rtol=1e-12)  # beta 0: linear
+    np.testing.assert_allclose(contraction_curve([-1.0, 2.0], 0.5, 2.0), [0.0, 0.5])  # clamped to [0, 1]
+
+
+def _moved(stage, control, acts):
+    control.activations.assign(np.asarray(acts, np.float32))
+    stage.update_geometry(control)
+    return stage.ctrl.numpy().astype(np.float64) - stage.rig.ctrl_rest
+
+
+def test_two_way_anchor(device):
+    """Fig. 6.3 two-way: the linear insertion (control point 0) and the ring point 3 it is anchored
+    to move by the same displacement, the stiffness-weighted mean of their own ones
+    (k = passive + activation): the active member drags the passive one, not a diluted mean."""
+    V, T, layer = slab()
+    inner = np.where(layer == 1)[0]
+    rig = small_rig(inner, V[inner])
+    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    stage = MuscleStage(rig, None, model.device)
+    control = model.control()
+    lin = np.ones(len(rig.ctrl_rest), bool)
+    for acts in ([1.0, 0.0], [0.0, 1.0], [0.6, 0.3]):
+        d = _moved(stage, control, acts)
+        free = rig_reference(rig, acts)[0] - rig.ctrl_rest
+        # each member's own displacement, without the anchor
+        loose = MuscleRig(**{**rig.__dict__, "anchor_ctrl": np.zeros(0, int), "anchor_group": np.zeros(0, int),
+                             "anchor_passive": np.zeros(0)})
+        own = rig_reference(loose, acts)[0] - rig.ctrl_rest
+        k = 0.1 + np.array([acts[0], acts[1]])  # members: ring point 3 (muscle 1), insertion 0 (muscle 0)
+        D = (k[1] * own[3] + k[0] * own[0]) / k.sum()
+        np.testing.assert_allclose(d[[0, 3]], [D, D], atol=2e-7, err_msg=f"anchor members, activations {acts}")
+        np.testing.assert_allclose(d, free, atol=2e-7, err_msg="kernel against the NumPy reference")
+        others = lin.copy()
+        others[[0, 3]] = False
+        np.testing.assert_allclose(d[others], own[others], atol=2e-7, err_msg="non-members follow their own muscle")
+    d = _moved(stage, control, [1.0, 0.0])
+    assert np.linalg.norm(d[3]) > 0.9 * np.linalg.norm(
+        rig_reference(rig, [1.0, 0.0])[0][0] - rig.ctrl_rest[0]) > 1e-3  # the ring point follows (1.1 / 1.2)
+    # members keep their rest offset: pulled together, not averaged into one point
+    X = stage.ctrl.numpy().astype(np.float64)
+    np.testing.assert_allclose(X[3] - X[0], rig.ctrl_rest[3] - rig.ctrl_rest[0], atol=2e-7)
+
+
+def test_sphincter_to_plane_keeps_fixed_points(device):
+    """A ring with two fixed points contracting toward a plane through its centre (the lids
+    closing toward the palpebral fissure): the points move along the plane's normal only, by the
+    contraction fraction of their distance to it (past it for a fraction above 1)."""
+    V, T, layer = slab()
+    inner = np.where(layer == 1)[0]
+    rig = small_rig(inner, V[inner])
+    rig.ctrl_pivot[[3, 7]] = -2  # ring points 0 and 4: fixed
+    rig.center_normal = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    control = model.control()
+    ring = np.arange(3, 11)
+    for c_max in (1.0, 1.6):
+        rig.contraction = np.array([0.3, c_max])
+        stage = MuscleStage(rig, None, model.device)
+        acts = [0.0, 1.0]
+        d = _moved(stage, control, acts)
+        X = rig.ctrl_rest + d
+        np.testing.assert_allclose(X, rig_reference(rig, acts)[0], atol=2e-7, err_msg="kernel against NumPy")
+        np.testing.assert_allclose(d[[3, 7]], 0.0, atol=1e-8, err_msg="fixed points")
+        np.testing.assert_allclose(d[ring][:, [0, 2]], 0.0, atol=1e-7, err_msg="along the normal only")
+        free = np.setdiff1d(ring, [3, 7])
+        y0 = rig.center[1, 1]
+        np.testing.assert_allclose(X[free, 1] - y0, (1 - c_max) * (rig.ctrl_rest[free, 1] - y0), atol=2e-7,
+                                   err_msg="the fraction c of the way to the plane")
+
+
+def test_area_weights_split_a_nodes_stiffness():
+    """Fig. 6.4 by area: a node's stiffness (shared equally by its attachments when given) is split
+    by the attachments' area weights, and a node only partly inside a band keeps that share."""
+    V, T, layer = slab()
+    rig = small_rig([25, 25, 26], V[[25, 25, 26]])
+    rig.att_stiffness = np.array([5.0, 5.0, 10.0])  # node 25: 10 N/m shared by two muscles; node 26: 10
+    rig.att_weight = np.array([0.5, 1.0, 0.25])
+    rig.validate()
+    np.testing.assert_allclose(rig.weighted_stiffness(), [10 * 0.5 / 1.5, 10 * 1.0 / 1.5, 10 * 0.25])
+    rig.att_weight = np.array([0.5, 1.2, 0.25])
+    with pytest.raises(facewarp.InputError, match="att_weight"):
+        rig.validate()
+
+
+def test_sphincter_glides_over_a_sphere(device):
+    """A ring gliding over a rigid part (the lids over the eyeball): each contracting point keeps
+    its rest distance from the part's centre; the kernel matches the NumPy reference."""
+    V, T, layer = slab()
+    inner = np.where(layer == 1)[0]
+    rig = small_rig(inner, V[inner])
+    g = rig.center[1] + np.array([0.0, 0.0, -0.015])
+    rig.glide, rig.glide_center = np.array([0, 1]), np.array([[0.0, 0.0, 0.0], g])
+    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    stage = MuscleStage(rig, None, model.device)
+    acts = [0.0, 1.0]
+    X = rig.ctrl_rest + _moved(stage, model.control(), acts)
+    np.testing.assert_allclose(X, rig_reference(rig, acts)[0], atol=2e-7, err_msg="kernel against NumPy")
+    ring = np.arange(4, 11)  # the ring but point 3, which the anchor ties to the linear insertion
+    r = lambda P: np.linalg.norm(P - g, axis=1)  # noqa: E731
+    np.testing.assert_allclose(r(X[ring]), r(rig.ctrl_rest[ring]), rtol=1e-5, err_msg="distance from the centre")
+    assert np.linalg.norm(X[ring] - rig.ctrl_rest[ring], axis=1).min() > 1e-3  # and yet they moved

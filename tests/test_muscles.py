@@ -136,7 +136,10 @@ def test_every_muscle_on_template_level0(head0):
     for m in ms.muscles:
         assert len(m.attachment) >= 5, f"{m.name}: {len(m.attachment)} attached nodes"
         assert set(m.attachment.nodes.tolist()) <= inner
-        assert (m.attachment.rest_length < m.lam).all()
+        # by area: a node part inside the band connects with that share of its area (Fig. 6.4 by area)
+        w = m.attachment.weight
+        assert ((w > 0) & (w <= 1)).all() and (w == 1).any(), m.name
+        assert (m.attachment.rest_length < 2 * m.lam).all()
     ref = ms.by_name()["zygomatic_major_L"]
     assert len(ref.segments) == 5
 
@@ -263,7 +266,9 @@ def test_muscle_rig_matches_segments(head0):
     names = rig.names
     i = names.index("frontalis_major_L")
     assert (rig.ctrl_jaw[rig.ctrl_muscle == i] == 0).all()
-    assert len(rig.anchor_dst) == 2 * 4 + 2 * 2
+    # two-way anchors: the modiolus ties 1 + 4 members per side, the upper lip 1 + 2
+    assert len(rig.anchor_ctrl) == 2 * 5 + 2 * 3 and len(np.unique(rig.anchor_group)) == 4
+    assert rig.anchor_passive.min() > 0
 
 
 def test_transfer_to_a_reshaped_head(head0):
@@ -279,3 +284,62 @@ def test_transfer_to_a_reshaped_head(head0):
     assert a.quality["min_attached_nodes"] >= 5
     for m0, m1 in zip(ms.muscles, a.muscles.muscles):
         np.testing.assert_array_equal(m0.skin_points.face, m1.skin_points.face)
+
+
+def test_region_filter(head0):
+    """Fig. 6.4: a muscle attaches only the sheet area of its own regions: no node without a face
+    there; the lid-closing orbicularis oculi takes lid area only, the frontalis only forehead."""
+    t, sl, ms = head0
+    R = mu.node_regions(t, sl)
+    REGIONS = facewarp.REGIONS
+    assert R.shape == (len(sl.vertices), len(REGIONS))
+    np.testing.assert_allclose(R.sum(1), 1.0)
+
+    def outside(m, nodes):  # nodes with no face in the muscle's regions
+        return int((R[nodes][:, [REGIONS.index(r) for r in m.regions]].sum(1) == 0).sum())
+
+    for m in ms.muscles:
+        assert m.regions and outside(m, m.attachment.nodes) == 0, m.name
+    by = ms.by_name()
+    for side in ("L", "R"):
+        assert set(by[f"orbicularis_oculi_{side}"].regions) == {f"eyelid_upper_{side}", f"eyelid_lower_{side}"}
+        assert len(by[f"orbicularis_oculi_{side}"].attachment) >= 8
+    assert set(by["orbicularis_oris"].regions) == {"upper_lip", "lower_lip", "lip_corner_L", "lip_corner_R"}
+    # without the regions the same muscles reach beyond them (the frontalis into the lids and the
+    # scalp, the orbicularis oculi into the brow and cheek)
+    defs = mu.load_muscle_defs()
+    for m in defs["muscles"]:
+        m.pop("regions", None)
+    wide = mu.build_muscles(t, sl, defs=defs).by_name()
+    for name in ("frontalis_major_L", "orbicularis_oculi_L", "orbicularis_oculi_R", "corrugator_L"):
+        # the weights count the area in the band: 68.6 -> 65.9, 13.0 -> 10.1, 12.7 -> 10.1, 10.4 -> 8.8
+        assert wide[name].attachment.weight.sum() > by[name].attachment.weight.sum() + 1.0, name
+    assert outside(by["orbicularis_oculi_L"], wide["orbicularis_oculi_L"].attachment.nodes) >= 2
+    with pytest.raises(facewarp.InputError, match="unknown region"):
+        defs["muscles"][0]["regions"] = ["elbow"]
+        mu.build_muscles(t, sl, defs=defs)
+
+
+def test_attach_by_area_is_mesh_independent():
+    """Fig. 6.4 by area: the area of a sheet a muscle pulls on (node areas times their weights)
+    stays the same when the sheet is refined; attaching whole nodes by the nodes' own positions
+    changes it with the mesh."""
+    mus = mu.make_linear_muscle("m", [[-0.02, 0.0, -0.004], [0.0, 0.0005, -0.004], [0.02, 0.0, -0.004]],
+                                radius=0.0015, lam=0.005, phi=np.deg2rad(60), segments=5)
+    area, whole = [], []
+    for n in (9, 36):  # 5 mm and 1.25 mm cells over 4 x 4 cm
+        g = np.linspace(-0.02, 0.02, n + 1)
+        X = np.array([[x, y, 0.0] for y in g for x in g])
+        q = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+        F = np.concatenate([np.stack([q[:-1, :-1], q[:-1, 1:], q[1:, 1:]], -1).reshape(-1, 3),
+                            np.stack([q[:-1, :-1], q[1:, 1:], q[1:, :-1]], -1).reshape(-1, 3)])
+        down = np.tile([0.0, 0.0, -1.0], (len(X), 1))
+        S = mu.sheet_samples(X, F, down)
+        np.testing.assert_allclose(S.node_area(len(X)).sum(), 0.04 ** 2, rtol=1e-12)
+        a = mu.attach_by_area(X, mus.segments, mus.lam, mus.phi, S, directions=down)
+        area.append(float((S.node_area(len(X))[a.nodes] * a.weight).sum()))
+        b = mu.attach_nodes(X, mus.segments, mus.lam, mus.phi, directions=down)
+        whole.append(float(S.node_area(len(X))[b.nodes].sum()))
+        assert ((a.weight > 0) & (a.weight <= 1)).all()
+    assert abs(area[1] / area[0] - 1) < 0.05, area
+    assert abs(whole[1] / whole[0] - 1) > 2 * abs(area[1] / area[0] - 1), (whole, area)

@@ -112,6 +112,18 @@ def test_extra_meshes_and_vertex_colors(device):
     assert top[0] > top[2] and bottom[2] > bottom[0], "vertex colours not interpolated (turbo: red top, blue bottom)"
 
 
+def test_inside_color_marks_the_inside_seen_through_a_hole(device):
+    V, F = unit_sphere()
+    F = F[V[F].mean(axis=1)[:, 2] < 0.6]  # a hole facing the camera: the ray at the centre meets the inside
+    mid = SIZE // 2
+    plain = render_mesh(V, F, width=SIZE, height=SIZE, device=device)
+    inside = render_mesh(V, F, width=SIZE, height=SIZE, inside_color=(0.0, 0.0, 1.0), device=device)
+    np.testing.assert_array_equal(inside[mid, mid], [0, 0, 255], err_msg="the inside is not drawn in inside_color")
+    assert plain[mid, mid, 0] > plain[mid, mid, 2], "without inside_color the inside is shaded like the outside"
+    ring = inside[mid, mid - int(0.9 * SIZE / 2 / 1.12)]  # outside the hole (radius 0.8), on the sphere (1.0)
+    assert int(ring[0]) > int(ring[2]) + 20, f"the outside must keep its colour, got {ring}"
+
+
 def test_device_matches_cpu(device):
     if device == "cpu":
         pytest.skip("compares a GPU with the CPU")
@@ -175,3 +187,76 @@ def test_render_views_writes_front_and_side(tmp_path):
     for path in paths:
         with Image.open(path) as png:
             assert png.size == (32, 32)
+
+
+# ------------------------------------------------------------------ whole-head pictures (issue 12)
+@pytest.fixture(scope="module")
+def head():
+    from facewarp import default_template
+
+    t = default_template(0)
+    return t, {k: np.asarray(v) for k, v in t.landmarks().items()}
+
+
+def test_face_view_draws_the_whole_head_with_a_clean_neck_cut(head):
+    from facewarp.render import FaceView
+
+    t, lm = head
+    view = FaceView(t.vertices, t.faces, lm, t.parts, face_height=120)
+    assert len(view.faces) == len(t.faces), "FaceView must draw the template's full mesh, not a cropped face"
+    assert view.face_pixels >= 120 - 1e-9, view.face_pixels
+    img = view.render(t.vertices)
+    assert img.shape == (view.size, view.width, 3)
+    drawn = np.any(img < 250, axis=2)
+    rows = np.flatnonzero(drawn.any(axis=1))
+    # crown and neck cut (y 0.134 and -0.19 m) fill the height but for the 2 % margin and 4 mm reach
+    assert rows[0] <= 0.05 * view.size and rows[-1] >= 0.95 * view.size, (rows[0], rows[-1], view.size)
+    # the neck cut is the template's straight ring (front view: one row), not a saw-tooth of cropped triangles
+    neck = (np.abs(t.vertices[:, 0]) < 0.03) & (t.vertices[:, 1] < -0.18)
+    cols = np.flatnonzero(drawn.any(axis=0))
+    half = 0.03 * view.pixels_per_metre  # 3 cm either side of the midline
+    mid = cols[np.abs(cols - view.width / 2) < half]
+    assert neck.any() and len(mid) > 10
+    lowest = np.array([np.flatnonzero(drawn[:, c])[-1] for c in mid])
+    assert np.ptp(lowest) <= 1, f"the neck's lower border is ragged: rows {lowest.min()}..{lowest.max()}"
+
+
+def test_face_view_eyes_have_iris_and_pupil(head):
+    from facewarp.render import FaceView, view_axes
+
+    t, lm = head
+    view = FaceView(t.vertices, t.faces, lm, t.parts, face_height=200)
+    img = view.render(t.vertices).astype(int)
+    right, up, _ = view_axes("front")
+    # the pupil: the front of the eyeball, straight ahead of its centre, projected into the image
+    eye = t.parts["eye_L"][0]
+    tip = eye[np.argmax(eye[:, 2])]
+    x, y = view.frame_points @ right, view.frame_points @ up
+    c = int(round(view.width / 2 + (tip @ right - 0.5 * (x.min() + x.max())) * view.pixels_per_metre))
+    r = int(round(view.size / 2 - (tip @ up - 0.5 * (y.min() + y.max())) * view.pixels_per_metre))
+    patch = img[r - 1:r + 2, c - 1:c + 2].reshape(-1, 3)
+    assert patch.max() < 90, f"no dark pupil at the front of the left eye ({r}, {c}): {patch.max(0)}"
+
+
+def test_expression_sheet_pairs_rest_and_peak_and_wraps(head):
+    from facewarp.render import expression_sheet
+
+    t, lm = head
+    below_mouth = t.vertices[:, 1] < lm["2.2"][1]
+    moved = t.vertices.copy()
+    moved[below_mouth, 1] -= 0.0052  # 5.2 mm down: the heat map's top is 6 mm
+    shots = [(f"shot {i}", moved, None) for i in range(4)]
+    sheet, top = expression_sheet(t.vertices, t.faces, lm, t.parts, shots, face_height=60, columns=3)
+    assert top == pytest.approx(0.006)
+    single, _ = expression_sheet(t.vertices, t.faces, lm, t.parts, shots[:1], face_height=60, columns=3)
+    h1, w1 = single.shape[:2]
+    # one block: rest | peak, three rows (front, 3/4, heat); four blocks at 3 per row: 2 x 3 blocks
+    assert sheet.shape[1] > 2.9 * w1 * 0.8 and sheet.shape[0] > 1.9 * h1, (sheet.shape, single.shape)
+    assert h1 > 3 * 60 * 1.5 and h1 > w1, single.shape
+    # the heat row is coloured (turbo), the face rows are not
+    lower = single[int(0.75 * h1):].reshape(-1, 3).astype(int)
+    assert (np.abs(lower[:, 1] - lower[:, 0]) > 60).any(), "no heat map colours in the last row"
+    with pytest.raises(InputError, match="shots"):
+        expression_sheet(t.vertices, t.faces, lm, t.parts, [])
+    with pytest.raises(InputError, match="shots\\[0\\] points"):
+        expression_sheet(t.vertices, t.faces, lm, t.parts, [("x", t.vertices[:10], None)])

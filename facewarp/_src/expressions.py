@@ -175,22 +175,26 @@ def _table_6_4(name, values, jaw_drop_m):
 # angry pi/12) are chin drops of 52 and 26 mm on a 0.1 m lever, near the widest human opening;
 # they are replaced by human-sized chin drops (laugh 10-25 mm, surprise 5-15 mm, angry none),
 # converted per head by its lever (:meth:`Expression.for_head`). With the muscles calibrated to
-# the recorded human rig (activation 1.0 = the full-weight ICT blendshape, ``muscle_defs.json``),
+# the recorded human rig (activation 1.0 = the full-weight ICT blendshape, ``muscle_defs.json``;
+# activation maps to contraction through the saturating curve of ``activation_curve`` there),
 # some printed activations gave shapes outside the issue-12 targets and were replaced; the old
 # and new values and the reasons are in ``muscle_defs.json`` under ``preset_changes``.
 PRESETS: dict[str, Expression] = {
     "neutral": Expression("neutral"),
     #                          01   02   03   04   05   06   07   08   09   10   11   12
     "smile": _table_6_4("smile", (0.6, 0.1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.2), None),
-    "laugh": _table_6_4("laugh", (0.7, 0.2, 0, 0.5, 0, 0.2, 0, 0, 0, 0, 0, 0.1), 0.022),
-    "surprise": _table_6_4("surprise", (0, 0, 0, 0, 0.3, 0.3, 0, 1.0, 0.6, 0.6, 0, 0), 0.012),
+    "laugh": _table_6_4("laugh", (1.0, 0.2, 0, 0.3, 0, 0.2, 0, 0, 0, 0, 0, 0.1), 0.022),
+    "surprise": _table_6_4("surprise", (0, 0, 0, 0, 0.3, 0.3, 0, 1.0, 0.2, 0.3, 0, 0), 0.012),
     "angry": _table_6_4("angry", (0, 0, 0.3, 0.2, 0, 0.5, 1.0, 0, 0, 0, 0.4, 0), None),
-    "sad": _table_6_4("sad", (0, 0, 0.8, 0, 0, 0, 0.6, 1.0, 0.1, 0, 0, 0), None),
-    # Beyond Table 6.4 (named activation sets). The sphincters (orbicularis oculi / oris) are
-    # driven like the other muscles; their own purse, press and lid-closing actions are not built.
+    "sad": _table_6_4("sad", (0, 0, 0.5, 0, 0, 0, 0.6, 1.0, 0.1, 0, 0, 0), None),
+    # Beyond Table 6.4 (named activation sets). The sphincters act by themselves: the orbicularis
+    # oculi closes the lids (blink; squint half-way with the brows and cheeks), the orbicularis
+    # oris narrows and purses the mouth (pucker, with the mentalis pushing the lower lip up and
+    # out) or, lightly, presses the lips together (press: they touch, the lip contact holds them).
     "blink": Expression("blink", {"orbicularis_oculi": 1.0}),
-    "squint": Expression("squint", {"orbicularis_oculi": 0.5, "corrugator": 0.2, "zygomatic_minor": 0.2}),
+    "squint": Expression("squint", {"orbicularis_oculi": 0.3, "corrugator": 0.2, "zygomatic_minor": 0.2}),
     "pucker": Expression("pucker", {"orbicularis_oris": 0.8, "mentalis": 0.3}),
+    "press": Expression("press", {"orbicularis_oris": 0.4}),
     "jaw_open": Expression("jaw_open", jaw_drop_m=0.020),
     "smile_L": Expression("smile_L", {"zygomatic_major_L": 0.6, "zygomatic_minor_L": 0.1,
                                           "levator_anguli_oris_L": 0.2}),

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from .attach import attach_nodes
+from .lips import separate_skin_lips
 from .muscles import MuscleSet, build_muscles, make_linear_muscle, muscles_to_json
 from .tissue import SkinLayer, build_skin_layer, extrude_skin_layer, skin_layer_quality
 
@@ -111,8 +112,11 @@ def build_anatomy(head, *, layers: int = 1, defs=None, placements=None, check_in
         raise InputError(f"layers: expected a whole number >= 1, got {layers!r}")
     check_head(head)
     skin = build_skin_layer(head, layers=layers)
+    lips = separate_skin_lips(head, skin)  # lips that cross at rest moved apart (anatomy/lips.py)
     ms = build_muscles(head, skin, defs=defs, placements=placements)
-    return Anatomy(head=head, skin=skin, muscles=ms, quality=anatomy_report(skin, ms, check_intersections=check_intersections))
+    quality = anatomy_report(skin, ms, check_intersections=check_intersections)
+    quality["lip_separation"] = lips
+    return Anatomy(head=head, skin=skin, muscles=ms, quality=quality)
 
 
 @dataclass

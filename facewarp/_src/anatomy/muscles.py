@@ -10,16 +10,28 @@ any head with FDPs to skin points (face, barycentric) and displaced inward along
   (``t_skull - r``) control points, ``r`` the muscle radius;
 - sphincters (13 orbicularis oris, 14 orbicularis oculi): a closed ring of 4 quadratic rational
   Bezier arcs (8 control points, the arcs' middle points weighted ``w``; ``w = cos 45deg`` gives
-  exact circular quarters) at depth ``(2 t_skin + t_skull) / 2``.
+  exact circular quarters) at depth ``(2 t_skin + t_skull) / 2`` (or ``t_skin + r`` with
+  ``"depth": "under_skin"``: the palpebral orbicularis oculi right under the lid skin).
 
-Anchors (Fig. 6.3) tie the insertions of voluntary muscles to control points of a sphincter:
-the anchor is the mean of its member control points, so the sphincter follows the linear muscles.
+Anchors (Fig. 6.3) tie the insertions of voluntary muscles to control points of a sphincter,
+two-way: in the solver every member moves by the stiffness-weighted mean of the members' own
+displacements (stiffness ``anchor_passive_stiffness + activation``), so an active muscle drags
+the sphincter point and the passive insertions along (``kernels_muscle._muscle_anchors``).
+
+A sphincter may mark ring points ``fixed`` (the lid corners on their palpebral ligaments), give its
+ring centre as a placement rule (``center``; default the mean of its on-curve points) and contract
+toward the plane through that centre that holds the chord of its two fixed points and the face's
+forward axis z (``to_plane``: the lids close across the palpebral fissure instead of shrinking
+toward one point), lie right under the skin (``depth``: ``under_skin``) and glide over a rigid part
+(``glide_part``: the lids over the eyeball ``eye``; each point keeps its distance from the part's
+centre as it contracts). A muscle's ``regions``
+(Fig. 6.4: "the region the muscle is related to") limit the nodes it attaches to; region names
+without a side take the muscle's side (both sides for an unpaired muscle).
 
 Every curve is cut into ellipsoid segments of equal arc length (the zygomatic major into 5, others
-in proportion to their length; :mod:`facewarp._src.anatomy.ellipsoids`), and inner-layer skin
-nodes attach to them by the distance and angle rule of Fig. 6.4
-(:mod:`facewarp._src.anatomy.attach`). The curves themselves are in
-:mod:`facewarp._src.anatomy.bezier`.
+in proportion to their length; :mod:`facewarp._src.anatomy.ellipsoids`), and inner-layer skin nodes
+attach to them by the distance and angle rule of Fig. 6.4 (:mod:`facewarp._src.anatomy.attach`). The
+curves themselves are in :mod:`facewarp._src.anatomy.bezier`.
 """
 
 from __future__ import annotations
@@ -34,7 +46,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..geometry.mesh import SurfacePoints, closest_surface_points
 from ..geometry.surface import vertex_normals
-from .attach import MuscleAttachment, attach_nodes
+from .attach import MuscleAttachment, attach_by_area, sheet_samples
 from .bezier import arc_length_params, bezier_quadratic
 from .ellipsoids import Ellipsoids, segment_ellipsoids
 
@@ -48,6 +60,7 @@ __all__ = [
     "load_muscle_defs",
     "make_linear_muscle",
     "muscles_to_json",
+    "node_regions",
 ]
 
 
@@ -135,7 +148,15 @@ class Muscle:
         phi: Attachment angle phi [rad].
         segments: The ellipsoids.
         attachment: Attached inner-layer nodes (filled by :func:`build_muscles`).
-        contraction: Largest relative shortening at activation 1 (used by the solver).
+        contraction: Largest relative shortening c_max at activation 1 (used by the solver).
+        saturation: beta of the activation curve ``c(a) = c_max (1 - e^(-beta a)) / (1 - e^-beta)``.
+        regions: Template regions whose nodes the muscle may attach to (empty: any).
+        center: Ring centre of a sphincter [m], shape (3,) (None: the mean of its on-curve points).
+        fixed: Sphincter control points that do not contract (tied to bone), indices.
+        center_normal: Unit normal of the plane the sphincter contracts toward, shape (3,), or None
+            (toward the centre point).
+        glide_center: Centre of the rigid part (an eyeball) the sphincter glides over [m], shape
+            (3,), or None.
     """
 
     name: str
@@ -154,6 +175,12 @@ class Muscle:
     segments: Ellipsoids | None = None
     attachment: MuscleAttachment | None = None
     contraction: float = 0.3
+    saturation: float = 0.0
+    regions: tuple = ()
+    center: np.ndarray | None = None
+    fixed: tuple = ()
+    center_normal: np.ndarray | None = None
+    glide_center: np.ndarray | None = None
 
     def curve_points(self, samples: int = 32) -> np.ndarray:
         """The fibre as a polyline [m], shape (q * samples + 1, 3) (closed for a sphincter)."""
@@ -169,17 +196,20 @@ class Muscle:
 
 @dataclass
 class Anchor:
-    """Control points that move together (Fig. 6.3): the anchor is their mean.
+    """Control points that move together (Fig. 6.3), two-way: each member moves by the
+    stiffness-weighted mean of the members' own displacements (``kernels_muscle._muscle_anchors``).
 
     Attributes:
         name: e.g. ``"modiolus_L"``.
-        members: ``(muscle name, control point index)`` pairs.
+        members: ``(muscle name, control point index)`` pairs, the sphincter point first.
         position: Rest position [m], the mean of the members, shape (3,).
+        passive: Stiffness of a member at activation 0, relative to what activation 1 adds.
     """
 
     name: str
     members: list[tuple[str, int]]
     position: np.ndarray
+    passive: float = 0.1
 
 
 @dataclass
@@ -235,7 +265,7 @@ def build_muscles(template, skin_layer=None, *, defs=None, placements=None) -> M
     _segment_muscles(muscles, by, dflt)
     anchors = _anchor_muscles(defs, by)
     if skin_layer is not None:
-        _attach_muscles(muscles, skin_layer)
+        _attach_muscles(muscles, skin_layer, template)
     return MuscleSet(muscles=muscles, anchors=anchors, defaults=dict(dflt))
 
 
@@ -274,10 +304,40 @@ def _place_muscles(template, defs: dict, placements: dict) -> list[Muscle]:
                 w = np.ones(3)
                 curves = np.array([[0, 1, 2]])
             else:
-                depth = 0.5 * (2 * t_skin + t_skull)
+                # Sec. 6.3's ring depth; "under_skin": right below the skin layer (t_skin + r), as
+                # the palpebral orbicularis oculi lies under the thin lid skin on the tarsal plates
+                # (the thesis depth would put it inside the eyeball)
+                rule = m.get("depth", "thesis")
+                if rule not in ("thesis", "under_skin"):
+                    raise InputError(f"muscle {name}: depth must be 'thesis' or 'under_skin', got {rule!r}")
+                depth = 0.5 * (2 * t_skin + t_skull) if rule == "thesis" else t_skin + r
                 sw = float(dflt.get("sphincter_weight", np.sqrt(0.5)))
                 w = np.array([1.0, sw] * 4)
                 curves = _SPHINCTER_CURVES.copy()
+            center = None
+            if kind is not MuscleKind.LINEAR and "center" in m:
+                # the rule's point itself (it may lie in an opening, the palpebral fissure), moved
+                # inward by the ring's mean depth along the ring's mean skin normal
+                crule = _mirror_rule(m["center"], mirror) if side == "R" else m["center"]
+                cn = n.mean(0)
+                cn = cn / np.linalg.norm(cn)
+                center = _rule_target(crule, lm, f"muscle {name} center") - float(depth.mean()) * cn
+            center_normal = None
+            if kind is not MuscleKind.LINEAR and m.get("to_plane", False):
+                fixed = [int(k) for k in m.get("fixed", [])]
+                if len(fixed) < 2:
+                    raise InputError(f"muscle {name}: to_plane needs 2 fixed control points (the chord), got {fixed}")
+                cp = skin - depth[:, None] * n
+                chord = cp[fixed[1]] - cp[fixed[0]]
+                cn = np.cross(chord, [0.0, 0.0, 1.0])  # the plane of the chord and the face's forward z
+                center_normal = cn / np.linalg.norm(cn)
+            glide_center = None
+            if kind is not MuscleKind.LINEAR and "glide_part" in m:
+                part = m["glide_part"] + (f"_{side}" if side else "")
+                parts = getattr(template, "parts", None) or {}
+                if part in parts:  # a head without that part: the ring moves in straight lines
+                    PV = np.asarray(parts[part][0], dtype=np.float64)
+                    glide_center = 0.5 * (PV.min(0) + PV.max(0))
             if (depth <= 0).any() or (depth >= t_skull).any():
                 k = int(np.flatnonzero((depth <= 0) | (depth >= t_skull))[0])
                 raise InputError(
@@ -307,9 +367,50 @@ def _place_muscles(template, defs: dict, placements: dict) -> list[Muscle]:
                             else dflt.get("sphincter_contraction", 0.2),
                         )
                     ),
+                    saturation=float(m.get("saturation", dflt.get("saturation", 0.0))),
+                    regions=_side_regions(m.get("regions", []), side, f"muscle {name}"),
+                    center=center,
+                    center_normal=center_normal,
+                    glide_center=glide_center,
+                    fixed=tuple(int(k) for k in m.get("fixed", [])),
                 )
             )
     return muscles
+
+
+def _side_regions(names, side: str, where: str) -> tuple:
+    """Template regions of a muscle: a name without a side takes the muscle's side (both sides
+    for an unpaired muscle); a side-specific name is mirrored for the right side."""
+    from ..template import REGIONS
+
+    out = []
+    for r in names:
+        if side == "R" and r.endswith("_L"):
+            r = r[:-2] + "_R"
+        if r in REGIONS:
+            out.append(r)
+        elif side and f"{r}_{side}" in REGIONS:
+            out.append(f"{r}_{side}")
+        elif not side and f"{r}_L" in REGIONS:
+            out += [f"{r}_L", f"{r}_R"]
+        else:
+            raise InputError(f"{where}: unknown region {r!r} (known: {', '.join(REGIONS)})")
+    return tuple(out)
+
+
+def node_regions(template, skin_layer) -> np.ndarray:
+    """How much of every skin node lies in each template region: the share of the faces around
+    the head vertex the node was extruded from that belong to the region, shape (n, R) float64
+    (R = len(REGIONS); rows sum to 1). (The attachments themselves count the sheet area of a
+    muscle's regions by triangle, :func:`~facewarp._src.anatomy.attach.attach_by_area`.)"""
+    from ..template import REGIONS
+
+    F = np.asarray(template.faces, dtype=np.int64)
+    fr = np.asarray(template.face_region, dtype=np.int64)
+    vr = np.zeros((len(template.vertices), len(REGIONS)))
+    np.add.at(vr, (F.ravel(), np.repeat(fr, 3)), 1.0)
+    vr /= np.maximum(vr.sum(1, keepdims=True), 1.0)
+    return vr[np.asarray(skin_layer.source_vertex)]
 
 
 def _segment_muscles(muscles: list[Muscle], by: dict[str, Muscle], dflt: dict) -> None:
@@ -357,26 +458,36 @@ def _anchor_muscles(defs: dict, by: dict[str, Muscle]) -> list[Anchor]:
                     raise InputError(f"anchor {a['name']}: muscle {nm!r} is not defined")
                 members.append((nm, 0))
             pos = np.mean([by[n].control_points[i] for n, i in members], axis=0)
-            anchors.append(Anchor(name=a["name"] + (f"_{side}" if side else ""), members=members, position=pos))
+            passive = float(a.get("passive_stiffness", defs.get("defaults", {}).get("anchor_passive_stiffness", 0.1)))
+            if not (np.isfinite(passive) and passive > 0):
+                raise InputError(f"anchor {a['name']}: passive_stiffness must be > 0, got {passive!r}")
+            anchors.append(Anchor(name=a["name"] + (f"_{side}" if side else ""), members=members, position=pos,
+                                  passive=passive))
     return anchors
 
 
-def _attach_muscles(muscles: list[Muscle], skin_layer) -> None:
-    """Step 4: attach the inner-sheet nodes of ``skin_layer`` near each muscle (Fig. 6.4); only
-    nodes on the skin side of the muscle (see :func:`attach_nodes`)."""
-    from scipy.spatial import cKDTree
+def _attach_muscles(muscles: list[Muscle], skin_layer, template=None) -> None:
+    """Step 4: attach the inner-sheet nodes of ``skin_layer`` to each muscle by the share of their
+    sheet area within Fig. 6.4's rule (:func:`~facewarp._src.anatomy.attach.attach_by_area`):
+    only area on the skin side of the muscle and, with the ``template`` (its ``face_region`` and
+    ``frontal``), only area of the muscle's own regions counts."""
+    from ..template import REGIONS
 
-    inner = skin_layer.inner_nodes
-    tree = cKDTree(skin_layer.vertices[inner])
+    X = skin_layer.vertices
+    p = int((np.asarray(skin_layer.layer) == 0).sum())
+    Fi = np.asarray(skin_layer.skin_faces) + skin_layer.layer_count * p  # the inner sheet's triangles
+    samples = sheet_samples(X, Fi, skin_layer.direction)
+    region = None
+    if template is not None and getattr(template, "face_region", None) is not None:
+        fidx = np.flatnonzero(np.asarray(template.frontal, dtype=bool))
+        if len(fidx) == len(Fi):  # skin face j was extruded from frontal face j
+            region = np.asarray(template.face_region)[fidx][samples.face]
     for mu in muscles:
-        e = mu.segments
-        reach = e.radii.max(1) + mu.lam
-        cand = set()
-        for c, rr in zip(e.centers, reach):
-            cand.update(tree.query_ball_point(c, rr))
-        cand = inner[np.array(sorted(cand), dtype=np.int64)] if cand else np.zeros(0, np.int64)
-        mu.attachment = attach_nodes(skin_layer.vertices, e, mu.lam, mu.phi, candidates=cand,
-                                     directions=skin_layer.direction)
+        mask = None
+        if region is not None and mu.regions:
+            mask = np.isin(region, [REGIONS.index(r) for r in mu.regions])
+        mu.attachment = attach_by_area(X, mu.segments, mu.lam, mu.phi, samples, sample_mask=mask,
+                                       directions=skin_layer.direction)
 
 
 def make_linear_muscle(
@@ -451,13 +562,21 @@ def muscles_to_json(ms: MuscleSet) -> dict:
             "phi_deg": float(np.rad2deg(m.phi)),
             "length": m.length(),
             "contraction": m.contraction,
+            "saturation": m.saturation,
+            "regions": list(m.regions),
+            "fixed": list(m.fixed),
+            "center": m.center,
+            "center_normal": m.center_normal,
+            "glide_center": m.glide_center,
+
             "segments": None
             if e is None
             else {"centers": e.centers, "axes": e.axes, "radii": e.radii, "curve": e.curve, "t": e.t},
             "attachment": None
             if a is None
-            else {"nodes": a.nodes, "segment": a.segment, "uv": a.uv, "rest_length": a.rest_length},
+            else {"nodes": a.nodes, "segment": a.segment, "uv": a.uv, "rest_length": a.rest_length, "weight": a.weight},
         }
     for an in ms.anchors:
-        out["anchors"][an.name] = {"members": [list(x) for x in an.members], "position": an.position}
+        out["anchors"][an.name] = {"members": [list(x) for x in an.members], "position": an.position,
+                                   "passive_stiffness": an.passive}
     return out

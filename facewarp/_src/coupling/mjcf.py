@@ -9,7 +9,9 @@
   (+-5 deg); its mass and inertia come from bone density over a mandible geometry (the skull
   surface under the chin and bottom-face regions, taken as a cortical plate of
   :data:`MANDIBLE_PLATE` thickness), its visual meshes are that plate and the lower teeth;
-- position actuators ``jaw_open`` and ``jaw_side`` on both hinges.
+- position actuators ``jaw_open`` and ``jaw_side`` on both hinges;
+- a site :data:`HEAD_SITE` on the cranium at the head's own origin and axes: the frame the skin
+  is simulated in (with ``neck=True`` the cranium body's frame sits at the neck's pivot instead).
 
 Everything is in metres and the head's own frame (y up, +z out of the face), so gravity is
 ``(0, -9.81, 0)``. Meshes are written inline (``<mesh vertex=... face=...>``): the file is
@@ -36,6 +38,7 @@ from ..template.head import REGIONS
 __all__ = [
     "BONE_DENSITY",
     "HEAD_MASS",
+    "HEAD_SITE",
     "JAW_OPEN_RANGE",
     "JAW_SIDE_RANGE",
     "MANDIBLE_PLATE",
@@ -130,6 +133,10 @@ def _visual(name: str, mesh: str, rgba: str) -> str:
             f'density="0" group="1" rgba="{rgba}"/>')
 
 
+HEAD_SITE = "head_origin"
+"""Name of the cranium site at the head's coordinate origin (see the module doc); a user's own
+model can carry one to tell :class:`~facewarp.MujocoJaw` where the head frame is on its body."""
+
 HEAD_MASS = 4.5
 """Mass of the cranium body with the soft tissue on it [kg] (an adult head without the mandible
 is 4-5 kg; Clauser et al. 1969)."""
@@ -191,6 +198,9 @@ def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_he
         ]
     ind = "  " if neck else ""
     head_body += [ind + g for g in cranium_geoms] + [
+        # the head's own coordinate frame (the template's origin and axes) on the cranium: the
+        # pose MujocoJaw hands to the skin, wherever the body's frame sits (the neck's pivot)
+        f'{ind}      <site name="{HEAD_SITE}" size="0.004" rgba="1 0.2 0.2 0"/>',
         f'{ind}      <body name="mandible" pos="{_fmt(pivot)}">',
         f'{ind}        <inertial pos="{_fmt(inert.center - pivot)}" mass="{inert.mass:.7g}" '
         f'fullinertia="{_fmt([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])}"/>',

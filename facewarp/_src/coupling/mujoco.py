@@ -35,6 +35,7 @@ import math
 import numpy as np
 
 from ..core.errors import InputError
+from .mjcf import HEAD_SITE
 
 __all__ = ["MujocoJaw"]
 
@@ -55,7 +56,10 @@ class MujocoJaw:
         model: The ``mujoco.MjModel``.
         data: Its ``mujoco.MjData``.
         mandible: Name of the mandible body.
-        cranium: Name of the cranium body (the head pose); None keeps the head still.
+        cranium: Name of the cranium body (the head pose); None keeps the head still. The head
+            frame is the pose of the cranium's site ``head_site`` where the body has one (the
+            head's origin and axes; :func:`~facewarp.head_mjcf` writes it), else the body's frame.
+        head_site: Name of that site (default ``"head_origin"``).
         open_joint, side_joint: Names of the hinges (``side_joint`` may be None).
         two_way: Apply the skin's reaction to MuJoCo (False: MuJoCo drives the skin only).
 
@@ -64,7 +68,8 @@ class MujocoJaw:
     """
 
     def __init__(self, sim, model, data, *, mandible: str = "mandible", cranium: str | None = "cranium",
-                 open_joint: str = "jaw_open", side_joint: str | None = "jaw_side", two_way: bool = True):
+                 open_joint: str = "jaw_open", side_joint: str | None = "jaw_side", two_way: bool = True,
+                 head_site: str = HEAD_SITE):
         mj = _mujoco()
         self.mj = mj
         self.sim, self.model, self.data = sim, model, data
@@ -86,6 +91,11 @@ class MujocoJaw:
 
         self.mandible = body(mandible)
         self.cranium = body(cranium) if cranium is not None else None
+        self.site = -1  # the head frame's site on the cranium body, if it has one
+        if self.cranium is not None:
+            site = mj.mj_name2id(model, mj.mjtObj.mjOBJ_SITE, head_site)
+            if site >= 0 and int(model.site_bodyid[site]) == self.cranium:
+                self.site = site
         self.joints = [hinge(open_joint)] + ([hinge(side_joint)] if side_joint is not None else [])
         self.qadr = [int(model.jnt_qposadr[j]) for j in self.joints]
         self.dadr = [int(model.jnt_dofadr[j]) for j in self.joints]
@@ -130,9 +140,12 @@ class MujocoJaw:
         return np.array(tau), np.array(k)
 
     def head_pose(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The cranium body's pose (R (3, 3), t (3,) [m]) in the MuJoCo world, or None."""
+        """The head frame's pose (R (3, 3), t (3,) [m]) in the MuJoCo world: x_world = R x_head + t;
+        None without a cranium."""
         if self.cranium is None:
             return None
+        if self.site >= 0:
+            return self.data.site_xmat[self.site].reshape(3, 3).copy(), self.data.site_xpos[self.site].copy()
         return self.data.xmat[self.cranium].reshape(3, 3).copy(), self.data.xpos[self.cranium].copy()
 
     def exchange(self) -> None:

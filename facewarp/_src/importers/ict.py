@@ -200,15 +200,17 @@ def _mouth_interior(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return inside
 
 
-def _crease_faces(V: np.ndarray, F: np.ndarray, frontal: np.ndarray, *, min_cos: float = -0.5,
+def _crease_faces(V: np.ndarray, F: np.ndarray, frontal: np.ndarray, *, min_cos: float = 0.0,
                   rounds: int = 10) -> np.ndarray:
     """Frontal faces around creases where the skin folds back on itself, mask (m,).
 
-    A vertex whose frontal triangles face opposite ways (two normals more than 120 degrees
-    apart) has no inward direction, so the skin layer cannot be extruded there. In the closed
-    ICT mouth this happens where the lips are pressed together at the corners, between the inner
-    and the outer lip corners. Those triangles are removed from the frontal face, repeatedly,
-    until no such vertex is left.
+    A vertex whose frontal triangles face opposite ways (two normals more than 90 degrees
+    apart) has no usable inward direction, so the skin layer cannot be extruded there. In the
+    closed ICT mouth this happens where the lips are pressed together at the corners, between
+    the inner and the outer lip corners. Those triangles are removed from the frontal face,
+    repeatedly, until no such vertex is left. (At 120 degrees the folds left at the lip corners
+    extrude into tets of ~0.05 mm^3 that a smile flattens before full activation; the line
+    search then stalls there: lip corner 8.6 mm instead of 11.4 at zygomatic major 1.0.)
     """
     from ..geometry.surface import face_normals
 
@@ -229,6 +231,55 @@ def _crease_faces(V: np.ndarray, F: np.ndarray, frontal: np.ndarray, *, min_cos:
         if not bad_faces:
             break
         keep[np.concatenate(bad_faces)] = False
+    return frontal & ~keep
+
+
+def _loose_faces(F: np.ndarray, frontal: np.ndarray) -> np.ndarray:
+    """Frontal faces that hang on the rest by a vertex or not at all, mask (m,).
+
+    Removing creases and thin faces can leave single triangles touching the frontal face at one
+    vertex only (bow-tie vertices at the lip corners, lid corners and nostrils) or not at all.
+    Extruded, such a triangle is a prism joined to the skin layer along the one edge under that
+    vertex (a hinge) or nowhere: a motion that costs no elastic energy, which makes the implicit
+    solver's factorised Hessian near-singular (its steps reach metres and every line search
+    fails, so the face barely follows the muscles). Kept are the largest edge-connected
+    component and, at each vertex, the largest fan of triangles joined through edges at that
+    vertex; repeated until nothing changes.
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    keep = frontal.copy()
+    n = int(F.max()) + 1
+    while keep.any():
+        idx = np.flatnonzero(keep)
+        Ff = F[idx]
+        m = len(idx)
+        # half-edge 3 f + e runs from corner 3 f + e to corner 3 f + (e + 1) % 3
+        a, b = Ff.ravel(), Ff[:, [1, 2, 0]].ravel()
+        key = np.minimum(a, b) * n + np.maximum(a, b)
+        o = np.argsort(key, kind="stable")
+        pair = np.flatnonzero(key[o][1:] == key[o][:-1])
+        h1, h2 = o[pair], o[pair + 1]  # half-edges of two faces on one edge
+        faces = sp.coo_matrix((np.ones(len(h1)), (h1 // 3, h2 // 3)), shape=(m, m))
+        _, comp = connected_components(faces, directed=False)
+        loose = comp != np.argmax(np.bincount(comp))
+        # corners of one vertex joined across a shared edge (both ends of the edge)
+        nxt = lambda h: 3 * (h // 3) + (h % 3 + 1) % 3  # noqa: E731
+        same = a[h1] == a[h2]
+        c1 = np.concatenate([h1, nxt(h1)])
+        c2 = np.concatenate([np.where(same, h2, nxt(h2)), np.where(same, nxt(h2), h2)])
+        _, fan = connected_components(sp.coo_matrix((np.ones(len(c1)), (c1, c2)), shape=(3 * m, 3 * m)),
+                                      directed=False)
+        vf, size = np.unique(np.stack([a, fan], 1), axis=0, return_counts=True)  # (vertex, fan) pairs
+        order = np.lexsort((-size, vf[:, 0]))  # by vertex, its largest fan first
+        first = order[np.r_[True, vf[order[1:], 0] != vf[order[:-1], 0]]]
+        big = np.full(n, -1, np.int64)
+        big[vf[first, 0]] = vf[first, 1]
+        loose[np.flatnonzero(fan != big[a]) // 3] = True
+        if not loose.any():
+            break
+        keep[idx[loose]] = False
     return frontal & ~keep
 
 
@@ -463,8 +514,12 @@ def import_ict(ict_dir: str | os.PathLike, *, levels: int = 3, device: str = "cp
     creased = _crease_faces(V, F, frontal)
     frontal[creased] = False  # the lips pressed together at the corners
     thickness = _vertex_thickness(F, region, n, THICKNESS_FACTOR)
-    thin = _thin_faces(V, F, frontal, thickness)
-    frontal[thin] = False  # the lid margins curling into the eye sockets, the nostril rims
+    while True:
+        frontal[_loose_faces(F, frontal)] = False  # triangles left hanging by a vertex
+        thin = _thin_faces(V, F, frontal, thickness)
+        if not thin.any():
+            break
+        frontal[thin] = False  # the lid margins curling into the eye sockets, the nostril rims
     cv = closest_point(AV, t.faces, V, device=device)
     skull = np.einsum("kc,kc->k", cv.bary, np.asarray(t.skull_depth)[t.faces[cv.face]])
     mv = closest_point(AV, t.faces, V * _MIRROR, device=device)  # the mirror image's depth

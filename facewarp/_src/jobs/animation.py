@@ -23,8 +23,8 @@ import numpy as np
 from ..core.errors import InputError
 from ..expressions import Timeline
 
-__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "UsdAnimation", "check_usd_path", "part_transforms",
-           "play_timeline", "sim_controls"]
+__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "UsdAnimation", "check_usd_path", "part_points",
+           "part_transforms", "peak_frames", "play_timeline", "sim_controls"]
 
 USD_SUFFIXES = (".usda", ".usdc", ".usdz")
 """File types of USD animations: text, binary crate, package."""
@@ -76,6 +76,32 @@ def part_transforms(fr, jaw_angles) -> dict:
         else:
             out[name] = _rigid_matrix(lambda P, a=a: jaw.apply(P, np.full(len(P), a), u, v))
     return out
+
+
+def part_points(fr, jaw_angles) -> dict:
+    """Vertices [m] of every rigid part of ``fr`` at ``jaw_angles`` (u, v) [rad]: name -> (k, 3)
+    float64 (:func:`part_transforms` applied to the parts at rest)."""
+    out = {}
+    for name, M in part_transforms(fr, jaw_angles).items():
+        V = np.asarray(fr.parts[name][0], dtype=np.float64)
+        out[name] = V @ M[:3, :3] + M[3, :3]
+    return out
+
+
+def peak_frames(timeline: Timeline, seconds: float, fps: float) -> list[tuple[str, int]]:
+    """(name, frame) of the peak of each segment of ``timeline`` that starts within ``seconds``.
+
+    The peak is the end of the segment's hold (the expression at full weight and longest held,
+    before its release and before the next segment of a sequence ramps in), or the last frame
+    where the run ends earlier; frame ``k`` is at ``k / fps`` s, frame 0 the rest.
+    """
+    last = int(round(seconds * fps))
+    out = []
+    for s in timeline.segments:
+        if s.start < seconds:
+            held = int(np.floor((s.start + s.attack + s.hold) * fps + 1e-9))
+            out.append((s.expression.name, min(last, max(1, held))))
+    return out or [("end", last)]
 
 
 def sim_controls(sim) -> tuple[np.ndarray, np.ndarray]:

@@ -12,8 +12,9 @@
    8 s with the relaxation after it, or squeezed into ``seconds``), simulated and streamed into
    ``animation.usdc`` frame by frame;
 6. pictures: ``adapted_head.png`` (the adapted head coloured by its vertex error), ``expressions.png``
-   (rest and the peak of each expression, front and three-quarter views over a displacement heat
-   map), ``sequence.gif`` (the whole sequence, front view, 15 fps);
+   (per expression the whole head at rest and at its peak, front and three-quarter views, over a
+   displacement heat map; :func:`~facewarp.render.expression_sheet`), ``sequence.gif`` (the whole
+   sequence, the whole head from the front, 15 fps);
 7. ``report.json``: adaptation errors, anatomy quality, simulation speed, timings, files.
 """
 
@@ -35,12 +36,13 @@ from ..geometry.mesh import load_mesh, save_obj
 from ..physics.face_rig import load_face_rig
 from ..present.animation import FaceView, label_grid, save_gif
 from ..present.render import colormap, render_mesh, save_png
+from ..present.strips import expression_sheet, sheet_font_size
 from ..present.template import colored_scene
 from ..sim.simulator import FaceSimulator
 from ..template.head import FRONTAL_REGIONS, REGIONS, default_template
 from ..template.synthetic import synthetic_scan
 from .adapt import adapt_files
-from .animation import JAWS, UsdAnimation, part_transforms, play_timeline, sim_controls
+from .animation import JAWS, UsdAnimation, part_points, part_transforms, peak_frames, play_timeline, sim_controls
 from .checks import check_out_dir, make_out_dir
 from .face import build_head_files
 
@@ -54,6 +56,9 @@ QUICK_SECONDS = 0.2
 
 GIF_FPS = 15.0
 """Frames per second of ``sequence.gif`` (every other simulated frame at 30 fps)."""
+
+GIF_FACE_HEIGHT = 220
+"""Height [px] of the face (hairline to chin) in ``sequence.gif`` (the whole head is about 1.8 times that)."""
 
 DEMO_STAGES = ("template", "scan", "adapt", "anatomy", "simulate", "pictures", "report")
 """The steps ``progress`` is called with, in order."""
@@ -78,16 +83,6 @@ def demo_timeline(seconds: float | None = None) -> tuple[Timeline, float]:
     k = seconds / total
     return Timeline([replace(s, start=s.start * k, attack=s.attack * k, hold=s.hold * k, release=s.release * k)
                      for s in full.segments]), float(seconds)
-
-
-def _peaks(timeline: Timeline, seconds: float, fps: float) -> list[tuple[str, int]]:
-    """(label, frame) of rest and of each segment's middle of hold that lies within ``seconds``."""
-    out = [("rest", 0)]
-    for s in timeline.segments:
-        t = s.start + s.attack + 0.5 * s.hold
-        if t <= seconds:
-            out.append((s.expression.name, int(round(t * fps))))
-    return out
 
 
 def _stats_mm(e: np.ndarray) -> dict:
@@ -135,7 +130,7 @@ def _adapted_picture(head, error: np.ndarray, path: Path, *, device: str, size: 
 
 
 class _KeyFrames:
-    """Keeps the surface and part transforms of a few frames (the expression strip)."""
+    """Keeps the surface and part vertices of a few frames (the expression sheet)."""
 
     def __init__(self, fr, frames: dict):
         self.fr, self.want = fr, frames
@@ -145,7 +140,7 @@ class _KeyFrames:
     def __call__(self, sim, k: int, t: float) -> None:
         if k in self.want.values():
             self.points[k] = sim.surface()
-            self.parts[k] = part_transforms(self.fr, sim_controls(sim)[1])
+            self.parts[k] = part_points(self.fr, sim_controls(sim)[1])
 
 
 class _GifFrames:
@@ -160,40 +155,26 @@ class _GifFrames:
             self.images.append(self.view.render(sim.surface(), part_transforms(self.fr, sim_controls(sim)[1])))
 
 
-def _face_bounds(view: FaceView, point_sets, margin: float = 0.004) -> np.ndarray:
-    """The box (2, 3) [m] around the cropped face of ``view`` over all ``point_sets``."""
-    P = np.concatenate([np.asarray(P)[view.used] for P in point_sets])
-    return np.stack([P.min(0) - margin, P.max(0) + margin])
-
-
-def _jaw_bounds(fr, view: FaceView, timeline: Timeline, seconds: float, fps: float) -> np.ndarray:
-    """The box around the face at rest and with the jaw at the widest opening of ``timeline``
-    (the head moved kinematically by its Eq. 6.4.9 amounts): the GIF's fixed framing."""
+def _jaw_bounds(fr, timeline: Timeline, seconds: float, fps: float) -> list:
+    """The head at rest and with the jaw at the widest opening of ``timeline`` (moved kinematically
+    by its Eq. 6.4.9 amounts): what the GIF's fixed camera frames."""
     times = np.arange(int(round(seconds * fps)) + 1) / fps
     timeline = timeline.for_head(fr)  # chin drops -> this head's jaw angles
     e = max((timeline.sample(float(t)) for t in times), key=lambda x: x.jaw_u)
     V = fr.head_vertices
     opened = fr.jaw.apply(V, fr.vertex_jaw, e.jaw_u, e.jaw_v) if fr.vertex_jaw is not None else V
-    return _face_bounds(view, [V, opened], margin=0.008)
+    return [V, opened]
 
 
-def _expression_strip(fr, landmarks, keys: _KeyFrames, labels: list, path: Path, *, device: str, size: int) -> float:
-    """``expressions.png``: rest and peaks, front and three-quarter over the displacement heat map; returns the heat top [m]."""
-    order = [k for _, k in labels]
-    rest = fr.head_vertices
-    disp = {k: np.linalg.norm(keys.points[k] - rest, axis=1) for k in order}
-    top = max(1e-3, float(np.ceil(max(float(d.max()) for d in disp.values()) * 1e3)) * 1e-3)
-    probe = FaceView(rest, fr.head_faces, landmarks, fr.parts, device=device)
-    box = _face_bounds(probe, [keys.points[k] for k in order])
-    front = FaceView(rest, fr.head_faces, landmarks, fr.parts, view="front", size=size, bounds=box, device=device)
-    quarter = FaceView(rest, fr.head_faces, landmarks, fr.parts, view="three_quarter", size=size, bounds=box,
-                       device=device)
-    rows = [[v.render(keys.points[k], keys.parts[k]) for k in order] for v in (front, quarter)]
-    rows.append([front.render(keys.points[k], keys.parts[k], heat=disp[k], heat_max=top) for k in order])
-    grid = label_grid(rows, column_labels=[name for name, _ in labels],
-                      row_labels=["front", "3/4", "moved"])
-    save_png(path, grid, title="Fig. 6.16 sequence: rest and the peak of each expression",
-             colorbar=(0.0, top * 1e3, "displacement from rest [mm]"))
+def _expression_sheet(fr, landmarks, keys: _KeyFrames, labels: list, path: Path, *, device: str,
+                      face_height: int, fps: float) -> float:
+    """``expressions.png``: per expression rest | peak, front and three-quarter over the displacement
+    heat map (:func:`~facewarp.render.expression_sheet`); returns the heat top [m]."""
+    shots = [(name, keys.points[k], keys.parts[k], f"peak, {k / fps:.2f} s") for name, k in labels]
+    sheet, top = expression_sheet(fr.head_vertices, fr.head_faces, landmarks, dict(fr.parts), shots,
+                                  face_height=face_height, columns=3, device=device)
+    save_png(path, sheet, title="Fig. 6.16 sequence: rest and peak of each expression",
+             colorbar=(0.0, top * 1e3, "displacement from rest [mm]"), font_size=sheet_font_size(sheet))
     return top
 
 
@@ -223,6 +204,7 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
         raise InputError(f"fps: expected a finite number > 0, got {fps!r}")
     timeline, seconds = demo_timeline(QUICK_SECONDS if quick and seconds is None else seconds)
     size = 200 if quick else 360
+    face_height = 160 if quick else 400
     make_out_dir(out)
     timings: dict = {}
 
@@ -260,11 +242,11 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
     fr = load_face_rig(build_dir)
     sim = FaceSimulator(fr, device=device, fps=fps)
     landmarks = dict(zip((str(k) for k in fr.fdp_ids), sim.fdp_points()))
-    labels = _peaks(timeline, seconds, fps)
+    labels = peak_frames(timeline, seconds, fps)
     keys = _KeyFrames(fr, dict(labels))
-    probe = FaceView(fr.head_vertices, fr.head_faces, landmarks, fr.parts, device=device)
-    gif_view = FaceView(fr.head_vertices, fr.head_faces, landmarks, fr.parts, size=160 if quick else 240,
-                        bounds=_jaw_bounds(fr, probe, timeline, seconds, fps), device=device)
+    gif_view = FaceView(fr.head_vertices, fr.head_faces, landmarks, fr.parts,
+                        face_height=100 if quick else GIF_FACE_HEIGHT, bounds=_jaw_bounds(fr, timeline, seconds, fps),
+                        supersample=1, device=device)
     gif = _GifFrames(gif_view, fr, int(round(fps / GIF_FPS)))
     with UsdAnimation(out / "animation.usdc", sim) as usd:
         sim_stats = play_timeline(sim, timeline, seconds, on_frame=(lambda s, k, tt: usd.add(s, tt), keys, gif),
@@ -274,7 +256,8 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
     step("pictures")
     _adapted_picture(head, e_v, out / "adapted_head.png", device=device, size=size)
     labels = [(name, k) for name, k in labels if k in keys.points]
-    heat_top = _expression_strip(fr, landmarks, keys, labels, out / "expressions.png", device=device, size=size)
+    heat_top = _expression_sheet(fr, landmarks, keys, labels, out / "expressions.png", device=device,
+                                 face_height=face_height, fps=fps)
     save_gif(out / "sequence.gif", gif.images, fps=fps / gif.every)
     t = lap("pictures", t)
 
@@ -282,7 +265,7 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
     d = adapt_report["distance_to_scan_m"]
     report = {
         "demo": {"seed": int(seed), "seconds": seconds, "fps": float(fps), "device": device, "jaw": jaw,
-                 "quick": bool(quick), "sequence": [name for name, _ in labels[1:]]},
+                 "quick": bool(quick), "sequence": [name for name, _ in labels]},
         "scan": {"vertex_count": int(len(scan.vertices)), "face_count": int(len(scan.faces)), "units": scan.units,
                  "landmark_count": len(scan.landmarks), "marker_count": len(scan.markers),
                  "pose": {"rotation_deg": float(np.degrees(np.arccos(np.clip((np.trace(scan.rotation) - 1) / 2, -1, 1)))),

@@ -22,9 +22,9 @@ from ..expressions import timeline_from_spec
 from ..physics.face_rig import face_rig_from_anatomy, load_face_rig, save_face_rig
 from ..present.anatomy import render_anatomy
 from ..present.render import save_png
-from ..present.strips import displacement_max, render_strip
+from ..present.strips import frames_sheet, sheet_font_size
 from ..sim.simulator import FaceSimulator, save_frames_npz
-from .animation import JAWS, USD_SUFFIXES, UsdAnimation, check_usd_path, jaw_driver, play_timeline
+from .animation import JAWS, USD_SUFFIXES, UsdAnimation, check_usd_path, jaw_driver, peak_frames, play_timeline
 from .checks import check_out_dir, make_out_dir
 
 __all__ = ["MAX_FRAMES", "USD_NAME", "build_files", "build_head_files", "simulate_files"]
@@ -98,7 +98,8 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
     skin, the expressions' jaw angles its actuator targets) or ``"kinematic"`` (Eq. 6.4.9 angles
     imposed directly).
 
-    ``out`` is a folder (``frames.npz``, ``frames.png``, and with ``usd`` the USD animation
+    ``out`` is a folder (``frames.npz``, ``frames.png``: per expression the whole head at rest and
+    at its peak, front and three-quarter, over its displacement heat map; and with ``usd`` the USD animation
     :data:`USD_NAME`, streamed while simulating) or a ``.usda`` / ``.usdc`` / ``.usdz`` file: then
     only that animation is written, streamed frame by frame with no frame kept in memory and no
     frame cap (:mod:`~facewarp._src.jobs.animation`). With ``tets`` the USD also holds the skin's
@@ -141,12 +142,9 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
                          jaw=jaw_driver(sim, jaw, mjcf=mjcf) if jaw == "mujoco" else None)
     save_frames_npz(out / "frames.npz", frames)
     nf = len(frames.times)
-    idx = np.unique(np.linspace(0, nf - 1, min(6, nf)).round().astype(int))
-    hmax = displacement_max(frames, idx)
-    strip = render_strip(frames, idx, device=device, heat_max=hmax)
-    labels = ", ".join(f"{frames.times[k]:.2f} s" for k in idx)
-    save_png(out / "frames.png", strip, title=f"{Path(str(expression)).name}: {labels}",
-             colorbar=(0.0, hmax * 1e3, "displacement from rest [mm]"))
+    sheet, hmax = frames_sheet(frames, peak_frames(timeline, seconds, fps), device=device)
+    save_png(out / "frames.png", sheet, title=f"{Path(str(expression)).name}: rest and peak",
+             colorbar=(0.0, hmax * 1e3, "displacement from rest [mm]"), font_size=sheet_font_size(sheet))
     written = ["frames.npz", "frames.png"]
     if usd:
         written.append(USD_NAME)

@@ -141,7 +141,7 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
                                   progress=frame_progress)
         view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, device=device)
         used = np.concatenate([P[view.used] for P, _ in track.frames.values()])
-        view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, device=device,
+        view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, aspect=0.6, device=device,
                         bounds=np.stack([used.min(0) - 0.004, used.max(0) + 0.004]))
         rows.append([view.render(*track.frames[k]) for _, k in labels if k in track.frames])
         per_head.append({

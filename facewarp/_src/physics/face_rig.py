@@ -26,7 +26,7 @@ from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..anatomy.jaw import JawKinematic
 from .muscle_stage import PIVOT_CENTER, PIVOT_FIXED, MuscleRig
-from ..template import REGIONS
+from ..template import FRONTAL_REGIONS, REGIONS
 
 __all__ = ["BONE_REGIONS", "MUSCLE_STIFFNESS", "FaceRig", "build_face", "face_rig_from_anatomy", "load_face_rig", "muscle_rig",
            "node_jaw_amounts", "save_face_rig"]
@@ -144,7 +144,7 @@ def _vertex_region_amounts(head, jaw: JawKinematic) -> np.ndarray:
 
     cut = np.zeros(n, bool)
     cut[boundary_vertices(F, n)] = True
-    cut &= neck_v & (head.vertices[:, 1] < np.percentile(head.vertices[neck_v, 1], 20))
+    cut &= neck_v  # the whole neck cut stays with the body, however tilted (an adapted or imported neck)
     out[cut] = 0.0
     # the neck faces took 0 in the mean above: border vertices keep only the frontal values
     frontal_only = np.bincount(F[~neck_faces].ravel(), weights=amt.reshape(-1, 3)[~neck_faces].ravel(), minlength=n)
@@ -179,10 +179,18 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
     v_amount = _vertex_region_amounts(head, jaw)
 
     # --- boundary conditions
+    # the border of the simulation domain is fixed where it meets the skin that rides the skull
+    # (scalp, ears, neck: the regions outside FRONTAL_REGIONS). Faces of frontal regions left out
+    # of the domain (an imported head's mouth interior behind the inner lip contour, the lip
+    # creases at the corners, the lid margins and nostril rims, where no skin layer could be
+    # extruded) are openings, not attachments: their border stays free, as the default
+    # template's open mouth is (measured on the imported ICT head: with that border fixed, the
+    # lip corner sat 1.8 mm from a fixed node and the full smile moved it 0.5 mm instead of 15)
     frontal_v = np.zeros(len(head.vertices), bool)
     frontal_v[np.unique(head.faces[head.frontal])] = True
+    outer_region = ~np.isin(head.face_region, [REGIONS.index(r) for r in FRONTAL_REGIONS])
     other_v = np.zeros(len(head.vertices), bool)
-    other_v[np.unique(head.faces[~head.frontal])] = True
+    other_v[np.unique(head.faces[~head.frontal & outer_region])] = True
     border_v = frontal_v & other_v
     src = skin.source_vertex
     fixed = border_v[src]
@@ -206,7 +214,8 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
     # --- muscles (packed by the anatomy stage, with Eq. 6.4.9 jaw amounts)
     rig = muscle_rig(ms, stiffness=muscle_stiffness, head=head, vertex_amount=v_amount)
     # a node tied to several muscles (the modiolus at the lip corner has five) shares k_m among
-    # them, so no node is pulled by more than one muscle's stiffness in total
+    # them, so no node is pulled by more than one muscle's stiffness in total (the muscle stage
+    # splits it by the attachments' area weights, MuscleRig.weighted_stiffness)
     per_node = np.bincount(rig.att_node, minlength=len(skin.vertices))
     rig.att_stiffness = rig.att_stiffness / np.maximum(per_node[rig.att_node], 1)
 
@@ -229,8 +238,9 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
 
 
 _RIG_FIELDS = ("activation_index", "contraction", "center", "center_jaw", "ctrl_rest", "ctrl_muscle", "ctrl_pivot",
-               "ctrl_jaw", "curve_ctrl", "curve_weight", "seg_curve", "seg_t", "seg_rest_radii", "anchor_dst",
-               "anchor_src", "anchor_weight", "att_node", "att_seg", "att_uv", "att_rest_length", "att_stiffness")
+               "ctrl_jaw", "curve_ctrl", "curve_weight", "seg_curve", "seg_t", "seg_rest_radii", "anchor_ctrl",
+               "anchor_group", "anchor_passive", "att_node", "att_seg", "att_uv", "att_rest_length", "att_stiffness",
+               "att_weight", "saturation", "center_normal", "glide", "glide_center")
 _FACE_FIELDS = ("head_vertices", "head_faces", "nodes", "tets", "layer", "surface_vertex", "fixed", "held", "jaw_nodes",
                 "jaw_amount", "support_nodes", "support_normal", "support_amount", "jaw_pivot", "jaw_u", "jaw_v", "lip_corners", "mouth_center", "fdp_ids", "fdp_part",
                 "fdp_face", "fdp_bary", "vertex_jaw")
@@ -262,6 +272,8 @@ def load_face_rig(path) -> FaceRig:
         raise InputError(f"{path}: not found (HEAD must be a `facewarp build` output folder)")
     try:
         z = np.load(path, allow_pickle=False)
+        if "rig_anchor_ctrl" not in z:
+            raise InputError(f"{path}: a face rig of an older facewarp (one-way anchors); run `facewarp build` again")
         rig = MuscleRig(names=[str(n) for n in z["rig_names"]], **{k: z[f"rig_{k}"] for k in _RIG_FIELDS})
         parts = {str(k): (z[f"part_{k}_V"], z[f"part_{k}_F"]) for k in z["part_names"]}
         part_jaw = {str(k): float(z[f"part_{k}_jaw"]) for k in z["part_names"]}
@@ -292,9 +304,10 @@ def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=N
 
     Control points are numbered muscle by muscle in ``muscles.muscles`` order. Linear muscles:
     the insertion and the middle point contract toward the attachment, which stays on the bone
-    (Sec. 6.4.1); sphincters contract toward their ring centre (mean of the 4 on-curve points).
-    Each anchor (Fig. 6.3) moves its sphincter control point by the mean displacement of its
-    linear insertions.
+    (Sec. 6.4.1); sphincters contract toward their ring centre (the muscle's ``center``, by
+    default the mean of the 4 on-curve points), but for their ``fixed`` points. Each anchor
+    (Fig. 6.3) ties its sphincter control point and linear insertions two-way (every member moves
+    by their stiffness-weighted mean displacement, ``kernels_muscle._muscle_anchors``).
 
     Args:
         muscles: Built muscles (with segments and attachments).
@@ -329,7 +342,8 @@ def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=N
             pivot[o : o + 3] = [o + 2, o + 2, PIVOT_FIXED]
         else:
             pivot[o : offs[i + 1]] = PIVOT_CENTER
-            center[i] = m.control_points[0::2].mean(0)
+            pivot[o + np.asarray(m.fixed, dtype=np.int64)] = PIVOT_FIXED
+            center[i] = m.control_points[0::2].mean(0) if m.center is None else m.center
     ctrl_jaw = np.zeros(len(ctrl))
     center_jaw = np.zeros(M)
     if vertex_amount is not None:
@@ -346,7 +360,7 @@ def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=N
     elif jaw is not None:
         if head is None:
             raise InputError("muscle_rig: jaw amounts need the head (its face regions)")
-        from ..template import REGIONS
+        from ..template import FRONTAL_REGIONS, REGIONS
 
         for i, m in enumerate(ms):
             regions = [REGIONS[r] for r in np.asarray(head.face_region)[m.skin_points.face]]
@@ -359,13 +373,12 @@ def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=N
     seg_t = np.concatenate([m.segments.t for m in ms]) if M else np.zeros((0, 2))
     seg_radii = np.concatenate([m.segments.radii for m in ms]) if M else np.zeros((0, 3))
     by = {m.name: i for i, m in enumerate(ms)}
-    dst, src, wgt = [], [], []
-    for a in muscles.anchors:
-        (sph, k), *ins = a.members
-        for name, j in ins:
-            dst.append(offs[by[sph]] + k)
-            src.append(offs[by[name]] + j)
-            wgt.append(1.0 / len(ins))
+    a_ctrl, a_group, a_passive = [], [], []
+    for g, a in enumerate(muscles.anchors):
+        for name, j in a.members:
+            a_ctrl.append(offs[by[name]] + j)
+            a_group.append(g)
+            a_passive.append(float(getattr(a, "passive", 0.1)))
     att = [m.attachment for m in ms]
     if any(a is None for a in att):
         raise InputError("muscle_rig: build the muscles with a skin layer first (no attachments)")
@@ -384,14 +397,21 @@ def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=N
         seg_curve=seg_curve.astype(np.int64),
         seg_t=seg_t,
         seg_rest_radii=seg_radii,
-        anchor_dst=np.asarray(dst, dtype=np.int64),
-        anchor_src=np.asarray(src, dtype=np.int64),
-        anchor_weight=np.asarray(wgt, dtype=np.float64),
+        anchor_ctrl=np.asarray(a_ctrl, dtype=np.int64),
+        anchor_group=np.asarray(a_group, dtype=np.int64),
+        anchor_passive=np.asarray(a_passive, dtype=np.float64),
         att_node=np.concatenate([a.nodes for a in att]).astype(np.int64) if M else np.zeros(0, int),
         att_seg=np.concatenate([a.segment + soffs[i] for i, a in enumerate(att)]).astype(np.int64) if M else np.zeros(0, int),
         att_uv=np.concatenate([a.uv for a in att]) if M else np.zeros((0, 2)),
         att_rest_length=np.concatenate([a.rest_length for a in att]) if M else np.zeros(0),
         att_stiffness=np.full(sum(len(a) for a in att), float(stiffness)),
+        att_weight=np.concatenate([a.weight for a in att]) if M else np.zeros(0),
+        saturation=np.array([getattr(m, "saturation", 0.0) for m in ms], dtype=np.float64),
+        center_normal=np.array([np.zeros(3) if getattr(m, "center_normal", None) is None else m.center_normal
+                                for m in ms], dtype=np.float64).reshape(M, 3),
+        glide=np.array([getattr(m, "glide_center", None) is not None for m in ms], dtype=np.int64),
+        glide_center=np.array([np.zeros(3) if getattr(m, "glide_center", None) is None else m.glide_center
+                               for m in ms], dtype=np.float64).reshape(M, 3),
     )
     rig.validate()
     return rig

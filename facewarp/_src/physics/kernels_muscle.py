@@ -4,11 +4,20 @@ Per substep, quasi-statically (Sec. 6.4.4):
 
 1. ``_muscle_controls``: every control point starts from its rest position moved by the jaw
    (Eq. 6.4.9 amount) and contracts: a linear muscle's insertion and middle point move toward
-   its attachment by ``activation * max_contraction`` of their distance; a sphincter's points
-   move toward the ring centre.
-2. ``_muscle_anchors``: anchor points (Fig. 6.3) add the displacement of the linear-muscle
-   control points they are tied to (weights sum to 1 per anchor), so sphincters follow the
-   voluntary muscles that pull on them.
+   its attachment by the fraction ``c(a)`` of their distance; a sphincter's points move toward
+   the ring centre, or toward a plane through it (the lids close toward the plane of the
+   palpebral fissure: the points move along its normal only); a point marked fixed (a lid corner
+   on its palpebral ligament) stays. ``c(a) = c_max (1 - exp(-beta a)) / (1 - exp(-beta))`` is
+   the saturating activation curve (``beta`` per muscle, 0 = linear ``c_max a``;
+   :func:`_contraction`). A sphincter that glides over a rigid part (the lids over the eyeball)
+   keeps each point's rest distance from the part's centre g: its straight-line target ``y``
+   goes to ``g + |x - g| (y - g) / |y - g|``, so the lids slide over the eyeball, not into it.
+2. ``_muscle_anchors``: anchors (Fig. 6.3) tie a sphincter control point and the insertions of
+   the voluntary muscles that meet there, two-way: every member moves by the common
+   displacement ``D = sum_j k_j d_j / sum_j k_j`` (``d_j`` its own contraction's displacement,
+   ``k_j = k_passive + a_j`` its stiffness, rising with its activation), the equilibrium of
+   springs of stiffness ``k_j`` from each member's own target to the anchor. An active muscle
+   drags the sphincter and the passive muscles along; two active ones share by stiffness.
 3. ``_muscle_segments``: each segment's ellipsoid is rebuilt from its (rational) quadratic Bezier
    curve: x along the chord (radius 1.05/2 of it), y perpendicular in the control-point plane,
    z = x cross y; y and z radii scale by sqrt(rx0 / rx), so the volume
@@ -16,7 +25,8 @@ Per substep, quasi-statically (Sec. 6.4.4):
 4. ``_muscle_forces``: each skin attachment's point on its ellipsoid is re-evaluated from its
    surface parameters (u, v) and the spring of Eq. 6.4.1,
    ``f = k_m cos(theta) (|p_m - p_s| - l0) (p_m - p_s) / |p_m - p_s|``, with theta the angle
-   between the spring and the fibre, is added to the skin node.
+   between the spring and the fibre, is added to the skin node. A sphincter squeezes across its
+   fibres (its ring shrinks radially), so its springs take the cosine as 1.
 5. ``_jaw_targets``: held / fixed nodes carried by the jaw get the jaw-rotated rest position as
    their target.
 6. ``_jaw_carry`` / ``_jaw_remember``: the free nodes of the jaw regions move with the change
@@ -44,6 +54,16 @@ def _jaw_move(p: wp.vec3, amount: float, pivot: wp.vec3, u_axis: wp.vec3, v_axis
     return _rotate_about(q, pivot, v_axis, angles[1] * amount)
 
 
+@wp.func
+def _contraction(a: float, c_max: float, beta: float):
+    # Saturating activation curve: c(a) = c_max (1 - e^(-beta a)) / (1 - e^(-beta)), a clamped to
+    # [0, 1]; c(0) = 0, c(1) = c_max, slope c_max beta / (1 - e^-beta) at 0; beta -> 0 is linear.
+    x = wp.clamp(a, 0.0, 1.0)
+    if beta < 1.0e-4:
+        return c_max * x
+    return c_max * (1.0 - wp.exp(-beta * x)) / (1.0 - wp.exp(-beta))
+
+
 @wp.kernel
 def _muscle_controls(
     # Model:
@@ -53,8 +73,12 @@ def _muscle_controls(
     ctrl_jaw: wp.array(dtype=float),
     muscle_activation: wp.array(dtype=wp.int32),
     muscle_contraction: wp.array(dtype=float),
+    muscle_saturation: wp.array(dtype=float),
     muscle_center: wp.array(dtype=wp.vec3),
     muscle_center_jaw: wp.array(dtype=float),
+    muscle_center_normal: wp.array(dtype=wp.vec3),
+    muscle_glide: wp.array(dtype=wp.int32),
+    muscle_glide_center: wp.array(dtype=wp.vec3),
     jaw_pivot: wp.vec3,
     jaw_u: wp.vec3,
     jaw_v: wp.vec3,
@@ -69,38 +93,60 @@ def _muscle_controls(
     m = ctrl_muscle[p]
     x = _jaw_move(ctrl_rest[p], ctrl_jaw[p], jaw_pivot, jaw_u, jaw_v, jaw_angles)
     ctrl_jawed[p] = x
-    a = wp.clamp(activations[muscle_activation[m]], 0.0, 1.0) * muscle_contraction[m]
+    a = _contraction(activations[muscle_activation[m]], muscle_contraction[m], muscle_saturation[m])
     piv = ctrl_pivot[p]
-    if piv == -2:  # attachment on the bone: does not contract
+    if piv == -2:  # attachment on the bone (or a sphincter point on a ligament): does not contract
         ctrl_out[p] = x
         return
-    if piv == -1:  # sphincter: toward the (jaw-moved) ring centre
+    if piv == -1:  # sphincter: toward the (jaw-moved) ring centre, or its plane (unit normal n)
         target = _jaw_move(muscle_center[m], muscle_center_jaw[m], jaw_pivot, jaw_u, jaw_v, jaw_angles)
+        n = muscle_center_normal[m]
+        if wp.length(n) > 0.0:
+            n = _jaw_move(n, muscle_center_jaw[m], wp.vec3(0.0), jaw_u, jaw_v, jaw_angles)
+            target = x - n * wp.dot(x - target, n)
     else:
         target = _jaw_move(ctrl_rest[piv], ctrl_jaw[piv], jaw_pivot, jaw_u, jaw_v, jaw_angles)
-    ctrl_out[p] = x + a * (target - x)
+    y = x + a * (target - x)
+    if muscle_glide[m] != 0:  # on the sphere about g through x (g on the cranium: no jaw)
+        g = muscle_glide_center[m]
+        q = y - g
+        lq = wp.length(q)
+        if lq > 1.0e-9:
+            y = g + q * (wp.length(x - g) / lq)
+    ctrl_out[p] = y
 
 
 @wp.kernel
 def _muscle_anchors(
-    # Model (anchors grouped by destination: dst_unique[k] takes anchors start[k] .. start[k+1]-1):
-    dst_unique: wp.array(dtype=wp.int32),
+    # Model (anchor k owns the members anchor_ctrl[start[k]] .. anchor_ctrl[start[k+1]-1]):
     start: wp.array(dtype=wp.int32),
-    anchor_src: wp.array(dtype=wp.int32),
-    anchor_weight: wp.array(dtype=float),
+    anchor_ctrl: wp.array(dtype=wp.int32),
+    anchor_passive: wp.array(dtype=float),
+    ctrl_muscle: wp.array(dtype=wp.int32),
+    muscle_activation: wp.array(dtype=wp.int32),
+    # Control:
+    activations: wp.array(dtype=float),
     # In:
     ctrl_jawed: wp.array(dtype=wp.vec3),
     ctrl_contracted: wp.array(dtype=wp.vec3),
-    # Out (accumulated):
+    # Out (the members only; a control point belongs to at most one anchor):
     ctrl_out: wp.array(dtype=wp.vec3),
 ):
+    # Fig. 6.3, two-way: members j with own displacements d_j and stiffnesses k_j are tied by
+    # springs to one anchor displacement D; the springs' equilibrium minimises
+    # sum_j k_j |D - d_j|^2, so D = sum_j k_j d_j / sum_j k_j, and every member moves by D.
     k = wp.tid()
     d = wp.vec3(0.0)
-    for a in range(start[k], start[k + 1]):
-        s = anchor_src[a]
-        d = d + anchor_weight[a] * (ctrl_contracted[s] - ctrl_jawed[s])
-    i = dst_unique[k]
-    ctrl_out[i] = ctrl_out[i] + d
+    wsum = float(0.0)
+    for j in range(start[k], start[k + 1]):
+        p = anchor_ctrl[j]
+        w = anchor_passive[j] + wp.clamp(activations[muscle_activation[ctrl_muscle[p]]], 0.0, 1.0)
+        d = d + w * (ctrl_contracted[p] - ctrl_jawed[p])
+        wsum = wsum + w
+    d = d / wp.max(wsum, 1.0e-12)
+    for j in range(start[k], start[k + 1]):
+        p = anchor_ctrl[j]
+        ctrl_out[p] = ctrl_jawed[p] + d
 
 
 @wp.func
@@ -188,9 +234,11 @@ def _attachment_point(
 
 
 @wp.func
-def _fibre_cosine(pm: wp.vec3, x: wp.vec3, frame: wp.mat33):
+def _fibre_cosine(pm: wp.vec3, x: wp.vec3, frame: wp.mat33, across: int):
     # |cos theta| of Eq. 6.4.1: the angle between the spring (x -> p_m) and the fibre (the
-    # segment's x axis); 0 for a spring of zero length
+    # segment's x axis); 0 for a spring of zero length; 1 for a sphincter's spring (across != 0)
+    if across != 0:
+        return 1.0
     d = pm - x
     length = wp.length(d)
     if length <= 1.0e-12:
@@ -208,6 +256,7 @@ def _muscle_forces(
     att_rest_length: wp.array(dtype=float),
     att_stiffness: wp.array(dtype=float),
     att_jaw_shift: wp.array(dtype=float),
+    att_across: wp.array(dtype=wp.int32),
     jaw_pivot: wp.vec3,
     jaw_u: wp.vec3,
     jaw_v: wp.vec3,
@@ -234,7 +283,7 @@ def _muscle_forces(
     if length <= 1.0e-12:
         return
     n = d / length
-    cos_theta = _fibre_cosine(pm, positions_in[i], seg_frame[att_seg[k]])
+    cos_theta = _fibre_cosine(pm, positions_in[i], seg_frame[att_seg[k]], att_across[k])
     # Eq. 6.4.1: spring toward the muscle, scaled by the cosine of the spring-fibre angle.
     att_force_out[k] = att_stiffness[k] * cos_theta * (length - att_rest_length[k]) * n
 
@@ -255,6 +304,7 @@ def _muscle_springs(
     att_uv: wp.array(dtype=wp.vec2),
     att_stiffness: wp.array(dtype=float),
     att_jaw_shift: wp.array(dtype=float),
+    att_across: wp.array(dtype=wp.int32),
     jaw_pivot: wp.vec3,
     jaw_u: wp.vec3,
     jaw_v: wp.vec3,
@@ -274,7 +324,8 @@ def _muscle_springs(
     pm = _attachment_point(k, att_seg, att_uv, att_jaw_shift, jaw_pivot, jaw_u, jaw_v, jaw_angles, seg_center,
                            seg_frame, seg_radii)
     att_point_out[k] = pm
-    spring_stiffness_out[k] = att_stiffness[k] * _fibre_cosine(pm, positions_in[att_node[k]], seg_frame[att_seg[k]])
+    spring_stiffness_out[k] = att_stiffness[k] * _fibre_cosine(pm, positions_in[att_node[k]], seg_frame[att_seg[k]],
+                                                               att_across[k])
 
 
 @wp.kernel

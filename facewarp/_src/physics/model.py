@@ -587,6 +587,16 @@ class Springs:
       fibre cosine folded into ``k`` for the step);
     * axis springs ``E = 1/2 k ((x - p) . a)^2`` (a sliding support along the unit axis a).
 
+    With :attr:`one_sided` the springs only push (contact, :mod:`facewarp._src.physics.contact`):
+
+    * axis: ``E = 1/2 k min(0, (x - p) . a)^2``, a half-space ``(x - p) . a >= 0`` the node may
+      not leave (p on the obstacle's surface, a its outward unit normal);
+    * distance: ``E = 1/2 k min(0, |x - p| - l0)^2``, a ball of radius l0 about p the node may
+      not enter (the eyeball).
+
+    Both are C1 (the force vanishes continuously at the surface); their Hessian is ``k a a^T``
+    (``k n n^T``, n = (x - p) / |x - p|) where the spring is compressed and 0 elsewhere.
+
     A stage that has springs fills them in its ``prepare`` (once per implicit step); the arrays
     stay allocated, so a captured frame keeps reading the same buffers.
     """
@@ -601,6 +611,8 @@ class Springs:
     """Rest length l0 [m] of distance springs, shape (k,), float32 (None for axis springs)."""
     axis: object = None
     """Unit axis a of axis springs, shape (k,), wp.vec3 (None for distance springs)."""
+    one_sided: bool = False
+    """Contact springs that only push (see the class doc); a stage sets it once."""
 
     @property
     def count(self) -> int:

@@ -17,7 +17,7 @@ from ..core.warp import get_warp
 from ..core.errors import InputError
 from .model import Model, Springs, group_indices
 
-__all__ = ["MuscleRig", "MuscleStage", "SupportStage", "ellipsoid_uv", "rig_reference"]
+__all__ = ["MuscleRig", "MuscleStage", "SupportStage", "contraction_curve", "ellipsoid_uv", "rig_reference"]
 
 PIVOT_CENTER = -1  # a sphincter point contracts toward its ring centre
 PIVOT_FIXED = -2  # a linear muscle's attachment on the bone does not contract
@@ -30,7 +30,7 @@ class MuscleRig:
     Attributes:
         names: Muscle instance names (e.g. ``zygomatic_major_L``), length M.
         activation_index: Index into ``Control.activations`` per muscle, shape (M,), int.
-        contraction: Largest relative shortening at activation 1, shape (M,), float.
+        contraction: Largest relative shortening c_max (at activation 1), shape (M,), float.
         center: Ring centre of sphincters (unused for linear muscles) [m], shape (M, 3).
         center_jaw: Jaw amount of the ring centre, shape (M,), float.
         ctrl_rest: Rest positions of all control points [m], shape (P, 3), float.
@@ -43,14 +43,31 @@ class MuscleRig:
         seg_curve: Curve of each segment, shape (S,), int.
         seg_t: Curve parameter range of each segment, shape (S, 2), float.
         seg_rest_radii: Ellipsoid radii at rest (x, y, z) [m], shape (S, 3), float.
-        anchor_dst, anchor_src, anchor_weight: Anchor ties (Fig. 6.3): sphincter control
-            point ``dst`` adds ``weight`` times the displacement of control point ``src``,
-            shape (A,) each.
+        anchor_ctrl: Member control points of the anchors (Fig. 6.3), grouped by anchor,
+            shape (A,), int; a control point belongs to at most one anchor.
+        anchor_group: Anchor of each member, shape (A,), int.
+        anchor_passive: Stiffness of each member at activation 0, relative to the stiffness an
+            activation of 1 adds, shape (A,), float, > 0 (``kernels_muscle._muscle_anchors``).
         att_node: Skin node of each attachment, shape (K,), int.
         att_seg: Segment of each attachment, shape (K,), int.
         att_uv: Ellipsoid surface parameters (u along the fibre, v around it), shape (K, 2).
         att_rest_length: Spring rest length l0 [m], shape (K,).
-        att_stiffness: Spring stiffness k_m [N/m], shape (K,).
+        att_stiffness: Spring stiffness k_m [N/m], shape (K,): a node's stiffness shared equally
+            among its attachments (as :func:`~facewarp._src.physics.face_rig.face_rig_from_anatomy`
+            and the simulator set it).
+        att_weight: Share of the node's sheet area within the muscle's band (Fig. 6.4 by area),
+            in (0, 1], shape (K,) (empty = all 1). The stage redistributes a node's stiffness by
+            these weights: attachment k of node i gets ``k_i w_k / max(sum_i w, 1)``.
+        saturation: Saturation beta of the activation curve
+            ``c(a) = c_max (1 - exp(-beta a)) / (1 - exp(-beta))`` per muscle, shape (M,), float,
+            >= 0 (0 = linear; empty = all 0).
+        center_normal: Unit normal of the plane a sphincter contracts toward (through its
+            centre; the lids' palpebral fissure), or 0 for contraction toward the centre point,
+            shape (M, 3), float (empty = all 0).
+        glide: 1 for a sphincter whose points glide over a sphere (the lids over the eyeball),
+            shape (M,), int (empty = none).
+        glide_center: Centre of that sphere [m] (on the cranium: not moved by the jaw), shape
+            (M, 3), float (empty = none).
     """
 
     names: list
@@ -67,14 +84,30 @@ class MuscleRig:
     seg_curve: np.ndarray
     seg_t: np.ndarray
     seg_rest_radii: np.ndarray
-    anchor_dst: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
-    anchor_src: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
-    anchor_weight: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    anchor_ctrl: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    anchor_group: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    anchor_passive: np.ndarray = field(default_factory=lambda: np.zeros(0))
     att_node: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     att_seg: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     att_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     att_rest_length: np.ndarray = field(default_factory=lambda: np.zeros(0))
     att_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    att_weight: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    saturation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    center_normal: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    glide: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    glide_center: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def __post_init__(self):
+        M = len(self.names)
+        if len(self.saturation) == 0:
+            self.saturation = np.zeros(M)
+        if len(self.center_normal) == 0:
+            self.center_normal = np.zeros((M, 3))
+        if len(self.glide) == 0:
+            self.glide = np.zeros(M, np.int64)
+        if len(self.glide_center) == 0:
+            self.glide_center = np.zeros((M, 3))
 
     @property
     def muscle_count(self) -> int:
@@ -93,6 +126,33 @@ class MuscleRig:
         b /= b.sum(1, keepdims=True)
         return np.einsum("kj,kj->k", b, np.asarray(self.ctrl_jaw, np.float64)[np.asarray(self.curve_ctrl)[c]])
 
+    def weighted_stiffness(self) -> np.ndarray:
+        """Spring stiffness [N/m] of every attachment after the area weights, shape (K,), float64:
+        a node's stiffness (``att_stiffness`` times its attachment count) split by the weights,
+        ``k_i w_k / max(sum_i w, 1)``: a node wholly inside one muscle's band keeps all of it,
+        one half inside gets half, one inside two bands splits it by their shares."""
+        if len(self.att_node) == 0:
+            return np.zeros(0)
+        node = np.asarray(self.att_node)
+        w = np.asarray(self.att_weight, np.float64) if len(self.att_weight) else np.ones(len(node))
+        count = np.bincount(node)[node]
+        wsum = np.bincount(node, weights=w)[node]
+        return np.asarray(self.att_stiffness, np.float64) * count * w / np.maximum(wsum, 1.0)
+
+    def sphincters(self) -> np.ndarray:
+        """Whether each muscle is a sphincter (has points contracting toward a centre), (M,) bool."""
+        out = np.zeros(len(self.names), bool)
+        out[np.asarray(self.ctrl_muscle)[np.asarray(self.ctrl_pivot) == PIVOT_CENTER]] = True
+        return out
+
+    def attachment_across(self) -> np.ndarray:
+        """1 where an attachment belongs to a sphincter, whose springs pull across the fibre (Eq.
+        6.4.1's cosine taken as 1), else 0, shape (K,), int."""
+        if len(self.att_node) == 0:
+            return np.zeros(0, np.int64)
+        first = np.asarray(self.curve_ctrl)[np.asarray(self.seg_curve)[np.asarray(self.att_seg)], 0]
+        return self.sphincters()[np.asarray(self.ctrl_muscle)[first]].astype(np.int64)
+
     def curve_normals(self) -> np.ndarray:
         """Unit normals of each curve's control-point plane at rest, shape (C, 3)."""
         c = self.ctrl_rest[self.curve_ctrl]
@@ -109,11 +169,29 @@ class MuscleRig:
         checks = [
             (self.ctrl_muscle, M, "ctrl_muscle"), (self.curve_ctrl.ravel(), P, "curve_ctrl"),
             (self.seg_curve, C, "seg_curve"), (self.att_seg, S, "att_seg"),
-            (self.anchor_dst, P, "anchor_dst"), (self.anchor_src, P, "anchor_src"),
+            (self.anchor_ctrl, P, "anchor_ctrl"),
         ]
         for a, n, name in checks:
             if len(a) and (a.min() < 0 or a.max() >= n):
                 raise InputError(f"muscle rig: {name} index out of range 0..{n - 1}")
+        A = len(self.anchor_ctrl)
+        if len(self.anchor_group) != A or len(self.anchor_passive) != A:
+            raise InputError(f"muscle rig: anchor_group and anchor_passive must have shape ({A},) like anchor_ctrl")
+        if A and len(np.unique(self.anchor_ctrl)) != A:
+            raise InputError("muscle rig: a control point belongs to more than one anchor")
+        if A and not (np.isfinite(self.anchor_passive).all() and (np.asarray(self.anchor_passive) > 0).all()):
+            raise InputError("muscle rig: anchor_passive must be finite and > 0")
+        for a, shape, name in ((self.saturation, (M,), "saturation"), (self.center_normal, (M, 3), "center_normal"),
+                               (self.glide, (M,), "glide"), (self.glide_center, (M, 3), "glide_center")):
+            if np.shape(a) != shape:
+                raise InputError(f"muscle rig: {name} must have shape {shape}, got {np.shape(a)}")
+        if not (np.isfinite(self.saturation).all() and (np.asarray(self.saturation) >= 0).all()):
+            raise InputError("muscle rig: saturation must be finite and >= 0")
+        if len(self.att_weight) == 0:  # attachments given without weights: all 1
+            self.att_weight = np.ones(len(self.att_node))
+        w = np.asarray(self.att_weight)
+        if w.shape != (len(self.att_node),) or not (np.isfinite(w).all() and (w > 0).all() and (w <= 1).all()):
+            raise InputError(f"muscle rig: att_weight must have shape ({len(self.att_node)},) with values in (0, 1]")
         piv = self.ctrl_pivot
         if len(piv) and (piv.min() < -2 or piv.max() >= P):
             raise InputError("muscle rig: ctrl_pivot out of range")
@@ -170,6 +248,17 @@ def ellipsoid_uv(center, frame, radii, P):
     return np.stack([u, v], -1)
 
 
+def contraction_curve(activation, contraction, saturation):
+    """The saturating activation curve of the muscles (``kernels_muscle._contraction``):
+    ``c(a) = c_max (1 - exp(-beta a)) / (1 - exp(-beta))``, ``a`` clamped to [0, 1], linear
+    ``c_max a`` for ``beta`` -> 0. Broadcasting arrays; returns the contraction fraction."""
+    a = np.clip(np.asarray(activation, np.float64), 0.0, 1.0)
+    c = np.asarray(contraction, np.float64)
+    b = np.asarray(saturation, np.float64)
+    bs = np.where(b < 1e-4, 1.0, b)
+    return np.where(b < 1e-4, c * a, c * -np.expm1(-bs * a) / -np.expm1(-bs))
+
+
 def rig_reference(rig: MuscleRig, activations, jaw=None, jaw_angles=(0.0, 0.0)):
     """NumPy reference of the whole muscle stage: (control points (P, 3), attachment points
     (K, 3)). ``jaw`` is a :class:`facewarp._src.jaw.JawKinematic` or None."""
@@ -181,13 +270,29 @@ def rig_reference(rig: MuscleRig, activations, jaw=None, jaw_angles=(0.0, 0.0)):
         centers = jaw_rotation(rig.center, rig.center_jaw, jaw.pivot, jaw.u_axis, jaw.v_axis, *jaw_angles)
     else:
         jawed, centers = rig.ctrl_rest.copy(), rig.center.copy()
-    a = np.clip(acts[rig.activation_index[rig.ctrl_muscle]], 0, 1) * rig.contraction[rig.ctrl_muscle]
+    act = np.clip(acts[rig.activation_index], 0, 1)  # (M,)
+    a = contraction_curve(act, rig.contraction, rig.saturation)[rig.ctrl_muscle]
     piv = rig.ctrl_pivot
     target = np.where((piv == PIVOT_CENTER)[:, None], centers[rig.ctrl_muscle], jawed[np.maximum(piv, 0)])
+    normal = np.asarray(rig.center_normal, np.float64)
+    if jaw is not None:
+        normal = jaw_rotation(normal, rig.center_jaw, np.zeros(3), jaw.u_axis, jaw.v_axis, *jaw_angles)
+    n = normal[rig.ctrl_muscle]
+    plane = (piv == PIVOT_CENTER) & (np.linalg.norm(n, axis=1) > 0)
+    target[plane] = jawed[plane] - n[plane] * np.einsum("ij,ij->i", jawed[plane] - target[plane], n[plane])[:, None]
     out = np.where((piv == PIVOT_FIXED)[:, None], jawed, jawed + a[:, None] * (target - jawed))
+    glide = (np.asarray(rig.glide)[rig.ctrl_muscle] != 0) & (piv != PIVOT_FIXED)
+    if glide.any():
+        g = np.asarray(rig.glide_center, np.float64)[rig.ctrl_muscle[glide]]
+        q = out[glide] - g
+        out[glide] = g + q * (np.linalg.norm(jawed[glide] - g, axis=1) / np.linalg.norm(q, axis=1))[:, None]
     contracted = out.copy()
-    for d, s, w in zip(rig.anchor_dst, rig.anchor_src, rig.anchor_weight):
-        out[d] += w * (contracted[s] - jawed[s])
+    for k in np.unique(rig.anchor_group):
+        mem = np.flatnonzero(np.asarray(rig.anchor_group) == k)
+        p = np.asarray(rig.anchor_ctrl)[mem]
+        w = np.asarray(rig.anchor_passive, np.float64)[mem] + act[rig.ctrl_muscle[p]]
+        D = (w[:, None] * (contracted[p] - jawed[p])).sum(0) / w.sum()
+        out[p] = jawed[p] + D
     c, f, r = segment_frames(rig, out)
     pts = ellipsoid_point(c[rig.att_seg], f[rig.att_seg], r[rig.att_seg], rig.att_uv)
     return out, pts
@@ -200,7 +305,10 @@ class MuscleStage:
     Explicit solvers call :meth:`apply` every substep (forces of Eq. 6.4.1 as printed, the fibre
     cosine at the current positions); implicit solvers call :meth:`prepare` once per step, which
     fills :attr:`springs` with the energy terms ``1/2 k_m w (|p_m - x| - l0)^2`` with the cosine
-    ``w`` taken at the step's start (see ``kernels_muscle._muscle_springs``).
+    ``w`` taken at the step's start (see ``kernels_muscle._muscle_springs``). A sphincter's springs
+    take ``w = 1``: its ring squeezes across its fibres (:meth:`MuscleRig.attachment_across`).
+    Control points contract along the saturating activation curve (:func:`contraction_curve`)
+    and anchors tie their members two-way (``kernels_muscle._muscle_anchors``).
 
     Attributes (device arrays, written every substep, readable between frames):
         ctrl: Current control points [m], shape (P,), wp.vec3.
@@ -230,6 +338,10 @@ class MuscleStage:
         self.ctrl_jaw = f32(rig.ctrl_jaw)
         self.muscle_activation = i32(rig.activation_index)
         self.muscle_contraction = f32(rig.contraction)
+        self.muscle_saturation = f32(rig.saturation)
+        self.muscle_center_normal = f32(rig.center_normal, wp.vec3)
+        self.muscle_glide = i32(rig.glide)
+        self.muscle_glide_center = f32(rig.glide_center, wp.vec3)
         self.muscle_center = f32(rig.center, wp.vec3)
         self.muscle_center_jaw = f32(rig.center_jaw)
         self.curve_ctrl = i32(rig.curve_ctrl, wp.vec3i)
@@ -238,20 +350,21 @@ class MuscleStage:
         self.seg_curve = i32(rig.seg_curve)
         self.seg_t = f32(rig.seg_t, wp.vec2)
         self.seg_rest_radii = f32(rig.seg_rest_radii, wp.vec3)
-        dst_u, a_start, a_order = group_indices(rig.anchor_dst)
-        self.anchor_dst_unique = i32(dst_u)
+        groups, a_start, a_order = group_indices(rig.anchor_group)
+        self.anchor_count = len(groups)
         self.anchor_start = i32(a_start)
-        self.anchor_src = i32(np.asarray(rig.anchor_src)[a_order])
-        self.anchor_weight = f32(np.asarray(rig.anchor_weight)[a_order])
+        self.anchor_ctrl = i32(np.asarray(rig.anchor_ctrl)[a_order])
+        self.anchor_passive = f32(np.asarray(rig.anchor_passive)[a_order])
         self.att_node = i32(rig.att_node)
         self.att_seg = i32(rig.att_seg)
         self.att_uv = f32(rig.att_uv, wp.vec2)
         self.att_rest_length = f32(rig.att_rest_length)
-        self.att_stiffness = f32(rig.att_stiffness)
+        self.att_stiffness = f32(rig.weighted_stiffness())
         shift = np.zeros(len(rig.att_node))
         if node_amount is not None and len(rig.att_node):
             shift = np.asarray(node_amount, np.float64)[rig.att_node] - rig.attachment_jaw()
         self.att_jaw_shift = f32(shift)
+        self.att_across = i32(rig.attachment_across())
         nodes_u, n_start, order = group_indices(rig.att_node)
         self.att_nodes_unique = i32(nodes_u)
         self.att_node_start = i32(n_start)
@@ -282,14 +395,16 @@ class MuscleStage:
             return
         wp.launch(km._muscle_controls, dim=P,
                   inputs=[self.ctrl_rest, self.ctrl_muscle, self.ctrl_pivot, self.ctrl_jaw, self.muscle_activation,
-                          self.muscle_contraction, self.muscle_center, self.muscle_center_jaw, self.jaw_pivot,
-                          self.jaw_u, self.jaw_v, control.activations, control.jaw_angles],
+                          self.muscle_contraction, self.muscle_saturation, self.muscle_center, self.muscle_center_jaw,
+                          self.muscle_center_normal, self.muscle_glide, self.muscle_glide_center, self.jaw_pivot,
+                          self.jaw_u, self.jaw_v,
+                          control.activations, control.jaw_angles],
                   outputs=[self.ctrl_jawed, self.ctrl_contracted], device=self.device)
         wp.copy(self.ctrl, self.ctrl_contracted)
-        if len(self.rig.anchor_dst):
-            wp.launch(km._muscle_anchors, dim=len(self.anchor_dst_unique),
-                      inputs=[self.anchor_dst_unique, self.anchor_start, self.anchor_src, self.anchor_weight,
-                              self.ctrl_jawed, self.ctrl_contracted],
+        if self.anchor_count:
+            wp.launch(km._muscle_anchors, dim=self.anchor_count,
+                      inputs=[self.anchor_start, self.anchor_ctrl, self.anchor_passive, self.ctrl_muscle,
+                              self.muscle_activation, control.activations, self.ctrl_jawed, self.ctrl_contracted],
                       outputs=[self.ctrl], device=self.device)
         if len(self.rig.seg_curve):
             wp.launch(km._muscle_segments, dim=len(self.rig.seg_curve),
@@ -303,7 +418,8 @@ class MuscleStage:
         if len(self.rig.att_node):
             wp.launch(self.km._muscle_forces, dim=len(self.rig.att_node),
                       inputs=[self.att_node, self.att_seg, self.att_uv, self.att_rest_length, self.att_stiffness,
-                              self.att_jaw_shift, self.jaw_pivot, self.jaw_u, self.jaw_v, control.jaw_angles,
+                              self.att_jaw_shift, self.att_across, self.jaw_pivot, self.jaw_u, self.jaw_v,
+                              control.jaw_angles,
                               self.seg_center, self.seg_frame, self.seg_radii, state_in.positions],
                       outputs=[self.att_point, self.att_force], device=self.device)
             wp.launch(self.kt._gather, dim=len(self.att_nodes_unique),
@@ -325,7 +441,7 @@ class MuscleStage:
         if len(self.rig.att_node):
             get_warp().launch(self.km._muscle_springs, dim=len(self.rig.att_node),
                               inputs=[self.att_node, self.att_seg, self.att_uv, self.att_stiffness,
-                                      self.att_jaw_shift, self.jaw_pivot, self.jaw_u, self.jaw_v,
+                                      self.att_jaw_shift, self.att_across, self.jaw_pivot, self.jaw_u, self.jaw_v,
                                       control.jaw_angles, self.seg_center, self.seg_frame, self.seg_radii,
                                       positions],
                               outputs=[self.att_point, self.spring_stiffness], device=self.device)

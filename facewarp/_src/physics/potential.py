@@ -21,7 +21,9 @@ Energies per element (C dimensionless, see :mod:`.model`):
 * area (Eq. 6.4.7): ``k / 2 C^2``, C = A / A0 - 1;
 * volume (Eq. 6.4.8): ``k / 2 C^2``, C = V / V0 - 1 (signed volume);
 * springs (:class:`~facewarp._src.physics.model.Springs`): ``k / 2 (|p - x| - l0)^2`` (muscles,
-  Eq. 6.4.1 with the fibre cosine frozen over the step) or ``k / 2 ((x - p) . a)^2`` (supports).
+  Eq. 6.4.1 with the fibre cosine frozen over the step) or ``k / 2 ((x - p) . a)^2`` (supports);
+  one-sided (contact): ``k / 2 min(0, |x - p| - l0)^2`` (out of a ball) or
+  ``k / 2 min(0, (x - p) . a)^2`` (a half-space).
 
 Hessians are positive semi-definite approximations, as a Newton-type solver needs: exact for
 the distance energy and the springs when stretched, with the negative part of the transverse
@@ -47,6 +49,11 @@ def _host(a, dtype=np.float64) -> np.ndarray:
     return np.asarray(arr, dtype=dtype)
 
 
+def _spring_tuple(t) -> tuple:
+    """``(node, point, k, l0, axis, one_sided)`` of a spring tuple with or without its 6th entry."""
+    return (*t[:5], bool(t[5]) if len(t) > 5 else False)
+
+
 def _rows3(v: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->i", v, v))
 
@@ -62,7 +69,7 @@ class StepData:
         force: External force [N], shape (n, 3).
         edge_c, face_c, tet_c: Constraints at the step's start (for the dashpots).
         springs: list of ``(node (k,), point (k, 3), stiffness (k,), rest_length (k,) or None,
-            axis (k, 3) or None)``.
+            axis (k, 3) or None[, one_sided bool])`` (one_sided: False when left out).
     """
 
     def __init__(self, h, z, mu, targets, force, edge_c, face_c, tet_c, springs):
@@ -176,7 +183,7 @@ class StepPotential:
             h: Step [s].
             targets: Targets of fixed and held nodes [m], shape (n, 3).
             force: External force [N], shape (n, 3), or None.
-            springs: Tuples ``(node, point, stiffness, rest_length | None, axis | None)``.
+            springs: Tuples ``(node, point, stiffness, rest_length | None, axis | None[, one_sided])``.
             cranium_velocity: ``(v, w)``: linear [m/s] and angular [rad/s] velocity, shape (2, 3).
         """
         x_n = np.asarray(x_n, np.float64)
@@ -260,18 +267,22 @@ class StepPotential:
         G = None
         if want_grad:
             G = data.mu[:, None] * dz + self.hold[:, None] * dh - data.force
-        for node, point, k, l0, axis in data.springs:
+        for node, point, k, l0, axis, one in map(_spring_tuple, data.springs):
             if len(node) == 0:
                 continue
             r = X[node] - point
             if axis is not None:
                 s = np.einsum("ij,ij->i", r, axis)
+                if one:
+                    s = np.minimum(s, 0.0)
                 e += 0.5 * np.sum(k * s * s)
                 if want_grad:
                     g = (k * s)[:, None] * axis
             else:
                 ll = _rows3(r)
                 st = ll - l0
+                if one:
+                    st = np.minimum(st, 0.0)
                 e += 0.5 * np.sum(k * st * st)
                 if want_grad:
                     g = (k * st / np.maximum(ll, 1e-300))[:, None] * r
@@ -299,18 +310,22 @@ class StepPotential:
         diag = np.zeros((self.n, 3, 3))
         idx = np.arange(3)
         diag[:, idx, idx] = (data.mu + np.where(self.free, self.hold, 0.0))[:, None]
-        for node, point, k, l0, axis in data.springs:
+        for node, point, k, l0, axis, one in map(_spring_tuple, data.springs):
             if len(node) == 0:
                 continue
             r = X[node] - point
             if axis is not None:
                 B = k[:, None, None] * axis[:, :, None] * axis[:, None, :]
+                if one:
+                    B = B * (np.einsum("ij,ij->i", r, axis) < 0.0)[:, None, None]
             else:
                 ll = np.maximum(_rows3(r), 1e-300)
                 nn = r / ll[:, None]
                 nnT = nn[:, :, None] * nn[:, None, :]
                 tr = np.maximum(1.0 - l0 / ll, 0.0)
                 B = k[:, None, None] * (nnT + tr[:, None, None] * (np.eye(3) - nnT))
+                if one:
+                    B = B * (ll < l0)[:, None, None]
             np.add.at(diag, node, B)
         w = np.concatenate([vals, diag.ravel()])
         data9 = np.bincount(self._scatter, weights=w, minlength=(self.block_count + 1) * 9)[: self.block_count * 9]

@@ -1,11 +1,12 @@
 """Pictures of an animation: one head seen by a fixed camera, frame after frame (GIF), and labelled grids.
 
-:class:`FaceView` renders the face of a head (cropped below the chin, behind the ears and above
-the hairline, lips tinted, eyes, teeth and tongue in place) for any vertex positions of the same
-topology, always from the same camera, so frames of an animation line up: the camera frames a
-fixed box (by default the rest face grown by ``reach``, how far anything may move; or given
-``bounds``), marked by framing points drawn in the background colour. :func:`save_gif` writes frames as an animated GIF with
-Pillow; :func:`label_grid` puts renders in rows and columns under text labels.
+:class:`FaceView` renders the whole head (the template's full mesh: scalp, ears, neck down to the
+template's own neck cut, lips tinted, the inside of the mouth darker, eyes with iris and pupil,
+teeth and tongue in place) for any vertex positions of the same topology, always from the same
+camera, so frames of an animation line up: the camera frames a fixed rectangle of the image plane
+(by default around the rest head; or around given point sets, e.g. every frame shown, or a box),
+marked by four framing points drawn in the background colour. :func:`save_gif` writes frames as an
+animated GIF with Pillow; :func:`label_grid` puts renders in rows and columns under text labels.
 """
 
 from __future__ import annotations
@@ -17,79 +18,178 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.fileio import atomic_write
-from .render import colormap, render_mesh
-from .template import LIPS, SKIN, TEETH, TONGUE, vermilion_weight
+from .render import colormap, render_mesh, view_axes
+from .template import CAVITY, head_colors, part_colors
 
-__all__ = ["FaceView", "label_grid", "save_gif"]
+__all__ = ["FACE_HEIGHT", "FaceView", "label_grid", "save_gif"]
 
 _BACKGROUND = (1.0, 1.0, 1.0)
+_MARGIN = 0.02  # empty border of a render, a fraction of the framed extent (render_mesh's margin)
+
+FACE_HEIGHT = 400
+"""Default height [px] of the face in a :class:`FaceView` render: hairline (FDP 11.1) to chin (2.1)."""
+
+
+def _framed_points(bounds, rest: np.ndarray) -> np.ndarray:
+    """The points a view frames: ``bounds`` None (the rest head), a box (2, 3) [m] (its 8 corners)
+    or a sequence of point sets (k_i, 3) [m] (all of them)."""
+    if bounds is None:
+        return rest
+    if np.shape(bounds) == (2, 3):
+        lo, hi = np.asarray(bounds, dtype=np.float64)
+        return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    try:
+        sets = [np.asarray(P, dtype=np.float64).reshape(-1, 3) for P in bounds]
+    except (TypeError, ValueError):
+        raise InputError("bounds: expected a box (2, 3) [m] or a list of point arrays (k, 3) [m]") from None
+    if not sets or not all(np.isfinite(P).all() for P in sets):
+        raise InputError("bounds: expected finite points")
+    return np.concatenate(sets)
+
+
+def _refine_ball(V: np.ndarray, F: np.ndarray, levels: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """A ball-like closed mesh (an eyeball) refined ``levels`` times for drawing: every triangle
+    split into four, each new vertex pushed out from the centre to the mean radius of its edge's
+    ends (so an iris 6 mm across is drawn round, not as a blur over 3 mm triangles).
+
+    Args:
+        V: Vertices [m], shape (k, 3), float. F: Triangles, shape (l, 3), int.
+
+    Returns:
+        Refined vertices (k', 3) [m] and triangles (4**levels * l, 3).
+    """
+    c = V.mean(0)
+    for _ in range(levels):
+        E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        edges, inverse = np.unique(E, axis=0, return_inverse=True)
+        a, b = V[edges[:, 0]] - c, V[edges[:, 1]] - c
+        m = a + b
+        r = 0.5 * (np.linalg.norm(a, axis=1) + np.linalg.norm(b, axis=1))
+        mid = c + m / np.maximum(np.linalg.norm(m, axis=1), 1e-12)[:, None] * r[:, None]
+        e = len(V) + inverse.reshape(3, -1).T  # new vertex of the edges (01, 12, 20) of each triangle
+        V = np.concatenate([V, mid])
+        F = np.concatenate([np.stack([F[:, 0], e[:, 0], e[:, 2]], 1), np.stack([F[:, 1], e[:, 1], e[:, 0]], 1),
+                            np.stack([F[:, 2], e[:, 2], e[:, 1]], 1), e])
+    return V, F
+
+
+def _rigid_map(A: np.ndarray, B: np.ndarray):
+    """The rigid motion (Kabsch) taking the points A (k, 3) closest to B (k, 3) [m], as a function of (j, 3) points."""
+    ca, cb = A.mean(0), B.mean(0)
+    U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return lambda X: (X - ca) @ R.T + cb
 
 
 class FaceView:
-    """A fixed camera on the face of one head (see the module docstring).
+    """A fixed camera on the whole head of one topology (see the module docstring).
 
     Args:
         rest_points: Head vertices at rest [m], shape (n, 3), float.
-        faces: Head triangles, shape (m, 3), int.
-        landmarks: FDP id -> rest position [m] (uses 2.1, 2.2, 2.3, 3.7, 8.1-8.4, 11.1).
-        parts: Rigid parts at rest, name -> (V (k, 3) [m], F (l, 3) int); drawn white (eyes,
-            teeth) or red (tongue).
+        faces: Head triangles, shape (m, 3), int: all of them are drawn.
+        landmarks: FDP id -> rest position [m] (uses 2.1, 2.2, 2.3, 8.1-8.4 and 11.1).
+        parts: Rigid parts at rest, name -> (V (k, 3) [m], F (l, 3) int); coloured by
+            :func:`~facewarp.render.part_colors` (eyes with iris and pupil, teeth, tongue).
         view: A view of :func:`~facewarp.render_mesh` (``"front"``, ``"three_quarter"``, ...).
-        size: Image height [px].
-        aspect: Image width over height (> 0; a face is taller than wide).
-        reach: How far [m] vertices may move from rest; the framed box grows by it.
-        bounds: Optional box to frame instead, (2, 3) [m] (min and max corner), e.g. the
-            union of the face's boxes over an animation.
+        size: Image height [px]; default: tall enough that the face (hairline 11.1 to chin 2.1)
+            spans ``face_height`` pixels.
+        face_height: Height [px] of the face when ``size`` is not given (default :data:`FACE_HEIGHT`).
+        aspect: Image width over height (> 0); default the framed rectangle's own.
+        reach: Room [m] left around the framed points on every side of the image (how far
+            anything not framed may move).
+        bounds: What the camera frames: None (the rest head), a box (2, 3) [m] (min and max
+            corner), or a list of point sets (k_i, 3) [m], e.g. the head in every frame shown.
+        supersample: Rays per pixel along each axis (:func:`~facewarp.render_mesh`; 1 for the
+            frames of a GIF, four times faster).
         device: Warp device to render on.
+
+    Attributes:
+        size, width: Image height and width [px].
+        pixels_per_metre: Scale of the render [px/m].
+        face_pixels: Hairline-to-chin height of the rest face in the image [px].
     """
 
     def __init__(self, rest_points, faces, landmarks: dict, parts: dict | None = None, *, view="front",
-                 size: int = 320, aspect: float = 0.8, reach: float = 0.02, bounds=None, device: str = "cpu"):
+                 size: int | None = None, face_height: int | None = None, aspect: float | None = None,
+                 reach: float = 0.004, bounds=None, supersample: int = 2, device: str = "cpu"):
         P0 = np.asarray(rest_points, dtype=np.float64)
+        if P0.ndim != 2 or P0.shape[1] != 3:
+            raise InputError(f"rest_points: expected shape (n, 3), got {P0.shape}")
         F = np.asarray(faces, dtype=np.int64)
-        missing = [k for k in ("2.1", "2.2", "2.3", "3.7", "8.1", "8.2", "8.3", "8.4", "11.1") if k not in landmarks]
+        missing = [k for k in ("2.1", "2.2", "2.3", "8.1", "8.2", "8.3", "8.4", "11.1") if k not in landmarks]
         if missing:
             raise InputError(f"landmarks: FaceView needs FDP {', '.join(missing)}")
         lm = {k: np.asarray(v, dtype=np.float64) for k, v in landmarks.items()}
-        c = P0[F].mean(1)
-        keep = (c[:, 1] > lm["2.1"][1] - 0.03) & (c[:, 2] > lm["3.7"][2] - 0.06) & (c[:, 1] < lm["11.1"][1] + 0.02)
-        self.faces = F[keep]
-        front = P0[:, 2] > 0.5 * (lm["2.2"][2] + lm["2.3"][2]) - 0.02
-        w = vermilion_weight(P0, lm, front)[:, None]
-        self.colors = SKIN * (1 - w) + LIPS * w
-        self.parts = {k: (np.asarray(V, np.float64), np.asarray(Fp, np.int64)) for k, (V, Fp) in (parts or {}).items()}
-        if bounds is None:
-            used = P0[np.unique(self.faces)]
-            lo, hi = used.min(0) - reach, used.max(0) + reach
-        else:
-            lo, hi = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
-        self.frame_points = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        if not (isinstance(reach, (int, float)) and 0 <= reach < 1):
+            raise InputError(f"reach: expected a distance in [0, 1) m, got {reach!r}")
+        # drawn outward-facing (the inside, seen through the mouth, is a dark cavity): a head whose
+        # triangles wind inward (negative enclosed volume about its centroid) is drawn flipped
+        self.used = np.unique(F)
+        c = P0[self.used].mean(0)
+        volume = np.einsum("ij,ij->i", P0[F[:, 0]] - c, np.cross(P0[F[:, 1]] - c, P0[F[:, 2]] - c)).sum()
+        self.faces = F if volume >= 0 else F[:, ::-1].copy()
         self.rest = P0
-        self.used = np.unique(self.faces)
-        if not (isinstance(aspect, (int, float)) and 0 < aspect < 10):
+        self.colors = head_colors(P0, lm)
+        self.parts = {k: (np.asarray(V, np.float64), np.asarray(Fp, np.int64)) for k, (V, Fp) in (parts or {}).items()}
+        # eyeballs are drawn refined (round iris and pupil); parts move rigidly, so a refined mesh
+        # follows its part by the part's rigid motion
+        self._drawn = {k: _refine_ball(V, Fp) if k.startswith("eye") else (V, Fp) for k, (V, Fp) in self.parts.items()}
+        self.part_colors = {k: part_colors(k, V) for k, (V, _) in self._drawn.items()}
+        self.view, self.device, self.supersample = view, device, supersample
+        # the framed rectangle in the image plane, and its four corners as framing points
+        right, up, forward = view_axes(view)
+        Q = _framed_points(bounds, P0)
+        x, y, z = Q @ right, Q @ up, Q @ forward
+        x0, x1, y0, y1 = x.min() - reach, x.max() + reach, y.min() - reach, y.max() + reach
+        zm = 0.5 * (z.min() + z.max())
+        self.frame_points = np.array([a * right + b * up + zm * forward for a in (x0, x1) for b in (y0, y1)])
+        ext_x, ext_y = x1 - x0, y1 - y0
+        if aspect is None:
+            aspect = ext_x / ext_y
+        if not (isinstance(aspect, (int, float, np.floating)) and 0 < aspect < 10):
             raise InputError(f"aspect: expected a number in (0, 10), got {aspect!r}")
-        self.view, self.size, self.device = view, int(size), device
-        self.width = max(1, int(round(self.size * aspect)))
+        face = abs(float((lm["11.1"] - lm["2.1"]) @ up))
+        if size is None:
+            fh = FACE_HEIGHT if face_height is None else face_height
+            if not (isinstance(fh, (int, np.integer)) and 16 <= fh <= 8192):
+                raise InputError(f"face_height: expected a whole number of pixels in [16, 8192], got {fh!r}")
+            # render_mesh fits the framed extent (grown by the margin) into the tighter axis
+            size = int(np.ceil(fh * max(ext_y, ext_x / aspect) * (1 + 2 * _MARGIN) / max(face, 1e-6)))
+        if not (isinstance(size, (int, np.integer)) and 8 <= size <= 16384):
+            raise InputError(f"size: expected a whole number of pixels in [8, 16384], got {size!r}")
+        self.size = int(size)
+        self.width = max(1, int(round(self.size * float(aspect))))
+        self.pixels_per_metre = 1.0 / (max(ext_x / self.width, ext_y / self.size) * (1 + 2 * _MARGIN))
+        self.face_pixels = face * self.pixels_per_metre
 
-    def _part_color(self, name: str):
-        return TONGUE if "tongue" in name else TEETH
-
-    def render(self, points, part_transforms: dict | None = None, *, heat=None, heat_max: float | None = None) -> np.ndarray:
-        """The face at ``points`` (n, 3) [m] as an RGB image (size, width, 3), uint8.
+    def render(self, points, part_transforms: dict | None = None, *, part_points: dict | None = None, heat=None,
+               heat_max: float | None = None) -> np.ndarray:
+        """The head at ``points`` (n, 3) [m] as an RGB image (size, width, 3), uint8.
 
         Args:
             points: Head vertex positions [m], shape (n, 3).
             part_transforms: Optional part name -> 4x4 rest-to-current transform in the row-vector
-                convention (``p' = p @ M``, translation in ``M[3, :3]``); parts left out stay at rest.
-            heat: Optional per-vertex scalar (n,) drawn with the turbo colour map from 0 to
-                ``heat_max`` instead of the skin colours (NaN grey).
+                convention (``p' = p @ M``, translation in ``M[3, :3]``).
+            part_points: Optional part name -> current vertices (k, 3) [m] (instead of a transform).
+                Parts in neither stay at rest.
+            heat: Optional per-vertex scalar (n,) drawn on the skin with the turbo colour map from 0
+                to ``heat_max`` instead of the skin colours (NaN grey); the parts keep their colours.
             heat_max: Top of the heat colour map (> 0); default the largest ``heat``.
         """
         extra = []
-        for name, (V, Fp) in self.parts.items():
+        for name, (V, _) in self.parts.items():
+            Vd, Fd = self._drawn[name]
             M = None if part_transforms is None else part_transforms.get(name)
-            Vp = V if M is None else V @ np.asarray(M)[:3, :3] + np.asarray(M)[3, :3]
-            extra.append((Vp, Fp, self._part_color(name)))
+            P = None if part_points is None else part_points.get(name)
+            if P is not None:
+                P = np.asarray(P, dtype=np.float64)
+                if P.shape != V.shape:
+                    raise InputError(f"part_points[{name!r}]: expected shape {V.shape}, got {P.shape}")
+                Vd = P if Vd is V else _rigid_map(V, P)(Vd)
+            elif M is not None:
+                Vd = Vd @ np.asarray(M)[:3, :3] + np.asarray(M)[3, :3]
+            extra.append((Vd, Fd, self.part_colors[name]))
         colors = self.colors
         if heat is not None:
             h = np.asarray(heat, dtype=np.float64)
@@ -97,8 +197,8 @@ class FaceView:
             colors = colormap(h, 0.0, max(top, 1e-12))
         return render_mesh(points, self.faces, view=self.view, width=self.width, height=self.size,
                            vertex_colors=colors, extra_meshes=extra, points=self.frame_points,
-                           point_color=_BACKGROUND, point_radius=1e-3, background=_BACKGROUND, margin=0.02,
-                           device=self.device)
+                           point_color=_BACKGROUND, point_radius=1e-3, background=_BACKGROUND, margin=_MARGIN,
+                           inside_color=CAVITY, supersample=self.supersample, device=self.device)
 
 
 def save_gif(path, images, *, fps: float = 15.0, loop: int = 0) -> Path:

@@ -16,6 +16,8 @@ import warp as wp
 #   c   = albedo * (ambient + diffuse * max(0, n_s . l))
 # The flip follows the geometric normal n_g, not n_s: near a silhouette an interpolated
 # normal may point slightly away from the viewer and must stay unlit rather than flip.
+# Inside: the back of one of the first ``inside_count`` triangles (a closed-ish surface seen
+# from within, e.g. the head through an open mouth) is drawn flat in ``inside_color``.
 @wp.kernel
 def _cast_rays(
     # Scene:
@@ -23,6 +25,8 @@ def _cast_rays(
     indices: wp.array(dtype=wp.int32),
     vertex_normals: wp.array(dtype=wp.vec3),
     corner_colors: wp.array(dtype=wp.vec3),
+    inside_count: int,
+    inside_color: wp.vec3,
     # Camera:
     origin: wp.vec3,
     step_right: wp.vec3,
@@ -61,6 +65,10 @@ def _cast_rays(
     else:
         n = hit.normal
     if wp.dot(hit.normal, forward) > 0.0:
+        if f < inside_count:
+            color_out[i, j] = inside_color
+            depth_out[i, j] = hit.t
+            return
         n = -n
 
     albedo = u * corner_colors[3 * f + 0] + v * corner_colors[3 * f + 1] + w * corner_colors[3 * f + 2]

@@ -113,6 +113,19 @@ def _view_angles(view) -> tuple[float, float]:
     return azimuth, elevation
 
 
+def view_axes(view) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The camera's unit axes of a view: image right, image up and viewing direction, each (3,) float64.
+
+    Args:
+        view: A name of :data:`VIEWS` or ``(azimuth_deg, elevation_deg)`` (module docstring).
+    """
+    az, el = np.radians(_view_angles(view))
+    forward = -np.array([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)])
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    return right, np.cross(right, forward), forward
+
+
 @dataclass(frozen=True)
 class _Camera:
     """Orthographic camera over a supersampled pixel grid.
@@ -138,20 +151,15 @@ class _Camera:
 
 
 def _make_camera(
-    P: np.ndarray, azimuth: float, elevation: float, width: int, height: int, margin: float
+    P: np.ndarray, azimuth: float, elevation: float, width: int, height: int, margin: float,
+    supersample: int = _SUPERSAMPLE,
 ) -> _Camera:
     """Frame the points P (k, 3) [m] seen from (azimuth, elevation) degrees.
 
     The projected bounding box fills the image's tighter axis except for ``margin`` (a fraction
     of the box's extent) on each side.
     """
-    az, el = np.radians(azimuth), np.radians(elevation)
-    eye = np.array([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)])
-    forward = -eye
-    right = np.cross(forward, [0.0, 1.0, 0.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-
+    right, up, forward = view_axes((azimuth, elevation))
     x, y, z = P @ right, P @ up, P @ forward
     extent_x, extent_y = np.ptp(x), np.ptp(y)
     diagonal = float(np.linalg.norm(np.ptp(P, axis=0)))
@@ -159,8 +167,8 @@ def _make_camera(
     size = max(extent_x / width, extent_y / height) * scale  # metres per output pixel
     if size <= 0.0:
         size = max(diagonal, 1.0) / max(width, height)
-    rows, cols = height * _SUPERSAMPLE, width * _SUPERSAMPLE
-    pixel = size / _SUPERSAMPLE
+    rows, cols = height * supersample, width * supersample
+    pixel = size / supersample
     pad = 0.05 * max(diagonal, 1e-6)
     centre = 0.5 * (x.min() + x.max()) * right + 0.5 * (y.min() + y.max()) * up
     origin = (
@@ -236,6 +244,8 @@ def render_mesh(
     polyline_color=(0.1, 0.2, 0.8),
     line_width: float | None = None,
     depth_tolerance: float | None = None,
+    inside_color=None,
+    supersample: int = _SUPERSAMPLE,
     device="cpu",
 ) -> np.ndarray:
     """Ray cast a triangle mesh (plus extras) into an RGB image.
@@ -270,6 +280,11 @@ def render_mesh(
         depth_tolerance: How far [m] a point or line sample may lie behind the visible
             surface and still be drawn (default: 1 % of the scene's bounding-box diagonal);
             ``float("inf")`` draws them on top of everything (muscles under the skin).
+        inside_color: Optional RGB for the back side of the triangles F (not of the extra
+            meshes), drawn flat: the inside of a head seen through its mouth reads as a cavity.
+            Default: both sides shaded alike.
+        supersample: Rays per pixel along each axis (1-4), box-filtered down: 2 (default)
+            smooths the edges; 1 is four times faster (e.g. the frames of a GIF).
         device: Warp device to ray cast on, e.g. ``"cpu"`` or ``"cuda:0"``.
 
     Returns:
@@ -293,6 +308,7 @@ def render_mesh(
     else:
         corners = np.broadcast_to(_as_color(base_color, "base_color"), F.shape + (3,))
     background = _as_color(background, "background")
+    inside = (0.0, 0.0, 0.0) if inside_color is None else _as_color(inside_color, "inside_color")
 
     # Scene: all triangles in one mesh, colours per triangle corner.
     scene_V, scene_F, scene_N, scene_C = [V], [F], [vertex_normals(V, F)], [corners]
@@ -330,7 +346,9 @@ def render_mesh(
             framed.append(P)
 
     all_V = np.concatenate(scene_V)
-    camera = _make_camera(np.concatenate(framed), azimuth, elevation, width, height, margin)
+    if supersample not in (1, 2, 3, 4):
+        raise InputError(f"supersample must be 1, 2, 3 or 4, got {supersample!r}")
+    camera = _make_camera(np.concatenate(framed), azimuth, elevation, width, height, margin, supersample)
     if depth_tolerance is None:
         depth_tolerance = 0.01 * float(np.linalg.norm(np.ptp(np.concatenate(framed), axis=0)))
 
@@ -359,6 +377,8 @@ def render_mesh(
             wp_indices,
             normals,
             corner_colors,
+            F.shape[0] if inside_color is not None else 0,
+            wp.vec3(*inside),
             wp.vec3(*camera.origin),
             wp.vec3(*(camera.pixel * camera.right)),
             wp.vec3(*(-camera.pixel * camera.up)),
@@ -372,7 +392,7 @@ def render_mesh(
         outputs=[color_out, depth_out],
         device=device,
     )
-    color = color_out.numpy().astype(np.float64)
+    color = color_out.numpy()  # float32; overlays and the box filter stay in float32
     depth = depth_out.numpy()
     miss = depth >= np.float32(camera.max_depth)
     depth = np.where(miss, np.inf, depth.astype(np.float64))
@@ -383,7 +403,7 @@ def render_mesh(
         line_width = max(1.0, 0.003 * short_side)
     for P, c in lines:
         samples = _polyline_samples(camera.project(P))
-        radius = 0.5 * line_width * _SUPERSAMPLE
+        radius = 0.5 * line_width * supersample
         _stamp(color, depth, samples, np.broadcast_to(c, samples.shape), radius, depth_tolerance)
     if points is not None and points.shape[0] > 0:
         if point_radius is None:
@@ -392,11 +412,11 @@ def render_mesh(
             pc = np.broadcast_to(_as_color(point_color, "point_color"), points.shape)
         else:
             pc = _as_colors(point_color, points.shape[0], "point_color")
-        _stamp(color, depth, camera.project(points), pc, point_radius * _SUPERSAMPLE, depth_tolerance)
+        _stamp(color, depth, camera.project(points), pc, point_radius * supersample, depth_tolerance)
 
-    s = _SUPERSAMPLE
-    image = color.reshape(height, s, width, s, 3).mean(axis=(1, 3))
-    return np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)
+    s = supersample
+    image = sum(color[i::s, j::s] for i in range(s) for j in range(s)) * np.float32(255.0 / (s * s))
+    return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
 
 # Turbo (Mikhailov 2019), polynomial fit by R. Du: c(x) = sum_k a_k x^k, k = 0..5.
@@ -481,7 +501,7 @@ def _format_value(v: float) -> str:
     return f"{v:.3g}"
 
 
-def save_png(path, image, *, title: str | None = None, colorbar=None) -> str:
+def save_png(path, image, *, title: str | None = None, colorbar=None, font_size: int | None = None) -> str:
     """Write an RGB image as PNG, atomically, with an optional title and colour bar.
 
     The file is written to a temporary name in the destination folder and then moved over
@@ -495,6 +515,8 @@ def save_png(path, image, *, title: str | None = None, colorbar=None) -> str:
         colorbar: ``(vmin, vmax, label)`` or ``(vmin, vmax, label, name)``: a horizontal bar of
             the colour map ``name`` (default ``"turbo"``) below the image, with the min / max
             values at its ends and the label in the middle.
+        font_size: Text height [px] of the title and colour bar; default from the image width
+            (at most 37 px).
 
     Returns:
         The path written, as a string.
@@ -510,7 +532,11 @@ def save_png(path, image, *, title: str | None = None, colorbar=None) -> str:
     if image.dtype != np.uint8:
         image = np.clip(np.rint(np.asarray(image, dtype=np.float64) * 255.0), 0, 255).astype(np.uint8)
     h, w = image.shape[:2]
-    font_size = max(12, min(w, 1200) // 32)
+    if font_size is None:
+        font_size = max(12, min(w, 1200) // 32)
+    elif not (isinstance(font_size, (int, np.integer)) and 6 <= font_size <= 512):
+        raise InputError(f"font_size: expected a whole number of pixels in [6, 512], got {font_size!r}")
+    font_size = int(font_size)
     font = _font(font_size)
     pad = font_size // 2
 

@@ -9,7 +9,8 @@ import numpy as np
 from ..template.head import REGIONS, Template
 from .render import render_mesh, save_png
 
-__all__ = ["LIPS", "SKIN", "TEETH", "TONGUE", "colored_scene", "render_previews", "vermilion_weight"]
+__all__ = ["CAVITY", "LIPS", "MOUTH", "SKIN", "TEETH", "TONGUE", "colored_scene", "head_colors", "part_colors",
+           "render_previews", "vermilion_weight"]
 
 
 SKIN = np.array([0.87, 0.72, 0.62])
@@ -31,6 +32,50 @@ def vermilion_weight(V, lm: dict, mask=None) -> np.ndarray:
     return w if mask is None else w * mask
 
 
+_EYE_PALETTE = np.array([[0.05, 0.05, 0.05], [0.33, 0.24, 0.16], [0.96, 0.95, 0.93]])  # pupil, iris, sclera
+MOUTH = np.array([0.45, 0.2, 0.2])
+"""Inside of the mouth (the lips' inner sheets), linear RGB."""
+CAVITY = np.array([0.16, 0.05, 0.05])
+"""The inside of the head seen through the open mouth (the skin's back side), linear RGB."""
+
+
+def part_colors(name: str, V) -> np.ndarray:
+    """Preview colours of a rigid part at rest, (k, 3) in [0, 1], for its vertices V (k, 3) [m].
+
+    Eyeballs (names starting ``eye``): white sclera with a brown iris (6 mm radius) and a black
+    pupil (2 mm) around the axis through the ball's centre along +z (the template's gaze);
+    teeth :data:`TEETH`; anything else (the tongue) :data:`TONGUE`.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    if name.startswith("eye"):
+        d = V - V.mean(0)
+        r = np.linalg.norm(d, axis=1)
+        ang = np.arccos(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1, 1))
+        rm = max(float(r.mean()), 6.5e-3)
+        k = np.where(ang < np.arcsin(2.0e-3 / rm), 0, np.where(ang < np.arcsin(6.0e-3 / rm), 1, 2))
+        return _EYE_PALETTE[k]
+    return np.tile(TEETH if name.startswith("teeth") else TONGUE, (len(V), 1))
+
+
+def head_colors(V, lm: dict) -> np.ndarray:
+    """Preview colours of a head's skin at rest, (n, 3) in [0, 1], from its vertices V (n, 3) [m]
+    and FDPs ``lm`` (id -> (3,) [m]; uses 2.2, 2.3, 8.1-8.4).
+
+    Skin, the vermilion tinted on the front of the face (:func:`vermilion_weight`), and the inside
+    of the mouth (the lips' inner sheets: within the lips' ellipse, more than 4 mm behind the
+    stomion) darker, so an open mouth reads as one.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    lm = {k: np.asarray(v, dtype=np.float64) for k, v in lm.items()}
+    sto = 0.5 * (lm["2.2"] + lm["2.3"])
+    front = V[:, 2] > sto[2] - 0.02
+    w = vermilion_weight(V, lm, front)[:, None]
+    col = SKIN * (1 - w) + LIPS * w
+    inner = (vermilion_weight(V, lm) > 0.5) & (V[:, 2] < sto[2] - 0.004) & front
+    col[inner] = MOUTH
+    return col
+
+
 def colored_scene(t: Template) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Skin and rigid parts merged into one mesh with per-vertex colours for previews.
 
@@ -47,16 +92,7 @@ def colored_scene(t: Template) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     Cs.append(col)
     off = t.vertex_count
     for name, (V, F) in t.parts.items():
-        if name.startswith("eye"):
-            c = V.mean(0)
-            d = V - c
-            ang = np.arccos(np.clip(d[:, 2] / np.linalg.norm(d, axis=1), -1, 1))
-            r = np.linalg.norm(d, axis=1).mean()
-            pc = np.where(ang < np.arcsin(2.0e-3 / r), 0.0, np.where(ang < np.arcsin(6.0e-3 / r), 1.0, 2.0))
-            pal = np.array([[0.05, 0.05, 0.05], [0.33, 0.24, 0.16], [0.96, 0.95, 0.93]])
-            Cs.append(pal[pc.astype(int)])
-        else:
-            Cs.append(np.tile(TEETH if name.startswith("teeth") else TONGUE, (len(V), 1)))
+        Cs.append(part_colors(name, V))
         Vs.append(V)
         Fs.append(F + off)
         off += len(V)

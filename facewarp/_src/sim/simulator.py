@@ -126,6 +126,11 @@ class FaceSimulator:
             physical ``support_modulus`` times the node's area; thesis the hold stiffness).
         edge_damping: Edge dashpot [N s/m] (default: thesis 500, physical 0).
         mass_scaling: Verlet: add mass to the 2 % of nodes below the chosen substep.
+        contact: Keep the lips from crossing each other, lips and cheeks outside the teeth and
+            the lids outside the eyeballs (:class:`~facewarp.physics.ContactStage`; default True).
+        contact_modulus: Contact stiffness per unit sheet area [N/m^3] (default
+            ``CONTACT_MODULUS``, 2e9, with the physical material; the thesis profile uses its hold
+            stiffness), plus ``CONTACT_MUSCLE_RATIO`` (50) times the node's muscle springs.
 
     Raises:
         InputError: an unknown solver, material or method, or bad numbers.
@@ -137,11 +142,12 @@ class FaceSimulator:
                  dt: float | None = None, substeps: int | None = None, fps: float = 30.0,
                  iterations: int | None = None, tolerance: float | None = None, method: str | None = None,
                  solver_options: dict | None = None, support_stiffness: float | None = None, edge_damping: float | None = None,
-                 mass_scaling: bool = True):
+                 mass_scaling: bool = True, contact: bool = True, contact_modulus: float | None = None):
         wp = get_warp()
         from dataclasses import replace
 
         from ..coupling.kinematic import CarryStage, JawStage
+        from ..physics.contact import CONTACT_MODULUS, CONTACT_MUSCLE_RATIO, ContactStage, contact_geometry
         from ..physics.materials import MaterialPhysical, material_profile
         from ..physics.model import ModelBuilder
         from ..physics.muscle_stage import MuscleStage, SupportStage
@@ -183,6 +189,24 @@ class FaceSimulator:
         extra = np.zeros(len(fr.nodes))
         np.add.at(extra, fr.support_nodes, np.broadcast_to(k_support, (len(fr.support_nodes),)))
         np.add.at(extra, rig.att_node, rig.att_stiffness)
+        # contact springs (one-sided, on the lips, the cheeks near the teeth and the lids)
+        self.contact_geometry = None
+        if contact:
+            if contact_modulus is not None and not (isinstance(contact_modulus, (int, float))
+                                                    and np.isfinite(contact_modulus) and contact_modulus > 0):
+                raise InputError(f"contact_modulus: expected a positive number [N/m^3], got {contact_modulus!r}")
+            # a node's contact spring holds against the tissue (per area, or the thesis profile's
+            # hold stiffness) and against its own muscle springs (CONTACT_MUSCLE_RATIO times them)
+            k_muscle = np.bincount(rig.att_node, weights=rig.att_stiffness, minlength=len(fr.nodes))
+            if physical:
+                k_contact = float(contact_modulus or CONTACT_MODULUS) * builder.vertex_area
+            else:
+                k_contact = np.full(len(fr.nodes), float(builder.hold_stiffness.max()) if fr.held.any() else 0.0)
+            k_contact = k_contact + CONTACT_MUSCLE_RATIO * k_muscle
+            self.contact_geometry = contact_geometry(fr)
+            g = self.contact_geometry
+            cand = np.unique(np.concatenate([*g.lip_nodes, *[t[4] for t in g.teeth], g.eye_nodes]).astype(np.int64))
+            extra[cand] += k_contact[cand]
         # the Verlet reference substep (selective mass scaling: the 2 % of nodes with the smallest
         # own limit, short edges and flat tets in creases of adapted heads, get the mass that lifts
         # them to it); the thesis profile's per-substep damping is a rate of 0.002 / that step
@@ -221,6 +245,10 @@ class FaceSimulator:
         carried = np.flatnonzero((node_jaw > 0) & ~fr.fixed)
         self.carry = CarryStage(self.jaw, carried, node_jaw[carried], self.device)
         stages = [self.carry, self.jaw_stage, self.support, self.muscles]
+        self.contact = None
+        if contact:
+            self.contact = ContactStage(fr, k_contact, self.device, geometry=self.contact_geometry)
+            stages.append(self.contact)
         if solver == "verlet":
             self.solver = SolverVerlet(self.model, stages=stages)
         else:
@@ -322,6 +350,7 @@ class FaceSimulator:
         self._j = np.zeros(2, np.float32)
         self._target_a, self._target_j = self._a.copy(), self._j.copy()
         self._steps_taken = 0
+        self.muscles.update_geometry(self.control)  # the rest fibres (frame 0 of run() draws them)
 
     # ------------------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
@@ -462,6 +491,17 @@ class FaceSimulator:
             V[m] = self.jaw.apply(V[m], fr.vertex_jaw[m], float(ja[0]), float(ja[1]))
         V[self.vertex_of_node] = X[self.node_of_vertex]
         return self._pose.to_world(V) if frame == "world" else V
+
+    def contact_crossings(self, X: np.ndarray | None = None) -> dict:
+        """Crossings at node positions X (default the current state; head frame): lip nodes inside
+        the other lip, nodes inside the teeth, lid nodes inside an eyeball
+        (:func:`~facewarp.physics.contact_crossings`; 0 each while the contact holds)."""
+        from ..physics.contact import contact_crossings, contact_geometry
+
+        if self.contact_geometry is None:
+            self.contact_geometry = contact_geometry(self.fr)
+        return contact_crossings(self.fr, self.positions() if X is None else X, self._j,
+                                 geometry=self.contact_geometry)
 
     def fdp(self, fdp_id: str) -> np.ndarray:
         """Current position [m] of one FDP (e.g. ``"2.1"``, the chin), shape (3,), float64."""

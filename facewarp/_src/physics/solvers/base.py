@@ -20,7 +20,7 @@ from ...core.warp import get_warp
 from .. import kernels_tissue as kt
 from ..model import Control, Model, State
 
-__all__ = ["SolverBase", "SolverStage", "check_step_args"]
+__all__ = ["SolverBase", "SolverStage", "check_step_args", "stage_springs"]
 
 
 def check_step_args(state_in: State, state_out: State, dt) -> None:
@@ -36,6 +36,19 @@ def check_step_args(state_in: State, state_out: State, dt) -> None:
         raise InputError("state_in and state_out must be different State buffers")
 
 
+def stage_springs(stages) -> list:
+    """The :class:`~facewarp._src.physics.model.Springs` of ``stages``, in stage order: a stage's
+    ``springs`` attribute is None, one ``Springs`` or a tuple / list of them (a contact stage has
+    one set per obstacle kind)."""
+    out = []
+    for st in stages:
+        sp = getattr(st, "springs", None)
+        if sp is None:
+            continue
+        out.extend(sp if isinstance(sp, (list, tuple)) else [sp])
+    return out
+
+
 class SolverStage(Protocol):
     """A stage that adds forces, springs or kinematic targets each step.
 
@@ -45,8 +58,11 @@ class SolverStage(Protocol):
     nodes kinematically, in place in ``state_in`` (both position buffers, before any force is
     computed). Implicit solvers (:class:`~.implicit.SolverImplicit`) call :meth:`prepare` once per
     step instead: the same targets and carry, and the stage's energy terms written into its
-    ``springs`` (:class:`~facewarp._src.physics.model.Springs`, or None for a stage without
-    any). Both may only launch kernels: no allocation, no host read.
+    ``springs`` (:class:`~facewarp._src.physics.model.Springs`, a tuple of them, or None for a
+    stage without any). A stage may also have ``refresh(model, positions, control)``, which the
+    implicit solver calls between iterations to re-evaluate its springs at the current iterate
+    (the muscles' fibre cosine, the contacts' active set). All may only launch kernels: no
+    allocation, no host read.
     """
 
     def apply(self, model: Model, state_in: State, control: Control, dt: float, forces: object,

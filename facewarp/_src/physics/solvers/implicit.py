@@ -53,6 +53,19 @@ solve (see ``kernels_muscle._muscle_springs``): within the solve a conservative 
 cosine at the solution and solve again until it no longer changes (``spring_updates``), so the
 step ends at a fixed point of Eq. 6.4.1 as printed; the device method re-evaluates it before every
 Newton iteration.
+
+Contact (:mod:`facewarp._src.physics.contact`) adds one-sided springs (``Springs.one_sided``):
+penalties that act only when compressed, their planes (the other lip's closest point, a dental
+arch's) frozen over a solve like the fibre cosine. The CPU methods detect the contacts again at
+the solution and solve again while a contact closed further by more than ``contact_tolerance``
+(up to ``contact_updates`` more solves); L-BFGS renews its factorisation at the step's start when
+a contact has closed since the last one (its factorised model keeps the contacts within
+``contact_slack`` of closing: without the stiff contact springs it would backtrack at every
+iteration). The device method re-detects before every Newton iteration, as for the muscles.
+Measured at level 0 (default head, CPU L-BFGS, ``benchmarks/physics_steps.py --contact``, a
+2-core box shared with other jobs, so +-30 %): the lids touch the eyeballs in most presets and
+cost 1.1-2x the frame time (laugh, smile, surprise, sad, blink, squint, the Fig. 6.16 sequence);
+pucker, the lips pressed together through its whole hold, 3-10x.
 """
 
 from __future__ import annotations
@@ -66,7 +79,7 @@ from ...core.errors import InputError, SimulationError
 from ...core.warp import get_warp
 from ..model import Control, Model, State, group_indices
 from . import kernels_implicit as ki
-from .base import SolverBase, check_step_args
+from .base import SolverBase, check_step_args, stage_springs
 
 __all__ = ["IMPLICIT_METHODS", "SolverImplicit", "factorization_backend"]
 
@@ -134,6 +147,7 @@ class _SpringSet:
         self.count = len(node)
         self.node_host = node
         self.axis = springs.axis is not None
+        self.one_sided = int(bool(getattr(springs, "one_sided", False)))
         nodes_u, start, order = group_indices(node)
         self.group_nodes = wp.array(nodes_u.astype(np.int32), dtype=wp.int32, device=device)
         self.group_start = wp.array(start.astype(np.int32), dtype=wp.int32, device=device)
@@ -177,6 +191,12 @@ class SolverImplicit(SolverBase):
         backend: Sparse factorisation for the CPU methods (default :func:`factorization_backend`).
 
     Attributes:
+        contact_slack: One-sided (contact) springs within this distance [m] of closing are kept
+            in the factorised model of L-BFGS and the Newton model of the device method (3e-4).
+        contact_tolerance: A contact detected again at the solution that closed further by more
+            than this [m] makes the CPU methods solve again (5e-5: half the 0.1 mm below the
+            contact gap that a pressed node keeps).
+        contact_updates: At most this many further solves for contacts (8).
         last_iterations: Iterations of the last step (host; 0 before the first step).
         factorizations: Number of factorisations made so far (CPU methods).
         timings: Seconds spent, accumulated: ``{"prepare", "gradient", "solve", "factor"}``.
@@ -228,6 +248,10 @@ class SolverImplicit(SolverBase):
         self.linear_iterations = int(linear_iterations)
         self.refactor_after = int(refactor_after)
         self._excess = 0  # iterations beyond one per step since the last factorisation
+        self.contact_slack = 3.0e-4  # [m] near-closed contacts kept in the factorised model (lbfgs)
+        self.contact_tolerance = 5.0e-5  # [m] contact re-detection that changes less is not solved again
+        self.contact_updates = 8  # further solves while a re-detected contact closed further
+        self._contacts_factored = None  # the contact set of the last factorisation
         self.spring_updates = int(spring_updates)
         self.spring_tolerance = float(spring_tolerance)
         self._refreshers = [st for st in self.stages if hasattr(st, "refresh")]
@@ -240,8 +264,7 @@ class SolverImplicit(SolverBase):
         self.timings = {"prepare": 0.0, "gradient": 0.0, "solve": 0.0, "factor": 0.0}
 
         m, dev, n = model, self.device, model.vertex_count
-        self.springs = [_SpringSet(st.springs, dev) for st in self.stages
-                        if getattr(st, "springs", None) is not None and st.springs.count > 0]
+        self.springs = [_SpringSet(sp_, dev) for sp_ in stage_springs(self.stages) if sp_.count > 0]
         self.x = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.x_trial = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.z = wp.zeros(n, dtype=wp.vec3, device=dev)
@@ -386,11 +409,12 @@ class SolverImplicit(SolverBase):
         for s in self.springs:
             sp_ = s.springs
             if s.axis:
-                wp.launch(ki._axis_spring_energy, dim=s.count, inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.axis, x],
+                wp.launch(ki._axis_spring_energy, dim=s.count,
+                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.axis, s.one_sided, x],
                           outputs=[s.energy, s.grad], device=dev)
             else:
                 wp.launch(ki._distance_spring_energy, dim=s.count,
-                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.rest_length, x],
+                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.rest_length, s.one_sided, x],
                           outputs=[s.energy, s.grad], device=dev)
         if not with_grad:
             return
@@ -409,8 +433,10 @@ class SolverImplicit(SolverBase):
                   device=self.device)
         wp.launch(ki._final_sum, dim=1, inputs=[self.partial, slot], outputs=[self.totals], device=self.device)
 
-    def _launch_hessian(self, x, h: float) -> None:
-        """PSD Hessian blocks at x summed into :attr:`block_values` (fixed rows / columns: identity)."""
+    def _launch_hessian(self, x, h: float, slack: float = 0.0) -> None:
+        """PSD Hessian blocks at x summed into :attr:`block_values` (fixed rows / columns: identity);
+        ``slack`` [m]: one-sided springs slack by less than this keep their block (the factorised
+        model of the CPU L-BFGS), 0 for the exact Hessian."""
         wp = get_warp()
         m, dev = self.model, self.device
         ih = 1.0 / h
@@ -430,11 +456,13 @@ class SolverImplicit(SolverBase):
         for s, off in zip(self.springs, o[4:]):
             sp_ = s.springs
             if s.axis:
-                wp.launch(ki._axis_spring_hessian, dim=s.count, inputs=[sp_.stiffness, sp_.axis, int(off)],
+                wp.launch(ki._axis_spring_hessian, dim=s.count,
+                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.axis, s.one_sided, slack, int(off), x],
                           outputs=[self.block_slots], device=dev)
             else:
                 wp.launch(ki._distance_spring_hessian, dim=s.count,
-                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.rest_length, int(off), x],
+                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.rest_length, s.one_sided, slack, int(off),
+                                  x],
                           outputs=[self.block_slots], device=dev)
         wp.launch(ki._gather_blocks, dim=self.block_count,
                   inputs=[self.block_start, self.block_order, self.block_row, self.block_col, m.vertex_fixed,
@@ -479,7 +507,7 @@ class SolverImplicit(SolverBase):
                     st.refresh(m, self.x, control)
             self._launch_energy(self.x, control, h)
             self._launch_total(0)
-            self._launch_hessian(self.x, h)
+            self._launch_hessian(self.x, h, self.contact_slack)
             wp.launch(ki._invert_diagonal, dim=n, inputs=[self.diag_block, self.block_values], outputs=[self.inv_diag],
                       device=dev)
             wp.launch(ki._negate, dim=n, inputs=[self.grad], outputs=[self.rhs], device=dev)
@@ -516,7 +544,8 @@ class SolverImplicit(SolverBase):
 
         t0 = time.perf_counter()
         self.x.numpy()[:] = x64
-        self._launch_hessian(self.x, h)
+        self._launch_hessian(self.x, h, self.contact_slack if self.method == "lbfgs" else 0.0)
+        self._contacts_factored = self._contact_set(x64)
         n = self.model.vertex_count
         vals = self.block_values.numpy().astype(np.float64)
         A = sp.bsr_matrix((vals, self._bsr_columns, self._bsr_offsets), shape=(3 * n, 3 * n))
@@ -555,7 +584,15 @@ class SolverImplicit(SolverBase):
             self._h = h
         total = 0
         updates = 0 if self.iterations is not None else self.spring_updates
-        for outer in range(updates + 1):
+        extra = 0 if self.iterations is not None else self.contact_updates
+        for outer in range(updates + extra + 1):
+            if (outer == 0 and self.method == "lbfgs" and self.refactor_after > 0
+                    and self._contacts_factored is not None):
+                # a contact closed since the factorisation: the factorised model lacks its stiff
+                # spring, and L-BFGS would backtrack at every iteration
+                cs = self._contact_set(x64)
+                if cs.shape != self._contacts_factored.shape or np.any(cs & ~self._contacts_factored):
+                    self._solve0 = self._host_factor(x64, h)
             e, g, noise = self._host_eval(x64, control, h)
             if not (np.isfinite(e) and np.isfinite(g).all()):
                 raise SimulationError(
@@ -566,7 +603,12 @@ class SolverImplicit(SolverBase):
             else:
                 its, x64 = self._lbfgs(x64, e, g, noise, control, h)
             total += its
-            if outer == updates or not self._refresh_springs(x64, control):
+            if outer == updates + extra or (outer >= updates and not any(s_.one_sided for s_ in self.springs)):
+                break
+            springs, contacts = self._refresh_springs(x64, control)
+            # the muscles' cosine is re-evaluated up to spring_updates times; a contact that
+            # closed further (a crossing in the making) up to contact_updates times more
+            if not ((springs and outer < updates) or contacts):
                 break
         if self.method == "lbfgs" and self.refactor_after > 0:
             if self.iterations is None:
@@ -578,20 +620,59 @@ class SolverImplicit(SolverBase):
         self.x.numpy()[:] = x64
         self.last_iterations = total
 
-    def _refresh_springs(self, x64: np.ndarray, control: Control) -> bool:
-        """Re-evaluate the refreshable springs at x64; True if one changed by more than the tolerance."""
+    def _contact_set(self, x64: np.ndarray) -> np.ndarray:
+        """Which one-sided springs are compressed or within :attr:`contact_slack` of it at x64,
+        all sets concatenated, shape (total,), bool."""
+        out = [np.zeros(0, bool)]
+        for s in self.springs:
+            if not s.one_sided:
+                continue
+            sp_ = s.springs
+            r = x64[s.node_host] - sp_.point.numpy()
+            if sp_.axis is not None:
+                gap = np.einsum("ij,ij->i", r, sp_.axis.numpy())
+            else:
+                gap = np.linalg.norm(r, axis=1) - sp_.rest_length.numpy()
+            out.append((sp_.stiffness.numpy() > 0) & (gap < self.contact_slack))
+        return np.concatenate(out)
+
+    def _refresh_springs(self, x64: np.ndarray, control: Control) -> tuple[bool, bool]:
+        """Re-evaluate the refreshable springs at x64; whether they changed: ``(springs,
+        contacts)``, a stiffness by more than ``spring_tolerance`` of the largest, and a one-sided
+        (contact) spring's compression at x64 grown by more than ``contact_tolerance`` (a contact
+        found, or its surface moved toward the node)."""
         if not self._refreshers:
-            return False
-        before = [s.springs.stiffness.numpy().copy() for s in self.springs]
+            return False, False
+
+        def snap(s):
+            sp_ = s.springs
+            k = sp_.stiffness.numpy().copy()
+            if not s.one_sided:
+                return k, None
+            r = x64[s.node_host] - sp_.point.numpy()
+            if sp_.axis is not None:
+                c = -np.einsum("ij,ij->i", r, sp_.axis.numpy())
+            else:
+                c = sp_.rest_length.numpy() - np.linalg.norm(r, axis=1)
+            return k, np.where(k > 0, np.maximum(c, 0.0), 0.0)
+
+        before = [snap(s) for s in self.springs]
         self.x.numpy()[:] = x64
         for st in self._refreshers:
             st.refresh(self.model, self.x, control)
-        change = 0.0
-        for s, b in zip(self.springs, before):
-            k = s.springs.stiffness.numpy()
-            if len(k):
-                change = max(change, float(np.abs(k - b).max() / max(float(np.abs(b).max()), float(np.abs(k).max()), 1e-30)))
-        return change > self.spring_tolerance
+        springs = contacts = False
+        for s, (b, cb) in zip(self.springs, before):
+            k, c = snap(s)
+            if not len(k):
+                continue
+            if s.one_sided:
+                # only a contact that closed further matters (one that opened leaves the node a
+                # little farther out, by less than the contact gap)
+                contacts |= float((c - cb).max()) > max(self.tolerance, self.contact_tolerance)
+            else:
+                scale = max(float(np.abs(b).max()), float(np.abs(k).max()), 1e-30)
+                springs |= float(np.abs(k - b).max()) / scale > self.spring_tolerance
+        return springs, contacts
 
     def _clear_history(self) -> None:
         self._history = ([], [], [])
@@ -619,6 +700,7 @@ class SolverImplicit(SolverBase):
         S, Y, R = self._history
         its = self.iterations or self.max_iterations
         solve0 = self._solve0
+        fresh = False  # solve0 was factorised at x64
         self._last_step_size = 0.0
         for k in range(its):
             if self.iterations is None and self.refactor_after > 0 and k > 0 and k % self.refactor_after == 0:
@@ -626,6 +708,7 @@ class SolverImplicit(SolverBase):
                 # factorisation at the current shape, history cleared
                 solve0 = self._solve0 = self._host_factor(x64, h)
                 S, Y, R = self._history
+                fresh = True
             t0 = time.perf_counter()
             q = -g
             alphas = []
@@ -645,7 +728,17 @@ class SolverImplicit(SolverBase):
             t, xn, en, gn, nn = self._line_search(x64, d, e, g, noise, control, h)
             if t == 0.0:
                 if not S:
-                    return k + 1, x64
+                    if fresh:
+                        return k + 1, x64
+                    # the factorisation was made at another shape: where the mesh has a soft
+                    # mode there (a flap, a sliver) its direction can be metres long and no
+                    # step of the line search lowers the energy; renew it here and retry once
+                    # (measured on the imported ICT head: the smile's lip corner stalled at
+                    # 0.7 mm of its 11 mm without this)
+                    solve0 = self._solve0 = self._host_factor(x64, h)
+                    S, Y, R = self._history
+                    fresh = True
+                    continue
                 self._clear_history()  # a stale pair spoilt the direction: retry from the factorisation
                 S, Y, R = self._history
                 continue
@@ -660,6 +753,7 @@ class SolverImplicit(SolverBase):
                 if len(S) > self.history:
                     S.pop(0), Y.pop(0), R.pop(0)
             x64, e, g, noise = xn, en, gn, nn
+            fresh = False
             self._last_step_size = float(np.abs(s_).max(initial=0.0))
             if self._converged(s_):
                 return k + 1, x64

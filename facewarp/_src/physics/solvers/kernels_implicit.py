@@ -239,12 +239,15 @@ def _node_energy(
 
 
 # Distance springs (muscles): E = k/2 (|p - x| - l0)^2, dE/dx = k (l - l0) (x - p) / l.
+# One-sided (contact, pushing out of the ball of radius l0 about p): the same with
+# s = min(0, l - l0), E = k/2 s^2, dE/dx = k s (x - p) / l.
 @wp.kernel
 def _distance_spring_energy(
     node: wp.array(dtype=wp.int32),
     point: wp.array(dtype=wp.vec3),
     stiffness: wp.array(dtype=float),
     rest_length: wp.array(dtype=float),
+    one_sided: int,
     positions: wp.array(dtype=wp.vec3),
     energy_out: wp.array(dtype=float),
     grad_out: wp.array(dtype=wp.vec3),
@@ -253,6 +256,8 @@ def _distance_spring_energy(
     r = positions[node[k]] - point[k]
     l = wp.length(r)
     st = l - rest_length[k]
+    if one_sided != 0:
+        st = wp.min(st, 0.0)
     energy_out[k] = 0.5 * stiffness[k] * st * st
     g = wp.vec3(0.0)
     if l > 0.0:
@@ -261,12 +266,15 @@ def _distance_spring_energy(
 
 
 # Axis springs (sliding supports): E = k/2 ((x - p) . a)^2, dE/dx = k ((x - p) . a) a.
+# One-sided (contact, the half-space (x - p) . a >= 0): s = min(0, (x - p) . a), E = k/2 s^2,
+# dE/dx = k s a.
 @wp.kernel
 def _axis_spring_energy(
     node: wp.array(dtype=wp.int32),
     point: wp.array(dtype=wp.vec3),
     stiffness: wp.array(dtype=float),
     axis: wp.array(dtype=wp.vec3),
+    one_sided: int,
     positions: wp.array(dtype=wp.vec3),
     energy_out: wp.array(dtype=float),
     grad_out: wp.array(dtype=wp.vec3),
@@ -274,6 +282,8 @@ def _axis_spring_energy(
     k = wp.tid()
     a = axis[k]
     s = wp.dot(positions[node[k]] - point[k], a)
+    if one_sided != 0:
+        s = wp.min(s, 0.0)
     energy_out[k] = 0.5 * stiffness[k] * s * s
     grad_out[k] = stiffness[k] * s * a
 
@@ -430,13 +440,19 @@ def _node_hessian(
     blocks_out[block_offset + i] = s * wp.identity(n=3, dtype=float)
 
 
-# Springs: distance k (n n^T + max(1 - l0/l, 0) (I - n n^T)); axis k a a^T.
+# Springs: distance k (n n^T + max(1 - l0/l, 0) (I - n n^T)); axis k a a^T. One-sided springs:
+# k n n^T (distance; the transverse term k (1 - l0/l) < 0 of a compressed spring dropped) and
+# k a a^T (axis) where the spring is compressed, 0 where it is slack. ``slack`` > 0 [m] keeps the
+# block also for springs slack by less than that (the CPU L-BFGS's factorised model: a contact
+# about to close is in the preconditioner); the exact Hessian has slack = 0.
 @wp.kernel
 def _distance_spring_hessian(
     node: wp.array(dtype=wp.int32),
     point: wp.array(dtype=wp.vec3),
     stiffness: wp.array(dtype=float),
     rest_length: wp.array(dtype=float),
+    one_sided: int,
+    slack: float,
     block_offset: int,
     positions: wp.array(dtype=wp.vec3),
     blocks_out: wp.array(dtype=wp.mat33),
@@ -449,19 +465,31 @@ def _distance_spring_hessian(
         n = r / l
         nn = _outer(n, n)
         H = stiffness[k] * (nn + wp.max(1.0 - rest_length[k] / l, 0.0) * (wp.identity(n=3, dtype=float) - nn))
+        if one_sided != 0:
+            H = stiffness[k] * nn
+    if one_sided != 0 and l - rest_length[k] >= slack:
+        H = wp.mat33(0.0)
     blocks_out[block_offset + k] = H
 
 
 @wp.kernel
 def _axis_spring_hessian(
+    node: wp.array(dtype=wp.int32),
+    point: wp.array(dtype=wp.vec3),
     stiffness: wp.array(dtype=float),
     axis: wp.array(dtype=wp.vec3),
+    one_sided: int,
+    slack: float,
     block_offset: int,
+    positions: wp.array(dtype=wp.vec3),
     blocks_out: wp.array(dtype=wp.mat33),
 ):
     k = wp.tid()
     a = axis[k]
-    blocks_out[block_offset + k] = stiffness[k] * _outer(a, a)
+    H = stiffness[k] * _outer(a, a)
+    if one_sided != 0 and wp.dot(positions[node[k]] - point[k], a) >= slack:
+        H = wp.mat33(0.0)
+    blocks_out[block_offset + k] = H
 
 
 # Every BSR block sums its block slots in a fixed order; a block in a fixed node's row or column

@@ -1,0 +1,446 @@
+"""Contact of the skin with itself and the rigid parts: lips, teeth, eyeballs (solver stage).
+
+The upper and lower lip may touch but never cross; lips and cheeks stay outside the teeth; lids
+stay outside the eyeball. :class:`ContactStage` keeps these with one-sided penalty springs
+(:class:`~facewarp._src.physics.model.Springs` with ``one_sided``; their energy, gradient and
+Hessian are in the solvers' kernels and in :mod:`.potential`):
+
+* lip on lip: every node of one lip (:mod:`facewarp._src.anatomy.lips`: the skin within
+  ``LIP_REACH`` of the mouth slit) against the closed surface of the other lip's tet region, a
+  ``wp.Mesh`` refit to the current positions at every detection; a node within ``LIP_REACH_M``
+  of it gets the half-space spring of its closest point (``kernels_contact._surface_contacts``);
+* lip and cheek on teeth: inner-sheet nodes that are free and lie within ``TEETH_NEAR_M`` of a
+  dental arch at rest, against that arch (a closed mesh; the upper teeth ride the cranium, the
+  lower teeth turn with the jaw by the part's Eq. 6.4.9 amount);
+* lid on eyeball: free nodes within ``EYE_NEAR_M`` of an eyeball's sphere, pushed out of the ball
+  ``|x - c| >= r`` (analytic, static springs).
+
+The half-space springs sit ``gap`` (0.25 mm) outside the other surface, so a node that touches
+with a force F stays ``gap - F / k`` outside it: the lips close without crossing as long as the
+force per node stays below ``k gap``. Two lips in contact are held at their mid-plane (see
+``kernels_contact._surface_contacts``). Detection runs in ``prepare`` (the step's start) and
+again in ``refresh``: the CPU solvers call it at each solution and solve again while a contact
+closed further (``SolverImplicit.contact_tolerance``), the device method before each Newton
+iteration. It is kernels only (mesh refit and queries included): no host read, so a frame can be
+captured in a CUDA graph. (Not run on a GPU yet: every kernel and the ``newton-pcg`` method with
+contact were run on the CPU device.)
+
+Stiffness (physical units): a node's spring is ``CONTACT_MODULUS * area + CONTACT_MUSCLE_RATIO *
+k_m`` [N/m], with the node's sheet area (:func:`~facewarp._src.physics.model.sheet_areas`; the
+median of its set for a node on no sheet) and k_m the muscle springs on the node (Eq. 6.4.1).
+The area term (2e9 N/m^3, 50 times the muscles' modulus 4e7; ~2e4 N/m on a level-0 lip node,
+about 20 times its edges' ``k0 / D0^2``) holds the skin that tissue pushes into contact (a lid
+closing over the eyeball: 5e8 left 0.17 mm on ICT identity 002's blink, 2e9 0.08 mm); the muscle
+term holds a node that its own muscle pulls into the obstacle (the orbicularis oculi pulls the
+lids toward its ring centre, inside the eyeball; the orbicularis oris presses the lips together):
+a muscle target d beyond the surface leaves ``d / 50`` of penetration, 0.1 mm for 5 mm. Stiffer
+contact costs the CPU L-BFGS more iterations (its factorised model meets the contacts only at a
+renewal); the gap keeps the real surface uncrossed while ``F / k`` stays below it. With the
+thesis profile the base term is its hold stiffness; its muscles (1e7 N/m a node) pull the lips
+through each other at the nodes next to the attached ones (a limitation, measured on pucker).
+
+:func:`contact_crossings` counts what the springs prevent, on any node positions: lip nodes
+inside a tet of the other lip, nodes inside a dental arch, nodes inside an eyeball.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..anatomy.lips import lip_crossings, lip_sides, lip_tets, region_surface
+from ..core.errors import InputError
+from ..core.warp import get_warp
+from .model import Springs
+
+__all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "EYE_NEAR_M", "LIP_REACH_M", "TEETH_NEAR_M",
+           "TEETH_REACH_M", "ContactGeometry", "ContactStage", "contact_crossings", "contact_geometry",
+           "lip_contact_geometry", "node_vertex", "winding_numbers"]
+
+CONTACT_MODULUS = 2.0e9
+"""Contact stiffness per unit sheet area [N/m^3] (module doc)."""
+CONTACT_MUSCLE_RATIO = 50.0
+"""A node's contact spring is at least this many times the muscle springs on it (module doc)."""
+CONTACT_GAP = 2.5e-4
+"""Distance [m] outside the other surface at which a half-space contact spring starts to push."""
+LIP_REACH_M = 3.0e-3
+"""Nodes within this distance [m] of the other lip's surface (inside or out) get a contact spring
+(more than the lips' thickness, so a node anywhere inside is found)."""
+TEETH_NEAR_M = 1.2e-2
+"""Inner-sheet nodes within this distance [m] of a dental arch at rest are its contact candidates."""
+TEETH_REACH_M = 4.0e-3
+"""Candidates within this distance [m] of the arch (inside or out) get a contact spring."""
+EYE_REST_SLACK_M = 5.0e-5
+"""A lid node inside the eyeball's sphere (or within the gap of it) at rest may sink this much
+[m] deeper before its spring pushes: an active set that starts exactly at rest would flicker
+with every step of the solver (measured: 2x the iterations of laugh at level 0)."""
+EYE_NEAR_M = 4.0e-3
+"""Nodes within this distance [m] of an eyeball's sphere at rest are its contact candidates."""
+_ROUNDING_M = 1.0e-6  # float32 positions of ~0.1 m: a node "deeper than at rest" by less is rounding
+_TEETH = ("teeth_upper", "teeth_lower")
+_EYES = ("eye_L", "eye_R")
+
+
+@dataclass
+class ContactGeometry:
+    """What the contact stage needs of a face rig (host, NumPy; metres).
+
+    Attributes:
+        node_side: Lip of every tet node, +1 upper / -1 lower / 0 neither, shape (p,), int8.
+        lip_faces: The closed surfaces of the upper and the lower lip's tet regions, outward
+            triangles over tet nodes, shapes (b, 3), int64 (``[upper, lower]``).
+        lip_nodes: Candidates against ``lip_faces[0]`` (lower-lip nodes) and ``lip_faces[1]``
+            (upper-lip nodes), shape (c,), int64 each.
+        teeth: ``[(name, V (t, 3), F (f, 3), jaw amount, candidate nodes (c,))]``.
+        eyes: ``(centers (e, 3), radii (e,))``; eye_nodes (c,), eye_of_node (c,) index into eyes.
+        excluded: Candidates left out because they already touch or cross at rest, per kind
+            (``{"lip_lip": n, "lip_teeth": n}``; a separated build has 0), and
+            ``lid_eye_inside_at_rest``: lid nodes inside the eyeball's sphere at rest (kept, with
+            their rest distance as the radius they may not go below).
+    """
+
+    node_side: np.ndarray
+    lip_faces: list
+    lip_nodes: list
+    teeth: list
+    eye_centers: np.ndarray
+    eye_radii: np.ndarray
+    eye_nodes: np.ndarray
+    eye_of_node: np.ndarray
+    excluded: dict
+
+
+def node_vertex(fr) -> np.ndarray:
+    """Head vertex every tet node lies on or under, shape (p,), int64 (-1 where unknown).
+
+    Sheets are stored one after another (node ``l q + i`` under outer node ``i``; see
+    :func:`~facewarp._src.physics.face_rig.node_jaw_amounts`)."""
+    n = len(fr.nodes)
+    q = int((np.asarray(fr.layer) == 0).sum())
+    sv = np.asarray(fr.surface_vertex, np.int64)
+    if q and n % q == 0 and (sv[:q] >= 0).all():
+        return sv[np.arange(n) % q]
+    return sv.copy()
+
+
+def _sphere(V) -> tuple[np.ndarray, float]:
+    V = np.asarray(V, np.float64)
+    c = V.mean(axis=0)
+    return c, float(np.linalg.norm(V - c, axis=1).mean())
+
+
+def winding_numbers(V, F, P) -> np.ndarray:
+    """Generalised winding number of the closed, outward surface (V, F) at each point of P
+    (Van Oosterom and Strackee's solid angle per triangle): ~1 inside, ~0 outside; shape (k,)."""
+    P = np.asarray(P, np.float64).reshape(-1, 3)
+    A = np.asarray(V, np.float64)[np.asarray(F)]  # (m, 3, 3)
+    out = np.zeros(len(P))
+    for s in range(0, len(P), 256):
+        R = A[None] - P[s : s + 256, None, None]  # (k, m, 3, 3)
+        a, b, c = R[..., 0, :], R[..., 1, :], R[..., 2, :]
+        la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
+        det = np.einsum("kmi,kmi->km", a, np.cross(b, c))
+        den = (la * lb * lc + np.einsum("kmi,kmi->km", a, b) * lc + np.einsum("kmi,kmi->km", b, c) * la
+               + np.einsum("kmi,kmi->km", c, a) * lb)
+        out[s : s + 256] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)
+    return out
+
+
+def _part_at(fr, name: str, jaw_angles) -> np.ndarray:
+    V, _ = fr.parts[name]
+    amt = float(fr.part_jaw.get(name, 0.0))
+    if amt and (jaw_angles[0] or jaw_angles[1]):
+        return fr.jaw.apply(V, np.full(len(V), amt), float(jaw_angles[0]), float(jaw_angles[1]))
+    return np.asarray(V, np.float64)
+
+
+def lip_contact_geometry(V, T, node_side, *, fixed=None, gap: float = CONTACT_GAP) -> ContactGeometry:
+    """The lip-on-lip part of :func:`contact_geometry` for any tet mesh with two marked regions.
+
+    Args:
+        V: Rest node positions [m], shape (p, 3), float.
+        T: Tets, shape (k, 4), int.
+        node_side: +1 / -1 for the nodes of the two regions (upper, lower lip), 0 elsewhere,
+            shape (p,), int; a region's tets are those whose four nodes are on its side.
+        fixed: Nodes that do not move (no candidates), shape (p,), bool.
+        gap: The contact gap [m] (candidates closer than ``2 gap`` at rest are left out).
+
+    Returns:
+        A :class:`ContactGeometry` without teeth and eyes.
+    """
+    from ..geometry.surface import closest_point
+
+    X = np.asarray(V, np.float64)
+    T = np.asarray(T, np.int64)
+    side = np.asarray(node_side, np.int8)
+    if side.shape != (len(X),):
+        raise InputError(f"node_side: expected shape ({len(X)},), got {side.shape}")
+    free = np.ones(len(X), bool) if fixed is None else ~np.asarray(fixed, bool)
+    up, lo = lip_tets(T, side)
+    excluded = {"lip_lip": 0, "lip_teeth": 0, "lid_eye_inside_at_rest": 0}
+    lip_faces, lip_nodes = [], []
+    crossing = lip_crossings(X, T, side)["nodes"]
+    for region, mine in ((up, -1), (lo, 1)):  # the lower lip's nodes against the upper lip, and back
+        S = region_surface(T[region]) if region.any() else np.zeros((0, 3), np.int64)
+        cand = np.flatnonzero((side == mine) & free)
+        if len(S) and len(cand):
+            d = closest_point(X, S, X[cand], max_dist=1.0).dist
+            bad = (d < 2.0 * gap) | np.isin(cand, crossing)
+            excluded["lip_lip"] += int(bad.sum())
+            cand = cand[~bad]
+        else:
+            cand = np.zeros(0, np.int64)
+        lip_faces.append(S)
+        lip_nodes.append(cand)
+    return ContactGeometry(side, lip_faces, lip_nodes, [], np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64),
+                           np.zeros(0, np.int64), excluded)
+
+
+def contact_geometry(fr, *, gap: float = CONTACT_GAP) -> ContactGeometry:
+    """The lips, teeth and eyeballs of a face rig and the candidate nodes of each contact.
+
+    Candidates that already touch or cross at rest (within ``2 gap`` of the other surface, or
+    inside it) are left out and counted in ``excluded``: a spring there would push the rest
+    shape away from rest. ``facewarp build`` separates crossing lips (:mod:`..anatomy.lips`).
+    """
+    from ..geometry.surface import closest_point
+
+    X = np.asarray(fr.nodes, np.float64)
+    free = ~np.asarray(fr.fixed, bool)
+    nv = node_vertex(fr)
+    side = lip_sides(fr.head_vertices, fr.head_faces, fr.mouth_center)[np.maximum(nv, 0)]
+    side[nv < 0] = 0
+    g = lip_contact_geometry(X, fr.tets, side, fixed=fr.fixed, gap=gap)
+    excluded, lip_faces, lip_nodes = g.excluded, g.lip_faces, g.lip_nodes
+    inner = (np.asarray(fr.layer) != 0) & free & ~np.asarray(fr.held, bool)
+    teeth = []
+    for name in _TEETH:
+        if name not in fr.parts:
+            continue
+        TV, TF = (np.asarray(a) for a in fr.parts[name])
+        cand = np.flatnonzero(inner)
+        cp = closest_point(TV, TF, X[cand], max_dist=TEETH_NEAR_M)
+        near = cp.face >= 0
+        cand, dist = cand[near], cp.dist[near]
+        bad = (dist < 2.0 * gap) | (winding_numbers(TV, TF, X[cand]) > 0.5)
+        excluded["lip_teeth"] += int(bad.sum())
+        teeth.append((name, TV.astype(np.float64), TF.astype(np.int64), float(fr.part_jaw.get(name, 0.0)), cand[~bad]))
+    centers, radii = [], []
+    for name in _EYES:
+        if name in fr.parts:
+            c, r = _sphere(fr.parts[name][0])
+            centers.append(c)
+            radii.append(r)
+    centers = np.asarray(centers, np.float64).reshape(-1, 3)
+    radii = np.asarray(radii, np.float64)
+    eye_nodes, eye_of = np.zeros(0, np.int64), np.zeros(0, np.int64)
+    if len(centers):
+        D = np.linalg.norm(X[:, None] - centers[None], axis=2) - radii[None]
+        which = np.argmin(D, axis=1)
+        dmin = D[np.arange(len(X)), which]
+        # a node already inside the ball at rest (an inner lid sheet extruded into the eyeball)
+        # keeps its rest distance as its radius: it may not sink deeper (ContactStage)
+        eye_nodes = np.flatnonzero(free & (dmin < EYE_NEAR_M))
+        eye_of = which[eye_nodes]
+        excluded["lid_eye_inside_at_rest"] = int((dmin[eye_nodes] < 0.0).sum())
+    return ContactGeometry(side, lip_faces, lip_nodes, teeth, centers, radii, eye_nodes, eye_of, excluded)
+
+
+def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeometry | None = None) -> dict:
+    """Count the crossings the contact prevents, at node positions X.
+
+    Args:
+        fr: The :class:`~facewarp._src.physics.face_rig.FaceRig`.
+        X: Tet node positions [m], shape (p, 3) (default the rest positions), head frame.
+        jaw_angles: Jaw angles (u, v) [rad] of the lower teeth.
+        geometry: :func:`contact_geometry` of ``fr`` (default: made here).
+
+    Returns:
+        ``{"lip_lip": nodes of one lip inside a tet of the other, "lip_lip_depth_m": the deepest,
+        "lip_teeth": free nodes inside a dental arch, "lip_teeth_depth_m": the deepest, "lid_eye":
+        free nodes inside an eyeball's sphere (deeper than at rest), "lid_eye_depth_m": the
+        deepest}``.
+    """
+    from ..geometry.surface import closest_point
+
+    Xr = np.asarray(fr.nodes, np.float64)
+    X = Xr if X is None else np.asarray(X, np.float64)
+    if X.shape != Xr.shape or not np.isfinite(X).all():
+        raise InputError(f"X: expected finite node positions of shape {Xr.shape}, got {X.shape}")
+    g = geometry or contact_geometry(fr)
+    free = ~np.asarray(fr.fixed, bool)
+    lip = lip_crossings(X, fr.tets, g.node_side, movable=free)
+    teeth, teeth_depth = 0, 0.0
+    for name, TV, TF, _, _ in g.teeth:
+        TVj = _part_at(fr, name, jaw_angles)
+        lo, hi = TVj.min(0), TVj.max(0)
+        cand = np.flatnonzero(free & (X >= lo).all(1) & (X <= hi).all(1))
+        inside = cand[winding_numbers(TVj, TF, X[cand]) > 0.5]
+        teeth += len(inside)
+        if len(inside):
+            teeth_depth = max(teeth_depth, float(closest_point(TVj, TF, X[inside]).dist.max()))
+    eye, eye_depth = 0, 0.0
+    if len(g.eye_centers):
+        D = np.linalg.norm(X[:, None] - g.eye_centers[None], axis=2) - g.eye_radii[None]
+        D0 = np.linalg.norm(Xr[:, None] - g.eye_centers[None], axis=2) - g.eye_radii[None]
+        # deeper than at rest (a lid's inner sheet may start inside), beyond float32 rounding
+        depth = np.maximum(np.minimum(D0, 0.0) - D - _ROUNDING_M, 0.0).max(axis=1) * free
+        eye, eye_depth = int((depth > 0.0).sum()), float(depth.max(initial=0.0))
+    return {"lip_lip": lip["count"], "lip_lip_depth_m": float(lip["depth"].max(initial=0.0)),
+            "lip_teeth": teeth, "lip_teeth_depth_m": teeth_depth, "lid_eye": eye, "lid_eye_depth_m": eye_depth}
+
+
+class _SurfaceSet:
+    """Candidate nodes against one closed surface: its ``wp.Mesh`` and the nodes' springs."""
+
+    def __init__(self, nodes, k, surface_points, faces, device, reach, gap, *, follows=None, rigid=None):
+        wp = get_warp()
+        self.count = len(nodes)
+        self.reach, self.gap = float(reach), float(gap)
+        self.follows = follows  # node indices the surface points are (a lip), or None
+        self.rigid = rigid  # (rest points, jaw amount) of a rigid part, or None
+        self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
+        self.k = wp.array(np.asarray(k, np.float32), dtype=float, device=device)
+        self.points = wp.array(np.asarray(surface_points, np.float32), dtype=wp.vec3, device=device)
+        if rigid is not None:
+            self.rest = wp.array(np.asarray(rigid[0], np.float32), dtype=wp.vec3, device=device)
+            self.amount = float(rigid[1])
+        if follows is not None:
+            self.follow = wp.array(np.asarray(follows, np.int32), dtype=wp.int32, device=device)
+        self.mesh = wp.Mesh(points=self.points, indices=wp.array(np.asarray(faces, np.int32).ravel(), dtype=wp.int32,
+                                                                   device=device))
+        self.springs = Springs(node=self.nodes, point=wp.zeros(self.count, dtype=wp.vec3, device=device),
+                               stiffness=wp.zeros(self.count, dtype=float, device=device),
+                               axis=wp.zeros(self.count, dtype=wp.vec3, device=device), one_sided=True)
+
+
+class ContactStage:
+    """Lip, teeth and eyeball contact as one-sided penalty springs (solver stage; module doc).
+
+    Args:
+        fr: The :class:`~facewarp._src.physics.face_rig.FaceRig` (or anything with ``nodes``
+            (p, 3) [m] and, for the lower teeth, ``jaw``; with ``geometry`` given, e.g. by
+            :func:`lip_contact_geometry`).
+        node_stiffness: Contact stiffness of every tet node [N/m], shape (p,) (the simulator:
+            ``CONTACT_MODULUS`` times the node's sheet area).
+        device: Warp device.
+        gap: Distance [m] outside a surface at which the half-space springs start to push.
+        lips, teeth, eyes: Which contacts to keep (all by default).
+        geometry: :func:`contact_geometry` of ``fr`` (default: made here).
+
+    Attributes:
+        springs: The spring sets (a tuple of :class:`~facewarp._src.physics.model.Springs`, all
+            one-sided): lower lip on upper, upper lip on lower, each dental arch, the eyeballs.
+        geometry: The :class:`ContactGeometry`.
+    """
+
+    def __init__(self, fr, node_stiffness, device, *, gap: float = CONTACT_GAP, lips: bool = True,
+                 teeth: bool = True, eyes: bool = True, geometry: ContactGeometry | None = None):
+        wp = get_warp()
+        from . import kernels_contact as kc
+
+        self.kc = kc
+        self.device = device
+        if not (np.isfinite(gap) and gap >= 0.0):
+            raise InputError(f"gap: expected a finite distance >= 0 [m], got {gap!r}")
+        X = np.asarray(fr.nodes, np.float64)
+        kn = np.asarray(node_stiffness, np.float64)
+        if kn.shape != (len(X),) or not (np.isfinite(kn).all() and (kn >= 0).all()):
+            raise InputError(f"node_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
+        g = geometry or contact_geometry(fr, gap=gap)
+        self.geometry = g
+        jaw = getattr(fr, "jaw", None)
+        if jaw is not None:
+            self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+        else:
+            self.pivot, self.u, self.v = wp.vec3(0.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0)
+
+        def stiff(nodes):
+            k = kn[nodes]
+            pos = k[k > 0]
+            return np.where(k > 0, k, np.median(pos) if len(pos) else 0.0)
+
+        self.surfaces: list[_SurfaceSet] = []
+        if lips:
+            for S, nodes in zip(g.lip_faces, g.lip_nodes):
+                if len(S) == 0 or len(nodes) == 0:
+                    continue
+                used, local = np.unique(S, return_inverse=True)
+                self.surfaces.append(_SurfaceSet(nodes, stiff(nodes), X[used], local.reshape(-1, 3), device,
+                                                 LIP_REACH_M, gap, follows=used))
+        if teeth:
+            for name, TV, TF, amount, nodes in g.teeth:
+                if len(nodes):
+                    self.surfaces.append(_SurfaceSet(nodes, stiff(nodes), TV, TF, device, TEETH_REACH_M, gap,
+                                                     rigid=(TV, amount)))
+        self.eye_count = len(g.eye_nodes) if eyes else 0
+        sets = [s.springs for s in self.surfaces]
+        if self.eye_count:
+            en = g.eye_nodes
+            c = g.eye_centers[g.eye_of_node]
+            # a node inside the ball (or within the gap) at rest gets its rest distance less
+            # EYE_REST_SLACK_M: no force at rest, and it may not sink deeper
+            r = np.minimum(g.eye_radii[g.eye_of_node] + gap, np.linalg.norm(X[en] - c, axis=1) - EYE_REST_SLACK_M)
+            self.eye_springs = Springs(
+                node=wp.array(en.astype(np.int32), dtype=wp.int32, device=device),
+                point=wp.array(c.astype(np.float32), dtype=wp.vec3, device=device),
+                stiffness=wp.array(stiff(en).astype(np.float32), dtype=float, device=device),
+                rest_length=wp.array(r.astype(np.float32), dtype=float, device=device), one_sided=True)
+            sets.append(self.eye_springs)
+        self.springs = tuple(sets)
+
+    @property
+    def counts(self) -> dict:
+        """Candidate nodes per contact kind (host ints)."""
+        g = self.geometry
+        lips = sum(s.count for s in self.surfaces if s.follows is not None)
+        teeth = sum(s.count for s in self.surfaces if s.rigid is not None)
+        return {"lip_lip": lips, "lip_teeth": teeth, "lid_eye": self.eye_count, "excluded": dict(g.excluded)}
+
+    def _move_rigid(self, control) -> None:
+        wp = get_warp()
+        for s in self.surfaces:
+            if s.rigid is not None and s.amount != 0.0:
+                wp.launch(self.kc._rigid_points, dim=len(s.rest),
+                          inputs=[s.rest, s.amount, self.pivot, self.u, self.v, control.jaw_angles],
+                          outputs=[s.points], device=self.device)
+                s.mesh.refit()
+
+    def refresh(self, model, positions, control) -> None:
+        """Contacts at ``positions`` [m], (p,) wp.vec3: the lips' surfaces refit to them, every
+        candidate's closest point and direction (the active set between implicit iterations)."""
+        wp = get_warp()
+        kc = self.kc
+        for s in self.surfaces:
+            if s.count == 0:
+                continue
+            if s.follows is not None:
+                wp.launch(kc._gather_points, dim=len(s.follow), inputs=[s.follow, positions], outputs=[s.points],
+                          device=self.device)
+                s.mesh.refit()
+            sp = s.springs
+            wp.launch(kc._surface_contacts, dim=s.count,
+                      inputs=[s.mesh.id, s.reach, s.gap, int(s.follows is not None), s.nodes, s.k, positions],
+                      outputs=[sp.point, sp.axis, sp.stiffness], device=self.device)
+
+    def prepare(self, model, state_in, control, dt, targets) -> None:
+        """Implicit solvers: the teeth at the step's jaw angles, contacts at the step's start."""
+        self._move_rigid(control)
+        self.refresh(model, state_in.positions, control)
+
+    def apply(self, model, state_in, control, dt, forces, targets) -> None:
+        """Explicit solvers: detect at ``state_in`` and add the one-sided spring forces."""
+        wp = get_warp()
+        self.prepare(model, state_in, control, dt, targets)
+        for s in self.surfaces:
+            if s.count:
+                sp = s.springs
+                wp.launch(self.kc._half_space_forces, dim=s.count,
+                          inputs=[sp.node, sp.point, sp.axis, sp.stiffness, state_in.positions], outputs=[forces],
+                          device=self.device)
+        if self.eye_count:
+            sp = self.eye_springs
+            wp.launch(self.kc._sphere_forces, dim=self.eye_count,
+                      inputs=[sp.node, sp.point, sp.rest_length, sp.stiffness, state_in.positions], outputs=[forces],
+                      device=self.device)

@@ -1,0 +1,318 @@
+"""Contact (issue 12): one-sided springs in the step's potential and the solvers' kernels, lips
+that may touch but not cross, lids outside the eyeball, the build's lip separation.
+
+Small fixtures (one tet, two boxes of Kuhn cubes) except the last test, which plays the laugh
+preset on the default head at level 0 for one second.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from conftest import grid_tets
+from facewarp.anatomy import lip_crossings, separate_lips
+from facewarp.geometry import signed_tet_volumes
+from facewarp.physics import (ContactStage, ModelBuilder, SolverImplicit, SolverVerlet, Springs, StepPotential,
+                              lip_contact_geometry)
+
+CM = 0.01
+
+
+def one_tet():
+    V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, np.sqrt(3) / 2, 0.0], [0.5, np.sqrt(3) / 6, np.sqrt(2 / 3)]])
+    return V * CM, np.array([[0, 1, 2, 3]])
+
+
+def one_sided_springs(X):
+    """On nodes 0..3 at X: two compressed and two slack of each kind (away from the kink)."""
+    node = np.arange(4)
+    axis = np.array([[0.0, 0.0, 1.0], [0.6, 0.8, 0.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
+    off = np.array([0.2, -0.3, 0.25, -0.1]) * CM  # (x - p) . a: < 0 compressed, > 0 slack
+    p_axis = X[node] - off[:, None] * axis
+    centre = X[node] + np.array([[0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.1], [0.1, 0.1, 0.0]]) * CM
+    dist = np.linalg.norm(X[node] - centre, axis=1)
+    radius = dist + np.array([0.05, -0.05, 0.04, -0.02]) * CM  # radius > distance: inside the ball
+    return [(node, centre, np.array([300.0, 500.0, 200.0, 400.0]), radius, None, True),
+            (node, p_axis, np.array([250.0, 150.0, 350.0, 450.0]), None, axis, True)]
+
+
+def _fd(P, data, X, h=1e-8):
+    FD = np.zeros_like(X)
+    FH = np.zeros((X.size, X.size))
+    for k, (a, d) in enumerate(itertools.product(range(len(X)), range(3))):
+        Xp, Xm = X.copy(), X.copy()
+        Xp[a, d] += h
+        Xm[a, d] -= h
+        FD[a, d] = (P.energy(Xp, data) - P.energy(Xm, data)) / (2 * h)
+        FH[:, k] = (P.gradient(Xp, data)[1] - P.gradient(Xm, data)[1]).ravel() / (2 * h)
+    return FD, FH
+
+
+def test_one_sided_springs_gradient_and_hessian_are_the_finite_differences():
+    V, T = one_tet()
+    # distance energy only, every edge stretched: its Hessian is exact there
+    b = ModelBuilder(V, T, material="physical", k_area=0.0, k_volume=0.0, damping_rate=0.0, stiffness_damping=0.0)
+    P = StepPotential(b.finalize("cpu"))
+    X = V * 1.1 + np.random.default_rng(0).normal(scale=1e-5, size=V.shape)
+    ball, half_space = one_sided_springs(X)
+    data = P.begin_step(V, V, 0.01, V, springs=[ball, half_space])
+    e, G = P.gradient(X, data)
+    FD, FH = _fd(P, data, X)
+    np.testing.assert_allclose(G, FD, rtol=1e-5, atol=1e-6 * np.abs(FD).max(), err_msg="gradient")
+    # half-space springs: the Hessian is exact (k a a^T compressed, 0 slack)
+    data = P.begin_step(V, V, 0.01, V, springs=[half_space])
+    H = P.hessian(X, data).toarray()
+    _, FH = _fd(P, data, X)
+    np.testing.assert_allclose(H, FH, rtol=1e-4, atol=1e-5 * np.abs(FH).max(), err_msg="half-space Hessian")
+    # ball springs: exact along the normal; the compressed spring's negative transverse term is
+    # dropped (PSD), and a slack one adds nothing
+    data = P.begin_step(V, V, 0.01, V, springs=[ball])
+    data_none = P.begin_step(V, V, 0.01, V)
+    H = P.hessian(X, data).toarray() - P.hessian(X, data_none).toarray()
+    _, FH = _fd(P, data, X)
+    _, FH0 = _fd(P, data_none, X)
+    FH = FH - FH0
+    node, c, k, r = ball[:4]
+    for i in range(4):
+        nrm = (X[i] - c[i]) / np.linalg.norm(X[i] - c[i])
+        blk, fblk = H[3 * i:3 * i + 3, 3 * i:3 * i + 3], FH[3 * i:3 * i + 3, 3 * i:3 * i + 3]
+        assert nrm @ blk @ nrm == pytest.approx(nrm @ fblk @ nrm, rel=1e-4, abs=1e-6 * k[i]), f"node {i}"
+        inside = np.linalg.norm(X[i] - c[i]) < r[i]
+        assert (nrm @ blk @ nrm > 0.5 * k[i]) == inside, f"node {i}: compressed {inside}"
+    assert np.linalg.eigvalsh(P.hessian(X, data).toarray()).min() > -1e-9 * np.abs(H).max()
+
+
+class _Springs:
+    """A stage with fixed springs (a test double of a contact stage)."""
+
+    def __init__(self, springs):
+        self.springs = springs
+
+    def prepare(self, model, state_in, control, dt, targets):
+        pass
+
+
+@pytest.mark.parametrize("method", ["lbfgs", "newton-pcg"])
+def test_kernels_evaluate_one_sided_springs_like_the_reference(method):
+    import warp as wp
+
+    V, T = grid_tets(2, 1, 1)
+    model = ModelBuilder(V, T, material="physical").finalize("cpu")
+    X = V + np.random.default_rng(2).normal(scale=5e-4, size=V.shape)
+    ref = one_sided_springs(X)
+    sets = []
+    for node, p, k, r, a, _ in ref:
+        sets.append(Springs(node=wp.array(node.astype(np.int32), dtype=wp.int32),
+                            point=wp.array(p.astype(np.float32), dtype=wp.vec3),
+                            stiffness=wp.array(k.astype(np.float32), dtype=float),
+                            rest_length=None if r is None else wp.array(r.astype(np.float32), dtype=float),
+                            axis=None if a is None else wp.array(a.astype(np.float32), dtype=wp.vec3), one_sided=True))
+    solver = SolverImplicit(model, method=method, stages=[_Springs(tuple(sets))])
+    state, control = model.state(), model.control()
+    e, G, H = solver.potential(state, control, 0.01, X, hessian=True)
+    P = StepPotential(model)
+    data = P.begin_step(V, V, 0.01, V, springs=ref)
+    X32 = X.astype(np.float32).astype(np.float64)
+    e_ref, G_ref = P.gradient(X32, data)
+    assert e == pytest.approx(e_ref, rel=1e-4)
+    np.testing.assert_allclose(G, G_ref, rtol=2e-3, atol=2e-3 * np.abs(G_ref).max(), err_msg="gradient")
+    np.testing.assert_allclose(H.toarray(), P.hessian(X32, data).toarray(), rtol=2e-3, atol=1e-4 * abs(H).max())
+
+
+def eyeball_case(material="physical"):
+    """A 3 x 3 x 1 slab of 1 cm cubes whose middle bottom node sits on an eyeball (r = 1.2 cm)
+    below it, the slab's rim fixed, pushed down by 2 N on the middle top node."""
+    V, T = grid_tets(3, 3, 1)
+    rim = (np.isclose(V[:, 0], 0) | np.isclose(V[:, 0], 3 * CM) | np.isclose(V[:, 1], 0) | np.isclose(V[:, 1], 3 * CM))
+    model = ModelBuilder(V, T, fixed=rim, material=material).finalize("cpu")
+    mid = np.flatnonzero(~rim & np.isclose(V[:, 2], 0))
+    centre = np.array([1.5 * CM, 1.5 * CM, -1.2 * CM - 1e-4])
+    return V, model, mid, centre
+
+
+@pytest.mark.parametrize("method", ["lbfgs", "newton-pcg"])
+def test_a_lid_pushed_into_the_eyeball_is_pushed_out(method):
+    """One-sided ball springs (the eyeball's) hold the free bottom nodes outside the ball that
+    a downward force drives them into without the springs."""
+    import warp as wp
+
+    V, model, mid, centre = eyeball_case()
+    top = np.flatnonzero(np.isclose(V[:, 2], CM) & np.isin(np.arange(len(V)), mid + 16))
+    f = np.zeros((len(V), 3), np.float32)
+    f[top, 2] = -2.0
+    r = 1.2 * CM
+    depth = {}
+    for contact in (False, True):
+        stages = []
+        if contact:
+            stages = [_Springs(Springs(node=wp.array(mid.astype(np.int32), dtype=wp.int32),
+                                       point=wp.array(np.tile(centre, (len(mid), 1)).astype(np.float32), dtype=wp.vec3),
+                                       stiffness=wp.full(len(mid), 2e4, dtype=float),
+                                       rest_length=wp.full(len(mid), r, dtype=float), one_sided=True))]
+        # the device method on the CPU: ~100 launches per Newton iteration, so fewer of each
+        opts = dict(iterations=2, linear_iterations=25) if method == "newton-pcg" else {}
+        solver = SolverImplicit(model, method=method, stages=stages, **opts)
+        a, b, c = model.state(), model.state(), model.control()
+        c.external_force.assign(f)
+        for _ in range(8 if method == "newton-pcg" else 15):
+            solver.step(a, b, c, 1 / 30)
+            a, b = b, a
+        solver.check(a)
+        X = a.positions.numpy().astype(np.float64)
+        depth[contact] = float((r - np.linalg.norm(X[mid] - centre, axis=1)).max())
+    assert depth[False] > 5e-4, f"the force should drive the slab 0.5 mm into the ball, got {depth[False]:.2e} m"
+    assert depth[True] < 1e-4, f"the contact should hold within 0.1 mm, got {depth[True]:.2e} m"
+
+
+def two_slabs(gap=1e-3):
+    """Two 3 x 3 x 1 boxes of 5 mm cubes, one above the other ``gap`` apart: the lower (side -1)
+    with its bottom fixed, the upper (side +1) with its top fixed."""
+    h = 0.005
+    V, T = grid_tets(3, 3, 1, h)
+    V2 = V + [0.27 * h, 0.13 * h, h + gap]  # shifted sideways: no node on a face of the other box
+    VV = np.concatenate([V, V2])
+    TT = np.concatenate([T, T + len(V)])
+    side = np.r_[np.full(len(V), -1), np.full(len(V), 1)].astype(np.int8)
+    fixed = np.r_[np.isclose(V[:, 2], 0), np.isclose(V2[:, 2], 2 * h + gap)]
+    return VV, TT, side, fixed
+
+
+def test_two_sheets_pressed_together_touch_but_do_not_cross():
+    VV, TT, side, fixed = two_slabs()
+    model = ModelBuilder(VV, TT, fixed=fixed, material="physical").finalize("cpu")
+    upper_bottom = np.flatnonzero((side == 1) & ~fixed)
+    f = np.zeros((len(VV), 3), np.float32)
+    f[upper_bottom, 2] = -0.4  # 1.6 N down on the upper slab's free sheet
+    g = lip_contact_geometry(VV, TT, side, fixed=fixed)
+    assert [len(n) for n in g.lip_nodes] == [16, 16] and g.excluded["lip_lip"] == 0
+
+    class Rig:
+        nodes = VV
+
+    crossing = {}
+    for contact in (False, True):
+        stages = [ContactStage(Rig(), np.full(len(VV), 5e4), "cpu", geometry=g)] if contact else []
+        solver = SolverImplicit(model, stages=stages)
+        a, b, c = model.state(), model.state(), model.control()
+        c.external_force.assign(f)
+        for _ in range(10):
+            solver.step(a, b, c, 1 / 30)
+            a, b = b, a
+        solver.check(a)
+        X = a.positions.numpy().astype(np.float64)
+        crossing[contact] = lip_crossings(X, TT, side)["count"]
+        if contact:
+            over = upper_bottom[(VV[upper_bottom, :2] < 0.014).all(axis=1)]  # above the lower box
+            gap_now = X[over, 2].min() - X[side == -1, 2].max()
+            assert -1e-4 < gap_now < 1e-3, f"the sheets should touch (within the contact gap), gap {gap_now:.2e} m"
+    assert crossing[False] > 0, "without contact the force should push one sheet through the other"
+    assert crossing[True] == 0
+
+
+def test_crossing_sheets_are_pushed_apart_by_the_verlet_forces():
+    """The explicit path: contact forces on nodes of one sheet inside the other point out of it."""
+    VV, TT, side, fixed = two_slabs()
+    model = ModelBuilder(VV, TT, fixed=fixed, material="physical").finalize("cpu")
+    g = lip_contact_geometry(VV, TT, side, fixed=fixed)
+
+    class Rig:
+        nodes = VV
+
+    stage = ContactStage(Rig(), np.full(len(VV), 5e4), "cpu", geometry=g)
+    solver = SolverVerlet(model, stages=[stage])
+    state, control = model.state(), model.control()
+    X = VV.copy()
+    moved = (side == 1) & ~fixed
+    X[moved, 2] -= 1.5e-3  # the upper slab's free sheet 0.5 mm into the lower one
+    state.positions.assign(X.astype(np.float32))
+    state.prev_positions.assign(X.astype(np.float32))
+    F = solver.compute_forces(state, control, 1e-4).numpy()
+    solver_plain = SolverVerlet(model)
+    F0 = solver_plain.compute_forces(state, control, 1e-4).numpy()
+    inside = lip_crossings(X, TT, side)["nodes"]  # each sheet's nodes inside the other box
+    up, lo = inside[side[inside] == 1], inside[side[inside] == -1]
+    assert len(up) >= 4 and len(lo) >= 4
+    dF = F[:, 2] - F0[:, 2]
+    assert (dF[up] > 0).all(), "contact forces push the upper sheet up, out of the lower"
+    assert (dF[lo] < 0).all(), "and the lower sheet down, out of the upper"
+
+
+def test_build_separation_moves_crossing_lips_apart_and_keeps_tets_valid():
+    VV, TT, side, fixed = two_slabs(gap=-1.5e-3)  # the upper box 1.5 mm into the lower one
+    before = lip_crossings(VV, TT, side)["count"]
+    assert before >= 8
+    X, rep = separate_lips(VV, TT, side, movable=~fixed)
+    assert rep["crossing_nodes_before"] == before and rep["crossing_nodes_after"] == 0
+    assert rep["moved_nodes"] > 0 and lip_crossings(X, TT, side)["count"] == 0
+    assert signed_tet_volumes(X, TT).min() > 0
+    np.testing.assert_array_equal(X[fixed], VV[fixed])
+    assert rep["max_move_m"] < 3e-3  # minimal: about the overlap and the clearance
+
+
+@pytest.fixture(scope="module")
+def default_rig():
+    import facewarp
+    from facewarp.anatomy import build_anatomy
+    from facewarp.physics import face_rig_from_anatomy
+
+    an = build_anatomy(facewarp.default_template(0), check_intersections=False)
+    return an, face_rig_from_anatomy(an)
+
+
+def test_lips_pushed_into_the_teeth_stay_outside(default_rig):
+    """The inner sheet of the lips and cheeks near the teeth, pushed toward the nearest dental
+    arch by 5 N a node, crosses into it without contact (1 mm deep) and stays outside with it
+    (a spring of ~3e4 N/m 0.25 mm out holds up to ~7 N)."""
+    from facewarp import FaceSimulator
+    from facewarp.physics import contact_geometry
+    from facewarp.geometry import closest_point
+
+    _, fr = default_rig
+    g = contact_geometry(fr)
+    nodes = np.concatenate([t[4] for t in g.teeth])
+    assert len(nodes) > 20
+    TV, TF = fr.parts["teeth_upper"]
+    V2, F2 = fr.parts["teeth_lower"]
+    TV, TF = np.concatenate([TV, V2]), np.concatenate([TF, F2 + len(TV)])
+    cp = closest_point(TV, TF, fr.nodes[nodes])
+    f = np.zeros((len(fr.nodes), 3), np.float32)
+    f[nodes] = 5.0 * (cp.points - fr.nodes[nodes]) / cp.dist[:, None]
+    inside = {}
+    for contact in (False, True):
+        sim = FaceSimulator(fr, contact=contact)
+        # the solver itself (FaceSimulator.step owns the external force: the head pose's loads)
+        sim.control.external_force.assign(f)
+        a, b = sim.state, sim.scratch
+        for _ in range(8):
+            sim.solver.step(a, b, sim.control, sim.dt)
+            a, b = b, a
+        sim.solver.check(a)
+        inside[contact] = sim.contact_crossings(a.positions.numpy().astype(np.float64))["lip_teeth"]
+    assert inside[False] > 0, "the force should push the lips into the teeth"
+    assert inside[True] == 0
+
+
+def test_laugh_on_the_default_head_has_no_crossings(default_rig):
+    from facewarp import FaceSimulator, timeline_from_spec
+
+    an, fr = default_rig
+    sep = an.quality["lip_separation"]  # what `facewarp build` reports
+    assert sep["lip_nodes"] > 0 and sep["crossing_nodes_before"] == 0 and sep["crossing_nodes_after"] == 0
+    sim = FaceSimulator(fr)
+    assert sim.contact is not None and sim.contact.counts["lip_lip"] > 0
+    tl = timeline_from_spec("laugh", 1.0).for_head(fr)
+    sim.reset()
+    worst = {}
+    for k in range(1, 31):
+        e = tl.sample(k / 30)
+        sim.set_activations(e)
+        sim.set_jaw(e.jaw_u, e.jaw_v)
+        sim.step()
+        if k % 5 == 0:
+            for key, v in sim.contact_crossings().items():
+                worst[key] = max(worst.get(key, 0), v)
+    assert worst["lip_lip"] == 0 and worst["lip_teeth"] == 0, worst
+    assert worst["lid_eye_depth_m"] < 1e-4, worst
