@@ -15,7 +15,6 @@ import pytest
 
 from conftest import grid_tets
 from facewarp import InputError, SimulationError
-from facewarp.geometry import signed_tet_volumes
 from facewarp.physics import (MaterialPhysical, MaterialThesis, ModelBuilder, SolverImplicit, SolverVerlet,
                               StepPotential, isotropic_moduli, material_profile, simulate, stable_dt)
 

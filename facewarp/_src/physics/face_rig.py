@@ -15,8 +15,6 @@ free, as are the nodes attached to muscles and the whole outer sheet.
 from __future__ import annotations
 
 import io
-import os
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -360,7 +358,7 @@ def muscle_rig(muscles: MuscleSet, *, stiffness: float = 4.0e5, jaw=None, head=N
     elif jaw is not None:
         if head is None:
             raise InputError("muscle_rig: jaw amounts need the head (its face regions)")
-        from ..template import FRONTAL_REGIONS, REGIONS
+        from ..template import REGIONS
 
         for i, m in enumerate(ms):
             regions = [REGIONS[r] for r in np.asarray(head.face_region)[m.skin_points.face]]
