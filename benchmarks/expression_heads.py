@@ -57,6 +57,7 @@ def _judge(name: str, d: dict, dist: dict) -> tuple[bool, str]:
 
 def main() -> None:
     import facewarp
+    from facewarp.geometry import signed_tet_volumes
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--heads", nargs="*", type=Path, default=[])
@@ -75,11 +76,7 @@ def main() -> None:
         rig = facewarp.build_face(facewarp.default_template(0)) if path is None else facewarp.load_face_rig(path)
         T = rig.tets
 
-        def vol(Y):
-            e1, e2, e3 = (Y[T[:, j]] - Y[T[:, 0]] for j in (1, 2, 3))
-            return np.einsum("ij,ij->i", np.cross(e1, e2), e3)
-
-        rest_sign = np.sign(vol(rig.nodes))
+        rest_sign = np.sign(signed_tet_volumes(rig.nodes, T))
         row = {"head": label, "presets": {}}
         for name in PRESETS:
             sim = facewarp.FaceSimulator(rig, device=args.device, fps=30)
@@ -103,7 +100,7 @@ def main() -> None:
                     worst[key] = max(worst[key], type(worst[key])(c.get(key, 0)))
             worst = {k: (round(v * 1e3, 3) if k.endswith("_m") else v) for k, v in worst.items()}
             worst = {(k[:-2] + "_mm" if k.endswith("_m") else k): v for k, v in worst.items()}
-            inverted = int((np.sign(vol(sim.positions())) != rest_sign).sum())
+            inverted = int((np.sign(signed_tet_volumes(sim.positions(), T)) != rest_sign).sum())
             nan = bool(not np.isfinite(frames.points).all())
             ids = [str(k) for k in frames.fdp_ids]
             P = frames.fdp_points.astype(np.float64)

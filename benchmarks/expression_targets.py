@@ -38,6 +38,7 @@ TARGETS = {
 
 def main() -> None:
     import facewarp
+    from facewarp.geometry import signed_tet_volumes
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--level", type=int, default=0)
@@ -48,11 +49,7 @@ def main() -> None:
     rig = facewarp.build_face(facewarp.default_template(args.level))
     T = rig.tets
 
-    def vol(Y):
-        e1, e2, e3 = (Y[T[:, j]] - Y[T[:, 0]] for j in (1, 2, 3))
-        return np.einsum("ij,ij->i", np.cross(e1, e2), e3)
-
-    rest_sign = np.sign(vol(rig.nodes))
+    rest_sign = np.sign(signed_tet_volumes(rig.nodes, T))
     rows = {}
     for name in list(facewarp.PRESETS) + ["zygomatic_major=1", "frontalis_inner=1"]:
         e = facewarp.expression_from_activations(name) if "=" in name else facewarp.preset(name)
@@ -67,7 +64,7 @@ def main() -> None:
                "distance_mm": {n: [round(float(np.linalg.norm(P[f, ids.index(a)] - P[f, ids.index(b)]) * 1e3), 2)
                                    for f in (0, -1)] for n, (a, b) in DISTANCES.items()},
                "still_moving_mm": float(np.abs(P[-1] - P[-8]).max() * 1e3),
-               "inverted_tets": int((np.sign(vol(sim.positions())) != rest_sign).sum()),
+               "inverted_tets": int((np.sign(signed_tet_volumes(sim.positions(), T)) != rest_sign).sum()),
                "nan": bool(not np.isfinite(frames.points).all()), "target": TARGETS.get(name, "")}
         rows[name] = row
         c = row["displacement_mm"]

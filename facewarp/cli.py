@@ -311,8 +311,7 @@ def cmd_build(args):
         f"min dihedral {q.get('min_dihedral_deg', float('nan')):.1f} deg, conforming {q.get('conforming')}",
         f"  {q['muscle_count']} muscles, attached skin nodes per muscle: min {q.get('min_attached_nodes', 0)}",
         "  lips: {crossing_nodes_before} nodes crossing the other lip at rest, {moved_nodes} moved apart, "
-        "{crossing_nodes_after} left".format(**q.get("lip_separation", {"crossing_nodes_before": 0, "moved_nodes": 0,
-                                                                          "crossing_nodes_after": 0})),
+        "{crossing_nodes_after} left".format(**q["lip_separation"]),
         "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz",
     ])
 

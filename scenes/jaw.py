@@ -76,18 +76,10 @@ class JawScene:
         """The face now beside its displacement heat map, RGB (size, 2 size, 3) uint8."""
         V = self.sim.surface()
         d = np.linalg.norm(V - self.rest, axis=1)
-        view, parts = self.view(int(size)), self._parts()
+        view, parts = self.view(int(size)), self.sim.part_points()
         face = view.render(V, part_points=parts)
         heat = view.render(V, part_points=parts, heat=d, heat_max=0.03)
         return np.concatenate([face, heat], axis=1)
-
-    def _parts(self) -> dict:
-        u, v = (float(a) for a in self.sim.jaw_angles)
-        out = {}
-        for name, (P, _) in self.rig.parts.items():
-            amt = self.rig.part_jaw.get(name, 0.0)
-            out[name] = self.sim.jaw.apply(P, np.full(len(P), amt), u, v) if amt else P
-        return out
 
 
 def main(argv=None) -> int:

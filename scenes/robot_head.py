@@ -84,15 +84,7 @@ class RobotHead:
 
     def render(self, *, size: int = 320) -> np.ndarray:
         """The head in the world, front view, RGB (size, size, 3) uint8."""
-        V = self.sim.surface()
-        R, t = self.sim.head_pose
-        u, v = (float(a) for a in self.sim.jaw_angles)
-        parts = {}
-        for name, (P, _) in self.rig.parts.items():
-            amt = self.rig.part_jaw.get(name, 0.0)
-            Q = self.sim.jaw.apply(P, np.full(len(P), amt), u, v) if amt else P
-            parts[name] = Q @ R.T + t
-        return self.view(int(size)).render(V, part_points=parts)
+        return self.view(int(size)).render(self.sim.surface(), part_points=self.sim.part_points())
 
 
 def main(argv=None) -> int:

@@ -56,6 +56,21 @@ def test_first_frame_draws_the_rest_fibres(rig):
     assert np.abs(C[1] - C[0]).max() < 0.01  # one frame into the attack: the fibres barely moved
 
 
+def test_part_points_follow_jaw_and_head_pose(rig):
+    """Rigid parts now: the lower teeth turn with the jaw, the upper ones stay; the world frame
+    adds the head pose (as surface() does)."""
+    sim = FaceSimulator(rig, fps=30)
+    rest = sim.part_points()
+    sim.set_jaw(0.2)
+    sim.set_head_pose(np.eye(3), [0.0, 0.01, 0.0])
+    sim.step()
+    moved, head = sim.part_points(), sim.part_points(frame="head")
+    assert np.abs(head["teeth_lower"] - rest["teeth_lower"]).max() > 5e-3
+    np.testing.assert_allclose(head["teeth_upper"], rest["teeth_upper"], atol=1e-12)
+    np.testing.assert_allclose(moved["teeth_upper"] - head["teeth_upper"], [[0.0, 0.01, 0.0]] * len(head["teeth_upper"]),
+                               atol=1e-9)
+
+
 @pytest.mark.parametrize("solver, material", [("implicit", "physical"), ("implicit", "thesis"), ("verlet", "thesis")])
 def test_smile_raises_lip_corners_outward(rig, solver, material):
     seconds = SECONDS if solver == "implicit" else 0.2  # Verlet: ~1,000 substeps per frame

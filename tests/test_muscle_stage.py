@@ -283,12 +283,7 @@ def test_two_way_anchor(device):
     """Fig. 6.3 two-way: the linear insertion (control point 0) and the ring point 3 it is anchored
     to move by the same displacement, the stiffness-weighted mean of their own ones
     (k = passive + activation): the active member drags the passive one, not a diluted mean."""
-    V, T, layer = slab()
-    inner = np.where(layer == 1)[0]
-    rig = small_rig(inner, V[inner])
-    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
-    stage = MuscleStage(rig, None, model.device)
-    control = model.control()
+    _, rig, _, stage, control = contracted_stage(device)  # _moved sets the activations
     lin = np.ones(len(rig.ctrl_rest), bool)
     for acts in ([1.0, 0.0], [0.0, 1.0], [0.6, 0.3]):
         d = _moved(stage, control, acts)

@@ -22,9 +22,10 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..geometry.tets import signed_tet_volumes
+from .tet_quality import boundary_faces
 
 __all__ = ["LIP_BAND", "LIP_CLEARANCE", "LIP_REACH", "lip_sides", "lip_tets", "lip_crossings", "mouth_slit",
-           "points_in_tets", "region_surface", "separate_lips", "separate_skin_lips"]
+           "points_in_tets", "separate_lips", "separate_skin_lips"]
 
 LIP_REACH = 0.012
 """Geodesic distance [m] from the mouth slit within which the skin counts as lip (the red lip and
@@ -34,8 +35,6 @@ LIP_BAND = 0.002
 LIP_CLEARANCE = 3.0e-4
 """Distance [m] outside the other lip's surface to which :func:`separate_lips` moves a node (above
 the solver's contact gap, so that a separated head starts out of contact)."""
-
-_TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])  # outward for positive volume
 
 
 def _boundary_loops(F) -> list[np.ndarray]:
@@ -137,14 +136,6 @@ def lip_tets(T, node_side) -> tuple[np.ndarray, np.ndarray]:
     return (s == 1).all(axis=1), (s == -1).all(axis=1)
 
 
-def region_surface(T) -> np.ndarray:
-    """Boundary triangles of a set of tets, outward (a closed surface), shape (b, 3), int64."""
-    T = np.asarray(T, dtype=np.int64).reshape(-1, 4)
-    Fall = T[:, _TET_FACES].reshape(-1, 3)
-    _, inv, cnt = np.unique(np.sort(Fall, axis=1), axis=0, return_inverse=True, return_counts=True)
-    return Fall[cnt[inv.reshape(-1)] == 1]
-
-
 def points_in_tets(P, V, T, *, eps: float = 1e-9) -> np.ndarray:
     """Index of a tet of (V, T) containing each point (barycentric weights all > ``eps``), or -1.
 
@@ -207,7 +198,7 @@ def lip_crossings(V, T, node_side, *, movable=None) -> dict:
             continue
         hit = cand[points_in_tets(V[cand], V, np.asarray(T)[other]) >= 0]
         if len(hit):
-            S = region_surface(np.asarray(T)[other])
+            S = boundary_faces(np.asarray(T)[other])
             nodes.append(hit)
             depth.append(closest_point(V, S, V[hit]).dist)
     nodes = np.concatenate(nodes) if nodes else np.zeros(0, np.int64)
@@ -266,7 +257,7 @@ def separate_lips(V, T, node_side, *, movable=None, clearance: float = LIP_CLEAR
             if not other.any() or len(cand) == 0:
                 continue
             To = T[other]
-            S = region_surface(To)
+            S = boundary_faces(To)
             cp = closest_point(X, S, X[cand], max_dist=0.01)
             inside = points_in_tets(X[cand], X, To) >= 0
             near = (cp.face >= 0) & (inside | (cp.dist < clearance * (1 - 1e-3)))

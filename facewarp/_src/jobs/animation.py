@@ -80,12 +80,8 @@ def part_transforms(fr, jaw_angles) -> dict:
 
 def part_points(fr, jaw_angles) -> dict:
     """Vertices [m] of every rigid part of ``fr`` at ``jaw_angles`` (u, v) [rad]: name -> (k, 3)
-    float64 (:func:`part_transforms` applied to the parts at rest)."""
-    out = {}
-    for name, M in part_transforms(fr, jaw_angles).items():
-        V = np.asarray(fr.parts[name][0], dtype=np.float64)
-        out[name] = V @ M[:3, :3] + M[3, :3]
-    return out
+    float64 (:meth:`FaceRig.part_at` of each part)."""
+    return {name: fr.part_at(name, jaw_angles) for name in fr.parts}
 
 
 def peak_frames(timeline: Timeline, seconds: float, fps: float) -> list[tuple[str, int]]:

@@ -49,7 +49,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..anatomy.lips import lip_crossings, lip_sides, lip_tets, region_surface
+from ..anatomy.lips import lip_crossings, lip_sides, lip_tets
+from ..anatomy.tet_quality import boundary_faces
 from ..core.errors import InputError
 from ..core.warp import get_warp
 from .model import Springs
@@ -147,14 +148,6 @@ def winding_numbers(V, F, P) -> np.ndarray:
     return out
 
 
-def _part_at(fr, name: str, jaw_angles) -> np.ndarray:
-    V, _ = fr.parts[name]
-    amt = float(fr.part_jaw.get(name, 0.0))
-    if amt and (jaw_angles[0] or jaw_angles[1]):
-        return fr.jaw.apply(V, np.full(len(V), amt), float(jaw_angles[0]), float(jaw_angles[1]))
-    return np.asarray(V, np.float64)
-
-
 def lip_contact_geometry(V, T, node_side, *, fixed=None, gap: float = CONTACT_GAP) -> ContactGeometry:
     """The lip-on-lip part of :func:`contact_geometry` for any tet mesh with two marked regions.
 
@@ -182,7 +175,7 @@ def lip_contact_geometry(V, T, node_side, *, fixed=None, gap: float = CONTACT_GA
     lip_faces, lip_nodes = [], []
     crossing = lip_crossings(X, T, side)["nodes"]
     for region, mine in ((up, -1), (lo, 1)):  # the lower lip's nodes against the upper lip, and back
-        S = region_surface(T[region]) if region.any() else np.zeros((0, 3), np.int64)
+        S = boundary_faces(T[region]) if region.any() else np.zeros((0, 3), np.int64)
         cand = np.flatnonzero((side == mine) & free)
         if len(S) and len(cand):
             d = closest_point(X, S, X[cand], max_dist=1.0).dist
@@ -273,7 +266,7 @@ def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeo
     lip = lip_crossings(X, fr.tets, g.node_side, movable=free)
     teeth, teeth_depth = 0, 0.0
     for name, TV, TF, _, _ in g.teeth:
-        TVj = _part_at(fr, name, jaw_angles)
+        TVj = fr.part_at(name, jaw_angles)
         lo, hi = TVj.min(0), TVj.max(0)
         cand = np.flatnonzero(free & (X >= lo).all(1) & (X <= hi).all(1))
         inside = cand[winding_numbers(TVj, TF, X[cand]) > 0.5]

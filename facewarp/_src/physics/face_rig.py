@@ -102,6 +102,17 @@ class FaceRig:
     def jaw(self) -> JawKinematic:
         return JawKinematic(self.jaw_pivot, self.jaw_u, self.jaw_v, self.lip_corners, self.mouth_center)
 
+    def part_at(self, name: str, jaw_angles=(0.0, 0.0)) -> np.ndarray:
+        """Vertices [m] of rigid part ``name`` in the head frame at ``jaw_angles`` (u, v) [rad],
+        shape (k, 3), float64: turned by the jaw with the part's amount (lower teeth and
+        tongue 1, eyes and upper teeth 0)."""
+        V = np.asarray(self.parts[name][0], np.float64)
+        amt = float(self.part_jaw.get(name, 0.0))
+        u, v = float(jaw_angles[0]), float(jaw_angles[1])
+        if amt == 0.0 or (u == 0.0 and v == 0.0):
+            return V
+        return self.jaw.apply(V, np.full(len(V), amt), u, v)
+
     @property
     def muscle_names(self) -> list[str]:
         return list(self.rig.names)

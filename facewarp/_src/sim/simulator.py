@@ -516,14 +516,15 @@ class FaceSimulator:
         parts = self._parts_now(self._j)
         return self._fdp_points(V[None], {k: P[None] for k, P in parts.items()})[0].astype(np.float64)
 
+    def part_points(self, *, frame: str = "world") -> dict:
+        """The rigid parts now (eyes, teeth, tongue): name -> vertices [m], shape (k, 3), float64;
+        the lower teeth and tongue turned by the current jaw, ``frame="world"`` with the head pose
+        applied (as :meth:`surface`), ``"head"`` without it."""
+        return self._parts_now(self._j, frame=frame)
+
     def _parts_now(self, j, *, frame: str = "world") -> dict:
-        fr = self.fr
-        out = {}
-        for name, (V, _) in fr.parts.items():
-            amt = fr.part_jaw.get(name, 0.0)
-            P = self.jaw.apply(V, np.full(len(V), amt), float(j[0]), float(j[1])) if amt else V
-            out[name] = self._pose.to_world(P) if frame == "world" else P
-        return out
+        out = {name: self.fr.part_at(name, j) for name in self.fr.parts}
+        return {k: self._pose.to_world(P) for k, P in out.items()} if frame == "world" else out
 
     def run(self, timeline: Timeline, seconds: float, *, progress=None, curve_samples: int = 24, jaw=None) -> Frames:
         """Simulate ``seconds`` of ``timeline`` from rest (it calls :meth:`reset`); one frame
