@@ -20,8 +20,9 @@ kinematic jaw):
   amplitude of the chin is matched by construction (its ratio is reported, not judged).
 
 Per case: cosine similarity of the stacked FDP displacements (the head FDPs that move > 0.5 mm in
-either), the same over the face vertices, and the amplitude ratio simulated / rig of the largest
-FDP displacement. Writes benchmarks/results/ict_rig_compare.json.
+either), the same over the face vertices, the amplitude ratio simulated / rig of the largest
+FDP displacement, and per compared FDP both vectors [mm] with the FDP's share of the rig's squared
+displacement (``per_fdp_mm``). Writes benchmarks/results/ict_rig_compare.json.
 """
 
 from __future__ import annotations
@@ -118,6 +119,13 @@ def main() -> None:
             "seconds_simulated": args.seconds, "wall_s": round(sim_s, 1),
             "nan": bool(not np.isfinite(frames.points).all()),
         }
+        # per FDP: the two vectors and the FDP's share of the rig's squared displacement (what a
+        # region the simulation leaves still costs the cosine)
+        e_rig = float((P_rig[moving] ** 2).sum())
+        row["per_fdp_mm"] = {
+            head_fdps[i]: {"sim": np.round(P_sim[i] * 1e3, 2).tolist(), "rig": np.round(P_rig[i] * 1e3, 2).tolist(),
+                           "rig_share": round(float(P_rig[i] @ P_rig[i]) / e_rig, 3)}
+            for i in np.flatnonzero(moving)}
         D_sim = frames.points[-1, :n_skin].astype(np.float64) - frames.points[0, :n_skin]
         row["cosine_face_vertices"] = round(_cos(D_sim[face_vertices], D_rig[face_vertices]), 3)
         row["cosine_ok"] = bool(row["cosine_fdp"] >= 0.7)

@@ -2,6 +2,7 @@
 
     python -m benchmarks.solver_accuracy [--materials physical thesis] [--parts frames static levels]
                                          [--presets smile laugh surprise angry sad] [--device cpu]
+                                         (parts: frames static levels pcg)
 
 * ``frames``: each Table 6.4 preset (attack 0.3 s, hold 0.7 s, release 0.3 s) on the default head
   (level 0) with the default solver (tolerance 3e-5 m), the interactive mode (1, 2, 3 iterations
@@ -11,6 +12,10 @@
 * ``static``: each preset ramped in over 0.3 s and held 0.5 s, at 1, 2, 4 and 8 steps per frame,
   against the Verlet reference of the same model (same profile, energies, muscles) run the same
   way: the largest FDP distance at rest [mm] and relative to the FDP's displacement.
+* ``pcg``: the device method (``newton-pcg``: a fixed count of Newton iterations, each a fixed
+  count of CG iterations) on ``--device`` at several (Newton, CG) counts, against the fully
+  converged CPU solution of the same steps (L-BFGS, tolerance 1e-7 m), per phase as ``frames``,
+  with frames per second: which counts keep every FDP within 0.5 mm or 10 %.
 * ``levels``: the same static shapes on level 1 (27k tets) against level 0: the relative difference
   of the FDP displacements (FDPs moving more than 1 mm on level 0).
 
@@ -121,6 +126,47 @@ def part_static(fr, material, presets, device) -> list:
     return rows
 
 
+PCG_COUNTS = ["3x50", "2x50", "3x30", "4x20", "5x15", "4x15", "3x20", "2x20"]  # Newton x CG [+e<extrapolate>]
+
+
+def part_pcg(fr, material, presets, device, counts=PCG_COUNTS) -> list:
+    import facewarp
+
+    rows = []
+    seconds = START + ATTACK + HOLD + RELEASE + 0.2
+    for name in presets:
+        tl = facewarp.timeline_for(name, attack=ATTACK, hold=HOLD, release=RELEASE, start=START)
+        conv, _ = _run(fr, tl, seconds, device="cpu", method="lbfgs", material=material, tolerance=1e-7,
+                       solver_options=dict(spring_tolerance=1e-4, max_iterations=500))
+        t = conv.times
+        phase = np.where(t < START + ATTACK, "attack", np.where(t < START + ATTACK + HOLD, "hold", "release"))
+        disp = np.linalg.norm(conv.fdp_points - conv.fdp_points[:1], axis=2)
+        row = {"preset": name, "material": material, "device": device, "frames": int(len(t)),
+               "max_fdp_displacement_mm": round(float(disp.max()) * 1e3, 3)}
+        for label in counts:
+            label_, _, rounds = label.partition("+r")
+            nc, _, ex = label_.partition("+e")
+            newton, cg = nc.split("x")
+            newton, cg = (None if newton == "a" else int(newton)), int(cg)  # "a": adaptive (the default)
+            kw = dict(device=device, material=material, method="newton-pcg", iterations=newton,
+                      solver_options=dict(linear_iterations=cg, extrapolate=float(ex or 0.5)))
+            if rounds:
+                kw["solver_options"]["rounds"] = int(rounds)
+            _run(fr, tl, 0.1, **kw)  # warm: kernels, graph
+            frames, sim = _run(fr, tl, seconds, **kw)
+            err = np.linalg.norm(frames.fdp_points - conv.fdp_points, axis=2)
+            r = {"fps": round(frames.frames_per_second, 1), "max_error_mm": round(float(err.max()) * 1e3, 4),
+                 "newton_iterations_per_frame": round(sim.solver.total_iterations / max(1, len(t) - 1), 2),
+                 "within_0.5mm_or_10pct": _within(err, disp)}
+            for ph in ("attack", "hold", "release"):
+                m = phase == ph
+                r[f"{ph}_max_error_mm"] = round(float(err[m].max()) * 1e3, 4)
+            row[label] = r
+        print(row, flush=True)
+        rows.append(row)
+    return rows
+
+
 def part_levels(fr0, material, presets, device) -> list:
     fr1 = _rig(1)
     rows = []
@@ -148,6 +194,9 @@ def main():
     ap.add_argument("--parts", nargs="+", default=["frames", "static", "levels"])
     ap.add_argument("--presets", nargs="+", default=list(PRESETS))
     ap.add_argument("--name", default=None, help="result file suffix")
+    ap.add_argument("--pcg-counts", nargs="+", default=PCG_COUNTS,
+                    help="pcg part: Newton x CG iteration counts, e.g. 3x50, ax20 (adaptive), 3x20+e0 (extrapolate 0; "
+                         "default 0.5), ax20+r3 (3 rounds)")
     args = ap.parse_args()
     from facewarp.physics import factorization_backend
 
@@ -157,8 +206,9 @@ def main():
     name = "solver_accuracy_" + args.device.split(":")[0] + (f"_{args.name}" if args.name else "")
     for mat in args.materials:
         for part in args.parts:
-            fn = {"frames": part_frames, "static": part_static, "levels": part_levels}[part]
-            result[f"{part}_{mat}"] = fn(fr, mat, args.presets, args.device)
+            fn = {"frames": part_frames, "static": part_static, "levels": part_levels, "pcg": part_pcg}[part]
+            extra = dict(counts=args.pcg_counts) if part == "pcg" else {}
+            result[f"{part}_{mat}"] = fn(fr, mat, args.presets, args.device, **extra)
             save(name, result)  # after every part: a long run keeps what it measured
     print("wrote", save(name, result))
 

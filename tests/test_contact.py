@@ -8,6 +8,7 @@ preset on the default head at level 0 for one second.
 from __future__ import annotations
 
 import itertools
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -133,7 +134,7 @@ def eyeball_case(material="physical"):
     return V, model, mid, centre
 
 
-@pytest.mark.parametrize("method", ["lbfgs", "newton-pcg"])
+@pytest.mark.parametrize("method", ["lbfgs", "newton-pcg", "newton-pcg-adaptive"])
 def test_a_lid_pushed_into_the_eyeball_is_pushed_out(method):
     """One-sided ball springs (the eyeball's) hold the free bottom nodes outside the ball that
     a downward force drives them into without the springs."""
@@ -154,7 +155,7 @@ def test_a_lid_pushed_into_the_eyeball_is_pushed_out(method):
                                        rest_length=wp.full(len(mid), r, dtype=float), one_sided=True))]
         # the device method on the CPU: ~100 launches per Newton iteration, so fewer of each
         opts = dict(iterations=2, linear_iterations=25) if method == "newton-pcg" else {}
-        solver = SolverImplicit(model, method=method, stages=stages, **opts)
+        solver = SolverImplicit(model, method=method.removesuffix("-adaptive"), stages=stages, **opts)
         a, b, c = model.state(), model.state(), model.control()
         c.external_force.assign(f)
         for _ in range(8 if method == "newton-pcg" else 15):
@@ -316,3 +317,95 @@ def test_laugh_on_the_default_head_has_no_crossings(default_rig):
                 worst[key] = max(worst.get(key, 0), v)
     assert worst["lip_lip"] == 0 and worst["lip_teeth"] == 0, worst
     assert worst["lid_eye_depth_m"] < 1e-4, worst
+
+
+def two_lids(gap=1.5e-3, h=0.005):
+    """Two 3 x 1 x 1 boxes of 5 mm cubes, the lower (side -1) with its bottom fixed, the upper
+    (side +1) ``gap`` above it with its top fixed and one box deeper (y): closing, they do not
+    run into each other but slide past, as the lids did. Returns the nodes, tets, the fixed
+    nodes and the fissure plane between them (point, normal, corners, ring height)."""
+    V, T = grid_tets(3, 1, 1, h)
+    V2 = V + [0.0, h + 5e-4, h + gap]
+    VV, TT = np.concatenate([V, V2]), np.concatenate([T, T + len(V)])
+    fixed = np.r_[np.isclose(V[:, 2], 0), np.isclose(V2[:, 2], 2 * h + gap)]
+    c = np.array([1.5 * h, h + 2.5e-4, h + 0.5 * gap])
+    corners = np.array([[-1e-3, c[1], c[2]], [3 * h + 1e-3, c[1], c[2]]])
+    return VV, TT, fixed, (c[None], np.array([[0.0, 0.0, 1.0]]), corners[None], np.array([h]))
+
+
+@pytest.mark.parametrize("method", ["lbfgs", "newton-pcg"])
+def test_lids_closing_past_each_other_stop_at_the_fissure_plane(method):
+    """Pushed toward each other by 0.6 N a node, the free sheets of two lids slide 3.5 mm past
+    the fissure plane without contact; with it every lid node stays on its side of the plane
+    and the two sheets close to it (0.11 mm: the springs' gap / 2, less their compression)."""
+    from facewarp.physics import contact_crossings, lid_contact_geometry
+
+    VV, TT, fixed, plane = two_lids()
+    g = lid_contact_geometry(VV, *plane, fixed=fixed)
+    upper, lower = g.lid_nodes[g.lid_side > 0], g.lid_nodes[g.lid_side < 0]
+    assert len(upper) == len(lower) == 8 and g.excluded["lid_lid"] == 0
+    model = ModelBuilder(VV, TT, fixed=fixed, material="physical").finalize("cpu")
+    f = np.zeros((len(VV), 3), np.float32)
+    f[upper, 2], f[lower, 2] = -0.6, 0.6
+    rig = SimpleNamespace(nodes=VV, tets=TT, fixed=fixed)
+    crossed = {}
+    for contact in (False, True):
+        stages = [ContactStage(rig, np.full(len(VV), 5e4), "cpu", geometry=g)] if contact else []
+        opts = dict(iterations=2, linear_iterations=25) if method == "newton-pcg" else {}
+        solver = SolverImplicit(model, method=method, stages=stages, **opts)
+        a, b, c = model.state(), model.state(), model.control()
+        c.external_force.assign(f)
+        for _ in range(8 if method == "newton-pcg" else 12):
+            solver.step(a, b, c, 1 / 30)
+            a, b = b, a
+        solver.check(a)
+        X = a.positions.numpy().astype(np.float64)
+        crossed[contact] = contact_crossings(rig, X, geometry=g)
+        if contact:
+            z0 = plane[0][0, 2]
+            assert X[upper, 2].min() - z0 < 2.5e-4 and z0 - X[lower, 2].max() < 2.5e-4, "the sheets close to the plane"
+    assert crossed[False]["lid_lid"] >= 8 and crossed[False]["lid_lid_depth_m"] > 1e-3, crossed[False]
+    assert crossed[True]["lid_lid"] == 0, crossed[True]
+
+
+def test_a_lid_node_across_the_fissure_plane_is_pushed_back_by_the_verlet_forces():
+    from facewarp.physics import lid_contact_geometry
+
+    VV, TT, fixed, plane = two_lids()
+    g = lid_contact_geometry(VV, *plane, fixed=fixed)
+    model = ModelBuilder(VV, TT, fixed=fixed, material="physical").finalize("cpu")
+
+    class Rig:
+        nodes = VV
+
+    stage = ContactStage(Rig(), np.full(len(VV), 5e4), "cpu", geometry=g)
+    assert stage.counts["lid_lid"] == 16
+    X = VV.copy()
+    upper = g.lid_nodes[g.lid_side > 0]
+    X[upper, 2] -= 1e-3  # the upper lid's free sheet 0.25 mm across the plane
+    state, control = model.state(), model.control()
+    state.positions.assign(X.astype(np.float32))
+    state.prev_positions.assign(X.astype(np.float32))
+    dF = (SolverVerlet(model, stages=[stage]).compute_forces(state, control, 1e-4).numpy()
+          - SolverVerlet(model).compute_forces(state, control, 1e-4).numpy())[:, 2]
+    z0 = plane[0][0, 2]
+    across = g.lid_nodes[g.lid_side * (X[g.lid_nodes, 2] - z0) < 1.25e-4]  # past the springs' plane (gap / 2)
+    np.testing.assert_array_equal(np.sort(across), np.sort(upper))
+    np.testing.assert_array_less(0.0, dF[upper], err_msg="the upper lid is pushed back up")
+    others = np.setdiff1d(np.arange(len(VV)), upper)
+    np.testing.assert_array_equal(dF[others], 0.0)
+
+
+def test_the_default_head_keeps_both_lids_of_each_eye_to_their_side(default_rig):
+    """The orbicularis oculi of each eye closes toward a fissure plane; the contact finds the
+    lids on both sides of it (none across at rest)."""
+    from facewarp.physics import contact_crossings, contact_geometry
+
+    _, fr = default_rig
+    g = contact_geometry(fr)
+    assert g.lid_planes.shape == (2, 2, 3)
+    for j in range(2):
+        side = g.lid_side[g.lid_plane == j]
+        assert (side > 0).sum() >= 10 and (side < 0).sum() >= 10, np.bincount(side + 1)
+    rest = contact_crossings(fr, geometry=g)
+    assert rest["lid_lid"] == 0 and rest["lid_lid_depth_m"] == 0.0

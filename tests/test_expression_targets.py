@@ -51,6 +51,7 @@ def _peak(rig, cache: dict, name: str) -> dict:
         cache[name] = {k: P[-1, i] - P[0, i] for i, k in enumerate(ids)}
         cache[name]["rest"] = {k: P[0, i] for i, k in enumerate(ids)}
         cache[name]["end"] = {k: P[-1, i] for i, k in enumerate(ids)}
+        cache[name]["crossings"] = sim.contact_crossings()
     return cache[name]
 
 
@@ -129,7 +130,12 @@ def test_blink_closes_the_lids(rig, peaks):
     d = _peak(rig, peaks, "blink")
     for a, b in (("3.1", "3.3"), ("3.2", "3.4")):
         assert _distance(d, a, b, "rest") > 8 * MM  # open at rest (9.1 mm)
-        assert _distance(d, a, b) <= 1 * MM, (a, b, _distance(d, a, b))  # closed: 0.80 / 0.48 mm
+        # the lids meet at the fissure plane and stop there (lid-lid contact); the FDPs stay
+        # 2.26 / 1.83 mm apart (the upper lid ends medial and in front of the lower one): short of
+        # the 1 mm, which was met only while the lids crossed (1.6 mm past each other)
+        assert _distance(d, a, b) <= 2.5 * MM, (a, b, _distance(d, a, b))
+        assert d["end"][a][1] > d["end"][b][1]  # the upper lid's margin is still above the lower's
+    assert d["crossings"]["lid_lid"] == 0, d["crossings"]
     assert np.linalg.norm(d["4.3"]) < 1 * MM  # the brows stay (0.2 mm)
 
 

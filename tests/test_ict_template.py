@@ -13,8 +13,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from facewarp import (FDP_CATALOGUE, FDP_IDS, FRONTAL_REGIONS, ICT_FDP_VERTICES, ICT_INNER_LIP_VERTICES, ICT_PART_RANGES,
-                      ICT_SKIN_VERTICES, REGIONS, InputError, build_anatomy, default_template, import_ict, load_mesh,
-                      load_template_dir)
+                      ICT_SKIN_VERTICES, REGIONS, InputError, build_anatomy, default_template, face_rig_from_anatomy,
+                      import_ict, load_mesh, load_template_dir)
 
 
 @pytest.fixture(scope="module")
@@ -119,9 +119,13 @@ def test_regions_and_frontal(ict):
     assert len(np.unique(np.stack([a, fans], 1), axis=0)) == len(np.unique(a))
 
 
-def test_anatomy_builds(ict):
-    t, _ = ict
-    q = build_anatomy(t, check_intersections=False).quality
+@pytest.fixture(scope="module")
+def ict_anatomy(ict):
+    return build_anatomy(ict[0], check_intersections=False)
+
+
+def test_anatomy_builds(ict_anatomy):
+    q = ict_anatomy.quality
     assert q["inverted_count"] == 0
     assert q["tet_count"] > 0 and q["conforming"]
     # no sliver sets a tiny stable time step (the default template's flattest tet: ~0.35 mm)
@@ -130,6 +134,33 @@ def test_anatomy_builds(ict):
     attached = {k: v["attached_nodes"] for k, v in q["muscles"].items()}
     assert len(attached) == 27
     assert min(attached.values()) >= 5, attached
+
+
+def test_face_rig_supports_and_openings(ict, ict_anatomy):
+    # issue 12: the ICT lips roll into the mouth. A sliding support along each inner node's own
+    # normal (up on the lower lip's roll, down on the upper's) held the full smile's lip corners
+    # at 8.3 mm instead of the rig's 15.6; the support follows the smoothed deeper surface
+    # (before: normals within 12 mm of a corner 81 deg apart, cos 0.13 to their mean; now 0.99)
+    t, _ = ict
+    fr = face_rig_from_anatomy(ict_anatomy)
+    lm = t.landmarks()
+    for corner in ("8.3", "8.4"):
+        near = np.linalg.norm(fr.nodes[fr.support_nodes] - lm[corner], axis=1) < 0.012
+        assert near.sum() > 50, (corner, near.sum())
+        n = fr.support_normal[near]
+        np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-6)
+        mean = n.mean(0) / np.linalg.norm(n.mean(0))
+        assert (n @ mean).min() > 0.9, (corner, (n @ mean).min())
+    # the rims of the faces left out of the tet mesh follow the skin: the inner lip corners
+    # (FDP 2.4/2.5, on left-out crease faces) fully, no rim vertex by more than all of it
+    share = fr.opening_weight.sum(1)
+    assert len(fr.opening_vertex) and (fr.opening_weight >= 0).all() and (share > 0).all() and (share <= 1).all()
+    assert not np.isin(fr.opening_vertex, fr.surface_vertex[fr.surface_vertex >= 0]).any()
+    w = dict(zip(fr.opening_vertex.tolist(), share.tolist()))
+    ids = [str(k) for k in fr.fdp_ids]
+    for k in ("2.4", "2.5"):
+        tri = fr.head_faces[fr.fdp_face[ids.index(k)]]
+        assert min(w.get(int(v), 0.0) for v in tri) > 0.9, (k, [w.get(int(v), 0.0) for v in tri])
 
 
 def test_cli_import(ict_dir, tmp_path, capsys):

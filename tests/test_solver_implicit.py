@@ -325,16 +325,26 @@ def test_newton_pcg_reaches_the_direct_solution():
     V, b, f = loaded_slab()
     model = b.finalize("cpu")
     out = {}
-    for method, kw in (("lbfgs", dict(tolerance=1e-9)), ("newton-pcg", dict(iterations=4, linear_iterations=100))):
+    counts = []
+    for label, method, kw in (("lbfgs", "lbfgs", dict(tolerance=1e-9)),
+                              ("fixed", "newton-pcg", dict(iterations=4, linear_iterations=100)),
+                              ("adaptive", "newton-pcg", dict(tolerance=1e-7, linear_iterations=100))):
         solver = SolverImplicit(model, method=method, **kw)
         a, s, c = model.state(), model.state(), model.control()
         c.external_force.assign(f)
         for _ in range(3):
             solver.step(a, s, c, 1 / 30)
             a, s = s, a
-        out[method] = a.positions.numpy().astype(np.float64)
+            counts.append((label, solver.last_iterations))
+        out[label] = a.positions.numpy().astype(np.float64)
     moved = np.abs(out["lbfgs"] - V).max()
-    np.testing.assert_allclose(out["newton-pcg"], out["lbfgs"], atol=2e-3 * moved)
+    np.testing.assert_allclose(out["fixed"], out["lbfgs"], atol=2e-3 * moved)
+    # the adaptive count (the default) iterates until the step is below its tolerance: more
+    # iterations on the first step (the load applied at once) than once the slab has settled
+    np.testing.assert_allclose(out["adaptive"], out["lbfgs"], atol=2e-3 * moved)
+    adaptive = [n for label, n in counts if label == "adaptive"]
+    assert adaptive[0] > 2 and adaptive[0] <= solver.max_iterations, counts
+    assert solver.total_iterations == sum(adaptive)
 
 
 def test_interactive_mode_runs_a_fixed_iteration_count():

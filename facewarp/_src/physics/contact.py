@@ -13,7 +13,16 @@ Hessian are in the solvers' kernels and in :mod:`.potential`):
   dental arch at rest, against that arch (a closed mesh; the upper teeth ride the cranium, the
   lower teeth turn with the jaw by the part's Eq. 6.4.9 amount);
 * lid on eyeball: free nodes within ``EYE_NEAR_M`` of an eyeball's sphere, pushed out of the ball
-  ``|x - c| >= r`` (analytic, static springs).
+  ``|x - c| >= r`` (analytic, static springs);
+* lid on lid: the orbicularis oculi closes the lids toward the plane of the palpebral fissure
+  (a sphincter with ``to_plane``: the plane through its centre with normal ``center_normal``,
+  between its two fixed corners; :mod:`.kernels_muscle`), where the two lid margins meet. Every
+  free node of the lids (between the corners, within twice the ring's height of the plane) keeps
+  to its side of that plane: a static half-space spring ``gap / 2`` short of it, so the margins
+  close to ``gap`` apart and stop there, however strongly the ring drives them (without it the
+  upper lid slid past the lower one on the level-1 head; ``lid_contact_geometry``). The plane
+  is static: a lid stops there even while the other is open (the presets move the lids that far
+  only by the orbicularis oculi, which closes both), and the lids may slide along it freely.
 
 The half-space springs sit ``gap`` (0.25 mm) outside the other surface, so a node that touches
 with a force F stays ``gap - F / k`` outside it: the lips close without crossing as long as the
@@ -38,14 +47,18 @@ contact costs the CPU L-BFGS more iterations (its factorised model meets the con
 renewal); the gap keeps the real surface uncrossed while ``F / k`` stays below it. With the
 thesis profile the base term is its hold stiffness; its muscles (1e7 N/m a node) pull the lips
 through each other at the nodes next to the attached ones (a limitation, measured on pucker).
+A lid-on-lid spring is ``LID_STIFFNESS_RATIO`` (4) times its node's: the lid margins are pressed
+together by the ring's whole drive past the plane, mostly through tissue (the outer nodes carry
+no muscle spring of their own), and at 1x the level-1 head's blink left 3 nodes 0.16 mm across.
 
 :func:`contact_crossings` counts what the springs prevent, on any node positions: lip nodes
-inside a tet of the other lip, nodes inside a dental arch, nodes inside an eyeball.
+inside a tet of the other lip, nodes inside a dental arch, nodes inside an eyeball, lid nodes on
+the other lid's side of the fissure plane.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -57,7 +70,7 @@ from .model import Springs
 
 __all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "EYE_NEAR_M", "LIP_REACH_M", "TEETH_NEAR_M",
            "TEETH_REACH_M", "ContactGeometry", "ContactStage", "contact_crossings", "contact_geometry",
-           "lip_contact_geometry", "node_vertex", "winding_numbers"]
+           "fissure_planes", "lid_contact_geometry", "lip_contact_geometry", "node_vertex", "winding_numbers"]
 
 CONTACT_MODULUS = 2.0e9
 """Contact stiffness per unit sheet area [N/m^3] (module doc)."""
@@ -78,6 +91,12 @@ EYE_REST_SLACK_M = 5.0e-5
 with every step of the solver (measured: 2x the iterations of laugh at level 0)."""
 EYE_NEAR_M = 4.0e-3
 """Nodes within this distance [m] of an eyeball's sphere at rest are its contact candidates."""
+LID_REACH = 2.0
+"""Lid candidates lie within this many times the ring's height (its control points' largest
+distance from the fissure plane) of the plane: the lids, not the brow or the cheek."""
+LID_STIFFNESS_RATIO = 4.0
+"""A lid-on-lid spring is this many times the node's contact stiffness (module doc)."""
+_LID_JAW_MAX = 0.05  # a fissure plane rides the cranium (fissure_planes)
 _ROUNDING_M = 1.0e-6  # float32 positions of ~0.1 m: a node "deeper than at rest" by less is rounding
 _TEETH = ("teeth_upper", "teeth_lower")
 _EYES = ("eye_L", "eye_R")
@@ -98,7 +117,12 @@ class ContactGeometry:
         excluded: Candidates left out because they already touch or cross at rest, per kind
             (``{"lip_lip": n, "lip_teeth": n}``; a separated build has 0), and
             ``lid_eye_inside_at_rest``: lid nodes inside the eyeball's sphere at rest (kept, with
-            their rest distance as the radius they may not go below).
+            their rest distance as the radius they may not go below); ``lid_lid``: lid nodes
+            within ``2 gap`` of a fissure plane at rest (the lids' corners: no side to keep).
+        lid_planes: The fissure planes, (point [m], unit normal) each, shape (l, 2, 3), float64.
+        lid_nodes: Lid nodes kept to their side of a plane, shape (c,), int64.
+        lid_plane: Their plane (index into ``lid_planes``), shape (c,), int64.
+        lid_side: Their side at rest, +1 along the plane's normal, -1 against it, shape (c,), int8.
     """
 
     node_side: np.ndarray
@@ -110,6 +134,10 @@ class ContactGeometry:
     eye_nodes: np.ndarray
     eye_of_node: np.ndarray
     excluded: dict
+    lid_planes: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    lid_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    lid_plane: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    lid_side: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int8))
 
 
 def node_vertex(fr) -> np.ndarray:
@@ -171,7 +199,7 @@ def lip_contact_geometry(V, T, node_side, *, fixed=None, gap: float = CONTACT_GA
         raise InputError(f"node_side: expected shape ({len(X)},), got {side.shape}")
     free = np.ones(len(X), bool) if fixed is None else ~np.asarray(fixed, bool)
     up, lo = lip_tets(T, side)
-    excluded = {"lip_lip": 0, "lip_teeth": 0, "lid_eye_inside_at_rest": 0}
+    excluded = {"lip_lip": 0, "lip_teeth": 0, "lid_eye_inside_at_rest": 0, "lid_lid": 0}
     lip_faces, lip_nodes = [], []
     crossing = lip_crossings(X, T, side)["nodes"]
     for region, mine in ((up, -1), (lo, 1)):  # the lower lip's nodes against the upper lip, and back
@@ -188,6 +216,96 @@ def lip_contact_geometry(V, T, node_side, *, fixed=None, gap: float = CONTACT_GA
         lip_nodes.append(cand)
     return ContactGeometry(side, lip_faces, lip_nodes, [], np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64),
                            np.zeros(0, np.int64), excluded)
+
+
+def fissure_planes(fr) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The planes the lid-closing sphincters close toward (the orbicularis oculi's palpebral
+    fissure): every sphincter of ``fr.rig`` with a ``center_normal`` (``to_plane``), two fixed
+    control points (its corners on the palpebral ligaments) and a centre that rides the cranium
+    (a jaw amount below 5 %; the lids' is ~1 %, interpolated from the regions around them): the
+    plane stays where it is at rest.
+
+    Returns:
+        ``(point (l, 3) [m], unit normal (l, 3), corners (l, 2, 3) [m], height (l,) [m])``: the
+        ring centre, the plane's normal, the fixed corners and the ring's height (its control
+        points' largest distance from the plane), float64; l = 0 for a rig without such a ring.
+    """
+    rig = getattr(fr, "rig", None)
+    out = ([], [], [], [])
+    if rig is not None and len(getattr(rig, "center_normal", ())):
+        N = np.asarray(rig.center_normal, np.float64)
+        ctrl_m, piv = np.asarray(rig.ctrl_muscle), np.asarray(rig.ctrl_pivot)
+        P = np.asarray(rig.ctrl_rest, np.float64)
+        for m in np.flatnonzero(np.linalg.norm(N, axis=1) > 0.5):
+            ctrl = np.flatnonzero(ctrl_m == m)
+            corners = ctrl[piv[ctrl] == -2]
+            if len(corners) != 2 or float(np.asarray(rig.center_jaw)[m]) > _LID_JAW_MAX:
+                continue
+            c, n = np.asarray(rig.center[m], np.float64), N[m] / np.linalg.norm(N[m])
+            for a, v in zip(out, (c, n, P[corners], float(np.abs((P[ctrl] - c) @ n).max()))):
+                a.append(v)
+    return (np.asarray(out[0], np.float64).reshape(-1, 3), np.asarray(out[1], np.float64).reshape(-1, 3),
+            np.asarray(out[2], np.float64).reshape(-1, 2, 3), np.asarray(out[3], np.float64))
+
+
+def lid_contact_geometry(V, point, normal, corners, height, *, fixed=None, gap: float = CONTACT_GAP) -> ContactGeometry:
+    """The lid-on-lid part of :func:`contact_geometry`: the nodes kept to their side of each
+    fissure plane (:func:`fissure_planes` gives the planes of a face rig).
+
+    A node is a lid node of a plane when it is free, lies between the plane's corners (its
+    projection on the corner chord strictly inside it), within ``LID_REACH`` times ``height`` of
+    the plane and within half the chord of the ring centre across it (the lids, not the back of
+    the head); its side is the side it lies on at rest. Nodes within ``2 gap`` of the plane at
+    rest (where the lids join at the corners) are left out, as the lips' candidates that touch at
+    rest: no side to keep, and a spring there would be near-closed from the start (the CPU
+    L-BFGS keeps near-closed contacts in its factorised model); they are counted in
+    ``excluded["lid_lid"]``.
+
+    Args:
+        V: Rest node positions [m], shape (p, 3), float.
+        point: A point of each plane [m] (the ring centre), shape (l, 3), float.
+        normal: Each plane's unit normal, shape (l, 3), float.
+        corners: The ring's two fixed corners [m], shape (l, 2, 3), float.
+        height: The ring's height [m], shape (l,), float.
+        fixed: Nodes that do not move (no candidates), shape (p,), bool.
+        gap: The contact gap [m].
+
+    Returns:
+        A :class:`ContactGeometry` with only the lid fields filled.
+    """
+    X = np.asarray(V, np.float64)
+    C, N = np.asarray(point, np.float64).reshape(-1, 3), np.asarray(normal, np.float64).reshape(-1, 3)
+    K, H = np.asarray(corners, np.float64).reshape(-1, 2, 3), np.asarray(height, np.float64).reshape(-1)
+    if not (len(C) == len(N) == len(K) == len(H)):
+        raise InputError(f"lid planes: expected l points, normals, corner pairs and heights, got shapes "
+                         f"{C.shape}, {N.shape}, {K.shape}, {H.shape}")
+    if not (np.isfinite(C).all() and np.isfinite(K).all() and (H > 0).all()
+            and np.allclose(np.linalg.norm(N, axis=1), 1.0, atol=1e-6)):
+        raise InputError("lid planes: expected finite points and corners, unit normals and heights > 0 [m]")
+    free = np.ones(len(X), bool) if fixed is None else ~np.asarray(fixed, bool)  # a node on one plane only
+    nodes, plane, side, on_plane = [], [], [], 0
+    for j, (c, n, (a, b), h) in enumerate(zip(C, N, K, H)):
+        chord = b - a
+        length = float(np.linalg.norm(chord))
+        e = chord / length
+        t = (X - a) @ e / length
+        d = (X - c) @ n
+        across = np.abs((X - c) @ np.cross(n, e))
+        cand = free & (t > 0.0) & (t < 1.0) & (np.abs(d) <= LID_REACH * h) & (across <= 0.5 * length)
+        flat = cand & (np.abs(d) < 2.0 * gap)
+        on_plane += int(flat.sum())
+        k = np.flatnonzero(cand & ~flat)
+        free[cand] = False
+        nodes.append(k)
+        plane.append(np.full(len(k), j, np.int64))
+        side.append(np.sign(d[k]).astype(np.int8))
+    g = ContactGeometry(np.zeros(len(X), np.int8), [], [], [], np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64),
+                        np.zeros(0, np.int64), {"lip_lip": 0, "lip_teeth": 0, "lid_eye_inside_at_rest": 0,
+                                                "lid_lid": on_plane})
+    g.lid_planes = np.stack([C, N], axis=1)
+    if nodes:
+        g.lid_nodes, g.lid_plane, g.lid_side = np.concatenate(nodes), np.concatenate(plane), np.concatenate(side)
+    return g
 
 
 def contact_geometry(fr, *, gap: float = CONTACT_GAP) -> ContactGeometry:
@@ -237,7 +355,10 @@ def contact_geometry(fr, *, gap: float = CONTACT_GAP) -> ContactGeometry:
         eye_nodes = np.flatnonzero(free & (dmin < EYE_NEAR_M))
         eye_of = which[eye_nodes]
         excluded["lid_eye_inside_at_rest"] = int((dmin[eye_nodes] < 0.0).sum())
-    return ContactGeometry(side, lip_faces, lip_nodes, teeth, centers, radii, eye_nodes, eye_of, excluded)
+    lids = lid_contact_geometry(X, *fissure_planes(fr), fixed=fr.fixed, gap=gap)
+    excluded["lid_lid"] = lids.excluded["lid_lid"]
+    return ContactGeometry(side, lip_faces, lip_nodes, teeth, centers, radii, eye_nodes, eye_of, excluded,
+                           lids.lid_planes, lids.lid_nodes, lids.lid_plane, lids.lid_side)
 
 
 def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeometry | None = None) -> dict:
@@ -253,7 +374,8 @@ def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeo
         ``{"lip_lip": nodes of one lip inside a tet of the other, "lip_lip_depth_m": the deepest,
         "lip_teeth": free nodes inside a dental arch, "lip_teeth_depth_m": the deepest, "lid_eye":
         free nodes inside an eyeball's sphere (deeper than at rest), "lid_eye_depth_m": the
-        deepest}``.
+        deepest, "lid_lid": lid nodes on the other side of their fissure plane (where the other
+        lid closes to), "lid_lid_depth_m": the farthest}``.
     """
     from ..geometry.surface import closest_point
 
@@ -280,8 +402,14 @@ def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeo
         # deeper than at rest (a lid's inner sheet may start inside), beyond float32 rounding
         depth = np.maximum(np.minimum(D0, 0.0) - D - _ROUNDING_M, 0.0).max(axis=1) * free
         eye, eye_depth = int((depth > 0.0).sum()), float(depth.max(initial=0.0))
+    lid, lid_depth = 0, 0.0
+    if len(g.lid_nodes):
+        C, N = g.lid_planes[g.lid_plane, 0], g.lid_planes[g.lid_plane, 1]
+        depth = np.maximum(-g.lid_side * np.einsum("ij,ij->i", X[g.lid_nodes] - C, N) - _ROUNDING_M, 0.0)
+        lid, lid_depth = int((depth > 0.0).sum()), float(depth.max())
     return {"lip_lip": lip["count"], "lip_lip_depth_m": float(lip["depth"].max(initial=0.0)),
-            "lip_teeth": teeth, "lip_teeth_depth_m": teeth_depth, "lid_eye": eye, "lid_eye_depth_m": eye_depth}
+            "lip_teeth": teeth, "lip_teeth_depth_m": teeth_depth, "lid_eye": eye, "lid_eye_depth_m": eye_depth,
+            "lid_lid": lid, "lid_lid_depth_m": lid_depth}
 
 
 class _SurfaceSet:
@@ -319,17 +447,23 @@ class ContactStage:
             ``CONTACT_MODULUS`` times the node's sheet area).
         device: Warp device.
         gap: Distance [m] outside a surface at which the half-space springs start to push.
-        lips, teeth, eyes: Which contacts to keep (all by default).
+        lips, teeth, eyes, lids: Which contacts to keep (all by default; ``lids``: lid on lid).
         geometry: :func:`contact_geometry` of ``fr`` (default: made here).
 
     Attributes:
         springs: The spring sets (a tuple of :class:`~facewarp._src.physics.model.Springs`, all
-            one-sided): lower lip on upper, upper lip on lower, each dental arch, the eyeballs.
+            one-sided): lower lip on upper, upper lip on lower, each dental arch, the eyeballs,
+            the lids at their fissure planes.
         geometry: The :class:`ContactGeometry`.
     """
 
+    allocates_on_refresh = True
+    """:meth:`refresh` refits ``wp.Mesh`` BVHs, which allocates (an edge-length scan): the device
+    solver refreshes this stage between the rounds of its Newton loop, not inside the loop (a
+    conditional node of a CUDA graph may not allocate)."""
+
     def __init__(self, fr, node_stiffness, device, *, gap: float = CONTACT_GAP, lips: bool = True,
-                 teeth: bool = True, eyes: bool = True, geometry: ContactGeometry | None = None):
+                 teeth: bool = True, eyes: bool = True, lids: bool = True, geometry: ContactGeometry | None = None):
         wp = get_warp()
         from . import kernels_contact as kc
 
@@ -381,6 +515,20 @@ class ContactStage:
                 stiffness=wp.array(stiff(en).astype(np.float32), dtype=float, device=device),
                 rest_length=wp.array(r.astype(np.float32), dtype=float, device=device), one_sided=True)
             sets.append(self.eye_springs)
+        self.lid_count = len(g.lid_nodes) if lids else 0
+        if self.lid_count:
+            ln = g.lid_nodes
+            c, n = g.lid_planes[g.lid_plane, 0], g.lid_planes[g.lid_plane, 1]
+            a = g.lid_side[:, None] * n  # toward the node's own side
+            # the plane gap / 2 short of the fissure plane (the two margins stop gap apart; a
+            # node nearer at rest, with a geometry made for a smaller gap, keeps its rest distance)
+            r = np.minimum(0.5 * gap, np.einsum("ij,ij->i", X[ln] - c, a))
+            self.lid_springs = Springs(
+                node=wp.array(ln.astype(np.int32), dtype=wp.int32, device=device),
+                point=wp.array((c + r[:, None] * a).astype(np.float32), dtype=wp.vec3, device=device),
+                stiffness=wp.array((LID_STIFFNESS_RATIO * stiff(ln)).astype(np.float32), dtype=float, device=device),
+                axis=wp.array(a.astype(np.float32), dtype=wp.vec3, device=device), one_sided=True)
+            sets.append(self.lid_springs)
         self.springs = tuple(sets)
 
     @property
@@ -389,7 +537,8 @@ class ContactStage:
         g = self.geometry
         lips = sum(s.count for s in self.surfaces if s.follows is not None)
         teeth = sum(s.count for s in self.surfaces if s.rigid is not None)
-        return {"lip_lip": lips, "lip_teeth": teeth, "lid_eye": self.eye_count, "excluded": dict(g.excluded)}
+        return {"lip_lip": lips, "lip_teeth": teeth, "lid_eye": self.eye_count, "lid_lid": self.lid_count,
+                "excluded": dict(g.excluded)}
 
     def _move_rigid(self, control) -> None:
         wp = get_warp()
@@ -436,4 +585,9 @@ class ContactStage:
             sp = self.eye_springs
             wp.launch(self.kc._sphere_forces, dim=self.eye_count,
                       inputs=[sp.node, sp.point, sp.rest_length, sp.stiffness, state_in.positions], outputs=[forces],
+                      device=self.device)
+        if self.lid_count:  # a lid node lies on one plane only: one spring per node in the set
+            sp = self.lid_springs
+            wp.launch(self.kc._half_space_forces, dim=self.lid_count,
+                      inputs=[sp.node, sp.point, sp.axis, sp.stiffness, state_in.positions], outputs=[forces],
                       device=self.device)

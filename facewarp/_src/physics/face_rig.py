@@ -8,8 +8,9 @@ Boundary conditions (Sec. 6.2, 6.4): only the frontal face is simulated. Skin no
 frontal region's border (outer and inner sheet) are fixed. Inner-sheet nodes of the regions over
 bone (:data:`BONE_REGIONS`: forehead, nose, chin, bottom face) that are not attached to a muscle
 are held by stiff springs at their rest position, which the jaw moves for the jaw regions
-(Eq. 6.4.9 amounts). Cheeks, lips and lids glide over soft tissue, teeth and eyeballs and are
-free, as are the nodes attached to muscles and the whole outer sheet.
+(Eq. 6.4.9 amounts). Cheeks, lips and lids glide over soft tissue, teeth and eyeballs: every
+other inner-sheet node has a sliding support along the normal of that deeper surface (the skin's
+inward direction smoothed over :data:`SUPPORT_SMOOTHING`). The outer sheet is free.
 """
 
 from __future__ import annotations
@@ -26,8 +27,9 @@ from ..anatomy.jaw import JawKinematic
 from .muscle_stage import PIVOT_CENTER, PIVOT_FIXED, MuscleRig
 from ..template import FRONTAL_REGIONS, REGIONS
 
-__all__ = ["BONE_REGIONS", "MUSCLE_STIFFNESS", "FaceRig", "build_face", "face_rig_from_anatomy", "load_face_rig", "muscle_rig",
-           "node_jaw_amounts", "save_face_rig"]
+__all__ = ["BONE_REGIONS", "MUSCLE_STIFFNESS", "OPENING_FALLOFF", "SUPPORT_SMOOTHING", "FaceRig", "build_face",
+           "face_rig_from_anatomy", "load_face_rig", "muscle_rig", "node_jaw_amounts", "opening_follow",
+           "save_face_rig", "substrate_normals"]
 
 MUSCLE_STIFFNESS = 1.0e7
 """Default muscle spring stiffness k_m of Eq. 6.4.1 [N/m] in the solver's unit system (node mass
@@ -49,6 +51,24 @@ slowing rigid motion (and stays far below the explicit limit 2 m / dt)."""
 BONE_REGIONS = ("nose", "chin", "bottom_face")
 """Regions whose inner sheet lies on bone and is held (unless attached to a muscle)."""
 
+OPENING_FALLOFF = 0.005
+"""Length [m] along the skin over which the rim of an opening in the frontal face (a face left
+out of the tet mesh) passes from following the simulated skin to the jaw's kinematic motion:
+a vertex at mesh distance d from the nearest simulated vertex takes ``exp(-(d / L)^2)`` of that
+vertex's displacement (:func:`opening_follow`). Without it the imported ICT head's lip creases
+(the inner lip corners, FDP 2.4/2.5) and lid margins stayed at rest while the lips and lids moved
+15 mm away: the frame tore there, and the smile's cosine with the rig was 0.644 instead of 0.792."""
+
+SUPPORT_SMOOTHING = 0.01
+"""Width [m] of the Gaussian (weights ``exp(-(d / w)^2)`` by inner-sheet area) over which the
+skin's inward directions are averaged into the normal of the deeper surface that the inner sheet
+glides on (:func:`substrate_normals`). The teeth, gums and buccal fat under the lips and cheeks
+are smooth at the centimetre scale; the skin of a finely meshed head is not: the lips of the
+imported ICT head roll into the mouth, and a support along each node's own normal there (up on
+the lower lip, down on the upper) held the lip corners in place (zygomatic major at 1.0 moved
+them 8.3 mm; with the smoothed normal 15.6 mm, the rig's mouthSmile 15.6; the default head's
+coarse lips 15.7 and 15.5 mm)."""
+
 
 @dataclass
 class FaceRig:
@@ -68,6 +88,11 @@ class FaceRig:
             follow the jaw kinematically with it (the neck under the chin).
         parts: rigid part name -> (V, F); part_jaw: name -> jaw amount (1 lower teeth, tongue).
         level: template level (or -1).
+        opening_vertex (q,), opening_node (q, c), opening_weight (q, c): head vertices of the
+            openings in the frontal face (frontal-region faces left out of the tet mesh: an
+            imported head's lip creases, mouth interior, lid margins), the outer nodes each
+            follows and how much of each node's displacement it takes (the rest of 1: the jaw's
+            kinematic motion); :func:`opening_follow`. None or empty: no openings.
     """
 
     head_vertices: np.ndarray
@@ -97,6 +122,9 @@ class FaceRig:
     parts: dict = field(default_factory=dict)
     part_jaw: dict = field(default_factory=dict)
     level: int = -1
+    opening_vertex: np.ndarray | None = None
+    opening_node: np.ndarray | None = None
+    opening_weight: np.ndarray | None = None
 
     @property
     def jaw(self) -> JawKinematic:
@@ -219,6 +247,9 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
     jaw_amount_node = v_amount[src]
     jaw_nodes = np.where((held | fixed) & (jaw_amount_node > 0))[0]
     support_nodes = np.where(inner & ~held & ~fixed)[0]
+    p = int((skin.layer == 0).sum())
+    inner_faces = np.asarray(skin.skin_faces) + int(skin.layer.max()) * p  # the inner sheet's triangles
+    support_normal = substrate_normals(skin.vertices, inner_faces, skin.direction, support_nodes)
 
     # --- muscles (packed by the anatomy stage, with Eq. 6.4.9 jaw amounts)
     rig = muscle_rig(ms, stiffness=muscle_stiffness, head=head, vertex_amount=v_amount)
@@ -228,6 +259,10 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
     per_node = np.bincount(rig.att_node, minlength=len(skin.vertices))
     rig.att_stiffness = rig.att_stiffness / np.maximum(per_node[rig.att_node], 1)
 
+    outer_nodes = np.flatnonzero(skin.layer == 0)
+    opening_faces = head.faces[~np.asarray(head.frontal, bool) & ~outer_region]
+    o_vertex, o_node, o_weight = opening_follow(head.vertices, head.faces, opening_faces, src[outer_nodes], outer_nodes)
+
     ids = list(head.fdp)
     parts = dict(getattr(head, "parts", {}) or {})
     part_jaw = {k: (1.0 if k in ("teeth_lower", "tongue") else 0.0) for k in parts}
@@ -236,14 +271,115 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
         head_vertices=np.asarray(head.vertices, float), head_faces=np.asarray(head.faces), nodes=skin.vertices,
         tets=skin.tets, layer=layer, surface_vertex=skin.surface_vertex, fixed=fixed, held=held,
         jaw_nodes=jaw_nodes, jaw_amount=jaw_amount_node[jaw_nodes], support_nodes=support_nodes,
-        support_normal=skin.direction[support_nodes], support_amount=jaw_amount_node[support_nodes], jaw_pivot=jaw.pivot, jaw_u=jaw.u_axis,
+        support_normal=support_normal, support_amount=jaw_amount_node[support_nodes], jaw_pivot=jaw.pivot, jaw_u=jaw.u_axis,
         jaw_v=jaw.v_axis, lip_corners=jaw.lip_corners, mouth_center=jaw.mouth_center, rig=rig,
         fdp_ids=np.array(ids), fdp_part=np.array([head.fdp[i][0] for i in ids]),
         fdp_face=np.array([int(head.fdp[i][1].face[0]) for i in ids]),
         fdp_bary=np.array([head.fdp[i][1].bary[0] for i in ids]), parts=parts, part_jaw=part_jaw,
         vertex_jaw=v_amount,
         level=int(getattr(head, "level", -1)),
+        opening_vertex=o_vertex, opening_node=o_node, opening_weight=o_weight,
     )
+
+
+def opening_follow(V, F, opening_faces, sim_vertex, sim_node, *, falloff: float = OPENING_FALLOFF, count: int = 8):
+    """How the rims of the openings in a frontal face follow the simulated skin.
+
+    Each vertex of ``opening_faces`` that is not simulated follows the ``count`` simulated
+    vertices nearest to it along the mesh edges (Shepard weights ``1 / d^2``; along the mesh, so
+    a vertex of the upper lip's inner roll follows the upper lip, not the lower one across the
+    lip gap, and one in the crease at the lip corner both lips), by the share
+    ``exp(-(d_min / falloff)^2)`` of their displacement, d_min the mesh distance to the nearest.
+
+    Args:
+        V: Head vertices [m], shape (n, 3), float.
+        F: Head triangles, shape (m, 3), int.
+        opening_faces: The openings' triangles, shape (o, 3), int.
+        sim_vertex: Head vertex of each simulated outer node, shape (s,), int.
+        sim_node: Those nodes, shape (s,), int.
+        falloff: Length [m], > 0.
+        count: Simulated vertices each rim vertex follows, >= 1.
+
+    Returns:
+        ``(vertex (q,) int64, node (q, count) int64, weight (q, count) float64)``: each row's
+        weights sum to the share (unused slots: node 0, weight 0); empty when there are no openings.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    if not (np.isfinite(falloff) and falloff > 0):
+        raise InputError(f"falloff: expected a positive length [m], got {falloff!r}")
+    if not (isinstance(count, (int, np.integer)) and count >= 1):
+        raise InputError(f"count: expected a whole number >= 1, got {count!r}")
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    sim_vertex = np.asarray(sim_vertex, np.int64)
+    node_of_vertex = np.full(len(V), -1, np.int64)
+    node_of_vertex[sim_vertex] = np.asarray(sim_node, np.int64)
+    verts = np.unique(np.asarray(opening_faces, np.int64).ravel()) if len(opening_faces) else np.zeros(0, np.int64)
+    verts = verts[node_of_vertex[verts] < 0]
+    out_v, out_n, out_w = [], [], []
+    if len(verts) and len(sim_vertex):
+        E = np.unique(np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+        L = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+        G = coo_matrix((L, (E[:, 0], E[:, 1])), shape=(len(V), len(V))).tocsr()
+        for start in range(0, len(verts), 256):  # rows of at most 256 x n distances at a time
+            chunk = verts[start:start + 256]
+            D = dijkstra(G, directed=False, indices=chunk, limit=4.0 * falloff)[:, sim_vertex]
+            near = np.argsort(D, axis=1)[:, :count]
+            d = np.take_along_axis(D, near, axis=1)
+            ok = np.isfinite(d[:, 0])
+            w = np.where(np.isfinite(d), 1.0 / np.maximum(d, 1e-5) ** 2, 0.0)
+            w *= (np.exp(-((d[:, 0] / falloff) ** 2)) / w.sum(1))[:, None]
+            pad = np.zeros((len(chunk), count), np.int64)
+            pad[:, : near.shape[1]] = node_of_vertex[sim_vertex[near]]
+            wpad = np.zeros((len(chunk), count))
+            wpad[:, : near.shape[1]] = w
+            out_v.append(chunk[ok])
+            out_n.append(pad[ok])
+            out_w.append(wpad[ok])
+    if not out_v:
+        return np.zeros(0, np.int64), np.zeros((0, count), np.int64), np.zeros((0, count))
+    return np.concatenate(out_v), np.concatenate(out_n), np.concatenate(out_w)
+
+
+def substrate_normals(X, F, directions, nodes, *, width: float = SUPPORT_SMOOTHING) -> np.ndarray:
+    """Normals of the deeper surface under a skin sheet: the sheet's inward directions averaged
+    around each node with Gaussian weights ``exp(-(d / width)^2)`` times each node's share of the
+    sheet area (so the average does not depend on how finely the sheet is meshed).
+
+    Args:
+        X: Node positions [m], shape (p, 3), float.
+        F: The sheet's triangles, shape (m, 3), int (indices into X).
+        directions: Unit inward direction of every node, shape (p, 3), float.
+        nodes: Nodes of the sheet to give a normal, shape (s,), int.
+        width: Gaussian width [m], > 0.
+
+    Returns:
+        Unit normals, shape (s, 3), float64.
+    """
+    from scipy.spatial import cKDTree
+
+    if not (np.isfinite(width) and width > 0):
+        raise InputError(f"width: expected a positive length [m], got {width!r}")
+    X = np.asarray(X, np.float64)
+    F = np.asarray(F, np.int64)
+    D = np.asarray(directions, np.float64)
+    nodes = np.asarray(nodes, np.int64)
+    tri = X[F]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    node_area = np.bincount(F.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(X))
+    sheet = np.flatnonzero(node_area > 0)
+    tree = cKDTree(X[sheet])
+    out = np.array(D[nodes], np.float64)
+    for i, near in enumerate(tree.query_ball_point(X[nodes], 2.5 * width)):
+        j = sheet[near]
+        w = node_area[j] * np.exp(-((np.linalg.norm(X[j] - X[nodes[i]], axis=1) / width) ** 2))
+        v = w @ D[j]
+        n = np.linalg.norm(v)
+        if n > 1e-12:
+            out[i] = v / n
+    return out
 
 
 _RIG_FIELDS = ("activation_index", "contraction", "center", "center_jaw", "ctrl_rest", "ctrl_muscle", "ctrl_pivot",
@@ -261,6 +397,8 @@ def save_face_rig(path, fr: FaceRig) -> Path:
     arrays.update({f"rig_{k}": getattr(fr.rig, k) for k in _RIG_FIELDS})
     arrays["rig_names"] = np.array(fr.rig.names)
     arrays["level"] = np.array(fr.level)
+    if fr.opening_vertex is not None:
+        arrays.update(opening_vertex=fr.opening_vertex, opening_node=fr.opening_node, opening_weight=fr.opening_weight)
     arrays["part_names"] = np.array(list(fr.parts))
     for k, (V, F) in fr.parts.items():
         arrays[f"part_{k}_V"], arrays[f"part_{k}_F"] = V, F
@@ -286,8 +424,9 @@ def load_face_rig(path) -> FaceRig:
         rig = MuscleRig(names=[str(n) for n in z["rig_names"]], **{k: z[f"rig_{k}"] for k in _RIG_FIELDS})
         parts = {str(k): (z[f"part_{k}_V"], z[f"part_{k}_F"]) for k in z["part_names"]}
         part_jaw = {str(k): float(z[f"part_{k}_jaw"]) for k in z["part_names"]}
+        opening = {k: z[k] for k in ("opening_vertex", "opening_node", "opening_weight") if k in z}
         return FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]),
-                       **{k: z[k] for k in _FACE_FIELDS})
+                       **{k: z[k] for k in _FACE_FIELDS}, **opening)
     except (KeyError, ValueError, OSError) as e:
         raise InputError(f"{path}: not a facewarp face rig ({e})") from None
 

@@ -8,7 +8,9 @@ Contact springs (:class:`~facewarp._src.physics.model.Springs` with ``one_sided`
   surface point p and the outward unit direction a there give the half-space energy
   ``E = 1/2 k min(0, (x - p') . a)^2`` with ``p' = p + gap a``; the spring is armed for every
   node within ``reach`` of the surface (inside or out) and slack (stiffness 0) beyond;
-* against a sphere (the eyeball): ``E = 1/2 k min(0, |x - c| - r)^2``, static.
+* against a sphere (the eyeball): ``E = 1/2 k min(0, |x - c| - r)^2``, static;
+* against a plane (a lid against the palpebral fissure, where the other lid closes to): the
+  half-space energy above with a static p and a, set once by :class:`.contact.ContactStage`.
 
 The explicit force is ``-dE/dx``: ``-k s a`` (half-space, ``s = min(0, (x - p') . a)``) and
 ``-k s (x - c) / |x - c|`` (sphere, ``s = min(0, |x - c| - r)``).
@@ -125,8 +127,9 @@ def _signed_distance(
     dist_out[k] = q.sign * wp.length(x - wp.mesh_eval_position(mesh, q.face, q.u, q.v))
 
 
-# Explicit forces of one-sided half-space springs: f = -k min(0, (x - p) . a) a. Every node
-# appears once per spring set, so the set adds to its nodes without atomics.
+# Explicit forces of one-sided half-space springs: f = -k min(0, (x - p) . a) a (the surface
+# contacts and the lids' fissure planes). Every node appears once per spring set, so the set
+# adds to its nodes without atomics.
 @wp.kernel
 def _half_space_forces(
     nodes: wp.array(dtype=wp.int32),

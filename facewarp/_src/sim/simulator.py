@@ -257,7 +257,10 @@ class FaceSimulator:
         self.state = self.model.state()
         self.scratch = self.model.state()
         self.control = self.model.control()
-        self.use_graph = bool(self.device.is_cuda)
+        # a frame is one replayed CUDA graph; the adaptive device solver's Newton loop is a
+        # conditional graph node (CUDA 12.4+): without one, the frames run launch by launch
+        self.use_graph = bool(self.device.is_cuda) and (
+            not getattr(self.solver, "adaptive", False) or wp.is_conditional_graph_supported())
         self._graphs: dict[int, object] = {}
         self._wp = wp
         self.step_seconds = 0.0
@@ -472,7 +475,8 @@ class FaceSimulator:
 
     def surface(self, X: np.ndarray | None = None, jaw_angles=None, *, frame: str = "world") -> np.ndarray:
         """Head vertices [m], shape (n, 3), float64: the simulated outer nodes written in, the
-        rest of the head moved kinematically by the jaw (its per-vertex amount).
+        rims of the frontal face's openings following them (``FaceRig.opening_*``), the rest of
+        the head moved kinematically by the jaw (its per-vertex amount).
 
         Args:
             X: Node positions (p, 3) [m], head frame; default the current state.
@@ -490,6 +494,11 @@ class FaceSimulator:
             m = fr.vertex_jaw > 0
             V[m] = self.jaw.apply(V[m], fr.vertex_jaw[m], float(ja[0]), float(ja[1]))
         V[self.vertex_of_node] = X[self.node_of_vertex]
+        if fr.opening_vertex is not None and len(fr.opening_vertex):  # rims of openings follow the skin
+            ov, w = fr.opening_vertex, fr.opening_weight
+            u = np.einsum("qc,qcd->qd", w, X[fr.opening_node] - fr.nodes[fr.opening_node])
+            share = w.sum(1, keepdims=True)
+            V[ov] = (1.0 - share) * V[ov] + share * fr.head_vertices[ov] + u
         return self._pose.to_world(V) if frame == "world" else V
 
     def contact_crossings(self, X: np.ndarray | None = None) -> dict:

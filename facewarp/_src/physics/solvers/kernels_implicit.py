@@ -180,6 +180,7 @@ def _tet_energy(
     tet_c_start: wp.array(dtype=float),
     inv_h: float,
     slot_offset: int,
+    reject_inverted: int,
     positions: wp.array(dtype=wp.vec3),
     energy_out: wp.array(dtype=float),
     slots_out: wp.array(dtype=wp.vec3),
@@ -197,6 +198,8 @@ def _tet_energy(
     dc = c - tet_c_start[t]
     dmp = tet_damping[t] * inv_h
     energy_out[t] = 0.5 * tet_k[t] * c * c + 0.5 * dmp * dc * dc
+    if reject_inverted != 0 and c <= -1.0:  # the device line search's trials: an inverted tet
+        energy_out[t] = 1.0e30  # makes the trial's energy unacceptable
     s = (tet_k[t] * c + dmp * dc) / (6.0 * v0)
     gj = s * wp.cross(e2, e3)
     gk = s * wp.cross(e3, e1)
@@ -444,7 +447,8 @@ def _node_hessian(
 # k n n^T (distance; the transverse term k (1 - l0/l) < 0 of a compressed spring dropped) and
 # k a a^T (axis) where the spring is compressed, 0 where it is slack. ``slack`` > 0 [m] keeps the
 # block also for springs slack by less than that (the CPU L-BFGS's factorised model: a contact
-# about to close is in the preconditioner); the exact Hessian has slack = 0.
+# about to close is in the preconditioner; the device method after a failed line search); the
+# exact Hessian has slack = 0. ``slack`` is a one-element array so the device can change it.
 @wp.kernel
 def _distance_spring_hessian(
     node: wp.array(dtype=wp.int32),
@@ -452,7 +456,7 @@ def _distance_spring_hessian(
     stiffness: wp.array(dtype=float),
     rest_length: wp.array(dtype=float),
     one_sided: int,
-    slack: float,
+    slack: wp.array(dtype=float),
     block_offset: int,
     positions: wp.array(dtype=wp.vec3),
     blocks_out: wp.array(dtype=wp.mat33),
@@ -467,7 +471,7 @@ def _distance_spring_hessian(
         H = stiffness[k] * (nn + wp.max(1.0 - rest_length[k] / l, 0.0) * (wp.identity(n=3, dtype=float) - nn))
         if one_sided != 0:
             H = stiffness[k] * nn
-    if one_sided != 0 and l - rest_length[k] >= slack:
+    if one_sided != 0 and l - rest_length[k] >= slack[0]:
         H = wp.mat33(0.0)
     blocks_out[block_offset + k] = H
 
@@ -479,7 +483,7 @@ def _axis_spring_hessian(
     stiffness: wp.array(dtype=float),
     axis: wp.array(dtype=wp.vec3),
     one_sided: int,
-    slack: float,
+    slack: wp.array(dtype=float),
     block_offset: int,
     positions: wp.array(dtype=wp.vec3),
     blocks_out: wp.array(dtype=wp.mat33),
@@ -487,7 +491,7 @@ def _axis_spring_hessian(
     k = wp.tid()
     a = axis[k]
     H = stiffness[k] * _outer(a, a)
-    if one_sided != 0 and wp.dot(positions[node[k]] - point[k], a) >= slack:
+    if one_sided != 0 and wp.dot(positions[node[k]] - point[k], a) >= slack[0]:
         H = wp.mat33(0.0)
     blocks_out[block_offset + k] = H
 
@@ -616,20 +620,6 @@ def _invert_diagonal(diag: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.m
         inv_out[i] = wp.identity(n=3, dtype=float)
 
 
-# z = alpha P x + beta y with the block-diagonal P (the preconditioner's matvec).
-@wp.kernel
-def _apply_blocks(
-    inv: wp.array(dtype=wp.mat33),
-    x: wp.array(dtype=wp.vec3),
-    y: wp.array(dtype=wp.vec3),
-    alpha: float,
-    beta: float,
-    z_out: wp.array(dtype=wp.vec3),
-):
-    i = wp.tid()
-    z_out[i] = alpha * (inv[i] * x[i]) + beta * y[i]
-
-
 @wp.kernel
 def _negate(v: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
     i = wp.tid()
@@ -639,3 +629,194 @@ def _negate(v: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
 @wp.kernel
 def _advance_counter(counter: wp.array(dtype=wp.int32)):
     counter[0] = counter[0] + 1
+
+
+# ------------------------------------------------------------------------------------------------
+# Block-Jacobi preconditioned conjugate gradients in two launches per iteration (the device
+# method's linear solve; :meth:`.implicit.SolverImplicit._launch_cg`). Chronopoulos & Gear's
+# formulation ("s-step iterative methods for symmetric linear systems", J. Comput. Appl. Math. 25,
+# 1989) computes both inner products of an iteration, (r, u) and (A u, u) with u = P r, in the same
+# phase, and carries s = A p by recurrence, so one iteration is one vector update and one
+# matrix-vector product, each also adding its inner product into CG_SLOTS partial sums (float64
+# atomics spread over slots so that no single address takes every thread's add). Each launch of
+# the update recomputes alpha and beta from the sums (every thread the same arithmetic); thread 0
+# also records them. The iteration count is fixed (no host round trip: capturable in a CUDA graph);
+# a breakdown or a residual below 1e-12 of the first one freezes the remaining iterations.
+CG_SLOTS = 32
+
+
+@wp.func
+def _slot_total(sums: wp.array2d(dtype=wp.float64), row: int):
+    s = wp.float64(0.0)
+    for k in range(CG_SLOTS):
+        s += sums[row, k]
+    return s
+
+
+@wp.kernel
+def _zero_2d(a: wp.array2d(dtype=wp.float64)):
+    i, j = wp.tid()
+    a[i, j] = wp.float64(0.0)
+
+
+@wp.kernel
+def _cg_start(
+    inv: wp.array(dtype=wp.mat33),
+    b: wp.array(dtype=wp.vec3),
+    x_out: wp.array(dtype=wp.vec3),
+    r: wp.array(dtype=wp.vec3),
+    u: wp.array(dtype=wp.vec3),
+    p: wp.array(dtype=wp.vec3),
+    s: wp.array(dtype=wp.vec3),
+    sums: wp.array2d(dtype=wp.float64),
+):
+    i = wp.tid()
+    ri = b[i]
+    ui = inv[i] * ri
+    r[i] = ri
+    u[i] = ui
+    x_out[i] = wp.vec3(0.0)
+    p[i] = wp.vec3(0.0)
+    s[i] = wp.vec3(0.0)
+    wp.atomic_add(sums, 0, i % CG_SLOTS, wp.float64(wp.dot(ri, ui)))
+
+
+# w = A u (A block-sparse, rows offsets[i]..offsets[i+1]) and (w, u) into sums[row].
+@wp.kernel
+def _cg_matvec(
+    offsets: wp.array(dtype=wp.int32),
+    columns: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=wp.mat33),
+    u: wp.array(dtype=wp.vec3),
+    row: int,
+    w: wp.array(dtype=wp.vec3),
+    sums: wp.array2d(dtype=wp.float64),
+):
+    i = wp.tid()
+    acc = wp.vec3(0.0)
+    for k in range(offsets[i], offsets[i + 1]):
+        acc += values[k] * u[columns[k]]
+    w[i] = acc
+    wp.atomic_add(sums, row, i % CG_SLOTS, wp.float64(wp.dot(acc, u[i])))
+
+
+# Iteration k: sums rows 2k = (r_k, u_k), 2k + 1 = (A u_k, u_k); scalars[k] = (alpha_k, gamma_k,
+# active). p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = P r, (r, u) into row 2k + 2.
+@wp.kernel
+def _cg_update(
+    inv: wp.array(dtype=wp.mat33),
+    it: int,
+    sums: wp.array2d(dtype=wp.float64),
+    scalars: wp.array2d(dtype=wp.float64),
+    x: wp.array(dtype=wp.vec3),
+    r: wp.array(dtype=wp.vec3),
+    u: wp.array(dtype=wp.vec3),
+    w: wp.array(dtype=wp.vec3),
+    p: wp.array(dtype=wp.vec3),
+    s: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    gamma = _slot_total(sums, 2 * it)
+    delta = _slot_total(sums, 2 * it + 1)
+    alpha = wp.float64(0.0)
+    beta = wp.float64(0.0)
+    den = wp.float64(0.0)
+    active = int(1)
+    if it > 0:
+        if scalars[it - 1, 2] == wp.float64(0.0):
+            active = 0
+    if active == 1:
+        if it > 0:
+            if gamma <= wp.float64(1.0e-12) * scalars[0, 1]:
+                active = 0
+    if active == 1:
+        if it == 0:
+            den = delta
+        else:
+            beta = gamma / scalars[it - 1, 1]
+            den = delta - beta * gamma / scalars[it - 1, 0]
+        if gamma > wp.float64(0.0) and den > wp.float64(0.0):
+            alpha = gamma / den
+        else:
+            active = 0
+    if i == 0:
+        scalars[it, 0] = alpha
+        scalars[it, 1] = gamma
+        scalars[it, 2] = wp.float64(active)
+    if active == 0:
+        return
+    a = float(alpha)
+    bt = float(beta)
+    pi = u[i] + bt * p[i]
+    si = w[i] + bt * s[i]
+    p[i] = pi
+    s[i] = si
+    x[i] = x[i] + a * pi
+    ri = r[i] - a * si
+    r[i] = ri
+    ui = inv[i] * ri
+    u[i] = ui
+    wp.atomic_add(sums, 2 * it + 2, i % CG_SLOTS, wp.float64(wp.dot(ri, ui)))
+
+
+# Convergence of the device method's adaptive Newton loop: the largest step of a free node this
+# iteration (t * |d_i|), then the loop's condition (continue while above tolerance, at most
+# max_iterations), decided on the device so the loop can be a conditional node of a CUDA graph.
+@wp.kernel
+def _step_size(
+    vertex_fixed: wp.array(dtype=wp.int32),
+    d: wp.array(dtype=wp.vec3),
+    t: wp.array(dtype=float),
+    largest: wp.array(dtype=float),
+):
+    i = wp.tid()
+    if vertex_fixed[i] == 0:
+        wp.atomic_max(largest, 0, t[0] * wp.length(d[i]))
+        wp.atomic_max(largest, 1, wp.length(d[i]))
+
+
+@wp.kernel
+def _newton_start(
+    counter: wp.array(dtype=wp.int32),
+    largest: wp.array(dtype=float),
+    cond: wp.array(dtype=wp.int32),
+    slack: wp.array(dtype=float),
+):
+    counter[0] = 0
+    largest[0] = 0.0
+    largest[1] = 0.0
+    cond[0] = 1
+    slack[0] = 0.0
+
+
+# After an iteration (largest = (max t |d_i|, max |d_i|) over free nodes): a line search that found
+# no lower energy along a direction longer than the tolerance (t = 0; a direction from the exact
+# Hessian ran into a contact spring that was slack at x) is retried once with the springs within
+# ``contact_slack`` of closing in the Hessian; it is never taken as convergence.
+@wp.kernel
+def _newton_continue(
+    tolerance: float,
+    max_iterations: int,
+    contact_slack: float,
+    t: wp.array(dtype=float),
+    counter: wp.array(dtype=wp.int32),
+    largest: wp.array(dtype=float),
+    cond: wp.array(dtype=wp.int32),
+    total: wp.array(dtype=wp.int64),
+    slack: wp.array(dtype=float),
+):
+    k = counter[0] + 1
+    counter[0] = k
+    total[0] = total[0] + wp.int64(1)
+    go = int(0)
+    if t[0] == 0.0 and slack[0] == 0.0 and largest[1] > tolerance:
+        slack[0] = contact_slack
+        if k < max_iterations:
+            go = 1
+    else:
+        slack[0] = 0.0
+        if k < max_iterations and largest[0] > tolerance:
+            go = 1
+    cond[0] = go
+    largest[0] = 0.0
+    largest[1] = 0.0
