@@ -201,6 +201,9 @@ def main():
     from facewarp.physics import factorization_backend
 
     rows = []
+    result = {"machine": machine(args.device), "expression": args.expression, "seconds": args.seconds,
+              "factorization_backend": factorization_backend(), "levels": rows}
+    name = "physics_steps_" + args.device.split(":")[0]
     for lv in args.levels:
         try:
             r = time_level(lv, args.device, args.expression, args.seconds,
@@ -208,12 +211,10 @@ def main():
         except SimulationError as e:
             r = {"level": lv, "error": str(e)}
         rows.append(r)
-    result = {"machine": machine(args.device), "expression": args.expression, "seconds": args.seconds,
-              "factorization_backend": factorization_backend(), "levels": rows}
+        save(name, result)  # after every level: a long run keeps what it measured
     if args.parity:
         result["parity_cpu_cuda"] = parity()
         print(result["parity_cpu_cuda"])
-    name = "physics_steps_" + args.device.split(":")[0]
     print("wrote", save(name, result))
 
 

@@ -392,6 +392,7 @@ class SolverImplicit(SolverBase):
         self._largest_step = wp.zeros(2, dtype=float, device=dev)  # (max t |d_i|, max |d_i|) [m]
         self._newton_total = wp.zeros(1, dtype=wp.int64, device=dev)
         self._slack = wp.zeros(1, dtype=float, device=dev)  # the device method's Hessian slack [m]
+        self._guess_flag = wp.zeros(1, dtype=wp.int32, device=dev)  # the extrapolated guess inverts a tet
         self.t_trials = [wp.array([0.5**j], dtype=float, device=dev) for j in range(_LINE_SEARCH_TRIALS)]
 
     def _launch_cg(self) -> None:
@@ -431,6 +432,12 @@ class SolverImplicit(SolverBase):
         wp.launch(ki._initial_guess, dim=m.vertex_count,
                   inputs=[m.vertex_fixed, self.extrapolate, self.targets, x, state_in.prev_positions],
                   outputs=[self.x], device=dev)
+        if self.method == "newton-pcg" and self.extrapolate > 0.0:  # (the host methods check on the host)
+            self._guess_flag.zero_()
+            wp.launch(ki._guess_inverted, dim=m.tet_count, inputs=[m.tet_indices, self.x], outputs=[self._guess_flag],
+                      device=dev)
+            wp.launch(ki._guess_fallback, dim=m.vertex_count, inputs=[self._guess_flag, m.vertex_fixed, x],
+                      outputs=[self.x], device=dev)
 
     def _mass_scale(self, h: float) -> float:
         return (1.0 + self.model.damping_rate * h) / (h * h)

@@ -559,6 +559,32 @@ def _initial_guess(
         x_out[i] = x + extrapolate * (x - prev_positions[i])
 
 
+# The device method's first guess falls back to x_n (free nodes) when the extrapolated one
+# inverts a tet (the host methods do the same on the host): _guess_inverted flags it,
+# _guess_fallback undoes the extrapolation.
+@wp.kernel
+def _guess_inverted(tet_indices: wp.array(dtype=wp.vec4i), x: wp.array(dtype=wp.vec3), flag: wp.array(dtype=wp.int32)):
+    t = wp.tid()
+    xi = x[tet_indices[t][0]]
+    e1 = x[tet_indices[t][1]] - xi
+    e2 = x[tet_indices[t][2]] - xi
+    e3 = x[tet_indices[t][3]] - xi
+    if wp.dot(e1, wp.cross(e2, e3)) <= 0.0:
+        flag[0] = 1
+
+
+@wp.kernel
+def _guess_fallback(
+    flag: wp.array(dtype=wp.int32),
+    vertex_fixed: wp.array(dtype=wp.int32),
+    positions: wp.array(dtype=wp.vec3),
+    x_out: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    if flag[0] != 0 and vertex_fixed[i] == 0:
+        x_out[i] = positions[i]
+
+
 # ---------------------------------------------------------------------------- reductions
 # Deterministic sum of an energy array: each thread adds a fixed chunk in order (float64), then
 # one thread adds the chunks in order and writes total_out[slot]. No atomics: the same sum on
