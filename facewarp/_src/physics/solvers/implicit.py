@@ -53,11 +53,12 @@ Methods (``method=``):
   with the springs within ``contact_slack`` of closing in the Hessian, and never taken as
   convergence. The first guess continues the previous step's motion (``extrapolate`` 0.5).
   Measured at level 0 against the fully converged steps (``benchmarks/solver_accuracy.py --parts
-  pcg``; every FDP of the five Table 6.4 presets during attack, hold and release): within 0.11 mm
-  at 2.3-6.3 Newton iterations per frame, where a fixed 3 iterations missed by up to 1.2 mm
-  (smile) and fixed 3 with the slack contacts in the Hessian by up to 2.2 mm (a lid sliding over
-  the eyeball took steps too short to follow it). ``iterations=k`` gives a fixed count instead
-  (the interactive mode).
+  pcg``; every FDP of the five Table 6.4 presets during attack, hold and release): within
+  0.02-0.25 mm at 3.5-6.3 Newton iterations per frame. ``iterations=k`` gives a fixed count
+  instead (the interactive mode): 3 stay within 0.31 mm, 2 and 1 miss the 0.5 mm on some presets
+  (0.6 and 1.9 mm). Before the exact Hessian, its retry and the extrapolated guess, the former
+  fixed 3 x 50 missed by up to 2.2 mm (a lid sliding over the eyeball took steps too short to
+  follow it).
 
 The muscle springs' fibre cosine of Eq. 6.4.1 is taken at the step's start and held over the
 solve (see ``kernels_muscle._muscle_springs``): within the solve a conservative spring
