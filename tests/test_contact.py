@@ -134,6 +134,22 @@ def eyeball_case(material="physical"):
     return V, model, mid, centre
 
 
+def _settle(model, stages, f, steps, method="lbfgs"):
+    """Node positions [m], shape (p, 3), float64, after ``steps`` implicit steps of 1/30 s under
+    the constant external force ``f`` (p, 3) [N], checked for NaN and inverted tets.
+    ``"newton-pcg"``: the device method at a fixed 2 Newton x 25 CG iterations (its launches are
+    slow on the CPU); ``"newton-pcg-adaptive"``: the device method as by default."""
+    opts = dict(iterations=2, linear_iterations=25) if method == "newton-pcg" else {}
+    solver = SolverImplicit(model, method=method.removesuffix("-adaptive"), stages=stages, **opts)
+    a, b, c = model.state(), model.state(), model.control()
+    c.external_force.assign(f)
+    for _ in range(steps):
+        solver.step(a, b, c, 1 / 30)
+        a, b = b, a
+    solver.check(a)
+    return a.positions.numpy().astype(np.float64)
+
+
 @pytest.mark.parametrize("method", ["lbfgs", "newton-pcg", "newton-pcg-adaptive"])
 def test_a_lid_pushed_into_the_eyeball_is_pushed_out(method):
     """One-sided ball springs (the eyeball's) hold the free bottom nodes outside the ball that
@@ -153,16 +169,7 @@ def test_a_lid_pushed_into_the_eyeball_is_pushed_out(method):
                                        point=wp.array(np.tile(centre, (len(mid), 1)).astype(np.float32), dtype=wp.vec3),
                                        stiffness=wp.full(len(mid), 2e4, dtype=float),
                                        rest_length=wp.full(len(mid), r, dtype=float), one_sided=True))]
-        # the device method on the CPU: ~100 launches per Newton iteration, so fewer of each
-        opts = dict(iterations=2, linear_iterations=25) if method == "newton-pcg" else {}
-        solver = SolverImplicit(model, method=method.removesuffix("-adaptive"), stages=stages, **opts)
-        a, b, c = model.state(), model.state(), model.control()
-        c.external_force.assign(f)
-        for _ in range(8 if method == "newton-pcg" else 15):
-            solver.step(a, b, c, 1 / 30)
-            a, b = b, a
-        solver.check(a)
-        X = a.positions.numpy().astype(np.float64)
+        X = _settle(model, stages, f, 8 if method == "newton-pcg" else 15, method)
         depth[contact] = float((r - np.linalg.norm(X[mid] - centre, axis=1)).max())
     assert depth[False] > 5e-4, f"the force should drive the slab 0.5 mm into the ball, got {depth[False]:.2e} m"
     assert depth[True] < 1e-4, f"the contact should hold within 0.1 mm, got {depth[True]:.2e} m"
@@ -196,14 +203,7 @@ def test_two_sheets_pressed_together_touch_but_do_not_cross():
     crossing = {}
     for contact in (False, True):
         stages = [ContactStage(Rig(), np.full(len(VV), 5e4), "cpu", geometry=g)] if contact else []
-        solver = SolverImplicit(model, stages=stages)
-        a, b, c = model.state(), model.state(), model.control()
-        c.external_force.assign(f)
-        for _ in range(10):
-            solver.step(a, b, c, 1 / 30)
-            a, b = b, a
-        solver.check(a)
-        X = a.positions.numpy().astype(np.float64)
+        X = _settle(model, stages, f, 10)
         crossing[contact] = lip_crossings(X, TT, side)["count"]
         if contact:
             over = upper_bottom[(VV[upper_bottom, :2] < 0.014).all(axis=1)]  # above the lower box
@@ -351,15 +351,7 @@ def test_lids_closing_past_each_other_stop_at_the_fissure_plane(method):
     crossed = {}
     for contact in (False, True):
         stages = [ContactStage(rig, np.full(len(VV), 5e4), "cpu", geometry=g)] if contact else []
-        opts = dict(iterations=2, linear_iterations=25) if method == "newton-pcg" else {}
-        solver = SolverImplicit(model, method=method, stages=stages, **opts)
-        a, b, c = model.state(), model.state(), model.control()
-        c.external_force.assign(f)
-        for _ in range(8 if method == "newton-pcg" else 12):
-            solver.step(a, b, c, 1 / 30)
-            a, b = b, a
-        solver.check(a)
-        X = a.positions.numpy().astype(np.float64)
+        X = _settle(model, stages, f, 8 if method == "newton-pcg" else 12, method)
         crossed[contact] = contact_crossings(rig, X, geometry=g)
         if contact:
             z0 = plane[0][0, 2]

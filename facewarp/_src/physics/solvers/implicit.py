@@ -435,8 +435,8 @@ class SolverImplicit(SolverBase):
                   outputs=[self.x], device=dev)
         if self.method == "newton-pcg" and self.extrapolate > 0.0:  # (the host methods check on the host)
             self._guess_flag.zero_()
-            wp.launch(ki._guess_inverted, dim=m.tet_count, inputs=[m.tet_indices, self.x], outputs=[self._guess_flag],
-                      device=dev)
+            wp.launch(ki._guess_inverted, dim=m.tet_count, inputs=[m.tet_indices, m.tet_rest_volume, self.x],
+                      outputs=[self._guess_flag], device=dev)
             wp.launch(ki._guess_fallback, dim=m.vertex_count, inputs=[self._guess_flag, m.vertex_fixed, x],
                       outputs=[self.x], device=dev)
 
@@ -565,7 +565,8 @@ class SolverImplicit(SolverBase):
     @property
     def total_iterations(self) -> int:
         """(Quasi-)Newton iterations of all steps so far (a device read with the adaptive
-        ``newton-pcg``, whose count lives on the device)."""
+        ``newton-pcg``, whose count lives on the device; a fixed count is counted on the host,
+        so steps replayed from a CUDA graph are not)."""
         return self._host_total + (int(self._newton_total.numpy()[0]) if self.adaptive else 0)
 
     # ------------------------------------------------------------------------------ device method

@@ -69,6 +69,17 @@ def _face_constraints(
     c_out[t] = 0.5 * wp.length(nn) / face_rest_area[t] - 1.0
 
 
+# Volume constraint of tet t at x: C = V / V0 - 1 (C <= -1: inverted).
+@wp.func
+def _tet_constraint(tet_indices: wp.array(dtype=wp.vec4i), tet_rest_volume: wp.array(dtype=float),
+                    x: wp.array(dtype=wp.vec3), t: int):
+    xi = x[tet_indices[t][0]]
+    e1 = x[tet_indices[t][1]] - xi
+    e2 = x[tet_indices[t][2]] - xi
+    e3 = x[tet_indices[t][3]] - xi
+    return wp.dot(e1, wp.cross(e2, e3)) / 6.0 / tet_rest_volume[t] - 1.0
+
+
 @wp.kernel
 def _tet_constraints(
     tet_indices: wp.array(dtype=wp.vec4i),
@@ -77,11 +88,7 @@ def _tet_constraints(
     c_out: wp.array(dtype=float),
 ):
     t = wp.tid()
-    xi = positions[tet_indices[t][0]]
-    e1 = positions[tet_indices[t][1]] - xi
-    e2 = positions[tet_indices[t][2]] - xi
-    e3 = positions[tet_indices[t][3]] - xi
-    c_out[t] = wp.dot(e1, wp.cross(e2, e3)) / 6.0 / tet_rest_volume[t] - 1.0
+    c_out[t] = _tet_constraint(tet_indices, tet_rest_volume, positions, t)
 
 
 @wp.kernel
@@ -563,13 +570,14 @@ def _initial_guess(
 # inverts a tet (the host methods do the same on the host): _guess_inverted flags it,
 # _guess_fallback undoes the extrapolation.
 @wp.kernel
-def _guess_inverted(tet_indices: wp.array(dtype=wp.vec4i), x: wp.array(dtype=wp.vec3), flag: wp.array(dtype=wp.int32)):
+def _guess_inverted(
+    tet_indices: wp.array(dtype=wp.vec4i),
+    tet_rest_volume: wp.array(dtype=float),
+    x: wp.array(dtype=wp.vec3),
+    flag: wp.array(dtype=wp.int32),
+):
     t = wp.tid()
-    xi = x[tet_indices[t][0]]
-    e1 = x[tet_indices[t][1]] - xi
-    e2 = x[tet_indices[t][2]] - xi
-    e3 = x[tet_indices[t][3]] - xi
-    if wp.dot(e1, wp.cross(e2, e3)) <= 0.0:
+    if _tet_constraint(tet_indices, tet_rest_volume, x, t) <= -1.0:  # the line search's test
         flag[0] = 1
 
 
