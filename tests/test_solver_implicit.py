@@ -99,6 +99,10 @@ def test_bad_step_arguments_are_input_errors():
         SolverImplicit(model, method="jacobi")
     with pytest.raises(InputError, match="tolerance"):
         SolverImplicit(model, tolerance=-1.0)
+    with pytest.raises(InputError, match="rounds"):
+        SolverImplicit(model, method="newton-pcg", rounds=0)
+    with pytest.raises(InputError, match="linear_iterations"):
+        SolverImplicit(model, method="newton-pcg", linear_iterations=0)
 
 
 def test_nan_control_is_a_simulation_error_not_a_nan_frame():
