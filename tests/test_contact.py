@@ -401,3 +401,57 @@ def test_the_default_head_keeps_both_lids_of_each_eye_to_their_side(default_rig)
         assert (side > 0).sum() >= 10 and (side < 0).sum() >= 10, np.bincount(side + 1)
     rest = contact_crossings(fr, geometry=g)
     assert rest["lid_lid"] == 0 and rest["lid_lid_depth_m"] == 0.0
+
+
+def test_a_gliding_lid_node_is_held_on_its_sphere_by_the_verlet_forces():
+    """The inner lid sheet over the eyeball glides on it: a gliding node lifted off its sphere
+    (its rest distance from the centre) is pulled back with the glide stiffness, one pushed in
+    is pushed out by that and its one-sided contact; a node with contact only is free to lift."""
+    from facewarp.physics import ContactGeometry
+
+    V, model, mid, centre = eyeball_case()
+    r = 1.2 * CM
+    glide = np.array([True, True, False, False])
+    g = ContactGeometry(np.zeros(len(V), np.int8), [], [], [], centre[None], np.array([r]), mid,
+                        np.zeros(len(mid), np.int64), {}, eye_glide=glide)
+
+    class Rig:
+        nodes = V
+
+    k, kg = 5e4, 2e3
+    stage = ContactStage(Rig(), np.full(len(V), k), "cpu", geometry=g, glide_stiffness=np.full(len(V), kg))
+    assert stage.counts["lid_eye"] == 4 and stage.counts["lid_glide"] == 2
+    d0 = np.linalg.norm(V[mid] - centre, axis=1)
+    n = (V[mid] - centre) / d0[:, None]
+    move = np.array([5e-4, -3e-4, 5e-4, -3e-4])  # out, in, out, in (radially) [m]
+    X = V.copy()
+    X[mid] += move[:, None] * n
+    state, control = model.state(), model.control()
+    state.positions.assign(X.astype(np.float32))
+    state.prev_positions.assign(X.astype(np.float32))
+    dF = (SolverVerlet(model, stages=[stage]).compute_forces(state, control, 1e-4).numpy()
+          - SolverVerlet(model).compute_forces(state, control, 1e-4).numpy())
+    # reference: -kg s n (gliding, two-sided, s = move) and -k min(0, |x - c| - r_c) n (contact;
+    # r_c: the rest distance less EYE_REST_SLACK_M 5e-5 m, or r + gap 2.5e-4 m)
+    r_c = np.minimum(r + 2.5e-4, d0 - 5e-5)
+    f = -(glide * kg * move + k * np.minimum(d0 + move - r_c, 0.0))[:, None] * n
+    np.testing.assert_allclose(dF[mid], f, rtol=1e-3, atol=1e-6, err_msg="sphere forces")
+    np.testing.assert_array_equal(np.delete(dF, mid, axis=0), 0.0)
+    assert (np.einsum("ij,ij->i", dF[mid[:2]], n[:2]) * move[:2] < 0).all()  # back onto the sphere
+    assert np.abs(dF[mid[2]]).max() == 0.0  # contact only: lifting off is free
+
+
+def test_the_lids_inner_sheet_over_the_eyeballs_glides_on_them(default_rig):
+    """The default head's inner lid sheet over each eyeball has no planar sliding support (a plane
+    tangent at rest pushed the closing lid medially and held it off the ball) but glides on the
+    eyeball: it is in the contact stage's two-sided sphere springs."""
+    from facewarp.physics import FaceSimulator, contact_geometry
+
+    _, fr = default_rig
+    g = contact_geometry(fr)
+    nodes = g.eye_nodes[g.eye_glide]
+    assert len(nodes) >= 20 and (np.asarray(fr.layer)[nodes] != 0).all(), len(nodes)
+    assert not np.isin(nodes, fr.support_nodes).any()
+    assert np.bincount(g.eye_of_node[g.eye_glide], minlength=2).min() >= 10  # both eyes
+    sim = FaceSimulator(fr)
+    assert sim.contact.counts["lid_glide"] == len(nodes)

@@ -57,13 +57,14 @@ class MuscleAttachment:
 
 def _nearest(P, ell: Ellipsoids, D=None):
     """Nearest surface point of the muscle to each point P (k, 3) over all segments: segment,
-    (u, v), distance, theta [rad] and whether the muscle lies deeper than the point along the
-    inward directions D (k, 3) (all True without D)."""
+    (u, v), distance, theta [rad], whether the muscle lies deeper than the point along the
+    inward directions D (k, 3) (all True without D) and the nearest point itself [m] (k, 3)."""
     best_d = np.full(len(P), np.inf)
     best_s = np.zeros(len(P), np.int64)
     best_uv = np.zeros((len(P), 2))
     best_sin = np.zeros(len(P))
     best_deeper = np.ones(len(P), bool)
+    best_p = np.zeros((len(P), 3))
     for k in range(len(ell)):
         Y = (P - ell.centers[k]) @ ell.axes[k].T  # local coordinates
         Xl, d, uv = closest_point_on_ellipsoid(Y, ell.radii[k])
@@ -75,10 +76,18 @@ def _nearest(P, ell: Ellipsoids, D=None):
         best_s[better] = k
         best_uv[better] = uv[better]
         best_sin[better] = sin_t[better]
+        best_p[better] = ell.centers[k] + Xl[better] @ ell.axes[k]
         if D is not None:
             deeper = np.einsum("ij,ij->i", conn @ ell.axes[k], D) < 0  # world x - p against inward
             best_deeper[better] = deeper[better]
-    return best_s, best_uv, best_d, np.arcsin(np.clip(best_sin, 0.0, 1.0)), best_deeper
+    return best_s, best_uv, best_d, np.arcsin(np.clip(best_sin, 0.0, 1.0)), best_deeper, best_p
+
+
+def _under_sheet(p, samples: "SheetSamples", tree) -> np.ndarray:
+    """Whether each muscle point p (k, 3) [m] lies under the sheet where it is: deeper than the
+    sheet's sample nearest to it, along that sample's inward direction, shape (k,) bool."""
+    _, j = tree.query(p)
+    return np.einsum("ij,ij->i", p - samples.points[j], samples.direction[j]) > 0.0
 
 
 def _empty() -> MuscleAttachment:
@@ -112,7 +121,7 @@ def attach_nodes(X, ell: Ellipsoids, lam: float, phi: float, *, candidates=None,
     if len(idx) == 0 or len(ell) == 0:
         return _empty()
     D = None if directions is None else np.asarray(directions, dtype=np.float64)[idx]
-    s, uv, d, theta, deeper = _nearest(X[idx], ell, D)
+    s, uv, d, theta, deeper, _ = _nearest(X[idx], ell, D)
     ok = (d < lam) & (theta < phi) & deeper
     return MuscleAttachment(idx[ok], s[ok], uv[ok], d[ok], theta[ok])
 
@@ -180,9 +189,19 @@ def sheet_samples(X, F, directions, *, n: int = 3) -> SheetSamples:
 def attach_by_area(X, ell: Ellipsoids, lam: float, phi: float, samples: SheetSamples, *, sample_mask=None,
                    directions=None, min_weight: float = 0.05) -> MuscleAttachment:
     """Fig. 6.4 over the sheet's area: a node's weight is the share of its sheet area
-    (:class:`SheetSamples`) whose points pass the distance, angle and skin-side rule of
-    :func:`attach_nodes` (and ``sample_mask``, e.g. the muscle's regions); nodes with a weight of
+    (:class:`SheetSamples`) whose points pass the distance and angle rule of :func:`attach_nodes`,
+    the skin-side rule (and ``sample_mask``, e.g. the muscle's regions); nodes with a weight of
     at least ``min_weight`` connect, each by its own nearest surface point.
+
+    The skin-side rule is taken where the muscle is: a sample (or node) connects only when its
+    nearest muscle point lies under the sheet there (deeper than the sheet sample nearest to that
+    point, along its inward direction), so no spring pulls its node out through the skin where
+    a muscle runs in or above the skin layer. (:func:`attach_nodes` compares the muscle point
+    with the node's own tangent plane instead; on a curved sheet that rejects a node beside a
+    muscle that runs under the sheet: in the fold of the upper lid the orbicularis oculi's ring
+    2-3 mm below a node lies "above" the node's plane, and the level-0 default head lost the
+    medial half of its upper lid's row of attachments, so the ring pulled the lid down on its
+    lateral half only and sheared it 2.6 mm medially.)
 
     Args:
         X: Node positions [m], shape (p, 3).
@@ -191,8 +210,8 @@ def attach_by_area(X, ell: Ellipsoids, lam: float, phi: float, samples: SheetSam
         phi: Angle threshold [rad].
         samples: The sheet's area samples.
         sample_mask: Samples that may pass at all, shape (s,), bool (default all).
-        directions: Unit inward direction of every node, shape (p, 3): a node deeper than the
-            muscle (the skin-side rule for the node itself) does not connect.
+        directions: Unit inward direction of every node, shape (p, 3): with it the skin-side
+            rule applies to the node itself too (its nearest muscle point under the sheet).
         min_weight: Smallest weight that connects a node.
 
     Returns:
@@ -213,15 +232,14 @@ def attach_by_area(X, ell: Ellipsoids, lam: float, phi: float, samples: SheetSam
         cand = cand[np.asarray(sample_mask, bool)[cand]]
     if len(cand) == 0:
         return _empty()
-    _, _, d, theta, deeper = _nearest(samples.points[cand], ell, samples.direction[cand])
-    ok = cand[(d < lam) & (theta < phi) & deeper]
+    _, _, d, theta, _, p = _nearest(samples.points[cand], ell)
+    ok = cand[(d < lam) & (theta < phi) & _under_sheet(p, samples, tree)]
     total = samples.node_area(len(X))
     inside = np.bincount(samples.node[ok], weights=samples.area[ok], minlength=len(X))
     w = np.divide(inside, total, out=np.zeros(len(X)), where=total > 0)
     idx = np.flatnonzero(w >= min_weight)
     if len(idx) == 0:
         return _empty()
-    D = None if directions is None else np.asarray(directions, dtype=np.float64)[idx]
-    s, uv, dn, th, deep = _nearest(X[idx], ell, D)
-    keep = deep
+    s, uv, dn, th, _, p = _nearest(X[idx], ell)
+    keep = _under_sheet(p, samples, tree) if directions is not None else np.ones(len(idx), bool)
     return MuscleAttachment(idx[keep], s[keep], uv[keep], dn[keep], th[keep], np.minimum(w[idx][keep], 1.0))

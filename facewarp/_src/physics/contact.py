@@ -13,7 +13,16 @@ Hessian are in the solvers' kernels and in :mod:`.potential`):
   dental arch at rest, against that arch (a closed mesh; the upper teeth ride the cranium, the
   lower teeth turn with the jaw by the part's Eq. 6.4.9 amount);
 * lid on eyeball: free nodes within ``EYE_NEAR_M`` of an eyeball's sphere, pushed out of the ball
-  ``|x - c| >= r`` (analytic, static springs);
+  ``|x - c| >= r`` (analytic, static springs). The lids' inner sheet there glides on the eyeball
+  (:func:`eyeball_sheet_nodes`): it has no planar sliding support (``face_rig``) but a two-sided
+  spring of the support's stiffness that keeps each node at its rest distance from the eyeball's
+  centre (besides its one-sided contact), so the lid slides over the ball and neither sinks into
+  it nor lifts off. A plane tangent at rest, as the sliding support of the cheeks, holds a node
+  that slides 4-5 mm down a 12 mm ball against the ball's push (20-25 degrees off the plane):
+  pulled back along the plane's normal, smoothed over 1 cm and tilted laterally, the default
+  head's upper lid went medially as it closed (with the ring's lopsided attachments,
+  :func:`~facewarp._src.anatomy.attach.attach_by_area`: FDP 3.1 2.6 mm), and at level 1 the lid
+  lifted off the ball (its margin 0.9 mm off, rolled forward in front of the lower one);
 * lid on lid: the orbicularis oculi closes the lids toward the plane of the palpebral fissure
   (a sphincter with ``to_plane``: the plane through its centre with normal ``center_normal``,
   between its two fixed corners; :mod:`.kernels_muscle`), where the two lid margins meet. Every
@@ -70,7 +79,8 @@ from .model import Springs
 
 __all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "EYE_NEAR_M", "LIP_REACH_M", "TEETH_NEAR_M",
            "TEETH_REACH_M", "ContactGeometry", "ContactStage", "contact_crossings", "contact_geometry",
-           "fissure_planes", "lid_contact_geometry", "lip_contact_geometry", "node_vertex", "winding_numbers"]
+           "eyeball_sheet_nodes", "eyeball_spheres", "fissure_planes", "lid_contact_geometry", "lip_contact_geometry",
+           "node_vertex", "winding_numbers"]
 
 CONTACT_MODULUS = 2.0e9
 """Contact stiffness per unit sheet area [N/m^3] (module doc)."""
@@ -114,6 +124,8 @@ class ContactGeometry:
             (upper-lip nodes), shape (c,), int64 each.
         teeth: ``[(name, V (t, 3), F (f, 3), jaw amount, candidate nodes (c,))]``.
         eyes: ``(centers (e, 3), radii (e,))``; eye_nodes (c,), eye_of_node (c,) index into eyes.
+        eye_glide: Which of ``eye_nodes`` glide on their eyeball (inner-sheet nodes without a
+            planar support, :func:`eyeball_sheet_nodes`), shape (c,), bool.
         excluded: Candidates left out because they already touch or cross at rest, per kind
             (``{"lip_lip": n, "lip_teeth": n}``; a separated build has 0), and
             ``lid_eye_inside_at_rest``: lid nodes inside the eyeball's sphere at rest (kept, with
@@ -138,6 +150,7 @@ class ContactGeometry:
     lid_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     lid_plane: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     lid_side: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int8))
+    eye_glide: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
 
 def node_vertex(fr) -> np.ndarray:
@@ -157,6 +170,47 @@ def _sphere(V) -> tuple[np.ndarray, float]:
     V = np.asarray(V, np.float64)
     c = V.mean(axis=0)
     return c, float(np.linalg.norm(V - c, axis=1).mean())
+
+
+def eyeball_spheres(parts) -> tuple[np.ndarray, np.ndarray]:
+    """The eyeballs' spheres: centre (the mean of the part's vertices) and radius (their mean
+    distance from it) of ``parts["eye_L"]`` and ``parts["eye_R"]`` where present.
+
+    Args:
+        parts: Rigid parts, ``{name: (V (n, 3) [m], F (m, 3))}``.
+
+    Returns:
+        ``(centers (e, 3) [m], radii (e,) [m])``, float64.
+    """
+    centers, radii = [], []
+    for name in _EYES:
+        if name in (parts or {}):
+            c, r = _sphere(parts[name][0])
+            centers.append(c)
+            radii.append(r)
+    return np.asarray(centers, np.float64).reshape(-1, 3), np.asarray(radii, np.float64)
+
+
+def eyeball_sheet_nodes(V, parts) -> np.ndarray:
+    """Nodes within ``EYE_NEAR_M`` of an eyeball's sphere (:func:`eyeball_spheres`) at rest.
+
+    Their deeper surface is the eyeball: ``face_rig`` gives the inner-sheet ones among them no
+    planar sliding support, and :class:`ContactStage` holds those on their sphere about the
+    eyeball's centre instead (module doc).
+
+    Args:
+        V: Rest node positions [m], shape (p, 3), float.
+        parts: Rigid parts, ``{name: (V (n, 3) [m], F (m, 3))}``.
+
+    Returns:
+        Shape (p,), bool.
+    """
+    X = np.asarray(V, np.float64).reshape(-1, 3)
+    centers, radii = eyeball_spheres(parts)
+    if len(centers) == 0:
+        return np.zeros(len(X), bool)
+    D = np.linalg.norm(X[:, None] - centers[None], axis=2) - radii[None]
+    return D.min(axis=1) < EYE_NEAR_M
 
 
 def winding_numbers(V, F, P) -> np.ndarray:
@@ -337,14 +391,7 @@ def contact_geometry(fr, *, gap: float = CONTACT_GAP) -> ContactGeometry:
         bad = (dist < 2.0 * gap) | (winding_numbers(TV, TF, X[cand]) > 0.5)
         excluded["lip_teeth"] += int(bad.sum())
         teeth.append((name, TV.astype(np.float64), TF.astype(np.int64), float(fr.part_jaw.get(name, 0.0)), cand[~bad]))
-    centers, radii = [], []
-    for name in _EYES:
-        if name in fr.parts:
-            c, r = _sphere(fr.parts[name][0])
-            centers.append(c)
-            radii.append(r)
-    centers = np.asarray(centers, np.float64).reshape(-1, 3)
-    radii = np.asarray(radii, np.float64)
+    centers, radii = eyeball_spheres(fr.parts)
     eye_nodes, eye_of = np.zeros(0, np.int64), np.zeros(0, np.int64)
     if len(centers):
         D = np.linalg.norm(X[:, None] - centers[None], axis=2) - radii[None]
@@ -355,10 +402,17 @@ def contact_geometry(fr, *, gap: float = CONTACT_GAP) -> ContactGeometry:
         eye_nodes = np.flatnonzero(free & (dmin < EYE_NEAR_M))
         eye_of = which[eye_nodes]
         excluded["lid_eye_inside_at_rest"] = int((dmin[eye_nodes] < 0.0).sum())
+    # the inner lid sheet over the eyeball without a planar support glides on the eyeball (a rig
+    # built before, with planar supports there, keeps them and gets one-sided contact only)
+    glide = np.zeros(len(eye_nodes), bool)
+    if getattr(fr, "support_nodes", None) is not None:
+        supported = np.zeros(len(X), bool)
+        supported[np.asarray(fr.support_nodes, np.int64)] = True
+        glide = ((np.asarray(fr.layer) != 0) & ~np.asarray(fr.held, bool) & ~supported)[eye_nodes]
     lids = lid_contact_geometry(X, *fissure_planes(fr), fixed=fr.fixed, gap=gap)
     excluded["lid_lid"] = lids.excluded["lid_lid"]
     return ContactGeometry(side, lip_faces, lip_nodes, teeth, centers, radii, eye_nodes, eye_of, excluded,
-                           lids.lid_planes, lids.lid_nodes, lids.lid_plane, lids.lid_side)
+                           lids.lid_planes, lids.lid_nodes, lids.lid_plane, lids.lid_side, glide)
 
 
 def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeometry | None = None) -> dict:
@@ -447,13 +501,19 @@ class ContactStage:
             ``CONTACT_MODULUS`` times the node's sheet area).
         device: Warp device.
         gap: Distance [m] outside a surface at which the half-space springs start to push.
-        lips, teeth, eyes, lids: Which contacts to keep (all by default; ``lids``: lid on lid).
+        lips, teeth, eyes, lids: Which contacts to keep (all by default; ``eyes``: lid on eyeball,
+            the gliding inner lid sheet included; ``lids``: lid on lid).
         geometry: :func:`contact_geometry` of ``fr`` (default: made here).
+        glide_stiffness: Stiffness of the two-sided spring that keeps a gliding inner lid node on
+            its sphere about the eyeball's centre [N/m], shape (p,) (the simulator: the sliding
+            support's, ``support_modulus`` times the node's sheet area; default
+            ``node_stiffness``). Its one-sided eyeball contact stays as every lid node's.
 
     Attributes:
         springs: The spring sets (a tuple of :class:`~facewarp._src.physics.model.Springs`, all
-            one-sided): lower lip on upper, upper lip on lower, each dental arch, the eyeballs,
-            the lids at their fissure planes.
+            one-sided but the gliding lid sheet's): lower lip on upper, upper lip on lower, each
+            dental arch, the eyeballs, the inner lid sheet gliding on them (two-sided), the lids at
+            their fissure planes.
         geometry: The :class:`ContactGeometry`.
     """
 
@@ -463,7 +523,8 @@ class ContactStage:
     conditional node of a CUDA graph may not allocate)."""
 
     def __init__(self, fr, node_stiffness, device, *, gap: float = CONTACT_GAP, lips: bool = True,
-                 teeth: bool = True, eyes: bool = True, lids: bool = True, geometry: ContactGeometry | None = None):
+                 teeth: bool = True, eyes: bool = True, lids: bool = True, geometry: ContactGeometry | None = None,
+                 glide_stiffness=None):
         wp = get_warp()
         from . import kernels_contact as kc
 
@@ -501,20 +562,37 @@ class ContactStage:
                 if len(nodes):
                     self.surfaces.append(_SurfaceSet(nodes, stiff(nodes), TV, TF, device, TEETH_REACH_M, gap,
                                                      rigid=(TV, amount)))
-        self.eye_count = len(g.eye_nodes) if eyes else 0
         sets = [s.springs for s in self.surfaces]
+        glide = np.asarray(g.eye_glide, bool)
+        if len(glide) != len(g.eye_nodes):
+            glide = np.zeros(len(g.eye_nodes), bool)
+        self.eye_count = len(g.eye_nodes) if eyes else 0
+        self.glide_count = int(glide.sum()) if eyes else 0
+        kg = kn if glide_stiffness is None else np.asarray(glide_stiffness, np.float64)
+        if kg.shape != (len(X),) or not (np.isfinite(kg).all() and (kg >= 0).all()):
+            raise InputError(f"glide_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
+
+        def eye_set(mine, r, k, one_sided):
+            en, c = g.eye_nodes[mine], g.eye_centers[g.eye_of_node[mine]]
+            return Springs(node=wp.array(en.astype(np.int32), dtype=wp.int32, device=device),
+                           point=wp.array(c.astype(np.float32), dtype=wp.vec3, device=device),
+                           stiffness=wp.array(k.astype(np.float32), dtype=float, device=device),
+                           rest_length=wp.array(r[mine].astype(np.float32), dtype=float, device=device),
+                           one_sided=one_sided)
+
+        d_rest = np.linalg.norm(X[g.eye_nodes] - g.eye_centers[g.eye_of_node], axis=1)
         if self.eye_count:
-            en = g.eye_nodes
-            c = g.eye_centers[g.eye_of_node]
             # a node inside the ball (or within the gap) at rest gets its rest distance less
             # EYE_REST_SLACK_M: no force at rest, and it may not sink deeper
-            r = np.minimum(g.eye_radii[g.eye_of_node] + gap, np.linalg.norm(X[en] - c, axis=1) - EYE_REST_SLACK_M)
-            self.eye_springs = Springs(
-                node=wp.array(en.astype(np.int32), dtype=wp.int32, device=device),
-                point=wp.array(c.astype(np.float32), dtype=wp.vec3, device=device),
-                stiffness=wp.array(stiff(en).astype(np.float32), dtype=float, device=device),
-                rest_length=wp.array(r.astype(np.float32), dtype=float, device=device), one_sided=True)
+            r = np.minimum(g.eye_radii[g.eye_of_node] + gap, d_rest - EYE_REST_SLACK_M)
+            every = np.ones(len(g.eye_nodes), bool)
+            self.eye_springs = eye_set(every, r, stiff(g.eye_nodes), True)
             sets.append(self.eye_springs)
+        if self.glide_count:
+            # the inner lid sheet glides on the eyeball: on its sphere, two-sided, at the sliding
+            # support's stiffness (the one-sided contact above keeps it out of the ball)
+            self.glide_springs = eye_set(glide, d_rest, kg[g.eye_nodes[glide]], False)
+            sets.append(self.glide_springs)
         self.lid_count = len(g.lid_nodes) if lids else 0
         if self.lid_count:
             ln = g.lid_nodes
@@ -537,8 +615,8 @@ class ContactStage:
         g = self.geometry
         lips = sum(s.count for s in self.surfaces if s.follows is not None)
         teeth = sum(s.count for s in self.surfaces if s.rigid is not None)
-        return {"lip_lip": lips, "lip_teeth": teeth, "lid_eye": self.eye_count, "lid_lid": self.lid_count,
-                "excluded": dict(g.excluded)}
+        return {"lip_lip": lips, "lip_teeth": teeth, "lid_eye": self.eye_count, "lid_glide": self.glide_count,
+                "lid_lid": self.lid_count, "excluded": dict(g.excluded)}
 
     def _move_rigid(self, control) -> None:
         wp = get_warp()
@@ -581,11 +659,12 @@ class ContactStage:
                 wp.launch(self.kc._half_space_forces, dim=s.count,
                           inputs=[sp.node, sp.point, sp.axis, sp.stiffness, state_in.positions], outputs=[forces],
                           device=self.device)
-        if self.eye_count:
-            sp = self.eye_springs
-            wp.launch(self.kc._sphere_forces, dim=self.eye_count,
-                      inputs=[sp.node, sp.point, sp.rest_length, sp.stiffness, state_in.positions], outputs=[forces],
-                      device=self.device)
+        for count, sp, one in ((self.eye_count, getattr(self, "eye_springs", None), 1),
+                               (self.glide_count, getattr(self, "glide_springs", None), 0)):
+            if count:
+                wp.launch(self.kc._sphere_forces, dim=count,
+                          inputs=[sp.node, sp.point, sp.rest_length, sp.stiffness, one, state_in.positions],
+                          outputs=[forces], device=self.device)
         if self.lid_count:  # a lid node lies on one plane only: one spring per node in the set
             sp = self.lid_springs
             wp.launch(self.kc._half_space_forces, dim=self.lid_count,

@@ -10,7 +10,8 @@ bone (:data:`BONE_REGIONS`: forehead, nose, chin, bottom face) that are not atta
 are held by stiff springs at their rest position, which the jaw moves for the jaw regions
 (Eq. 6.4.9 amounts). Cheeks, lips and lids glide over soft tissue, teeth and eyeballs: every
 other inner-sheet node has a sliding support along the normal of that deeper surface (the skin's
-inward direction smoothed over :data:`SUPPORT_SMOOTHING`). The outer sheet is free.
+inward direction smoothed over :data:`SUPPORT_SMOOTHING`), but the lids' inner sheet over an
+eyeball, which glides on the ball itself (:mod:`.contact`). The outer sheet is free.
 """
 
 from __future__ import annotations
@@ -246,7 +247,11 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
     held = inner & ~attached & ~fixed & (on_bone[src] >= 0.5)
     jaw_amount_node = v_amount[src]
     jaw_nodes = np.where((held | fixed) & (jaw_amount_node > 0))[0]
-    support_nodes = np.where(inner & ~held & ~fixed)[0]
+    # the lids' inner sheet over an eyeball glides on the ball, not on a plane (contact stage)
+    from .contact import eyeball_sheet_nodes
+
+    on_eye = eyeball_sheet_nodes(skin.vertices, getattr(head, "parts", None))
+    support_nodes = np.where(inner & ~held & ~fixed & ~on_eye)[0]
     p = int((skin.layer == 0).sum())
     inner_faces = np.asarray(skin.skin_faces) + int(skin.layer.max()) * p  # the inner sheet's triangles
     support_normal = substrate_normals(skin.vertices, inner_faces, skin.direction, support_nodes)

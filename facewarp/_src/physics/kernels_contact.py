@@ -8,12 +8,13 @@ Contact springs (:class:`~facewarp._src.physics.model.Springs` with ``one_sided`
   surface point p and the outward unit direction a there give the half-space energy
   ``E = 1/2 k min(0, (x - p') . a)^2`` with ``p' = p + gap a``; the spring is armed for every
   node within ``reach`` of the surface (inside or out) and slack (stiffness 0) beyond;
-* against a sphere (the eyeball): ``E = 1/2 k min(0, |x - c| - r)^2``, static;
+* against a sphere (the eyeball): ``E = 1/2 k min(0, |x - c| - r)^2``, static; the inner lid
+  sheet gliding on the eyeball has the two-sided ``E = 1/2 k (|x - c| - r)^2`` (r its rest distance);
 * against a plane (a lid against the palpebral fissure, where the other lid closes to): the
   half-space energy above with a static p and a, set once by :class:`.contact.ContactStage`.
 
 The explicit force is ``-dE/dx``: ``-k s a`` (half-space, ``s = min(0, (x - p') . a)``) and
-``-k s (x - c) / |x - c|`` (sphere, ``s = min(0, |x - c| - r)``).
+``-k s (x - c) / |x - c|`` (sphere, ``s = min(0, |x - c| - r)``, or ``|x - c| - r`` two-sided).
 """
 
 from __future__ import annotations
@@ -146,13 +147,15 @@ def _half_space_forces(
     forces[i] = forces[i] - stiffness[k] * s * a
 
 
-# Explicit forces of one-sided sphere springs: f = -k min(0, |x - c| - r) (x - c) / |x - c|.
+# Explicit forces of sphere springs: f = -k s (x - c) / |x - c|, s = min(0, |x - c| - r) one-sided
+# (out of the eyeball), s = |x - c| - r two-sided (the inner lid sheet gliding on it).
 @wp.kernel
 def _sphere_forces(
     nodes: wp.array(dtype=wp.int32),
     center: wp.array(dtype=wp.vec3),
     radius: wp.array(dtype=float),
     stiffness: wp.array(dtype=float),
+    one_sided: int,
     positions: wp.array(dtype=wp.vec3),
     forces: wp.array(dtype=wp.vec3),
 ):
@@ -160,6 +163,8 @@ def _sphere_forces(
     i = nodes[k]
     r = positions[i] - center[k]
     l = wp.length(r)
-    s = wp.min(l - radius[k], 0.0)
+    s = l - radius[k]
+    if one_sided != 0:
+        s = wp.min(s, 0.0)
     if l > 0.0:
         forces[i] = forces[i] - stiffness[k] * s / l * r

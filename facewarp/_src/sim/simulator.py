@@ -247,7 +247,11 @@ class FaceSimulator:
         stages = [self.carry, self.jaw_stage, self.support, self.muscles]
         self.contact = None
         if contact:
-            self.contact = ContactStage(fr, k_contact, self.device, geometry=self.contact_geometry)
+            # the inner lid sheet gliding on the eyeball has the sliding support's stiffness
+            k_glide = (mat.support_modulus * builder.vertex_area if physical and support_stiffness is None
+                       else np.full(len(fr.nodes), float(np.median(k_support)) if np.size(k_support) else 0.0))
+            self.contact = ContactStage(fr, k_contact, self.device, geometry=self.contact_geometry,
+                                        glide_stiffness=k_glide)
             stages.append(self.contact)
         if solver == "verlet":
             self.solver = SolverVerlet(self.model, stages=stages)
