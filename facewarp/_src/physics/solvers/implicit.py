@@ -99,7 +99,7 @@ __all__ = ["IMPLICIT_METHODS", "SolverImplicit", "factorization_backend"]
 IMPLICIT_METHODS = ("lbfgs", "newton", "newton-pcg")
 """The methods of :class:`SolverImplicit` (see the module doc)."""
 
-_CHUNK = 256  # entries per thread of the deterministic energy sums
+_PARTIALS = 512  # partial sums (threads) of the deterministic energy sums
 _LINE_SEARCH_TRIALS = 4  # device line search: t = 1, 1/2, 1/4, 1/8
 
 
@@ -339,7 +339,7 @@ class SolverImplicit(SolverBase):
         off = np.r_[0, np.cumsum(sizes)]
         self.energy = wp.zeros(int(off[-1]), dtype=float, device=dev)
         self._e_views = [self.energy[int(off[i]):int(off[i + 1])] if sizes[i] else None for i in range(len(sizes))]
-        self._chunks = max(1, -(-int(off[-1]) // _CHUNK))
+        self._chunks = max(1, min(_PARTIALS, int(off[-1])))
         self.partial = wp.zeros(self._chunks, dtype=wp.float64, device=dev)
         self.totals = wp.zeros(1 + _LINE_SEARCH_TRIALS, dtype=wp.float64, device=dev)
         self._h = None
@@ -358,11 +358,11 @@ class SolverImplicit(SolverBase):
         F = m.face_indices.numpy().astype(np.int64)
         T = m.tet_indices.numpy().astype(np.int64)
 
-        def pairs(idx):
-            c = idx.shape[1]
-            r = np.repeat(idx[:, :, None], c, axis=2).reshape(-1)
-            cc = np.repeat(idx[:, None, :], c, axis=1).reshape(-1)
-            return r, cc
+        def pairs(idx):  # block slot p * count + t: corner pair p = a * c + b of element t (pair-major:
+            c = idx.shape[1]  # a warp's threads write neighbouring blocks, coalesced)
+            r = np.repeat(idx[:, :, None], c, axis=2).reshape(len(idx), c * c)
+            cc = np.repeat(idx[:, None, :], c, axis=1).reshape(len(idx), c * c)
+            return r.T.reshape(-1), cc.T.reshape(-1)
 
         rows, cols = zip(*[pairs(E), pairs(F), pairs(T), (np.arange(n), np.arange(n))]
                          + [(s.node_host, s.node_host) for s in self.springs])
@@ -511,7 +511,7 @@ class SolverImplicit(SolverBase):
     def _launch_total(self, slot: int) -> None:
         """The total energy, summed deterministically into ``totals[slot]``."""
         wp = get_warp()
-        wp.launch(ki._chunk_sums, dim=self._chunks, inputs=[self.energy, _CHUNK], outputs=[self.partial],
+        wp.launch(ki._chunk_sums, dim=self._chunks, inputs=[self.energy], outputs=[self.partial],
                   device=self.device)
         wp.launch(ki._final_sum, dim=1, inputs=[self.partial, slot], outputs=[self.totals], device=self.device)
 
@@ -658,7 +658,7 @@ class SolverImplicit(SolverBase):
                           self.targets, control.external_force, pool.sets, pool.set_index, pool.local,
                           1.0 / h, self.x, self.direction],
                   outputs=[self.trial_energy], device=dev)
-        wp.launch(ki._chunk_sums_rows, dim=self.trial_partial.shape, inputs=[self.trial_energy, _CHUNK],
+        wp.launch(ki._chunk_sums_rows, dim=self.trial_partial.shape, inputs=[self.trial_energy],
                   outputs=[self.trial_partial], device=dev)
         wp.launch(ki._final_sums_rows, dim=_LINE_SEARCH_TRIALS, inputs=[self.trial_partial, 1],
                   outputs=[self.totals], device=dev)

@@ -376,8 +376,9 @@ def _zero_fixed(vertex_fixed: wp.array(dtype=wp.int32), v: wp.array(dtype=wp.vec
 #             blocks (i,i) = (j,j) = H, (i,j) = (j,i) = -H;
 #   area, volume: Gauss-Newton (k + d/h) g_a g_b^T with g = grad C (the neglected k C grad^2 C
 #             vanishes at rest);
-# each written into the element's block slots: edges 4 (ii, ij, ji, jj), faces 9, tets 16,
-# corner-major (a, b) -> a * c + b.
+# each written into the element's block slots: edges 4 (ii, ij, ji, jj), faces 9, tets 16, corner
+# pair (a, b) -> p = a * c + b, pair-major: slot offset + p * count + element (neighbouring threads
+# write neighbouring blocks: coalesced).
 @wp.kernel
 def _edge_hessian(
     edge_indices: wp.array(dtype=wp.vec2i),
@@ -405,10 +406,11 @@ def _edge_hessian(
     if l > 0.0:
         b = wp.max(k0 * (c + c * c * c) + dmp * (c - edge_c_start[e]), 0.0) / (d0 * l)
     H = a * nn + b * (wp.identity(n=3, dtype=float) - nn)
-    blocks_out[4 * e] = H
-    blocks_out[4 * e + 1] = -H
-    blocks_out[4 * e + 2] = -H
-    blocks_out[4 * e + 3] = H
+    ne = edge_indices.shape[0]
+    blocks_out[e] = H
+    blocks_out[ne + e] = -H
+    blocks_out[2 * ne + e] = -H
+    blocks_out[3 * ne + e] = H
 
 
 @wp.kernel
@@ -423,7 +425,8 @@ def _face_hessian(
     blocks_out: wp.array(dtype=wp.mat33),
 ):
     t = wp.tid()
-    o = block_offset + 9 * t
+    nf = face_indices.shape[0]
+    o = block_offset + t
     xi = positions[face_indices[t][0]]
     e1 = positions[face_indices[t][1]] - xi
     e2 = positions[face_indices[t][2]] - xi
@@ -438,15 +441,15 @@ def _face_hessian(
     g0 = -(g1 + g2)
     a0 = face_rest_area[t]
     s = (face_k[t] + face_damping[t] * inv_h) / (a0 * a0)
-    blocks_out[o + 0] = s * _outer(g0, g0)
-    blocks_out[o + 1] = s * _outer(g0, g1)
-    blocks_out[o + 2] = s * _outer(g0, g2)
-    blocks_out[o + 3] = s * _outer(g1, g0)
-    blocks_out[o + 4] = s * _outer(g1, g1)
-    blocks_out[o + 5] = s * _outer(g1, g2)
-    blocks_out[o + 6] = s * _outer(g2, g0)
-    blocks_out[o + 7] = s * _outer(g2, g1)
-    blocks_out[o + 8] = s * _outer(g2, g2)
+    blocks_out[o] = s * _outer(g0, g0)
+    blocks_out[o + nf] = s * _outer(g0, g1)
+    blocks_out[o + 2 * nf] = s * _outer(g0, g2)
+    blocks_out[o + 3 * nf] = s * _outer(g1, g0)
+    blocks_out[o + 4 * nf] = s * _outer(g1, g1)
+    blocks_out[o + 5 * nf] = s * _outer(g1, g2)
+    blocks_out[o + 6 * nf] = s * _outer(g2, g0)
+    blocks_out[o + 7 * nf] = s * _outer(g2, g1)
+    blocks_out[o + 8 * nf] = s * _outer(g2, g2)
 
 
 @wp.kernel
@@ -461,7 +464,8 @@ def _tet_hessian(
     blocks_out: wp.array(dtype=wp.mat33),
 ):
     t = wp.tid()
-    o = block_offset + 16 * t
+    nt = tet_indices.shape[0]
+    o = block_offset + t
     xi = positions[tet_indices[t][0]]
     e1 = positions[tet_indices[t][1]] - xi
     e2 = positions[tet_indices[t][2]] - xi
@@ -475,7 +479,7 @@ def _tet_hessian(
     for a in range(4):
         ga = _pick4(g0, g1, g2, g3, a)
         for b in range(4):
-            blocks_out[o + 4 * a + b] = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
+            blocks_out[o + (4 * a + b) * nt] = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
 
 
 # Diagonal blocks of every node: (mu + k_h) I; fixed nodes: the identity (their DOFs are not
@@ -610,15 +614,16 @@ def _guess_fallback(
 
 
 # ---------------------------------------------------------------------------- reductions
-# Deterministic sum of an energy array: each thread adds a fixed chunk in order (float64), then
-# one thread adds the chunks in order and writes total_out[slot]. No atomics: the same sum on
-# every run and device.
+# Deterministic sum of an energy array: thread c of P adds entries c, c + P, c + 2P, ... in order
+# (float64; neighbouring threads read neighbouring entries), then one thread adds the P partial
+# sums in order and writes total_out[slot]. No atomics: the same sum on every run and device.
 @wp.kernel
-def _chunk_sums(values: wp.array(dtype=float), chunk: int, partial_out: wp.array(dtype=wp.float64)):
+def _chunk_sums(values: wp.array(dtype=float), partial_out: wp.array(dtype=wp.float64)):
     c = wp.tid()
     n = values.shape[0]
+    p = partial_out.shape[0]
     s = wp.float64(0.0)
-    for i in range(c * chunk, wp.min((c + 1) * chunk, n)):
+    for i in range(c, n, p):
         s = s + wp.float64(values[i])
     partial_out[c] = s
 
@@ -634,11 +639,12 @@ def _final_sum(partial: wp.array(dtype=wp.float64), slot: int, total_out: wp.arr
 # Rows of a 2-D energy array (the line search's trials) summed the same way: row j into
 # total_out[first_slot + j].
 @wp.kernel
-def _chunk_sums_rows(values: wp.array2d(dtype=float), chunk: int, partial_out: wp.array2d(dtype=wp.float64)):
+def _chunk_sums_rows(values: wp.array2d(dtype=float), partial_out: wp.array2d(dtype=wp.float64)):
     j, c = wp.tid()
     n = values.shape[1]
+    p = partial_out.shape[1]
     s = wp.float64(0.0)
-    for i in range(c * chunk, wp.min((c + 1) * chunk, n)):
+    for i in range(c, n, p):
         s = s + wp.float64(values[j, i])
     partial_out[j, c] = s
 
