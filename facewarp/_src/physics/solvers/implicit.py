@@ -39,10 +39,11 @@ Methods (``method=``):
   jaw's 0.3 s opening of laugh and surprise, none once the expression is held).
 * ``"newton"`` (CPU): Newton with a fresh factorisation every iteration and the same line search.
 * ``"newton-pcg"`` (default on CUDA, runs on the CPU too): Newton iterations, each with a fixed
-  number (``linear_iterations``, 20) of block-Jacobi preconditioned conjugate-gradient iterations
-  on the block-sparse Hessian assembled by kernels, two launches per CG iteration (the
-  Chronopoulos-Gear form, kernels ``_cg_*``: about a fifth of ``warp.optim.linear.cg``'s launches,
-  the same iterates), and a backtracking line search (t = 1, 1/2, 1/4, 1/8) decided on the device.
+  number (``linear_iterations``, 10) of block-Jacobi preconditioned conjugate-gradient iterations
+  on the block-sparse Hessian assembled by kernels, one launch per CG iteration (the
+  Chronopoulos-Gear form with the product fused into the update, kernels ``_cg_*``: about a tenth
+  of ``warp.optim.linear.cg``'s launches, the same iterates), and a backtracking line search
+  (t = 1, 1/2, 1/4, 1/8, all four evaluated in one pass) decided on the device.
   The Newton loop is adaptive: it runs until no free node moves more than ``tolerance`` (3e-5 m
   from the simulator) in an iteration, at most ``max_iterations`` (12), as a ``wp.capture_while``
   loop, so on CUDA a whole frame, loop included, is one CUDA graph with no host round trip
@@ -99,7 +100,6 @@ __all__ = ["IMPLICIT_METHODS", "SolverImplicit", "factorization_backend"]
 IMPLICIT_METHODS = ("lbfgs", "newton", "newton-pcg")
 """The methods of :class:`SolverImplicit` (see the module doc)."""
 
-_PARTIALS = 512  # partial sums (threads) of the deterministic energy sums
 _LINE_SEARCH_TRIALS = 4  # device line search: t = 1, 1/2, 1/4, 1/8
 
 
@@ -217,8 +217,10 @@ class SolverImplicit(SolverBase):
             iterations; 1.0 overshoots and rings) and with ``"newton-pcg"`` (its adaptive loop:
             1.0 took as many iterations), 0 otherwise (converged L-BFGS steps gain nothing).
         linear_iterations: Conjugate-gradient iterations per Newton iteration (``"newton-pcg"``,
-            default 20: 50 or 200 gave the same per-frame FDP errors against the converged steps,
-            the Newton count was the limit; 10 about as good with a few more Newton iterations).
+            default 10. Measured per frame against the converged steps, every FDP of the five
+            Table 6.4 presets: 10 gave the errors of 20 (and 20 those of 50 and 200) at about 0.3
+            more Newton iterations per frame; the Newton count is the limit. On an H100 at level 0,
+            3 Newton iterations, a frame took a quarter less time than with 20).
         refactor_after: ``"lbfgs"`` renews the factorisation at the current shape when the
             iterations beyond one per step since the last one add up to this (with a fixed
             ``iterations``: all iterations of steps whose last update was above ``tolerance``),
@@ -252,7 +254,7 @@ class SolverImplicit(SolverBase):
 
     def __init__(self, model: Model, *, stages=(), method: str | None = None, tolerance: float = 1e-5,
                  max_iterations: int | None = None, iterations: int | None = None, history: int = 8,
-                 extrapolate: float | None = None, linear_iterations: int = 20, refactor_after: int = 20,
+                 extrapolate: float | None = None, linear_iterations: int = 10, refactor_after: int = 20,
                  spring_updates: int = 4, spring_tolerance: float = 0.01, backend: str | None = None,
                  rounds: int = 2):
         super().__init__(model, stages=stages)
@@ -339,7 +341,8 @@ class SolverImplicit(SolverBase):
         off = np.r_[0, np.cumsum(sizes)]
         self.energy = wp.zeros(int(off[-1]), dtype=float, device=dev)
         self._e_views = [self.energy[int(off[i]):int(off[i + 1])] if sizes[i] else None for i in range(len(sizes))]
-        self._chunks = max(1, min(_PARTIALS, int(off[-1])))
+        self._chunk = max(32, int(np.ceil(np.sqrt(off[-1]))))  # entries per partial sum
+        self._chunks = max(1, -(-int(off[-1]) // self._chunk))
         self.partial = wp.zeros(self._chunks, dtype=wp.float64, device=dev)
         self.totals = wp.zeros(1 + _LINE_SEARCH_TRIALS, dtype=wp.float64, device=dev)
         self._h = None
@@ -511,7 +514,7 @@ class SolverImplicit(SolverBase):
     def _launch_total(self, slot: int) -> None:
         """The total energy, summed deterministically into ``totals[slot]``."""
         wp = get_warp()
-        wp.launch(ki._chunk_sums, dim=self._chunks, inputs=[self.energy], outputs=[self.partial],
+        wp.launch(ki._chunk_sums, dim=self._chunks, inputs=[self.energy, self._chunk], outputs=[self.partial],
                   device=self.device)
         wp.launch(ki._final_sum, dim=1, inputs=[self.partial, slot], outputs=[self.totals], device=self.device)
 
@@ -658,7 +661,7 @@ class SolverImplicit(SolverBase):
                           self.targets, control.external_force, pool.sets, pool.set_index, pool.local,
                           1.0 / h, self.x, self.direction],
                   outputs=[self.trial_energy], device=dev)
-        wp.launch(ki._chunk_sums_rows, dim=self.trial_partial.shape, inputs=[self.trial_energy],
+        wp.launch(ki._chunk_sums_rows, dim=self.trial_partial.shape, inputs=[self.trial_energy, self._chunk],
                   outputs=[self.trial_partial], device=dev)
         wp.launch(ki._final_sums_rows, dim=_LINE_SEARCH_TRIALS, inputs=[self.trial_partial, 1],
                   outputs=[self.totals], device=dev)
