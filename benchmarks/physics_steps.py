@@ -2,6 +2,7 @@
 
     python -m benchmarks.physics_steps [--levels 0 1] [--device cpu|cuda] [--seconds 2]
                                        [--expression laugh] [--verlet-frames 3] [--parity]
+                                       [--modes implicit interactive_3 ...] [--tag T]
 
 Builds the default head at each level and plays ``expression`` (default laugh: muscles and a
 30 degree jaw) for ``seconds`` at 30 fps through :class:`facewarp.FaceSimulator`:
@@ -9,14 +10,15 @@ Builds the default head at each level and plays ``expression`` (default laugh: m
 * ``implicit`` (the default solver; physical material; on CUDA the device method, every frame one
   replayed CUDA graph): frames per second of the stepping, real-time factor, iterations and
   factorisations, and where the time goes (stage preparation, gradients, solves, factorisations);
-* ``interactive_1`` / ``interactive_2``: the same with a fixed 1 or 2 iterations per frame;
+* ``interactive_1`` / ``_2`` / ``_3``: the same with a fixed 1, 2 or 3 iterations per frame (3: the
+  fewest that keep every FDP within 0.5 mm of the converged steps, ``solver_accuracy.py``);
 * ``verlet``: the explicit reference (thesis and physical profiles) over ``--verlet-frames``
   frames: substeps per frame and per second, real-time factor.
 
 A first frame (kernel compilation, graph capture, first factorisation) is run and discarded.
 With ``--parity`` (needs CUDA) the laugh ramp is run with the device method on "cpu" and "cuda:0"
 and the node positions compared, relative to the largest displacement.
-Writes benchmarks/results/physics_steps_<device>.json.
+Writes benchmarks/results/physics_steps_<device>[_<tag>].json.
 
     python -m benchmarks.physics_steps --contact [--levels 0] [--expressions laugh pucker blink smile]
                                        [--head default|BUILD_DIR ...] [--method lbfgs|newton-pcg] [--tag T]
@@ -83,16 +85,25 @@ def _verlet(fr, device, expression, frames, material) -> dict:
             "realtime_factor": round(frames / sim.fps / wall, 5), "added_mass_fraction": sim.added_mass_fraction}
 
 
-def time_level(level: int, device: str, expression: str, seconds: float, verlet_frames: int) -> dict:
+MODES = {"implicit": {}, "interactive_1": dict(iterations=1), "interactive_2": dict(iterations=2),
+         "interactive_3": dict(iterations=3), "implicit_thesis": dict(material="thesis")}
+"""The implicit solver's settings timed per level (interactive_3: the fixed count that keeps every FDP
+within 0.5 mm of the converged steps, benchmarks/solver_accuracy.py)."""
+
+
+def time_level(level: int, device: str, expression: str, seconds: float, verlet_frames: int,
+               modes=tuple(MODES)) -> dict:
     import facewarp
+    from facewarp import SimulationError
 
     fr = facewarp.build_face(facewarp.default_template(level))
     row = {"level": level, "nodes": int(len(fr.nodes)), "tets": int(len(fr.tets))}
-    row["implicit"] = _frames(fr, device, expression, seconds)
-    print(row, flush=True)
-    row["interactive_1"] = _frames(fr, device, expression, seconds, iterations=1)
-    row["interactive_2"] = _frames(fr, device, expression, seconds, iterations=2)
-    row["implicit_thesis"] = _frames(fr, device, expression, seconds, material="thesis")
+    for mode in modes:
+        try:
+            row[mode] = _frames(fr, device, expression, seconds, **MODES[mode])
+        except SimulationError as e:  # recorded, the other settings still run
+            row[mode] = {"error": str(e)}
+        print({"level": level, mode: row[mode]}, flush=True)
     if verlet_frames > 0:
         row["verlet_thesis"] = _verlet(fr, device, expression, verlet_frames, "thesis")
         row["verlet_physical"] = _verlet(fr, device, expression, verlet_frames, "physical")
@@ -193,7 +204,9 @@ def main():
     ap.add_argument("--expressions", nargs="+", default=["laugh", "pucker", "blink", "smile"])
     ap.add_argument("--head", nargs="+", help="with --contact: heads (default, a head folder or a build folder)")
     ap.add_argument("--method", help="with --contact: the implicit method (default: the device's)")
-    ap.add_argument("--tag", help="with --contact: a suffix of the results file's name")
+    ap.add_argument("--modes", nargs="+", default=list(MODES), choices=list(MODES),
+                    help="the implicit solver's settings to time per level")
+    ap.add_argument("--tag", help="a suffix of the results file's name")
     args = ap.parse_args()
     if args.contact:
         return main_contact(args)
@@ -203,11 +216,11 @@ def main():
     rows = []
     result = {"machine": machine(args.device), "expression": args.expression, "seconds": args.seconds,
               "factorization_backend": factorization_backend(), "levels": rows}
-    name = "physics_steps_" + args.device.split(":")[0]
+    name = "physics_steps_" + args.device.split(":")[0] + (f"_{args.tag}" if args.tag else "")
     for lv in args.levels:
         try:
             r = time_level(lv, args.device, args.expression, args.seconds,
-                           args.verlet_frames if lv < 2 or args.device != "cpu" else 0)
+                           args.verlet_frames if lv < 2 or args.device != "cpu" else 0, args.modes)
         except SimulationError as e:
             r = {"level": lv, "error": str(e)}
         rows.append(r)

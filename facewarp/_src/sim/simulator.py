@@ -261,6 +261,11 @@ class FaceSimulator:
         self.state = self.model.state()
         self.scratch = self.model.state()
         self.control = self.model.control()
+        # the controls go up through pinned host memory: an asynchronous copy, no allocation (one
+        # row per control chunk, so no chunk's values are overwritten before its copy has run)
+        na = int(self.control.activations.shape[0])
+        self._control_host = wp.zeros(self.CONTROL_CHUNKS * (na + 2), dtype=float, device="cpu",
+                                      pinned=bool(self.device.is_cuda))
         # a frame is one replayed CUDA graph; the adaptive device solver's Newton loop is a
         # conditional graph node (CUDA 12.4+): without one, the frames run launch by launch
         self.use_graph = bool(self.device.is_cuda) and (
@@ -383,10 +388,15 @@ class FaceSimulator:
         chunks = max(1, min(n, self.CONTROL_CHUNKS))
         bounds = np.linspace(0, n, chunks + 1).round().astype(int)
         a0, j0 = self._a, self._j
+        wp, host, na = self._wp, self._control_host.numpy(), len(a0)
         for c in range(chunks):
             w = (c + 1) / chunks
-            self.control.activations.assign((1 - w) * a0 + w * self._target_a)
-            self.control.jaw_angles.assign((1 - w) * j0 + w * self._target_j)
+            o = c * (na + 2)
+            host[o:o + na] = (1 - w) * a0 + w * self._target_a
+            host[o + na:o + na + 2] = (1 - w) * j0 + w * self._target_j
+            if na:
+                wp.copy(self.control.activations, self._control_host, src_offset=o, count=na)
+            wp.copy(self.control.jaw_angles, self._control_host, src_offset=o + na, count=2)
             self._run_substeps(int(bounds[c + 1] - bounds[c]))
         self._a, self._j = self._target_a.copy(), self._target_j.copy()
         self._pose.advance()

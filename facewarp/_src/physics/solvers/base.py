@@ -107,6 +107,8 @@ class SolverBase:
         self.targets = wp.clone(model.rest_positions)
         self.step_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.guard = wp.array([kt.GUARD_NONE, kt.GUARD_NONE], dtype=wp.int32, device=self.device)
+        # the guard comes back through pinned host memory (no allocation per check)
+        self._guard_host = wp.zeros(2, dtype=wp.int32, device="cpu", pinned=bool(self.device.is_cuda))
 
     def _launch_guard(self, state_out: State) -> None:
         m = self.model
@@ -139,7 +141,11 @@ class SolverBase:
         Raises:
             SimulationError: naming the first failing step and tet (and vertex).
         """
-        step, code = (int(v) for v in self.guard.numpy())
+        wp = get_warp()
+        wp.copy(self._guard_host, self.guard)
+        if self.device.is_cuda:
+            wp.synchronize_stream(wp.get_stream(self.device))
+        step, code = (int(v) for v in self._guard_host.numpy())
         if step == kt.GUARD_NONE:
             return
         tet, kind = divmod(code, 2)

@@ -39,10 +39,11 @@ Methods (``method=``):
   jaw's 0.3 s opening of laugh and surprise, none once the expression is held).
 * ``"newton"`` (CPU): Newton with a fresh factorisation every iteration and the same line search.
 * ``"newton-pcg"`` (default on CUDA, runs on the CPU too): Newton iterations, each with a fixed
-  number (``linear_iterations``, 20) of block-Jacobi preconditioned conjugate-gradient iterations
-  on the block-sparse Hessian assembled by kernels, two launches per CG iteration (the
-  Chronopoulos-Gear form, kernels ``_cg_*``: about a fifth of ``warp.optim.linear.cg``'s launches,
-  the same iterates), and a backtracking line search (t = 1, 1/2, 1/4, 1/8) decided on the device.
+  number (``linear_iterations``, 10) of block-Jacobi preconditioned conjugate-gradient iterations
+  on the block-sparse Hessian assembled by kernels, one launch per CG iteration (the
+  Chronopoulos-Gear form with the product fused into the update, kernels ``_cg_*``: about a tenth
+  of ``warp.optim.linear.cg``'s launches, the same iterates), and a backtracking line search
+  (t = 1, 1/2, 1/4, 1/8, all four evaluated in one pass) decided on the device.
   The Newton loop is adaptive: it runs until no free node moves more than ``tolerance`` (3e-5 m
   from the simulator) in an iteration, at most ``max_iterations`` (12), as a ``wp.capture_while``
   loop, so on CUDA a whole frame, loop included, is one CUDA graph with no host round trip
@@ -99,7 +100,6 @@ __all__ = ["IMPLICIT_METHODS", "SolverImplicit", "factorization_backend"]
 IMPLICIT_METHODS = ("lbfgs", "newton", "newton-pcg")
 """The methods of :class:`SolverImplicit` (see the module doc)."""
 
-_CHUNK = 256  # entries per thread of the deterministic energy sums
 _LINE_SEARCH_TRIALS = 4  # device line search: t = 1, 1/2, 1/4, 1/8
 
 
@@ -151,21 +151,45 @@ def _factorize(A, backend: str):
 
 
 class _SpringSet:
-    """One stage's springs with the fixed-order gather of their gradient slots and Hessian blocks."""
+    """One stage's springs (host side: the contact and fibre-cosine tests of the CPU methods)."""
 
-    def __init__(self, springs, device):
-        wp = get_warp()
+    def __init__(self, springs):
         self.springs = springs
-        node = springs.node.numpy().astype(np.int64)
-        self.count = len(node)
-        self.node_host = node
+        self.node_host = springs.node.numpy().astype(np.int64)
+        self.count = len(self.node_host)
         self.axis = springs.axis is not None
         self.one_sided = int(bool(getattr(springs, "one_sided", False)))
+
+
+class _SpringPool:
+    """Every stage's springs as one pool of ``count`` springs, evaluated in one launch per pass:
+    a :class:`~.kernels_implicit.SpringSet` per set (the stage's own arrays, read in place), the
+    set and local index of every pooled spring, its gradient entries and their fixed-order gather
+    per node (deterministic sums)."""
+
+    def __init__(self, sets: list, device):
+        wp = get_warp()
+        dummy_f = wp.zeros(1, dtype=float, device=device)
+        dummy_v = wp.zeros(1, dtype=wp.vec3, device=device)
+        descs = []
+        for s in sets:
+            sp = s.springs
+            d = ki.SpringSet()
+            d.node, d.point, d.stiffness = sp.node, sp.point, sp.stiffness
+            d.rest_length = dummy_f if sp.rest_length is None else sp.rest_length
+            d.axis = dummy_v if sp.axis is None else sp.axis
+            d.is_axis, d.one_sided = int(s.axis), s.one_sided
+            descs.append(d)
+        self._dummies = (dummy_f, dummy_v)
+        counts = [s.count for s in sets]
+        self.count = int(sum(counts))
+        i32 = lambda a: wp.array(np.ascontiguousarray(a, np.int32), dtype=wp.int32, device=device)  # noqa: E731
+        self.sets = wp.array(descs, dtype=ki.SpringSet, device=device) if descs else None
+        self.set_index = i32(np.repeat(np.arange(len(sets)), counts))
+        self.local = i32(np.concatenate([np.arange(c) for c in counts]) if sets else np.zeros(0))
+        node = np.concatenate([s.node_host for s in sets]) if sets else np.zeros(0, np.int64)
         nodes_u, start, order = group_indices(node)
-        self.group_nodes = wp.array(nodes_u.astype(np.int32), dtype=wp.int32, device=device)
-        self.group_start = wp.array(start.astype(np.int32), dtype=wp.int32, device=device)
-        self.group_order = wp.array(order.astype(np.int32), dtype=wp.int32, device=device)
-        self.energy = None  # views into the solver's energy array
+        self.group_nodes, self.group_start, self.group_order = i32(nodes_u), i32(start), i32(order)
         self.grad = wp.zeros(self.count, dtype=wp.vec3, device=device)
 
 
@@ -193,8 +217,10 @@ class SolverImplicit(SolverBase):
             iterations; 1.0 overshoots and rings) and with ``"newton-pcg"`` (its adaptive loop:
             1.0 took as many iterations), 0 otherwise (converged L-BFGS steps gain nothing).
         linear_iterations: Conjugate-gradient iterations per Newton iteration (``"newton-pcg"``,
-            default 20: 50 or 200 gave the same per-frame FDP errors against the converged steps,
-            the Newton count was the limit; 10 about as good with a few more Newton iterations).
+            default 10. Measured per frame against the converged steps, every FDP of the five
+            Table 6.4 presets: 10 gave the errors of 20 (and 20 those of 50 and 200) at about 0.3
+            more Newton iterations per frame; the Newton count is the limit. On an H100 at level 0,
+            3 Newton iterations, a frame took a quarter less time than with 20).
         refactor_after: ``"lbfgs"`` renews the factorisation at the current shape when the
             iterations beyond one per step since the last one add up to this (with a fixed
             ``iterations``: all iterations of steps whose last update was above ``tolerance``),
@@ -228,7 +254,7 @@ class SolverImplicit(SolverBase):
 
     def __init__(self, model: Model, *, stages=(), method: str | None = None, tolerance: float = 1e-5,
                  max_iterations: int | None = None, iterations: int | None = None, history: int = 8,
-                 extrapolate: float | None = None, linear_iterations: int = 20, refactor_after: int = 20,
+                 extrapolate: float | None = None, linear_iterations: int = 10, refactor_after: int = 20,
                  spring_updates: int = 4, spring_tolerance: float = 0.01, backend: str | None = None,
                  rounds: int = 2):
         super().__init__(model, stages=stages)
@@ -298,9 +324,9 @@ class SolverImplicit(SolverBase):
         self.timings = {"prepare": 0.0, "gradient": 0.0, "solve": 0.0, "factor": 0.0}
 
         m, dev, n = model, self.device, model.vertex_count
-        self.springs = [_SpringSet(sp_, dev) for sp_ in stage_springs(self.stages) if sp_.count > 0]
+        self.springs = [_SpringSet(sp_) for sp_ in stage_springs(self.stages) if sp_.count > 0]
+        self._pool = _SpringPool(self.springs, dev)
         self.x = wp.zeros(n, dtype=wp.vec3, device=dev)
-        self.x_trial = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.z = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.grad = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.slots = wp.zeros(m.slot_count, dtype=wp.vec3, device=dev)
@@ -310,14 +336,13 @@ class SolverImplicit(SolverBase):
         self.c_tet_trial = wp.zeros(m.tet_count, dtype=float, device=dev)
         self.nodes = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=dev)
         self._host_slack = wp.zeros(1, dtype=float, device=dev)
-        # one energy array: edges, faces, tets, nodes, then each spring set
-        sizes = [m.edge_count, m.face_count, m.tet_count, n] + [s.count for s in self.springs]
+        # one energy array: edges, faces, tets, nodes, then the pooled springs
+        sizes = [m.edge_count, m.face_count, m.tet_count, n, self._pool.count]
         off = np.r_[0, np.cumsum(sizes)]
         self.energy = wp.zeros(int(off[-1]), dtype=float, device=dev)
-        self._e_views = [self.energy[int(off[i]):int(off[i + 1])] for i in range(len(sizes))]
-        for s, v in zip(self.springs, self._e_views[4:]):
-            s.energy = v
-        self._chunks = max(1, -(-int(off[-1]) // _CHUNK))
+        self._e_views = [self.energy[int(off[i]):int(off[i + 1])] if sizes[i] else None for i in range(len(sizes))]
+        self._chunk = max(32, int(np.ceil(np.sqrt(off[-1]))))  # entries per partial sum
+        self._chunks = max(1, -(-int(off[-1]) // self._chunk))
         self.partial = wp.zeros(self._chunks, dtype=wp.float64, device=dev)
         self.totals = wp.zeros(1 + _LINE_SEARCH_TRIALS, dtype=wp.float64, device=dev)
         self._h = None
@@ -336,16 +361,16 @@ class SolverImplicit(SolverBase):
         F = m.face_indices.numpy().astype(np.int64)
         T = m.tet_indices.numpy().astype(np.int64)
 
-        def pairs(idx):
-            c = idx.shape[1]
-            r = np.repeat(idx[:, :, None], c, axis=2).reshape(-1)
-            cc = np.repeat(idx[:, None, :], c, axis=1).reshape(-1)
-            return r, cc
+        def pairs(idx):  # block slot p * count + t: corner pair p = a * c + b of element t (pair-major:
+            c = idx.shape[1]  # a warp's threads write neighbouring blocks, coalesced)
+            r = np.repeat(idx[:, :, None], c, axis=2).reshape(len(idx), c * c)
+            cc = np.repeat(idx[:, None, :], c, axis=1).reshape(len(idx), c * c)
+            return r.T.reshape(-1), cc.T.reshape(-1)
 
         rows, cols = zip(*[pairs(E), pairs(F), pairs(T), (np.arange(n), np.arange(n))]
                          + [(s.node_host, s.node_host) for s in self.springs])
         rows, cols = np.concatenate(rows), np.concatenate(cols)
-        self._block_offsets = np.cumsum([0, 4 * len(E), 9 * len(F), 16 * len(T), n] + [s.count for s in self.springs])
+        self._block_offsets = np.cumsum([0, 4 * len(E), 9 * len(F), 16 * len(T), n, self._pool.count])
         code = rows * n + cols
         uniq, inv = np.unique(code, return_inverse=True)
         nb = len(uniq)
@@ -384,8 +409,9 @@ class SolverImplicit(SolverBase):
         self.inv_diag = wp.zeros(n, dtype=wp.mat33, device=dev)
         self.rhs = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.direction = wp.zeros(n, dtype=wp.vec3, device=dev)
-        self._cg_vectors = [wp.zeros(n, dtype=wp.vec3, device=dev) for _ in range(5)]  # r, u, w, p, s
-        self._cg_sums = wp.zeros((2 * self.linear_iterations + 1, ki.CG_SLOTS), dtype=wp.float64, device=dev)
+        vec = lambda: wp.zeros(n, dtype=wp.vec3, device=dev)  # noqa: E731
+        self._cg_buffers = ((vec(), vec(), vec()), (vec(), vec(), vec()), vec(), vec())  # (r, s, w) x 2, u, p
+        self._cg_sums = wp.zeros((2 * self.linear_iterations + 2, ki.CG_SLOTS), dtype=wp.float64, device=dev)
         self._cg_scalars = wp.zeros((self.linear_iterations, 3), dtype=wp.float64, device=dev)
         self.t_step = wp.zeros(1, dtype=float, device=dev)
         self._newton_count = wp.zeros(1, dtype=wp.int32, device=dev)
@@ -394,24 +420,31 @@ class SolverImplicit(SolverBase):
         self._newton_total = wp.zeros(1, dtype=wp.int64, device=dev)
         self._slack = wp.zeros(1, dtype=float, device=dev)  # the device method's Hessian slack [m]
         self._guess_flag = wp.zeros(1, dtype=wp.int32, device=dev)  # the extrapolated guess inverts a tet
-        self.t_trials = [wp.array([0.5**j], dtype=float, device=dev) for j in range(_LINE_SEARCH_TRIALS)]
+        # the line search's trial energies (row j: t = 2^-j), in the energy array's layout
+        self.trial_energy = wp.zeros((_LINE_SEARCH_TRIALS, self.energy.shape[0]), dtype=float, device=dev)
+        self.trial_partial = wp.zeros((_LINE_SEARCH_TRIALS, self._chunks), dtype=wp.float64, device=dev)
 
     def _launch_cg(self) -> None:
         """:attr:`direction` = A^-1 :attr:`rhs` by ``linear_iterations`` block-Jacobi preconditioned
-        CG iterations from 0, two launches each (kernels ``_cg_*``, Chronopoulos-Gear form).
+        CG iterations from 0, one launch each after a start and a first product (kernels
+        ``_cg_*``, Chronopoulos-Gear form, the product fused with the update).
 
         Measured against ``warp.optim.linear.cg`` (~10 launches and a conditional graph node per
         iteration) on the same systems: the same iterates up to float32 rounding."""
         wp = get_warp()
         dev, n, A = self.device, self.model.vertex_count, self.A
-        r, u, w, p, s = self._cg_vectors
+        (r0, s0, w0), (r1, s1, w1), u, p = self._cg_buffers
         sums, scalars, inv, x = self._cg_sums, self._cg_scalars, self.inv_diag, self.direction
         wp.launch(ki._zero_2d, dim=sums.shape, inputs=[], outputs=[sums], device=dev)  # (a kernel node)
-        wp.launch(ki._cg_start, dim=n, inputs=[inv, self.rhs], outputs=[x, r, u, p, s, sums], device=dev)
+        wp.launch(ki._cg_start, dim=n, inputs=[inv, self.rhs], outputs=[x, r0, u, p, s0, sums], device=dev)
+        wp.launch(ki._cg_matvec, dim=n, inputs=[A.offsets, A.columns, A.values, u, 1], outputs=[w0, sums], device=dev)
+        bufs = ((r0, s0, w0), (r1, s1, w1))
         for k in range(self.linear_iterations):
-            wp.launch(ki._cg_matvec, dim=n, inputs=[A.offsets, A.columns, A.values, u, 2 * k + 1],
-                      outputs=[w, sums], device=dev)
-            wp.launch(ki._cg_update, dim=n, inputs=[inv, k, sums], outputs=[scalars, x, r, u, w, p, s], device=dev)
+            (ri, si, wi), (ro, so, wo) = bufs[k % 2], bufs[(k + 1) % 2]
+            wp.launch(ki._cg_iteration, dim=n,
+                      inputs=[A.offsets, A.columns, A.values, inv, k, int(k == self.linear_iterations - 1), sums,
+                              scalars, ri, si, wi],
+                      outputs=[x, p, u, ro, so, wo], device=dev)
 
     # ------------------------------------------------------------------------------ device work
     def _begin(self, state_in: State, control: Control, h: float) -> None:
@@ -443,10 +476,8 @@ class SolverImplicit(SolverBase):
     def _mass_scale(self, h: float) -> float:
         return (1.0 + self.model.damping_rate * h) / (h * h)
 
-    def _launch_energy(self, x, control: Control, h: float, with_grad: bool = True, trial: bool = False) -> None:
-        """Per-element energies into :attr:`energy` and the gradient into :attr:`grad` at x;
-        ``trial``: a line-search trial of the device method, where an inverted tet's energy is
-        1e30 (the trial is rejected, as the host line search rejects inverting steps)."""
+    def _launch_energy(self, x, control: Control, h: float, with_grad: bool = True) -> None:
+        """Per-element energies into :attr:`energy` and the gradient into :attr:`grad` at x."""
         wp = get_warp()
         m, dev = self.model, self.device
         ih = 1.0 / h
@@ -460,36 +491,30 @@ class SolverImplicit(SolverBase):
                   outputs=[ef, self.slots], device=dev)
         wp.launch(ki._tet_energy, dim=m.tet_count,
                   inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, self.c_tet, ih,
-                          2 * m.edge_count + 3 * m.face_count, int(trial), x],
+                          2 * m.edge_count + 3 * m.face_count, x],
                   outputs=[et, self.slots, self.c_tet_trial], device=dev)
         wp.launch(ki._node_energy, dim=m.vertex_count,
                   inputs=[m.vertex_mass, m.vertex_fixed, m.vertex_hold_stiffness, self._mass_scale(h), self.z,
                           self.targets, control.external_force, x],
                   outputs=[en, self.grad], device=dev)
-        for s in self.springs:
-            sp_ = s.springs
-            if s.axis:
-                wp.launch(ki._axis_spring_energy, dim=s.count,
-                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.axis, s.one_sided, x],
-                          outputs=[s.energy, s.grad], device=dev)
-            else:
-                wp.launch(ki._distance_spring_energy, dim=s.count,
-                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.rest_length, s.one_sided, x],
-                          outputs=[s.energy, s.grad], device=dev)
+        pool = self._pool
+        if pool.count:
+            wp.launch(ki._spring_energy, dim=pool.count, inputs=[pool.sets, pool.set_index, pool.local, x],
+                      outputs=[self._e_views[4], pool.grad], device=dev)
         if not with_grad:
             return
         wp.launch(ki._gather_free, dim=m.vertex_count,
                   inputs=[self.nodes, m.node_slot_start, m.node_slots, m.vertex_fixed, self.slots],
                   outputs=[self.grad], device=dev)
-        for s in self.springs:
-            wp.launch(ki._gather_free, dim=len(s.group_nodes),
-                      inputs=[s.group_nodes, s.group_start, s.group_order, m.vertex_fixed, s.grad],
+        if pool.count:
+            wp.launch(ki._gather_free, dim=len(pool.group_nodes),
+                      inputs=[pool.group_nodes, pool.group_start, pool.group_order, m.vertex_fixed, pool.grad],
                       outputs=[self.grad], device=dev)
 
     def _launch_total(self, slot: int) -> None:
         """The total energy, summed deterministically into ``totals[slot]``."""
         wp = get_warp()
-        wp.launch(ki._chunk_sums, dim=self._chunks, inputs=[self.energy, _CHUNK], outputs=[self.partial],
+        wp.launch(ki._chunk_sums, dim=self._chunks, inputs=[self.energy, self._chunk], outputs=[self.partial],
                   device=self.device)
         wp.launch(ki._final_sum, dim=1, inputs=[self.partial, slot], outputs=[self.totals], device=self.device)
 
@@ -516,17 +541,11 @@ class SolverImplicit(SolverBase):
         wp.launch(ki._node_hessian, dim=m.vertex_count,
                   inputs=[m.vertex_mass, m.vertex_hold_stiffness, self._mass_scale(h), int(o[3])],
                   outputs=[self.block_slots], device=dev)
-        for s, off in zip(self.springs, o[4:]):
-            sp_ = s.springs
-            if s.axis:
-                wp.launch(ki._axis_spring_hessian, dim=s.count,
-                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.axis, s.one_sided, slack, int(off), x],
-                          outputs=[self.block_slots], device=dev)
-            else:
-                wp.launch(ki._distance_spring_hessian, dim=s.count,
-                          inputs=[sp_.node, sp_.point, sp_.stiffness, sp_.rest_length, s.one_sided, slack, int(off),
-                                  x],
-                          outputs=[self.block_slots], device=dev)
+        pool = self._pool
+        if pool.count:
+            wp.launch(ki._spring_hessian, dim=pool.count,
+                      inputs=[pool.sets, pool.set_index, pool.local, slack, int(o[4]), x],
+                      outputs=[self.block_slots], device=dev)
         wp.launch(ki._gather_blocks, dim=self.block_count,
                   inputs=[self.block_start, self.block_order, self.block_row, self.block_col, m.vertex_fixed,
                           self.block_slots],
@@ -613,35 +632,43 @@ class SolverImplicit(SolverBase):
             st.refresh(self.model, self.x, control)
 
     def _launch_continue(self) -> None:
-        """The step's size, the loop's condition and the next iteration's Hessian slack."""
+        """The loop's condition and the next iteration's Hessian slack (from the step's size)."""
         wp = get_warp()
-        m = self.model
-        wp.launch(ki._step_size, dim=m.vertex_count, inputs=[m.vertex_fixed, self.direction, self.t_step],
-                  outputs=[self._largest_step], device=self.device)
         wp.launch(ki._newton_continue, dim=1, inputs=[self.tolerance, self.max_iterations, self.contact_slack, self.t_step],
                   outputs=[self._newton_count, self._largest_step, self._newton_cond, self._newton_total, self._slack],
                   device=self.device)
 
     def _pcg_iteration(self, control: Control, h: float) -> None:
-        """One Newton iteration at :attr:`x`: Hessian and gradient, CG, line search on the device."""
+        """One Newton iteration at :attr:`x`: Hessian and gradient, CG, line search on the device.
+
+        The line search evaluates its four trials in one pass (:func:`~.kernels_implicit._trial_energies`:
+        every element, node and spring at every trial), and every stage's springs are one pool:
+        with the CG's two launches per iteration, about 60 launches per Newton iteration, where
+        a launch per trial and per spring set took 140 (the level-0 frame is launch bound)."""
         wp = get_warp()
-        m, dev, n = self.model, self.device, self.model.vertex_count
+        m, dev, n, pool = self.model, self.device, self.model.vertex_count, self._pool
         self._launch_energy(self.x, control, h)
         self._launch_total(0)
         self._launch_hessian(self.x, h, self._slack)  # 0 (exact) unless the last line search failed
-        wp.launch(ki._invert_diagonal, dim=n, inputs=[self.diag_block, self.block_values], outputs=[self.inv_diag],
-                  device=dev)
-        wp.launch(ki._negate, dim=n, inputs=[self.grad], outputs=[self.rhs], device=dev)
+        wp.launch(ki._newton_system, dim=n, inputs=[self.diag_block, self.block_values, self.grad],
+                  outputs=[self.inv_diag, self.rhs], device=dev)
         self._launch_cg()
-        for j in range(_LINE_SEARCH_TRIALS):
-            wp.launch(ki._axpy_free, dim=n, inputs=[m.vertex_fixed, self.x, self.direction, self.t_trials[j]],
-                      outputs=[self.x_trial], device=dev)
-            self._launch_energy(self.x_trial, control, h, with_grad=False, trial=True)
-            self._launch_total(1 + j)
+        wp.launch(ki._trial_energies, dim=self.energy.shape[0],
+                  inputs=[m.edge_indices, m.edge_rest_length, m.edge_k0, m.edge_damping, self.c_edge,
+                          m.face_indices, m.face_rest_area, m.face_k, m.face_damping, self.c_face,
+                          m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, self.c_tet,
+                          m.vertex_mass, m.vertex_fixed, m.vertex_hold_stiffness, self._mass_scale(h), self.z,
+                          self.targets, control.external_force, pool.sets, pool.set_index, pool.local,
+                          1.0 / h, self.x, self.direction],
+                  outputs=[self.trial_energy], device=dev)
+        wp.launch(ki._chunk_sums_rows, dim=self.trial_partial.shape, inputs=[self.trial_energy, self._chunk],
+                  outputs=[self.trial_partial], device=dev)
+        wp.launch(ki._final_sums_rows, dim=_LINE_SEARCH_TRIALS, inputs=[self.trial_partial, 1],
+                  outputs=[self.totals], device=dev)
         wp.launch(ki._select_step, dim=1, inputs=[self.totals, _LINE_SEARCH_TRIALS], outputs=[self.t_step],
                   device=dev)
-        wp.launch(ki._axpy_free, dim=n, inputs=[m.vertex_fixed, self.x, self.direction, self.t_step],
-                  outputs=[self.x], device=dev)
+        wp.launch(ki._take_step, dim=n, inputs=[m.vertex_fixed, self.direction, self.t_step],
+                  outputs=[self.x, self._largest_step], device=dev)
 
     # ------------------------------------------------------------------------------ host methods
     def _host_eval(self, x64: np.ndarray, control: Control, h: float) -> tuple[float, np.ndarray, float]:

@@ -107,6 +107,82 @@ def _inertial_target(
     z_out[i] = (2.0 * x - prev_positions[i] + ah * w) / (1.0 + ah)
 
 
+# ---------------------------------------------------------------------------- element energies
+# One definition of every term's energy, shared by the energy kernels and the device line
+# search's trial kernel (so a trial at t = 0 would sum to the same total, bit for bit).
+@wp.func
+def _edge_e(xi: wp.vec3, xj: wp.vec3, d0: float, k0: float, dmp: float, c_start: float):
+    c = wp.length(xi - xj) / d0 - 1.0
+    dc = c - c_start
+    return k0 * c * c * (0.5 + 0.25 * c * c) + 0.5 * dmp * dc * dc
+
+
+@wp.func
+def _face_e(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, a0: float, k: float, dmp: float, c_start: float):
+    c = 0.5 * wp.length(wp.cross(xj - xi, xk - xi)) / a0 - 1.0
+    dc = c - c_start
+    return 0.5 * k * c * c + 0.5 * dmp * dc * dc
+
+
+@wp.func
+def _tet_c(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3, v0: float):
+    return wp.dot(xj - xi, wp.cross(xk - xi, xl - xi)) / 6.0 / v0 - 1.0
+
+
+@wp.func
+def _tet_e(c: float, k: float, dmp: float, c_start: float):
+    dc = c - c_start
+    return 0.5 * k * c * c + 0.5 * dmp * dc * dc
+
+
+@wp.func
+def _node_e(x: wp.vec3, mu: float, z: wp.vec3, kh: float, target: wp.vec3, f: wp.vec3):
+    dz = x - z
+    dh = x - target
+    return 0.5 * mu * wp.dot(dz, dz) + 0.5 * kh * wp.dot(dh, dh) - wp.dot(f, x)
+
+
+# Every stage's springs in one launch: a SpringSet per stage set (its arrays, read in place, so the
+# stages keep filling their own buffers), spring k of the pool being spring spring_local[k] of set
+# spring_set[k]. Unused arrays (rest_length of axis springs, axis of distance springs) are dummies.
+@wp.struct
+class SpringSet:
+    node: wp.array(dtype=wp.int32)
+    point: wp.array(dtype=wp.vec3)
+    stiffness: wp.array(dtype=float)
+    rest_length: wp.array(dtype=float)
+    axis: wp.array(dtype=wp.vec3)
+    is_axis: int
+    one_sided: int
+
+
+# Distance springs (muscles): E = k/2 (|p - x| - l0)^2, dE/dx = k (l - l0) (x - p) / l.
+# One-sided (contact, pushing out of the ball of radius l0 about p): the same with
+# s = min(0, l - l0), E = k/2 s^2, dE/dx = k s (x - p) / l.
+# Axis springs (sliding supports): E = k/2 ((x - p) . a)^2, dE/dx = k ((x - p) . a) a.
+# One-sided (contact, the half-space (x - p) . a >= 0): s = min(0, (x - p) . a), E = k/2 s^2,
+# dE/dx = k s a.
+@wp.func
+def _spring_e_grad(s: SpringSet, k: int, x: wp.vec3):
+    r = x - s.point[k]
+    g = wp.vec3(0.0)
+    st = float(0.0)
+    if s.is_axis != 0:
+        a = s.axis[k]
+        st = wp.dot(r, a)
+        if s.one_sided != 0:
+            st = wp.min(st, 0.0)
+        g = s.stiffness[k] * st * a
+    else:
+        l = wp.length(r)
+        st = l - s.rest_length[k]
+        if s.one_sided != 0:
+            st = wp.min(st, 0.0)
+        if l > 0.0:
+            g = s.stiffness[k] * st / l * r
+    return 0.5 * s.stiffness[k] * st * st, g
+
+
 # ---------------------------------------------------------------------------- energy, gradient
 # Distance (Eq. 6.4.4 with k(C) of Eq. 6.4.6): E = k0 (C^2/2 + C^4/4) + d/(2h) (C - C_n)^2,
 # dE/dC = k0 (C + C^3) + d/h (C - C_n), dC/dx_i = n / D0 = -dC/dx_j.
@@ -130,7 +206,8 @@ def _edge_energy(
     dc = c - edge_c_start[e]
     k0 = edge_k0[e]
     dmp = edge_damping[e] * inv_h
-    energy_out[e] = k0 * c * c * (0.5 + 0.25 * c * c) + 0.5 * dmp * dc * dc
+    energy_out[e] = _edge_e(positions[edge_indices[e][0]], positions[edge_indices[e][1]], d0, k0, dmp,
+                            edge_c_start[e])
     g = wp.vec3(0.0)
     if l > 0.0:
         g = (k0 * (c + c * c * c) + dmp * dc) / (d0 * l) * d
@@ -164,7 +241,8 @@ def _face_energy(
     c = 0.5 * nl / a0 - 1.0
     dc = c - face_c_start[t]
     dmp = face_damping[t] * inv_h
-    energy_out[t] = 0.5 * face_k[t] * c * c + 0.5 * dmp * dc * dc
+    energy_out[t] = _face_e(xi, positions[face_indices[t][1]], positions[face_indices[t][2]], a0, face_k[t], dmp,
+                            face_c_start[t])
     gj = wp.vec3(0.0)
     gk = wp.vec3(0.0)
     if nl > 0.0:
@@ -187,7 +265,6 @@ def _tet_energy(
     tet_c_start: wp.array(dtype=float),
     inv_h: float,
     slot_offset: int,
-    reject_inverted: int,
     positions: wp.array(dtype=wp.vec3),
     energy_out: wp.array(dtype=float),
     slots_out: wp.array(dtype=wp.vec3),
@@ -200,13 +277,11 @@ def _tet_energy(
     e2 = positions[tet_indices[t][2]] - xi
     e3 = positions[tet_indices[t][3]] - xi
     v0 = tet_rest_volume[t]
-    c = wp.dot(e1, wp.cross(e2, e3)) / 6.0 / v0 - 1.0
+    c = _tet_c(xi, positions[tet_indices[t][1]], positions[tet_indices[t][2]], positions[tet_indices[t][3]], v0)
     c_out[t] = c  # C <= -1: inverted (the host line search rejects such a step)
     dc = c - tet_c_start[t]
     dmp = tet_damping[t] * inv_h
-    energy_out[t] = 0.5 * tet_k[t] * c * c + 0.5 * dmp * dc * dc
-    if reject_inverted != 0 and c <= -1.0:  # the device line search's trials: an inverted tet
-        energy_out[t] = 1.0e30  # makes the trial's energy unacceptable
+    energy_out[t] = _tet_e(c, tet_k[t], dmp, tet_c_start[t])
     s = (tet_k[t] * c + dmp * dc) / (6.0 * v0)
     gj = s * wp.cross(e2, e3)
     gk = s * wp.cross(e3, e1)
@@ -244,58 +319,26 @@ def _node_energy(
     kh = vertex_hold_stiffness[i]
     dh = x - targets[i]
     f = external_force[i]
-    energy_out[i] = 0.5 * mu * wp.dot(dz, dz) + 0.5 * kh * wp.dot(dh, dh) - wp.dot(f, x)
+    energy_out[i] = _node_e(x, mu, z[i], kh, targets[i], f)
     grad_out[i] = mu * dz + kh * dh - f
 
 
-# Distance springs (muscles): E = k/2 (|p - x| - l0)^2, dE/dx = k (l - l0) (x - p) / l.
-# One-sided (contact, pushing out of the ball of radius l0 about p): the same with
-# s = min(0, l - l0), E = k/2 s^2, dE/dx = k s (x - p) / l.
+# Every spring of every stage: energy and gradient (one entry each; gathered per node by _gather_free).
 @wp.kernel
-def _distance_spring_energy(
-    node: wp.array(dtype=wp.int32),
-    point: wp.array(dtype=wp.vec3),
-    stiffness: wp.array(dtype=float),
-    rest_length: wp.array(dtype=float),
-    one_sided: int,
+def _spring_energy(
+    springs: wp.array(dtype=SpringSet),
+    spring_set: wp.array(dtype=wp.int32),
+    spring_local: wp.array(dtype=wp.int32),
     positions: wp.array(dtype=wp.vec3),
     energy_out: wp.array(dtype=float),
     grad_out: wp.array(dtype=wp.vec3),
 ):
     k = wp.tid()
-    r = positions[node[k]] - point[k]
-    l = wp.length(r)
-    st = l - rest_length[k]
-    if one_sided != 0:
-        st = wp.min(st, 0.0)
-    energy_out[k] = 0.5 * stiffness[k] * st * st
-    g = wp.vec3(0.0)
-    if l > 0.0:
-        g = stiffness[k] * st / l * r
+    s = springs[spring_set[k]]
+    j = spring_local[k]
+    e, g = _spring_e_grad(s, j, positions[s.node[j]])
+    energy_out[k] = e
     grad_out[k] = g
-
-
-# Axis springs (sliding supports): E = k/2 ((x - p) . a)^2, dE/dx = k ((x - p) . a) a.
-# One-sided (contact, the half-space (x - p) . a >= 0): s = min(0, (x - p) . a), E = k/2 s^2,
-# dE/dx = k s a.
-@wp.kernel
-def _axis_spring_energy(
-    node: wp.array(dtype=wp.int32),
-    point: wp.array(dtype=wp.vec3),
-    stiffness: wp.array(dtype=float),
-    axis: wp.array(dtype=wp.vec3),
-    one_sided: int,
-    positions: wp.array(dtype=wp.vec3),
-    energy_out: wp.array(dtype=float),
-    grad_out: wp.array(dtype=wp.vec3),
-):
-    k = wp.tid()
-    a = axis[k]
-    s = wp.dot(positions[node[k]] - point[k], a)
-    if one_sided != 0:
-        s = wp.min(s, 0.0)
-    energy_out[k] = 0.5 * stiffness[k] * s * s
-    grad_out[k] = stiffness[k] * s * a
 
 
 # Gather per node for springs whose nodes may repeat: node[k] takes slots order[start[k]] ..
@@ -333,8 +376,9 @@ def _zero_fixed(vertex_fixed: wp.array(dtype=wp.int32), v: wp.array(dtype=wp.vec
 #             blocks (i,i) = (j,j) = H, (i,j) = (j,i) = -H;
 #   area, volume: Gauss-Newton (k + d/h) g_a g_b^T with g = grad C (the neglected k C grad^2 C
 #             vanishes at rest);
-# each written into the element's block slots: edges 4 (ii, ij, ji, jj), faces 9, tets 16,
-# corner-major (a, b) -> a * c + b.
+# each written into the element's block slots: edges 4 (ii, ij, ji, jj), faces 9, tets 16, corner
+# pair (a, b) -> p = a * c + b, pair-major: slot offset + p * count + element (neighbouring threads
+# write neighbouring blocks: coalesced).
 @wp.kernel
 def _edge_hessian(
     edge_indices: wp.array(dtype=wp.vec2i),
@@ -362,10 +406,11 @@ def _edge_hessian(
     if l > 0.0:
         b = wp.max(k0 * (c + c * c * c) + dmp * (c - edge_c_start[e]), 0.0) / (d0 * l)
     H = a * nn + b * (wp.identity(n=3, dtype=float) - nn)
-    blocks_out[4 * e] = H
-    blocks_out[4 * e + 1] = -H
-    blocks_out[4 * e + 2] = -H
-    blocks_out[4 * e + 3] = H
+    ne = edge_indices.shape[0]
+    blocks_out[e] = H
+    blocks_out[ne + e] = -H
+    blocks_out[2 * ne + e] = -H
+    blocks_out[3 * ne + e] = H
 
 
 @wp.kernel
@@ -380,7 +425,8 @@ def _face_hessian(
     blocks_out: wp.array(dtype=wp.mat33),
 ):
     t = wp.tid()
-    o = block_offset + 9 * t
+    nf = face_indices.shape[0]
+    o = block_offset + t
     xi = positions[face_indices[t][0]]
     e1 = positions[face_indices[t][1]] - xi
     e2 = positions[face_indices[t][2]] - xi
@@ -395,15 +441,15 @@ def _face_hessian(
     g0 = -(g1 + g2)
     a0 = face_rest_area[t]
     s = (face_k[t] + face_damping[t] * inv_h) / (a0 * a0)
-    blocks_out[o + 0] = s * _outer(g0, g0)
-    blocks_out[o + 1] = s * _outer(g0, g1)
-    blocks_out[o + 2] = s * _outer(g0, g2)
-    blocks_out[o + 3] = s * _outer(g1, g0)
-    blocks_out[o + 4] = s * _outer(g1, g1)
-    blocks_out[o + 5] = s * _outer(g1, g2)
-    blocks_out[o + 6] = s * _outer(g2, g0)
-    blocks_out[o + 7] = s * _outer(g2, g1)
-    blocks_out[o + 8] = s * _outer(g2, g2)
+    blocks_out[o] = s * _outer(g0, g0)
+    blocks_out[o + nf] = s * _outer(g0, g1)
+    blocks_out[o + 2 * nf] = s * _outer(g0, g2)
+    blocks_out[o + 3 * nf] = s * _outer(g1, g0)
+    blocks_out[o + 4 * nf] = s * _outer(g1, g1)
+    blocks_out[o + 5 * nf] = s * _outer(g1, g2)
+    blocks_out[o + 6 * nf] = s * _outer(g2, g0)
+    blocks_out[o + 7 * nf] = s * _outer(g2, g1)
+    blocks_out[o + 8 * nf] = s * _outer(g2, g2)
 
 
 @wp.kernel
@@ -418,7 +464,8 @@ def _tet_hessian(
     blocks_out: wp.array(dtype=wp.mat33),
 ):
     t = wp.tid()
-    o = block_offset + 16 * t
+    nt = tet_indices.shape[0]
+    o = block_offset + t
     xi = positions[tet_indices[t][0]]
     e1 = positions[tet_indices[t][1]] - xi
     e2 = positions[tet_indices[t][2]] - xi
@@ -432,7 +479,7 @@ def _tet_hessian(
     for a in range(4):
         ga = _pick4(g0, g1, g2, g3, a)
         for b in range(4):
-            blocks_out[o + 4 * a + b] = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
+            blocks_out[o + (4 * a + b) * nt] = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
 
 
 # Diagonal blocks of every node: (mu + k_h) I; fixed nodes: the identity (their DOFs are not
@@ -457,48 +504,37 @@ def _node_hessian(
 # about to close is in the preconditioner; the device method after a failed line search); the
 # exact Hessian has slack = 0. ``slack`` is a one-element array so the device can change it.
 @wp.kernel
-def _distance_spring_hessian(
-    node: wp.array(dtype=wp.int32),
-    point: wp.array(dtype=wp.vec3),
-    stiffness: wp.array(dtype=float),
-    rest_length: wp.array(dtype=float),
-    one_sided: int,
+def _spring_hessian(
+    springs: wp.array(dtype=SpringSet),
+    spring_set: wp.array(dtype=wp.int32),
+    spring_local: wp.array(dtype=wp.int32),
     slack: wp.array(dtype=float),
     block_offset: int,
     positions: wp.array(dtype=wp.vec3),
     blocks_out: wp.array(dtype=wp.mat33),
 ):
     k = wp.tid()
-    r = positions[node[k]] - point[k]
-    l = wp.length(r)
-    H = stiffness[k] * wp.identity(n=3, dtype=float)
-    if l > 0.0:
-        n = r / l
-        nn = _outer(n, n)
-        H = stiffness[k] * (nn + wp.max(1.0 - rest_length[k] / l, 0.0) * (wp.identity(n=3, dtype=float) - nn))
-        if one_sided != 0:
-            H = stiffness[k] * nn
-    if one_sided != 0 and l - rest_length[k] >= slack[0]:
-        H = wp.mat33(0.0)
-    blocks_out[block_offset + k] = H
-
-
-@wp.kernel
-def _axis_spring_hessian(
-    node: wp.array(dtype=wp.int32),
-    point: wp.array(dtype=wp.vec3),
-    stiffness: wp.array(dtype=float),
-    axis: wp.array(dtype=wp.vec3),
-    one_sided: int,
-    slack: wp.array(dtype=float),
-    block_offset: int,
-    positions: wp.array(dtype=wp.vec3),
-    blocks_out: wp.array(dtype=wp.mat33),
-):
-    k = wp.tid()
-    a = axis[k]
-    H = stiffness[k] * _outer(a, a)
-    if one_sided != 0 and wp.dot(positions[node[k]] - point[k], a) >= slack[0]:
+    s = springs[spring_set[k]]
+    j = spring_local[k]
+    r = positions[s.node[j]] - s.point[j]
+    kj = s.stiffness[j]
+    H = wp.mat33(0.0)
+    gap = float(0.0)  # how far a one-sided spring is from closing [m]
+    if s.is_axis != 0:
+        a = s.axis[j]
+        H = kj * _outer(a, a)
+        gap = wp.dot(r, a)
+    else:
+        l = wp.length(r)
+        H = kj * wp.identity(n=3, dtype=float)
+        if l > 0.0:
+            n = r / l
+            nn = _outer(n, n)
+            H = kj * (nn + wp.max(1.0 - s.rest_length[j] / l, 0.0) * (wp.identity(n=3, dtype=float) - nn))
+            if s.one_sided != 0:
+                H = kj * nn
+        gap = l - s.rest_length[j]
+    if s.one_sided != 0 and gap >= slack[0]:
         H = wp.mat33(0.0)
     blocks_out[block_offset + k] = H
 
@@ -531,22 +567,6 @@ def _gather_blocks(
 
 
 # ---------------------------------------------------------------------------- vector updates
-# x_out = x + t * d on the free nodes (fixed nodes stay on their targets).
-@wp.kernel
-def _axpy_free(
-    vertex_fixed: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3),
-    d: wp.array(dtype=wp.vec3),
-    t: wp.array(dtype=float),
-    x_out: wp.array(dtype=wp.vec3),
-):
-    i = wp.tid()
-    if vertex_fixed[i] != 0:
-        x_out[i] = x[i]
-    else:
-        x_out[i] = x[i] + t[0] * d[i]
-
-
 # Start of a step: fixed nodes on their targets, free nodes at x_n + (x_n - x_prev) * extrapolate
 # (the previous motion continued: a good first guess of a slowly changing quasi-static shape).
 @wp.kernel
@@ -596,7 +616,9 @@ def _guess_fallback(
 # ---------------------------------------------------------------------------- reductions
 # Deterministic sum of an energy array: each thread adds a fixed chunk in order (float64), then
 # one thread adds the chunks in order and writes total_out[slot]. No atomics: the same sum on
-# every run and device.
+# every run and device. The solver takes chunks of about sqrt(n) entries, so neither pass has a
+# long serial chain (measured on an H100 at level 2: threads striding over the whole array, 512
+# of them, took 10x as long as contiguous chunks: every load a cache miss).
 @wp.kernel
 def _chunk_sums(values: wp.array(dtype=float), chunk: int, partial_out: wp.array(dtype=wp.float64)):
     c = wp.tid()
@@ -613,6 +635,133 @@ def _final_sum(partial: wp.array(dtype=wp.float64), slot: int, total_out: wp.arr
     for i in range(partial.shape[0]):
         s = s + partial[i]
     total_out[slot] = s
+
+
+# Rows of a 2-D energy array (the line search's trials) summed the same way: row j into
+# total_out[first_slot + j].
+@wp.kernel
+def _chunk_sums_rows(values: wp.array2d(dtype=float), chunk: int, partial_out: wp.array2d(dtype=wp.float64)):
+    j, c = wp.tid()
+    n = values.shape[1]
+    s = wp.float64(0.0)
+    for i in range(c * chunk, wp.min((c + 1) * chunk, n)):
+        s = s + wp.float64(values[j, i])
+    partial_out[j, c] = s
+
+
+@wp.kernel
+def _final_sums_rows(partial: wp.array2d(dtype=wp.float64), first_slot: int, total_out: wp.array(dtype=wp.float64)):
+    j = wp.tid()
+    s = wp.float64(0.0)
+    for i in range(partial.shape[1]):
+        s = s + partial[j, i]
+    total_out[first_slot + j] = s
+
+
+# ---------------------------------------------------------------------------- device line search
+# A trial position: x_i + t d_i on a free node (the arithmetic of _axpy_free / _take_step, so the
+# step taken is the trial evaluated), x_i on a fixed one.
+@wp.func
+def _trial_x(x: wp.array(dtype=wp.vec3), d: wp.array(dtype=wp.vec3), vertex_fixed: wp.array(dtype=wp.int32),
+             i: int, t: float):
+    if vertex_fixed[i] != 0:
+        return x[i]
+    return x[i] + t * d[i]
+
+
+# The energies of every line-search trial t_j = 2^-j (row j of energy_out) in one pass: entry i is
+# an edge, face, tet, node or spring in the layout of the solver's energy array (i < E edges, then
+# F faces, T tets, N nodes, the pooled springs), the same terms as the energy kernels. A trial that
+# inverts a tet (C <= -1) gets energy 1e30 in that tet's entry: never accepted, as the host line
+# search rejects inverting steps.
+@wp.kernel
+def _trial_energies(
+    edge_indices: wp.array(dtype=wp.vec2i),
+    edge_rest_length: wp.array(dtype=float),
+    edge_k0: wp.array(dtype=float),
+    edge_damping: wp.array(dtype=float),
+    edge_c_start: wp.array(dtype=float),
+    face_indices: wp.array(dtype=wp.vec3i),
+    face_rest_area: wp.array(dtype=float),
+    face_k: wp.array(dtype=float),
+    face_damping: wp.array(dtype=float),
+    face_c_start: wp.array(dtype=float),
+    tet_indices: wp.array(dtype=wp.vec4i),
+    tet_rest_volume: wp.array(dtype=float),
+    tet_k: wp.array(dtype=float),
+    tet_damping: wp.array(dtype=float),
+    tet_c_start: wp.array(dtype=float),
+    vertex_mass: wp.array(dtype=float),
+    vertex_fixed: wp.array(dtype=wp.int32),
+    vertex_hold_stiffness: wp.array(dtype=float),
+    mass_scale: float,
+    z: wp.array(dtype=wp.vec3),
+    targets: wp.array(dtype=wp.vec3),
+    external_force: wp.array(dtype=wp.vec3),
+    springs: wp.array(dtype=SpringSet),
+    spring_set: wp.array(dtype=wp.int32),
+    spring_local: wp.array(dtype=wp.int32),
+    inv_h: float,
+    x: wp.array(dtype=wp.vec3),
+    d: wp.array(dtype=wp.vec3),
+    energy_out: wp.array2d(dtype=float),
+):
+    i = wp.tid()
+    trials = energy_out.shape[0]
+    ne = edge_indices.shape[0]
+    nf = face_indices.shape[0]
+    nt = tet_indices.shape[0]
+    nv = vertex_mass.shape[0]
+    t = float(1.0)
+    if i < ne:
+        a = edge_indices[i][0]
+        b = edge_indices[i][1]
+        dmp = edge_damping[i] * inv_h
+        for j in range(trials):
+            energy_out[j, i] = _edge_e(_trial_x(x, d, vertex_fixed, a, t), _trial_x(x, d, vertex_fixed, b, t),
+                                       edge_rest_length[i], edge_k0[i], dmp, edge_c_start[i])
+            t = t * 0.5
+    elif i < ne + nf:
+        f = i - ne
+        a = face_indices[f][0]
+        b = face_indices[f][1]
+        fc = face_indices[f][2]
+        dmp = face_damping[f] * inv_h
+        for j in range(trials):
+            energy_out[j, i] = _face_e(_trial_x(x, d, vertex_fixed, a, t), _trial_x(x, d, vertex_fixed, b, t),
+                                       _trial_x(x, d, vertex_fixed, fc, t), face_rest_area[f], face_k[f], dmp,
+                                       face_c_start[f])
+            t = t * 0.5
+    elif i < ne + nf + nt:
+        q = i - ne - nf
+        tet = tet_indices[q]
+        dmp = tet_damping[q] * inv_h
+        for j in range(trials):
+            c = _tet_c(_trial_x(x, d, vertex_fixed, tet[0], t), _trial_x(x, d, vertex_fixed, tet[1], t),
+                       _trial_x(x, d, vertex_fixed, tet[2], t), _trial_x(x, d, vertex_fixed, tet[3], t),
+                       tet_rest_volume[q])
+            e = _tet_e(c, tet_k[q], dmp, tet_c_start[q])
+            if c <= -1.0:
+                e = 1.0e30
+            energy_out[j, i] = e
+            t = t * 0.5
+    elif i < ne + nf + nt + nv:
+        v = i - ne - nf - nt
+        for j in range(trials):
+            e = float(0.0)
+            if vertex_fixed[v] == 0:
+                e = _node_e(_trial_x(x, d, vertex_fixed, v, t), vertex_mass[v] * mass_scale, z[v],
+                            vertex_hold_stiffness[v], targets[v], external_force[v])
+            energy_out[j, i] = e
+            t = t * 0.5
+    else:
+        k = i - ne - nf - nt - nv
+        s = springs[spring_set[k]]
+        l = spring_local[k]
+        for j in range(trials):
+            e, g = _spring_e_grad(s, l, _trial_x(x, d, vertex_fixed, s.node[l], t))
+            energy_out[j, i] = e
+            t = t * 0.5
 
 
 # Backtracking on the device: trials t = 1, 1/2, 1/4, 1/8 have energies totals[1..4]; take the
@@ -641,23 +790,19 @@ def _select_step(totals: wp.array(dtype=wp.float64), trials: int, t_out: wp.arra
         t_out[0] = t
 
 
-# Block-Jacobi preconditioner: the inverse of every 3 x 3 diagonal block (block index diag[i]);
-# a singular block falls back to the identity.
+# The Newton system's block-Jacobi preconditioner and right-hand side in one launch: the inverse
+# of every 3 x 3 diagonal block (block index diag[i]; a singular block falls back to the
+# identity) and rhs = -grad.
 @wp.kernel
-def _invert_diagonal(diag: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.mat33), inv_out: wp.array(dtype=wp.mat33)):
+def _newton_system(diag: wp.array(dtype=wp.int32), values: wp.array(dtype=wp.mat33), grad: wp.array(dtype=wp.vec3),
+                   inv_out: wp.array(dtype=wp.mat33), rhs_out: wp.array(dtype=wp.vec3)):
     i = wp.tid()
     B = values[diag[i]]
-    det = wp.determinant(B)
-    if wp.abs(det) > 1.0e-30:
+    if wp.abs(wp.determinant(B)) > 1.0e-30:
         inv_out[i] = wp.inverse(B)
     else:
         inv_out[i] = wp.identity(n=3, dtype=float)
-
-
-@wp.kernel
-def _negate(v: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
-    i = wp.tid()
-    out[i] = -v[i]
+    rhs_out[i] = -grad[i]
 
 
 @wp.kernel
@@ -666,16 +811,17 @@ def _advance_counter(counter: wp.array(dtype=wp.int32)):
 
 
 # ------------------------------------------------------------------------------------------------
-# Block-Jacobi preconditioned conjugate gradients in two launches per iteration (the device
+# Block-Jacobi preconditioned conjugate gradients in one launch per iteration (the device
 # method's linear solve; :meth:`.implicit.SolverImplicit._launch_cg`). Chronopoulos & Gear's
 # formulation ("s-step iterative methods for symmetric linear systems", J. Comput. Appl. Math. 25,
 # 1989) computes both inner products of an iteration, (r, u) and (A u, u) with u = P r, in the same
-# phase, and carries s = A p by recurrence, so one iteration is one vector update and one
+# phase, and carries s = A p by recurrence, so an iteration is one vector update and one
 # matrix-vector product, each also adding its inner product into CG_SLOTS partial sums (float64
-# atomics spread over slots so that no single address takes every thread's add). Each launch of
-# the update recomputes alpha and beta from the sums (every thread the same arithmetic); thread 0
-# also records them. The iteration count is fixed (no host round trip: capturable in a CUDA graph);
-# a breakdown or a residual below 1e-12 of the first one freezes the remaining iterations.
+# atomics spread over slots so that no single address takes every thread's add); _cg_iteration
+# fuses the two into one launch (see there). Each launch recomputes alpha and beta from the sums
+# (every thread the same arithmetic); thread 0 also records them. The iteration count is fixed
+# (no host round trip: capturable in a CUDA graph); a breakdown or a residual below 1e-12 of the
+# first one freezes the remaining iterations.
 CG_SLOTS = 32
 
 
@@ -734,22 +880,10 @@ def _cg_matvec(
     wp.atomic_add(sums, row, i % CG_SLOTS, wp.float64(wp.dot(acc, u[i])))
 
 
-# Iteration k: sums rows 2k = (r_k, u_k), 2k + 1 = (A u_k, u_k); scalars[k] = (alpha_k, gamma_k,
-# active). p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = P r, (r, u) into row 2k + 2.
-@wp.kernel
-def _cg_update(
-    inv: wp.array(dtype=wp.mat33),
-    it: int,
-    sums: wp.array2d(dtype=wp.float64),
-    scalars: wp.array2d(dtype=wp.float64),
-    x: wp.array(dtype=wp.vec3),
-    r: wp.array(dtype=wp.vec3),
-    u: wp.array(dtype=wp.vec3),
-    w: wp.array(dtype=wp.vec3),
-    p: wp.array(dtype=wp.vec3),
-    s: wp.array(dtype=wp.vec3),
-):
-    i = wp.tid()
+# alpha_k, beta_k of iteration k from sums rows 2k = (r_k, u_k) and 2k + 1 = (A u_k, u_k), and whether
+# the iteration is active (not after a breakdown or a residual below 1e-12 of the first).
+@wp.func
+def _cg_coefficients(sums: wp.array2d(dtype=wp.float64), scalars: wp.array2d(dtype=wp.float64), it: int):
     gamma = _slot_total(sums, 2 * it)
     delta = _slot_total(sums, 2 * it + 1)
     alpha = wp.float64(0.0)
@@ -773,6 +907,39 @@ def _cg_update(
             alpha = gamma / den
         else:
             active = 0
+    return alpha, beta, gamma, active
+
+
+# One whole CG iteration k in one launch. Its vector update p = u + beta p, s = w + beta s,
+# x += alpha p, r -= alpha s, u = P r only needs a node's own entries, and so does the next
+# product's u at a neighbour j: u_j = P_j (r_j - alpha (w_j + beta s_j)) from the iteration's
+# input. So each thread updates its node and also forms A u for its row from its neighbours'
+# inputs (recomputed, not read back: r, s, w are double-buffered, *_in read, *_out written; x, p
+# and u are only ever read by their own thread). (r, u) goes into sums row 2k + 2 and (A u, u)
+# into row 2k + 3; the last iteration (``last``) skips the product. scalars[k] = (alpha_k,
+# gamma_k, active).
+@wp.kernel
+def _cg_iteration(
+    offsets: wp.array(dtype=wp.int32),
+    columns: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=wp.mat33),
+    inv: wp.array(dtype=wp.mat33),
+    it: int,
+    last: int,
+    sums: wp.array2d(dtype=wp.float64),
+    scalars: wp.array2d(dtype=wp.float64),
+    r_in: wp.array(dtype=wp.vec3),
+    s_in: wp.array(dtype=wp.vec3),
+    w_in: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=wp.vec3),
+    p: wp.array(dtype=wp.vec3),
+    u: wp.array(dtype=wp.vec3),
+    r_out: wp.array(dtype=wp.vec3),
+    s_out: wp.array(dtype=wp.vec3),
+    w_out: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    alpha, beta, gamma, active = _cg_coefficients(sums, scalars, it)
     if i == 0:
         scalars[it, 0] = alpha
         scalars[it, 1] = gamma
@@ -782,33 +949,45 @@ def _cg_update(
     a = float(alpha)
     bt = float(beta)
     pi = u[i] + bt * p[i]
-    si = w[i] + bt * s[i]
+    si = w_in[i] + bt * s_in[i]
     p[i] = pi
-    s[i] = si
     x[i] = x[i] + a * pi
-    ri = r[i] - a * si
-    r[i] = ri
+    ri = r_in[i] - a * si
     ui = inv[i] * ri
+    r_out[i] = ri
+    s_out[i] = si
     u[i] = ui
     wp.atomic_add(sums, 2 * it + 2, i % CG_SLOTS, wp.float64(wp.dot(ri, ui)))
+    if last != 0:
+        return
+    acc = wp.vec3(0.0)
+    for k in range(offsets[i], offsets[i + 1]):
+        j = columns[k]
+        acc += values[k] * (inv[j] * (r_in[j] - a * (w_in[j] + bt * s_in[j])))
+    w_out[i] = acc
+    wp.atomic_add(sums, 2 * it + 3, i % CG_SLOTS, wp.float64(wp.dot(acc, ui)))
 
 
-# Convergence of the device method's adaptive Newton loop: the largest step of a free node this
-# iteration (t * |d_i|), then the loop's condition (continue while above tolerance, at most
-# max_iterations), decided on the device so the loop can be a conditional node of a CUDA graph.
+# The line search's step: x += t d on the free nodes, and the largest step (t |d_i|) and
+# direction (|d_i|) of a free node for the convergence test (largest reset by _newton_continue).
 @wp.kernel
-def _step_size(
+def _take_step(
     vertex_fixed: wp.array(dtype=wp.int32),
     d: wp.array(dtype=wp.vec3),
     t: wp.array(dtype=float),
+    x: wp.array(dtype=wp.vec3),
     largest: wp.array(dtype=float),
 ):
     i = wp.tid()
     if vertex_fixed[i] == 0:
+        x[i] = x[i] + t[0] * d[i]
         wp.atomic_max(largest, 0, t[0] * wp.length(d[i]))
         wp.atomic_max(largest, 1, wp.length(d[i]))
 
 
+# Convergence of the device method's adaptive Newton loop: from the largest step of a free node
+# this iteration (t * |d_i|, _take_step), the loop's condition (continue while above tolerance, at
+# most max_iterations), decided on the device so the loop can be a conditional node of a CUDA graph.
 @wp.kernel
 def _newton_start(
     counter: wp.array(dtype=wp.int32),
