@@ -54,12 +54,15 @@ Methods (``method=``):
   with the springs within ``contact_slack`` of closing in the Hessian, and never taken as
   convergence. The first guess continues the previous step's motion (``extrapolate`` 0.5).
   Measured at level 0 against the fully converged steps (``benchmarks/solver_accuracy.py --parts
-  pcg``; every FDP of the five Table 6.4 presets during attack, hold and release): within
-  0.02-0.25 mm at 3.5-6.3 Newton iterations per frame. ``iterations=k`` gives a fixed count
-  instead (the interactive mode): 3 stay within 0.31 mm, 2 and 1 miss the 0.5 mm on some presets
-  (0.6 and 1.9 mm). Before the exact Hessian, its retry and the extrapolated guess, the former
-  fixed 3 x 50 missed by up to 2.2 mm (a lid sliding over the eyeball took steps too short to
-  follow it).
+  pcg``; every FDP of the five Table 6.4 presets during attack, hold and release; on an H100):
+  within 0.03-0.25 mm at 3.8-6.9 Newton iterations per frame. ``iterations=k`` gives a fixed count
+  instead (the interactive mode): 3 stay within 0.32 mm, 2 and 1 miss the 0.5 mm on some presets
+  (0.6 and 1.9 mm, on the CPU). A level-0 frame is launch bound (H100: 319 frames/s adaptive, 443
+  with 3 iterations; ``benchmarks/physics_steps.py``): the four line-search trials are one pass
+  (``_trial_energies``), every stage's springs one pooled launch (``_SpringPool``), a CG iteration
+  one launch, so a Newton iteration is 36 launches where it was ~140 (179 frames/s). Before the
+  exact Hessian, its retry and the extrapolated guess, the former fixed 3 x 50 missed by up to
+  2.2 mm (a lid sliding over the eyeball took steps too short to follow it).
 
 The muscle springs' fibre cosine of Eq. 6.4.1 is taken at the step's start and held over the
 solve (see ``kernels_muscle._muscle_springs``): within the solve a conservative spring
@@ -642,9 +645,9 @@ class SolverImplicit(SolverBase):
         """One Newton iteration at :attr:`x`: Hessian and gradient, CG, line search on the device.
 
         The line search evaluates its four trials in one pass (:func:`~.kernels_implicit._trial_energies`:
-        every element, node and spring at every trial), and every stage's springs are one pool:
-        with the CG's two launches per iteration, about 60 launches per Newton iteration, where
-        a launch per trial and per spring set took 140 (the level-0 frame is launch bound)."""
+        every element, node and spring at every trial), every stage's springs are one pool and
+        a CG iteration is one launch: 36 launches per Newton iteration, where a launch per trial,
+        per spring set and per CG phase took ~140 (the level-0 frame is launch bound)."""
         wp = get_warp()
         m, dev, n, pool = self.model, self.device, self.model.vertex_count, self._pool
         self._launch_energy(self.x, control, h)
