@@ -406,7 +406,8 @@ def test_the_default_head_keeps_both_lids_of_each_eye_to_their_side(default_rig)
 def test_a_gliding_lid_node_is_held_on_its_sphere_by_the_verlet_forces():
     """The inner lid sheet over the eyeball glides on it: a gliding node lifted off its sphere
     (its rest distance from the centre) is pulled back with the glide stiffness, one pushed in
-    is pushed out by that and its one-sided contact; a node with contact only is free to lift."""
+    is pushed out by that, its one-sided contact and its floor on the sphere (the contact's
+    stiffness); a node with contact only is free to lift."""
     from facewarp.physics import ContactGeometry
 
     V, model, mid, centre = eyeball_case()
@@ -431,10 +432,11 @@ def test_a_gliding_lid_node_is_held_on_its_sphere_by_the_verlet_forces():
     state.prev_positions.assign(X.astype(np.float32))
     dF = (SolverVerlet(model, stages=[stage]).compute_forces(state, control, 1e-4).numpy()
           - SolverVerlet(model).compute_forces(state, control, 1e-4).numpy())
-    # reference: -kg s n (gliding, two-sided, s = move) and -k min(0, |x - c| - r_c) n (contact;
-    # r_c: the rest distance less EYE_REST_SLACK_M 5e-5 m, or r + gap 2.5e-4 m)
+    # reference: -kg s n (gliding, two-sided, s = move), -k min(0, |x - c| - r_c) n (contact;
+    # r_c: the rest distance less EYE_REST_SLACK_M 5e-5 m, or r + gap 2.5e-4 m) and, gliding,
+    # -k min(0, s + 5e-5) n (the floor: its sphere less EYE_REST_SLACK_M)
     r_c = np.minimum(r + 2.5e-4, d0 - 5e-5)
-    f = -(glide * kg * move + k * np.minimum(d0 + move - r_c, 0.0))[:, None] * n
+    f = -(glide * (kg * move + k * np.minimum(move + 5e-5, 0.0)) + k * np.minimum(d0 + move - r_c, 0.0))[:, None] * n
     np.testing.assert_allclose(dF[mid], f, rtol=1e-3, atol=1e-6, err_msg="sphere forces")
     np.testing.assert_array_equal(np.delete(dF, mid, axis=0), 0.0)
     assert (np.einsum("ij,ij->i", dF[mid[:2]], n[:2]) * move[:2] < 0).all()  # back onto the sphere
@@ -455,3 +457,80 @@ def test_the_lids_inner_sheet_over_the_eyeballs_glides_on_them(default_rig):
     assert np.bincount(g.eye_of_node[g.eye_glide], minlength=2).min() >= 10  # both eyes
     sim = FaceSimulator(fr)
     assert sim.contact.counts["lid_glide"] == len(nodes)
+
+
+def test_the_gliding_lids_close_onto_the_eyeball_surface(default_rig):
+    """Each gliding inner lid node keeps to its own sphere: through its rest position, centred on
+    the line through the eyeball's centre along its fissure plane's normal, and meeting that plane
+    where the eyeball's sphere of radius R + gap does (the middle of the fissure: the upper and
+    lower lids close at one depth, whatever their depths at rest; 0.4 mm outside and 0.9 mm inside
+    the ball on ICT identity 007)."""
+    from facewarp.physics import CONTACT_GAP, contact_geometry
+
+    _, fr = default_rig
+    g = contact_geometry(fr)
+    X = np.asarray(fr.nodes, np.float64)
+    mine = np.flatnonzero(g.eye_glide)
+    o, R = g.eye_centers[g.eye_of_node[mine]], g.eye_radii[g.eye_of_node[mine]]
+    c, rho = g.glide_centers[mine], g.glide_radii[mine]
+    np.testing.assert_allclose(np.linalg.norm(X[g.eye_nodes[mine]] - c, axis=1), rho, atol=1e-9, err_msg="through x0")
+    checked = 0
+    for j, (p, n) in enumerate(g.lid_planes):
+        eye = np.argmin(np.linalg.norm(g.eye_centers - p, axis=1))
+        on = g.eye_of_node[mine] == eye
+        shift = c[on] - o[on]
+        np.testing.assert_allclose(shift - np.outer(shift @ n, n), 0.0, atol=1e-12, err_msg="centre on the normal")
+        # on the plane: the circle's foot q and radius give |x - o|^2 = |q - o|^2 + rho_c^2
+        h = (p - c[on]) @ n
+        q = c[on] + np.outer(h, n)
+        meet = np.sqrt(np.linalg.norm(q - o[on], axis=1) ** 2 + rho[on] ** 2 - h**2)
+        x0 = X[g.eye_nodes[mine][on]]
+        tangent = g.lid_tangent[g.lid_plane == j][0]
+        middle = (np.abs((x0 - p) @ tangent) < 5e-3) & (np.abs((x0 - p) @ n) > 1e-3)
+        assert middle.sum() >= 4, middle.sum()
+        np.testing.assert_allclose(meet[middle], R[on][middle] + CONTACT_GAP, atol=1e-7, err_msg="at R + gap")
+        checked += middle.sum()
+    assert checked >= 8
+
+
+def test_closing_lid_margins_are_tied_along_the_fissure_by_the_verlet_forces():
+    """Lid margins near the fissure plane are drawn toward their partners along the fissure (the
+    corner chord, x here): at rest, within reach, nothing; closed to the plane with the upper
+    lid shifted 0.4 mm along x, each node is pulled back by its glide stiffness times its half of
+    the shift; across the chord and on other nodes, nothing."""
+    from facewarp.physics import lid_contact_geometry
+
+    VV, TT, fixed, plane = two_lids()
+    g = lid_contact_geometry(VV, *plane, fixed=fixed)
+    upper, lower = g.lid_nodes[g.lid_side > 0], g.lid_nodes[g.lid_side < 0]
+    np.testing.assert_allclose(g.lid_tangent, np.tile([1.0, 0.0, 0.0], (16, 1)))
+    partner = g.lid_nodes[g.lid_partner]
+    np.testing.assert_allclose(VV[partner, 0], VV[g.lid_nodes, 0])  # the same place along the fissure
+    model = ModelBuilder(VV, TT, fixed=fixed, material="physical").finalize("cpu")
+    kg = 2e3
+
+    class Rig:
+        nodes = VV
+
+    stage = ContactStage(Rig(), np.full(len(VV), 5e4), "cpu", geometry=g, glide_stiffness=np.full(len(VV), kg))
+    assert stage.counts["lid_tie"] == 16
+
+    def forces(X):
+        state, control = model.state(), model.control()
+        state.positions.assign(X.astype(np.float32))
+        state.prev_positions.assign(X.astype(np.float32))
+        return (SolverVerlet(model, stages=[stage]).compute_forces(state, control, 1e-4).numpy()
+                - SolverVerlet(model).compute_forces(state, control, 1e-4).numpy())
+
+    np.testing.assert_array_equal(forces(VV), 0.0)  # 0.625 mm from their springs: tied, at their rest offset
+    X = VV.copy()
+    z0 = plane[0][0, 2]
+    X[upper, 2] += z0 + 1e-4 - VV[upper, 2]  # both lids 0.1 mm from the plane (touching)
+    X[lower, 2] += z0 - 1e-4 - VV[lower, 2]
+    X[upper, 0] += 4e-4
+    dF = forces(X)
+    np.testing.assert_allclose(dF[upper, 0], -kg * 2e-4, rtol=1e-3, err_msg="upper lid pulled back along x")
+    np.testing.assert_allclose(dF[lower, 0], kg * 2e-4, rtol=1e-3, err_msg="lower lid drawn along")
+    np.testing.assert_allclose(dF[g.lid_nodes][:, 1], 0.0, atol=1e-9)
+    others = np.setdiff1d(np.arange(len(VV)), g.lid_nodes)
+    np.testing.assert_array_equal(dF[others], 0.0)

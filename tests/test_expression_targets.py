@@ -130,15 +130,20 @@ def test_blink_closes_the_lids(rig, peaks):
     d = _peak(rig, peaks, "blink")
     for a, b in (("3.1", "3.3"), ("3.2", "3.4")):
         assert _distance(d, a, b, "rest") > 8 * MM  # open at rest (9.1 mm)
-        # the lids meet at the fissure plane and stop there (lid-lid contact): 0.85 / 0.60 mm
-        # (2.26 / 1.83 mm while the ring's skin-side rule left the medial upper lid unattached
-        # and a planar support held the lid against the eyeball: the upper lid ended 1.95 mm
-        # medial of the lower one)
+        # the lids meet at the fissure plane and stop there (lid-lid contact), closing onto the
+        # eyeball's surface and onto each other along the fissure: 0.72 / 0.56 mm (0.84 / 0.59
+        # with each lid at its rest depth and free to slide along the plane; 2.26 / 1.83 mm
+        # while the ring's skin-side rule left the medial upper lid unattached and a planar
+        # support held the lid against the eyeball: the upper lid ended 1.95 mm medial of the
+        # lower one)
         assert _distance(d, a, b) <= 1 * MM, (a, b, _distance(d, a, b))
-        assert abs(d["end"][a][0] - d["end"][b][0]) <= 0.75 * MM  # above the lower lid, not beside it (0.57 / 0.36)
+        assert abs(d["end"][a][0] - d["end"][b][0]) <= 0.5 * MM  # above the lower lid, not beside it (0.31 / 0.29)
         assert d["end"][a][1] > d["end"][b][1]  # the upper lid's margin is still above the lower's
     assert d["crossings"]["lid_lid"] == 0, d["crossings"]
-    assert np.linalg.norm(d["4.3"]) < 1 * MM  # the brows stay (0.2 mm)
+    # no lid node deeper in the eyeball than at rest (26 nodes, 0.06 mm, before the gliding lid
+    # sheet had its floor)
+    assert d["crossings"]["lid_eye"] == 0, d["crossings"]
+    assert np.linalg.norm(d["4.3"]) < 1 * MM  # the brows stay (0.4 mm)
 
 
 def test_pucker_narrows_and_purses(rig, peaks):

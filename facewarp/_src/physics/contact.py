@@ -15,12 +15,20 @@ Hessian are in the solvers' kernels and in :mod:`.potential`):
 * lid on eyeball: free nodes within ``EYE_NEAR_M`` of an eyeball's sphere, pushed out of the ball
   ``|x - c| >= r`` (analytic, static springs). The lids' inner sheet there glides on the eyeball
   (:func:`eyeball_sheet_nodes`): it has no planar sliding support (``face_rig``) but a two-sided
-  spring of the support's stiffness that keeps each node at its rest distance from the eyeball's
-  centre (besides its one-sided contact), so the lid slides over the ball and neither sinks into
-  it nor lifts off. A plane tangent at rest, as the sliding support of the cheeks, holds a node
-  that slides 4-5 mm down a 12 mm ball against the ball's push (20-25 degrees off the plane):
-  pulled back along the plane's normal, smoothed over 1 cm and tilted laterally, the default
-  head's upper lid went medially as it closed (with the ring's lopsided attachments,
+  spring of the support's stiffness that keeps each node on its glide sphere, and a one-sided
+  floor there at the contact's stiffness (besides its one-sided contact), so the lid slides
+  over the ball and neither sinks into it nor lifts off. The glide sphere
+  (:func:`glide_spheres`) runs through the node's rest position and meets the fissure plane on
+  the eyeball's surface: the two lids close at one depth, on the ball, whatever their depths at
+  rest (a sphere about the eyeball's centre kept each at its rest depth: on the ICT-adapted heads
+  the lower lid's inner sheet lies 0.5-1.5 mm deeper than the upper one's, up to 1 mm inside
+  the ball's sphere, and the closed upper margin stayed up to 1.2 mm in front of the lower one;
+  the floor: the ring pulls the lids into the ball with ~2.5 N, and on the support's stiffness
+  alone the lower lid stopped 0.5 mm short of its sphere). A plane tangent at rest, as the
+  sliding support of the cheeks, holds a node that slides 4-5 mm down a 12 mm ball against the
+  ball's push (20-25 degrees off the plane): pulled back along the plane's normal, smoothed over
+  1 cm and tilted laterally, the default head's upper lid went medially as it closed (with the
+  ring's lopsided attachments,
   :func:`~facewarp._src.anatomy.attach.attach_by_area`: FDP 3.1 2.6 mm), and at level 1 the lid
   lifted off the ball (its margin 0.9 mm off, rolled forward in front of the lower one);
 * lid on lid: the orbicularis oculi closes the lids toward the plane of the palpebral fissure
@@ -31,7 +39,17 @@ Hessian are in the solvers' kernels and in :mod:`.potential`):
   close to ``gap`` apart and stop there, however strongly the ring drives them (without it the
   upper lid slid past the lower one on the level-1 head; ``lid_contact_geometry``). The plane
   is static: a lid stops there even while the other is open (the presets move the lids that far
-  only by the orbicularis oculi, which closes both), and the lids may slide along it freely.
+  only by the orbicularis oculi, which closes both). Along the fissure the closing margins meet
+  point to point (``kernels_contact._lid_ties``): a lid node and its partner (the other lid's
+  node nearest along the plane at rest), both within ``LID_TIE_REACH_M`` of their springs, are
+  drawn together along the corner chord, their rest offset there shrinking with the gap between
+  them (no force at rest, aligned when closed), at the glide stiffness. Without it the lids
+  slid past each other along the plane once the ring pressed them together (the overshoot of
+  its contraction 1.5): on the adapted heads the right upper lid ended 0.5-1.2 mm lateral of
+  the lower one, the slide starting when the lids met (the right lower margin node 1.5 mm
+  medially, its upper partner 0.45 mm; with the ring driven only to the plane, contraction 1.0,
+  0.2 mm, but the lids stayed 2 mm open). At the contact's stiffness the ties stalled the CPU
+  L-BFGS on the level-1 head (the lids stuck 1 mm apart).
 
 The half-space springs sit ``gap`` (0.25 mm) outside the other surface, so a node that touches
 with a force F stays ``gap - F / k`` outside it: the lips close without crossing as long as the
@@ -79,8 +97,8 @@ from .model import Springs
 
 __all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "EYE_NEAR_M", "LIP_REACH_M", "TEETH_NEAR_M",
            "TEETH_REACH_M", "ContactGeometry", "ContactStage", "contact_crossings", "contact_geometry",
-           "eyeball_sheet_nodes", "eyeball_spheres", "fissure_planes", "lid_contact_geometry", "lip_contact_geometry",
-           "node_vertex", "winding_numbers"]
+           "eyeball_sheet_nodes", "eyeball_spheres", "fissure_planes", "glide_spheres", "lid_contact_geometry",
+           "lip_contact_geometry", "node_vertex", "winding_numbers"]
 
 CONTACT_MODULUS = 2.0e9
 """Contact stiffness per unit sheet area [N/m^3] (module doc)."""
@@ -106,6 +124,15 @@ LID_REACH = 2.0
 distance from the fissure plane) of the plane: the lids, not the brow or the cheek."""
 LID_STIFFNESS_RATIO = 4.0
 """A lid-on-lid spring is this many times the node's contact stiffness (module doc)."""
+LID_TIE_REACH_M = 1.0e-3
+"""A lid node and its partner across the fissure are tied along it while both lie within this
+distance [m] of their half-space springs' planes (``kernels_contact._lid_ties``)."""
+GLIDE_TAPER = 0.15
+"""Share of the corner chord at either end over which the gliding lids' meeting depth tapers to
+their rest depth (:func:`glide_spheres`)."""
+GLIDE_MIN_HEIGHT_M = 1.0e-3
+"""A gliding node's distance [m] from its fissure plane is taken as at least this much
+(:func:`glide_spheres`)."""
 _LID_JAW_MAX = 0.05  # a fissure plane rides the cranium (fissure_planes)
 _ROUNDING_M = 1.0e-6  # float32 positions of ~0.1 m: a node "deeper than at rest" by less is rounding
 _TEETH = ("teeth_upper", "teeth_lower")
@@ -126,6 +153,10 @@ class ContactGeometry:
         eyes: ``(centers (e, 3), radii (e,))``; eye_nodes (c,), eye_of_node (c,) index into eyes.
         eye_glide: Which of ``eye_nodes`` glide on their eyeball (inner-sheet nodes without a
             planar support, :func:`eyeball_sheet_nodes`), shape (c,), bool.
+        glide_centers, glide_radii: The sphere each of ``eye_nodes`` glides on (used where
+            ``eye_glide``): centre [m], shape (c, 3), and radius [m], shape (c,), float64
+            (:func:`glide_spheres`; empty: the sphere about its eyeball's centre through its rest
+            position).
         excluded: Candidates left out because they already touch or cross at rest, per kind
             (``{"lip_lip": n, "lip_teeth": n}``; a separated build has 0), and
             ``lid_eye_inside_at_rest``: lid nodes inside the eyeball's sphere at rest (kept, with
@@ -135,6 +166,11 @@ class ContactGeometry:
         lid_nodes: Lid nodes kept to their side of a plane, shape (c,), int64.
         lid_plane: Their plane (index into ``lid_planes``), shape (c,), int64.
         lid_side: Their side at rest, +1 along the plane's normal, -1 against it, shape (c,), int8.
+        lid_tangent: The fissure's unit direction in each lid node's plane (the corner chord
+            without its normal part), shape (c, 3), float64.
+        lid_partner: Each lid node's partner across the fissure (index into ``lid_nodes``: the
+            other lid's node of its plane nearest to it along the plane at rest; -1 none),
+            shape (c,), int64.
     """
 
     node_side: np.ndarray
@@ -151,6 +187,10 @@ class ContactGeometry:
     lid_plane: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     lid_side: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int8))
     eye_glide: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    lid_tangent: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    lid_partner: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    glide_centers: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    glide_radii: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def node_vertex(fr) -> np.ndarray:
@@ -211,6 +251,66 @@ def eyeball_sheet_nodes(V, parts) -> np.ndarray:
         return np.zeros(len(X), bool)
     D = np.linalg.norm(X[:, None] - centers[None], axis=2) - radii[None]
     return D.min(axis=1) < EYE_NEAR_M
+
+
+def glide_spheres(V, nodes, eye_of_node, eye_centers, eye_radii, planes, corners, *,
+                  gap: float = CONTACT_GAP) -> tuple[np.ndarray, np.ndarray]:
+    """The sphere each gliding inner lid node keeps to: through its rest position, and meeting
+    the fissure plane of its eye on the eyeball's surface (``gap`` outside it).
+
+    A sphere about the eyeball's centre o through the node's rest position x0 (radius
+    ``r0 = |x0 - o|``) keeps the node at its rest depth as the lid slides over the ball, and the
+    two lids of an adapted head do not lie at one depth: at identity 007's left lid margins the
+    inner sheet lies 0.9 mm inside the ball's sphere (lower) and 0.4 mm outside it (upper) at
+    rest, and the closed margins stayed 1.2 mm apart front to back. Each node instead gets the
+    sphere about ``o + s n`` (n the unit normal of its eye's fissure plane, through the point p)
+    through x0: on the plane it is the sphere
+    about o of radius ``R_m``, ``R_m^2 = r0^2 - 2 s (x0 - p) . n``, so with
+    ``s = (r0^2 - R_m^2) / (2 (x0 - p) . n)`` the node reaches the plane at ``|x - o| = R_m``.
+    ``R_m = r0 + w (R + gap - r0)``: w is 1 along the middle of the fissure, tapering to 0 over
+    ``GLIDE_TAPER`` of the corner chord at either end (the lids are closed at the corners), and
+    the node's distance from the plane is taken as at least ``GLIDE_MIN_HEIGHT_M`` (a node next
+    to the plane barely moves; its sphere stays near the concentric one).
+
+    Args:
+        V: Rest node positions [m], shape (p, 3), float.
+        nodes: The gliding nodes, shape (c,), int.
+        eye_of_node: Their eyeball (index into ``eye_centers``), shape (c,), int.
+        eye_centers, eye_radii: The eyeballs' spheres [m], shapes (e, 3), (e,), float.
+        planes: The fissure planes, (point [m], unit normal) each, shape (l, 2, 3), float.
+        corners: Each plane's two fixed ring corners [m], shape (l, 2, 3), float.
+        gap: The contact gap [m].
+
+    Returns:
+        ``(centres (c, 3) [m], radii (c,) [m])``, float64; a node whose eyeball has no fissure
+        plane within twice its radius keeps the concentric sphere.
+    """
+    X = np.asarray(V, np.float64)[np.asarray(nodes, np.int64)]
+    which = np.asarray(eye_of_node, np.int64)
+    O, R = np.asarray(eye_centers, np.float64).reshape(-1, 3), np.asarray(eye_radii, np.float64).reshape(-1)
+    Pl, K = np.asarray(planes, np.float64).reshape(-1, 2, 3), np.asarray(corners, np.float64).reshape(-1, 2, 3)
+    if len(Pl) != len(K):
+        raise InputError(f"planes, corners: expected one corner pair per plane, got {len(Pl)} and {len(K)}")
+    o = O[which]
+    centers, radii = o.copy(), np.linalg.norm(X - o, axis=1)
+    for e in range(len(O)):
+        if len(Pl) == 0:
+            break
+        j = int(np.argmin(np.linalg.norm(Pl[:, 0] - O[e], axis=1)))
+        if np.linalg.norm(Pl[j, 0] - O[e]) > 2.0 * R[e]:
+            continue
+        mine = which == e
+        p, n, (a, b) = Pl[j, 0], Pl[j, 1], K[j]
+        t = (X[mine] - a) @ (b - a) / float((b - a) @ (b - a))
+        w = np.clip(np.minimum(t, 1.0 - t) / GLIDE_TAPER, 0.0, 1.0)
+        r0 = radii[mine]
+        rm = r0 + w * (R[e] + gap - r0)
+        h = (X[mine] - p) @ n
+        h = np.where(h < 0.0, -1.0, 1.0) * np.maximum(np.abs(h), GLIDE_MIN_HEIGHT_M)
+        s = (r0**2 - rm**2) / (2.0 * h)
+        centers[mine] = O[e] + s[:, None] * n
+        radii[mine] = np.linalg.norm(X[mine] - centers[mine], axis=1)
+    return centers, radii
 
 
 def winding_numbers(V, F, P) -> np.ndarray:
@@ -337,7 +437,7 @@ def lid_contact_geometry(V, point, normal, corners, height, *, fixed=None, gap: 
             and np.allclose(np.linalg.norm(N, axis=1), 1.0, atol=1e-6)):
         raise InputError("lid planes: expected finite points and corners, unit normals and heights > 0 [m]")
     free = np.ones(len(X), bool) if fixed is None else ~np.asarray(fixed, bool)  # a node on one plane only
-    nodes, plane, side, on_plane = [], [], [], 0
+    nodes, plane, side, tangent, partner, on_plane, count = [], [], [], [], [], 0, 0
     for j, (c, n, (a, b), h) in enumerate(zip(C, N, K, H)):
         chord = b - a
         length = float(np.linalg.norm(chord))
@@ -352,13 +452,26 @@ def lid_contact_geometry(V, point, normal, corners, height, *, fixed=None, gap: 
         free[cand] = False
         nodes.append(k)
         plane.append(np.full(len(k), j, np.int64))
-        side.append(np.sign(d[k]).astype(np.int8))
+        sd = np.sign(d[k]).astype(np.int8)
+        side.append(sd)
+        f = chord - n * float(chord @ n)
+        tangent.append(np.tile(f / np.linalg.norm(f), (len(k), 1)))
+        # the partner: the other lid's node nearest along the plane at rest
+        Y = X[k] - np.outer(d[k], n)
+        mine = np.full(len(k), -1, np.int64)
+        for s in (-1, 1):
+            me, other = np.flatnonzero(sd == s), np.flatnonzero(sd == -s)
+            if len(me) and len(other):
+                mine[me] = count + other[np.argmin(np.linalg.norm(Y[me][:, None] - Y[other][None], axis=2), axis=1)]
+        partner.append(mine)
+        count += len(k)
     g = ContactGeometry(np.zeros(len(X), np.int8), [], [], [], np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64),
                         np.zeros(0, np.int64), {"lip_lip": 0, "lip_teeth": 0, "lid_eye_inside_at_rest": 0,
                                                 "lid_lid": on_plane})
     g.lid_planes = np.stack([C, N], axis=1)
     if nodes:
         g.lid_nodes, g.lid_plane, g.lid_side = np.concatenate(nodes), np.concatenate(plane), np.concatenate(side)
+        g.lid_tangent, g.lid_partner = np.concatenate(tangent).reshape(-1, 3), np.concatenate(partner)
     return g
 
 
@@ -409,10 +522,14 @@ def contact_geometry(fr, *, gap: float = CONTACT_GAP) -> ContactGeometry:
         supported = np.zeros(len(X), bool)
         supported[np.asarray(fr.support_nodes, np.int64)] = True
         glide = ((np.asarray(fr.layer) != 0) & ~np.asarray(fr.held, bool) & ~supported)[eye_nodes]
-    lids = lid_contact_geometry(X, *fissure_planes(fr), fixed=fr.fixed, gap=gap)
+    planes = fissure_planes(fr)
+    lids = lid_contact_geometry(X, *planes, fixed=fr.fixed, gap=gap)
     excluded["lid_lid"] = lids.excluded["lid_lid"]
+    # the gliding lids close onto the eyeball's surface, whatever their depth at rest
+    gc, gr = glide_spheres(X, eye_nodes, eye_of, centers, radii, lids.lid_planes, planes[2], gap=gap)
     return ContactGeometry(side, lip_faces, lip_nodes, teeth, centers, radii, eye_nodes, eye_of, excluded,
-                           lids.lid_planes, lids.lid_nodes, lids.lid_plane, lids.lid_side, glide)
+                           lids.lid_planes, lids.lid_nodes, lids.lid_plane, lids.lid_side, glide, lids.lid_tangent,
+                           lids.lid_partner, gc, gr)
 
 
 def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeometry | None = None) -> dict:
@@ -503,17 +620,21 @@ class ContactStage:
         gap: Distance [m] outside a surface at which the half-space springs start to push.
         lips, teeth, eyes, lids: Which contacts to keep (all by default; ``eyes``: lid on eyeball,
             the gliding inner lid sheet included; ``lids``: lid on lid).
+        ties: With ``lids``, tie the closing lid margins along the fissure
+            (``kernels_contact._lid_ties``; default True).
         geometry: :func:`contact_geometry` of ``fr`` (default: made here).
         glide_stiffness: Stiffness of the two-sided spring that keeps a gliding inner lid node on
-            its sphere about the eyeball's centre [N/m], shape (p,) (the simulator: the sliding
-            support's, ``support_modulus`` times the node's sheet area; default
-            ``node_stiffness``). Its one-sided eyeball contact stays as every lid node's.
+            its glide sphere [N/m], shape (p,) (the simulator: the sliding support's,
+            ``support_modulus`` times the node's sheet area; default ``node_stiffness``), and of
+            the lid ties. Its floor there and its one-sided eyeball contact have the node's
+            ``node_stiffness``.
 
     Attributes:
         springs: The spring sets (a tuple of :class:`~facewarp._src.physics.model.Springs`, all
-            one-sided but the gliding lid sheet's): lower lip on upper, upper lip on lower, each
-            dental arch, the eyeballs, the inner lid sheet gliding on them (two-sided), the lids at
-            their fissure planes.
+            one-sided but the gliding lid sheet's and the ties): lower lip on upper, upper lip on
+            lower, each dental arch, the eyeballs, the inner lid sheet gliding on them (two-sided)
+            and its floor, the lids at their fissure planes, the lid ties along the fissures
+            (two-sided axis springs).
         geometry: The :class:`ContactGeometry`.
     """
 
@@ -523,8 +644,8 @@ class ContactStage:
     conditional node of a CUDA graph may not allocate)."""
 
     def __init__(self, fr, node_stiffness, device, *, gap: float = CONTACT_GAP, lips: bool = True,
-                 teeth: bool = True, eyes: bool = True, lids: bool = True, geometry: ContactGeometry | None = None,
-                 glide_stiffness=None):
+                 teeth: bool = True, eyes: bool = True, lids: bool = True, ties: bool = True,
+                 geometry: ContactGeometry | None = None, glide_stiffness=None):
         wp = get_warp()
         from . import kernels_contact as kc
 
@@ -572,8 +693,9 @@ class ContactStage:
         if kg.shape != (len(X),) or not (np.isfinite(kg).all() and (kg >= 0).all()):
             raise InputError(f"glide_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
 
-        def eye_set(mine, r, k, one_sided):
-            en, c = g.eye_nodes[mine], g.eye_centers[g.eye_of_node[mine]]
+        def eye_set(mine, r, k, one_sided, centers=None):
+            en = g.eye_nodes[mine]
+            c = g.eye_centers[g.eye_of_node[mine]] if centers is None else centers[mine]
             return Springs(node=wp.array(en.astype(np.int32), dtype=wp.int32, device=device),
                            point=wp.array(c.astype(np.float32), dtype=wp.vec3, device=device),
                            stiffness=wp.array(k.astype(np.float32), dtype=float, device=device),
@@ -589,11 +711,20 @@ class ContactStage:
             self.eye_springs = eye_set(every, r, stiff(g.eye_nodes), True)
             sets.append(self.eye_springs)
         if self.glide_count:
-            # the inner lid sheet glides on the eyeball: on its sphere, two-sided, at the sliding
-            # support's stiffness (the one-sided contact above keeps it out of the ball)
-            self.glide_springs = eye_set(glide, d_rest, kg[g.eye_nodes[glide]], False)
-            sets.append(self.glide_springs)
+            # the inner lid sheet glides on the eyeball: on its glide sphere (glide_spheres; about
+            # the eyeball's centre through its rest position where none is given), two-sided at
+            # the sliding support's stiffness, and it may not sink below that sphere (one-sided at
+            # its contact stiffness, EYE_REST_SLACK_M short of it); the contact above keeps it out
+            # of the ball
+            if len(g.glide_centers) == len(g.eye_nodes) and len(g.glide_radii) == len(g.eye_nodes):
+                gc, gr = np.asarray(g.glide_centers, np.float64), np.asarray(g.glide_radii, np.float64)
+            else:
+                gc, gr = g.eye_centers[g.eye_of_node], d_rest
+            self.glide_springs = eye_set(glide, gr, kg[g.eye_nodes[glide]], False, gc)
+            self.floor_springs = eye_set(glide, gr - EYE_REST_SLACK_M, stiff(g.eye_nodes)[glide], True, gc)
+            sets += [self.glide_springs, self.floor_springs]
         self.lid_count = len(g.lid_nodes) if lids else 0
+        self.tie_count = 0
         if self.lid_count:
             ln = g.lid_nodes
             c, n = g.lid_planes[g.lid_plane, 0], g.lid_planes[g.lid_plane, 1]
@@ -607,6 +738,24 @@ class ContactStage:
                 stiffness=wp.array((LID_STIFFNESS_RATIO * stiff(ln)).astype(np.float32), dtype=float, device=device),
                 axis=wp.array(a.astype(np.float32), dtype=wp.vec3, device=device), one_sided=True)
             sets.append(self.lid_springs)
+            partner = np.asarray(g.lid_partner, np.int64)
+            if ties and len(partner) == len(ln) and len(g.lid_tangent) == len(ln) and (partner >= 0).any():
+                # margins that close meet point to point along the fissure (kernels_contact._lid_ties),
+                # held as firmly as the inner sheet on its support (the glide stiffness: the
+                # contact's stiffness there stalled the CPU L-BFGS on the level-1 head)
+                self.tie_count = self.lid_count
+                mate = np.maximum(partner, 0)
+                off = 0.5 * (X[ln] - X[ln[mate]])
+                above = np.einsum("ij,ij->i", X[ln] - c, a) - r  # from the node's spring plane at rest
+                self.tie_rest = wp.array((above + above[mate]).astype(np.float32), dtype=float, device=device)
+                self.tie_partner = wp.array(partner.astype(np.int32), dtype=wp.int32, device=device)
+                self.tie_offset = wp.array(off.astype(np.float32), dtype=wp.vec3, device=device)
+                self.tie_stiffness = wp.array(kg[ln].astype(np.float32), dtype=float, device=device)
+                self.tie_springs = Springs(
+                    node=self.lid_springs.node, point=wp.zeros(len(ln), dtype=wp.vec3, device=device),
+                    stiffness=wp.zeros(len(ln), dtype=float, device=device),
+                    axis=wp.array(np.asarray(g.lid_tangent, np.float32), dtype=wp.vec3, device=device))
+                sets.append(self.tie_springs)
         self.springs = tuple(sets)
 
     @property
@@ -616,7 +765,7 @@ class ContactStage:
         lips = sum(s.count for s in self.surfaces if s.follows is not None)
         teeth = sum(s.count for s in self.surfaces if s.rigid is not None)
         return {"lip_lip": lips, "lip_teeth": teeth, "lid_eye": self.eye_count, "lid_glide": self.glide_count,
-                "lid_lid": self.lid_count, "excluded": dict(g.excluded)}
+                "lid_lid": self.lid_count, "lid_tie": self.tie_count, "excluded": dict(g.excluded)}
 
     def _move_rigid(self, control) -> None:
         wp = get_warp()
@@ -643,6 +792,12 @@ class ContactStage:
             wp.launch(kc._surface_contacts, dim=s.count,
                       inputs=[s.mesh.id, s.reach, s.gap, int(s.follows is not None), s.nodes, s.k, positions],
                       outputs=[sp.point, sp.axis, sp.stiffness], device=self.device)
+        if self.tie_count:
+            sp, st = self.lid_springs, self.tie_springs
+            wp.launch(kc._lid_ties, dim=self.tie_count,
+                      inputs=[sp.node, self.tie_partner, self.tie_offset, self.tie_rest, sp.point, sp.axis,
+                              LID_TIE_REACH_M, self.tie_stiffness, positions],
+                      outputs=[st.point, st.stiffness], device=self.device)
 
     def prepare(self, model, state_in, control, dt, targets) -> None:
         """Implicit solvers: the teeth at the step's jaw angles, contacts at the step's start."""
@@ -660,7 +815,8 @@ class ContactStage:
                           inputs=[sp.node, sp.point, sp.axis, sp.stiffness, state_in.positions], outputs=[forces],
                           device=self.device)
         for count, sp, one in ((self.eye_count, getattr(self, "eye_springs", None), 1),
-                               (self.glide_count, getattr(self, "glide_springs", None), 0)):
+                               (self.glide_count, getattr(self, "glide_springs", None), 0),
+                               (self.glide_count, getattr(self, "floor_springs", None), 1)):
             if count:
                 wp.launch(self.kc._sphere_forces, dim=count,
                           inputs=[sp.node, sp.point, sp.rest_length, sp.stiffness, one, state_in.positions],
@@ -668,5 +824,10 @@ class ContactStage:
         if self.lid_count:  # a lid node lies on one plane only: one spring per node in the set
             sp = self.lid_springs
             wp.launch(self.kc._half_space_forces, dim=self.lid_count,
+                      inputs=[sp.node, sp.point, sp.axis, sp.stiffness, state_in.positions], outputs=[forces],
+                      device=self.device)
+        if self.tie_count:  # the ties' points were detected in prepare
+            sp = self.tie_springs
+            wp.launch(self.kc._axis_forces, dim=self.tie_count,
                       inputs=[sp.node, sp.point, sp.axis, sp.stiffness, state_in.positions], outputs=[forces],
                       device=self.device)

@@ -9,12 +9,17 @@ Contact springs (:class:`~facewarp._src.physics.model.Springs` with ``one_sided`
   ``E = 1/2 k min(0, (x - p') . a)^2`` with ``p' = p + gap a``; the spring is armed for every
   node within ``reach`` of the surface (inside or out) and slack (stiffness 0) beyond;
 * against a sphere (the eyeball): ``E = 1/2 k min(0, |x - c| - r)^2``, static; the inner lid
-  sheet gliding on the eyeball has the two-sided ``E = 1/2 k (|x - c| - r)^2`` (r its rest distance);
+  sheet gliding on the eyeball has, on its glide sphere (c, r per node:
+  :func:`.contact.glide_spheres`), the two-sided ``E = 1/2 k (|x - c| - r)^2`` and a one-sided
+  floor of the same form;
 * against a plane (a lid against the palpebral fissure, where the other lid closes to): the
-  half-space energy above with a static p and a, set once by :class:`.contact.ContactStage`.
+  half-space energy above with a static p and a, set once by :class:`.contact.ContactStage`;
+* lid on lid along the fissure (:func:`_lid_ties`): two-sided axis springs
+  ``E = 1/2 k ((x - m) . t)^2`` whose point m is re-detected like the contacts.
 
-The explicit force is ``-dE/dx``: ``-k s a`` (half-space, ``s = min(0, (x - p') . a)``) and
-``-k s (x - c) / |x - c|`` (sphere, ``s = min(0, |x - c| - r)``, or ``|x - c| - r`` two-sided).
+The explicit force is ``-dE/dx``: ``-k s a`` (half-space, ``s = min(0, (x - p') . a)``; axis,
+``s = (x - m) . t``) and ``-k s (x - c) / |x - c|`` (sphere, ``s = min(0, |x - c| - r)``, or
+``|x - c| - r`` two-sided).
 """
 
 from __future__ import annotations
@@ -168,3 +173,62 @@ def _sphere_forces(
         s = wp.min(s, 0.0)
     if l > 0.0:
         forces[i] = forces[i] - stiffness[k] * s / l * r
+
+
+# Lid margins that close meet point to point: a lid node k and its partner j across the fissure
+# (the other lid's node nearest to it along the plane at rest), both within `reach` of their
+# half-space springs at the fissure plane (the margins closing or closed), are drawn together
+# along the fissure's tangent t (the corner chord in the plane): each gets the two-sided axis
+# spring E = 1/2 k ((x_k - m_k) . t)^2 about m_k = (x_k + x_j) / 2 + s offset_k, offset_k =
+# (X_k - X_j) / 2 at rest and s = d / d_rest (clamped to [0, 1]) the pair's distance across the
+# plane (d: the sum of the two nodes' distances from their springs' planes) over its rest value.
+# So (x_k - x_j) . t shrinks with the opening: the rest offset at rest (no force there), 0 where
+# the margins touch. m_k is taken at the positions of the last detection (as the lips'
+# mid-plane); a pair not both that near gets stiffness 0.
+@wp.kernel
+def _lid_ties(
+    # Model:
+    nodes: wp.array(dtype=wp.int32),
+    partner: wp.array(dtype=wp.int32),
+    rest_offset: wp.array(dtype=wp.vec3),
+    rest_distance: wp.array(dtype=float),
+    plane_point: wp.array(dtype=wp.vec3),
+    plane_axis: wp.array(dtype=wp.vec3),
+    reach: float,
+    node_stiffness: wp.array(dtype=float),
+    # State in:
+    positions: wp.array(dtype=wp.vec3),
+    # Out:
+    point_out: wp.array(dtype=wp.vec3),
+    stiffness_out: wp.array(dtype=float),
+):
+    k = wp.tid()
+    x = positions[nodes[k]]
+    j = partner[k]
+    point_out[k] = x
+    stiffness_out[k] = 0.0
+    if j < 0:
+        return
+    y = positions[nodes[j]]
+    dx = wp.dot(x - plane_point[k], plane_axis[k])
+    dy = wp.dot(y - plane_point[j], plane_axis[j])
+    if dx < reach and dy < reach:
+        s = wp.clamp((dx + dy) / wp.max(rest_distance[k], 1.0e-9), 0.0, 1.0)
+        point_out[k] = 0.5 * (x + y) + s * rest_offset[k]
+        stiffness_out[k] = node_stiffness[k]
+
+
+# Explicit forces of two-sided axis springs: f = -k ((x - p) . a) a (the lid ties).
+@wp.kernel
+def _axis_forces(
+    nodes: wp.array(dtype=wp.int32),
+    point: wp.array(dtype=wp.vec3),
+    axis: wp.array(dtype=wp.vec3),
+    stiffness: wp.array(dtype=float),
+    positions: wp.array(dtype=wp.vec3),
+    forces: wp.array(dtype=wp.vec3),
+):
+    k = wp.tid()
+    i = nodes[k]
+    a = axis[k]
+    forces[i] = forces[i] - stiffness[k] * wp.dot(positions[i] - point[k], a) * a
