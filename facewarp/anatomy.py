@@ -12,7 +12,8 @@
   :func:`sheet_samples`, :class:`SheetSamples`, :func:`attach_by_area`;
 - the muscles of a head: :func:`load_muscle_defs`, :func:`build_muscles`, :class:`MuscleSet`,
   :class:`Muscle`, :class:`Anchor`, :func:`make_linear_muscle`, :func:`muscles_to_json`,
-  :func:`node_regions` (the template regions of every skin node, Fig. 6.4's region filter);
+  :func:`node_regions` (the template regions of every skin node, Fig. 6.4's region filter),
+  :func:`depth_normals` (the skin normal that places a control point at a depth);
 - the whole anatomy: :func:`build_anatomy`, :func:`write_anatomy`, :func:`slab_anatomy`;
 - the kinematic jaw (Sec. 6.4.3): :class:`JawKinematic`, :func:`rotate_about`;
 - the lips: :func:`mouth_slit`, :func:`lip_sides`, :func:`lip_tets`, :func:`lip_crossings`,
@@ -67,6 +68,7 @@ from ._src.anatomy.muscles import (  # noqa: F401
     MuscleKind,
     MuscleSet,
     build_muscles,
+    depth_normals,
     load_muscle_defs,
     make_linear_muscle,
     muscles_to_json,

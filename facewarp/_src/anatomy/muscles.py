@@ -3,7 +3,9 @@ segmentation, anchors and skin attachment, and their JSON form.
 
 The 14 muscles of Table 6.2 (paired where anatomical) are defined as data in
 ``muscle_defs.json``: control points are *placement rules* relative to MPEG-4 FDPs, resolved on
-any head with FDPs to skin points (face, barycentric) and displaced inward along the skin normal:
+any head with FDPs to skin points (face, barycentric) and displaced inward along the skin normal
+(averaged over a patch as wide as the depth, :func:`depth_normals`, so the placement does not
+change with the mesh resolution):
 
 - linear muscles (1-12): a regular quadratic Bezier curve (all weights 1) through the insertion
   (depth ``2 t_skin + r``), middle (``(2 t_skin + t_skull) / 2``) and attachment
@@ -56,7 +58,9 @@ __all__ = [
     "Muscle",
     "MuscleKind",
     "MuscleSet",
+    "NORMAL_FOOTPRINT",
     "build_muscles",
+    "depth_normals",
     "load_muscle_defs",
     "make_linear_muscle",
     "muscles_to_json",
@@ -230,12 +234,69 @@ class MuscleSet:
         return {m.name: m for m in self.muscles}
 
 
+NORMAL_FOOTPRINT = 1.0
+"""Width of the skin patch whose normal places a control point, relative to its depth: a point
+``d`` below the skin lies along the area-weighted mean normal of the skin within about ``d``
+(Gaussian weights ``exp(-(r / (NORMAL_FOOTPRINT d))^2)`` on the faces' areas,
+:func:`depth_normals`), not along the mesh's own vertex normal. The vertex normal averages over
+one ring of faces, a width that halves with each template level: on the nose and around the eyes
+the level-0 and level-1 normals differed by 10-20 degrees, which moved control points 5-10 mm
+deep by 1-2 mm between the levels (the nasalis 1.5, the quadratus labii superioris 1.75, the
+mentalis 1.9 mm). With it the static shapes of Table 6.4's presets on the default head agree
+better between levels 0 and 1 (median FDP difference, with the held rule of
+``physics.face_rig``: angry 17 -> 14 %, sad 20 -> 16 %, smile 9.7, laugh 7.5 -> 6.3, surprise
+8.9 -> 8.3 %; ``benchmarks/solver_accuracy.py --parts levels``). A sphincter at the
+``under_skin`` depth keeps the vertex normal (it follows the skin layer, which is extruded
+along the vertex normals). None: the vertex normal for every muscle."""
+
 _SPHINCTER_CURVES = np.array([[0, 1, 2], [2, 3, 4], [4, 5, 6], [6, 7, 0]])
 _LINEAR_KEYS = ("insertion", "middle", "attachment")
 
 
 def _interp_vertex(values: np.ndarray, F: np.ndarray, sp: SurfacePoints) -> np.ndarray:
     return np.einsum("kc,kc...->k...", sp.bary, values[F[sp.face]])
+
+
+def depth_normals(V, F, points, depth, *, footprint: float | None = None) -> np.ndarray:
+    """Unit outward skin normals for control points ``depth`` below the skin points ``points``:
+    the area-weighted mean of the face normals of the mesh (V, F) with Gaussian weights
+    ``exp(-(r / w)^2)``, r the distance of a face's centroid from the point and
+    ``w = footprint * depth`` (:data:`NORMAL_FOOTPRINT`), so the direction does not depend on
+    how finely the skin is meshed.
+
+    Args:
+        V: Head vertices [m], shape (n, 3), float.
+        F: Triangles, shape (m, 3), int.
+        points: Skin points [m], shape (k, 3), float.
+        depth: Depth of each control point below its skin point [m], shape (k,), float, > 0.
+        footprint: Width relative to the depth (default :data:`NORMAL_FOOTPRINT`).
+
+    Returns:
+        Unit normals, shape (k, 3), float64.
+    """
+    from scipy.spatial import cKDTree
+
+    footprint = NORMAL_FOOTPRINT if footprint is None else footprint
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    width = footprint * np.asarray(depth, dtype=np.float64).reshape(-1)
+    if not (np.isfinite(width).all() and (width > 0).all()):
+        raise InputError(f"depth_normals: depth * footprint must be positive lengths [m], got {width}")
+    an = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])  # twice the area times the unit normal
+    C = V[F].mean(1)
+    tree = cKDTree(C)
+    out = np.zeros((len(P), 3))
+    for i, (p, w) in enumerate(zip(P, width)):
+        near = np.asarray(tree.query_ball_point(p, 2.5 * w), dtype=np.int64)
+        if len(near) == 0:
+            near = np.asarray([tree.query(p)[1]], dtype=np.int64)
+        g = np.exp(-((np.linalg.norm(C[near] - p, axis=1) / w) ** 2))
+        out[i] = g @ an[near]
+    n = np.linalg.norm(out, axis=1, keepdims=True)
+    if (n <= 0).any():
+        raise InputError("depth_normals: the skin around a control point has no mean normal (faces cancel)")
+    return out / n
 
 
 def build_muscles(template, skin_layer=None, *, defs=None, placements=None) -> MuscleSet:
@@ -314,6 +375,10 @@ def _place_muscles(template, defs: dict, placements: dict) -> list[Muscle]:
                 sw = float(dflt.get("sphincter_weight", np.sqrt(0.5)))
                 w = np.array([1.0, sw] * 4)
                 curves = _SPHINCTER_CURVES.copy()
+            if NORMAL_FOOTPRINT is not None and (kind is MuscleKind.LINEAR or rule == "thesis"):
+                # (a ring right under the skin, "under_skin", follows the skin layer's own
+                # extrusion along the vertex normals)
+                n = depth_normals(V, F, skin, depth)
             center = None
             if kind is not MuscleKind.LINEAR and "center" in m:
                 # the rule's point itself (it may lie in an opening, the palpebral fissure), moved

@@ -6,12 +6,13 @@ from an :class:`~facewarp._src.anatomy.build.Anatomy` and :func:`muscle_rig` pac
 
 Boundary conditions (Sec. 6.2, 6.4): only the frontal face is simulated. Skin nodes on the
 frontal region's border (outer and inner sheet) are fixed. Inner-sheet nodes of the regions over
-bone (:data:`BONE_REGIONS`: forehead, nose, chin, bottom face) that are not attached to a muscle
-are held by stiff springs at their rest position, which the jaw moves for the jaw regions
-(Eq. 6.4.9 amounts). Cheeks, lips and lids glide over soft tissue, teeth and eyeballs: every
-other inner-sheet node has a sliding support along the normal of that deeper surface (the skin's
-inward direction smoothed over :data:`SUPPORT_SMOOTHING`), but the lids' inner sheet over an
-eyeball, which glides on the ball itself (:mod:`.contact`). The outer sheet is free.
+bone (:data:`BONE_REGIONS`: nose, chin, bottom face) whose sheet area lies mostly outside the
+muscles' attachment bands are held by stiff springs at their rest position, which the jaw moves
+for the jaw regions (Eq. 6.4.9 amounts). Cheeks, lips and lids glide over soft tissue, teeth and
+eyeballs: every other inner-sheet node has a sliding support along the normal of that deeper
+surface (the skin's inward direction smoothed over :data:`SUPPORT_SMOOTHING`), but the lids'
+inner sheet over an eyeball, which glides on the ball itself (:mod:`.contact`). The outer sheet
+is free.
 """
 
 from __future__ import annotations
@@ -233,10 +234,16 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
     src = skin.source_vertex
     fixed = border_v[src]
     inner = skin.layer == skin.layer.max()
-    attached = np.zeros(len(skin.vertices), bool)
+    # a node counts as attached when most of its sheet area lies within the muscles' bands (the
+    # sum of its attachment weights, Fig. 6.4 by area, >= 1/2), the same midpoint rule as the
+    # bone regions' below: where any attachment freed the node (weights down to 0.05), a band
+    # freed half an element more bone on either side, twice as much on level 0 as on level 1
+    # (held inner sheet 87.5 vs 101.3 cm^2 of the default head; with the rule 105.7 vs 109.7)
+    share = np.zeros(len(skin.vertices))
     for m in ms.muscles:
-        if m.attachment is not None:
-            attached[m.attachment.nodes] = True
+        if m.attachment is not None and len(m.attachment):
+            np.add.at(share, m.attachment.nodes, m.attachment.weight)
+    attached = share >= 0.5
     # over bone: the forehead (frontal bone), nose (nasal bone and cartilage), chin and the bottom
     # face (mandible); the cheeks (buccal space), lips and lids glide freely over soft tissue,
     # teeth and eyeballs
