@@ -812,7 +812,7 @@ class ContactStage:
             if s.count:
                 sp = s.springs
                 wp.launch(self.kc._half_space_forces, dim=s.count,
-                          inputs=[sp.node, sp.point, sp.axis, sp.stiffness, state_in.positions], outputs=[forces],
+                          inputs=[sp.node, sp.point, sp.axis, sp.stiffness, 1, state_in.positions], outputs=[forces],
                           device=self.device)
         for count, sp, one in ((self.eye_count, getattr(self, "eye_springs", None), 1),
                                (self.glide_count, getattr(self, "glide_springs", None), 0),
@@ -821,13 +821,11 @@ class ContactStage:
                 wp.launch(self.kc._sphere_forces, dim=count,
                           inputs=[sp.node, sp.point, sp.rest_length, sp.stiffness, one, state_in.positions],
                           outputs=[forces], device=self.device)
-        if self.lid_count:  # a lid node lies on one plane only: one spring per node in the set
-            sp = self.lid_springs
-            wp.launch(self.kc._half_space_forces, dim=self.lid_count,
-                      inputs=[sp.node, sp.point, sp.axis, sp.stiffness, state_in.positions], outputs=[forces],
-                      device=self.device)
-        if self.tie_count:  # the ties' points were detected in prepare
-            sp = self.tie_springs
-            wp.launch(self.kc._axis_forces, dim=self.tie_count,
-                      inputs=[sp.node, sp.point, sp.axis, sp.stiffness, state_in.positions], outputs=[forces],
-                      device=self.device)
+        # a lid node lies on one plane only: one spring per node in the set; the ties' points were
+        # detected in prepare (two-sided)
+        for count, sp, one in ((self.lid_count, getattr(self, "lid_springs", None), 1),
+                               (self.tie_count, getattr(self, "tie_springs", None), 0)):
+            if count:
+                wp.launch(self.kc._half_space_forces, dim=count,
+                          inputs=[sp.node, sp.point, sp.axis, sp.stiffness, one, state_in.positions],
+                          outputs=[forces], device=self.device)

@@ -133,22 +133,25 @@ def _signed_distance(
     dist_out[k] = q.sign * wp.length(x - wp.mesh_eval_position(mesh, q.face, q.u, q.v))
 
 
-# Explicit forces of one-sided half-space springs: f = -k min(0, (x - p) . a) a (the surface
-# contacts and the lids' fissure planes). Every node appears once per spring set, so the set
-# adds to its nodes without atomics.
+# Explicit forces of half-space springs: f = -k s a, s = min(0, (x - p) . a) one-sided (the surface
+# contacts and the lids' fissure planes), s = (x - p) . a two-sided (the lid ties). Every node
+# appears once per spring set, so the set adds to its nodes without atomics.
 @wp.kernel
 def _half_space_forces(
     nodes: wp.array(dtype=wp.int32),
     point: wp.array(dtype=wp.vec3),
     axis: wp.array(dtype=wp.vec3),
     stiffness: wp.array(dtype=float),
+    one_sided: int,
     positions: wp.array(dtype=wp.vec3),
     forces: wp.array(dtype=wp.vec3),
 ):
     k = wp.tid()
     i = nodes[k]
     a = axis[k]
-    s = wp.min(wp.dot(positions[i] - point[k], a), 0.0)
+    s = wp.dot(positions[i] - point[k], a)
+    if one_sided != 0:
+        s = wp.min(s, 0.0)
     forces[i] = forces[i] - stiffness[k] * s * a
 
 
@@ -216,19 +219,3 @@ def _lid_ties(
         s = wp.clamp((dx + dy) / wp.max(rest_distance[k], 1.0e-9), 0.0, 1.0)
         point_out[k] = 0.5 * (x + y) + s * rest_offset[k]
         stiffness_out[k] = node_stiffness[k]
-
-
-# Explicit forces of two-sided axis springs: f = -k ((x - p) . a) a (the lid ties).
-@wp.kernel
-def _axis_forces(
-    nodes: wp.array(dtype=wp.int32),
-    point: wp.array(dtype=wp.vec3),
-    axis: wp.array(dtype=wp.vec3),
-    stiffness: wp.array(dtype=float),
-    positions: wp.array(dtype=wp.vec3),
-    forces: wp.array(dtype=wp.vec3),
-):
-    k = wp.tid()
-    i = nodes[k]
-    a = axis[k]
-    forces[i] = forces[i] - stiffness[k] * wp.dot(positions[i] - point[k], a) * a

@@ -346,7 +346,8 @@ class SolverImplicit(SolverBase):
         self._e_views = [self.energy[int(off[i]):int(off[i + 1])] if sizes[i] else None for i in range(len(sizes))]
         self._chunk = max(32, int(np.ceil(np.sqrt(off[-1]))))  # entries per partial sum
         self._chunks = max(1, -(-int(off[-1]) // self._chunk))
-        self.partial = wp.zeros(self._chunks, dtype=wp.float64, device=dev)
+        self._energy_row = self.energy.reshape((1, self.energy.shape[0]))  # a view: summed as one row
+        self.partial = wp.zeros((1, self._chunks), dtype=wp.float64, device=dev)
         self.totals = wp.zeros(1 + _LINE_SEARCH_TRIALS, dtype=wp.float64, device=dev)
         self._h = None
         self._solve0 = None
@@ -514,12 +515,14 @@ class SolverImplicit(SolverBase):
                       inputs=[pool.group_nodes, pool.group_start, pool.group_order, m.vertex_fixed, pool.grad],
                       outputs=[self.grad], device=dev)
 
-    def _launch_total(self, slot: int) -> None:
-        """The total energy, summed deterministically into ``totals[slot]``."""
+    def _launch_sums(self, values, partial, first_slot: int) -> None:
+        """Each row of ``values`` (rows, energy entries) summed deterministically into
+        ``totals[first_slot + row]``, through ``partial`` (rows, chunks)."""
         wp = get_warp()
-        wp.launch(ki._chunk_sums, dim=self._chunks, inputs=[self.energy, self._chunk], outputs=[self.partial],
+        wp.launch(ki._chunk_sums_rows, dim=partial.shape, inputs=[values, self._chunk], outputs=[partial],
                   device=self.device)
-        wp.launch(ki._final_sum, dim=1, inputs=[self.partial, slot], outputs=[self.totals], device=self.device)
+        wp.launch(ki._final_sums_rows, dim=partial.shape[0], inputs=[partial, first_slot], outputs=[self.totals],
+                  device=self.device)
 
     def _launch_hessian(self, x, h: float, slack=None) -> None:
         """PSD Hessian blocks at x summed into :attr:`block_values` (fixed rows / columns: identity);
@@ -651,7 +654,7 @@ class SolverImplicit(SolverBase):
         wp = get_warp()
         m, dev, n, pool = self.model, self.device, self.model.vertex_count, self._pool
         self._launch_energy(self.x, control, h)
-        self._launch_total(0)
+        self._launch_sums(self._energy_row, self.partial, 0)
         self._launch_hessian(self.x, h, self._slack)  # 0 (exact) unless the last line search failed
         wp.launch(ki._newton_system, dim=n, inputs=[self.diag_block, self.block_values, self.grad],
                   outputs=[self.inv_diag, self.rhs], device=dev)
@@ -664,10 +667,7 @@ class SolverImplicit(SolverBase):
                           self.targets, control.external_force, pool.sets, pool.set_index, pool.local,
                           1.0 / h, self.x, self.direction],
                   outputs=[self.trial_energy], device=dev)
-        wp.launch(ki._chunk_sums_rows, dim=self.trial_partial.shape, inputs=[self.trial_energy, self._chunk],
-                  outputs=[self.trial_partial], device=dev)
-        wp.launch(ki._final_sums_rows, dim=_LINE_SEARCH_TRIALS, inputs=[self.trial_partial, 1],
-                  outputs=[self.totals], device=dev)
+        self._launch_sums(self.trial_energy, self.trial_partial, 1)
         wp.launch(ki._select_step, dim=1, inputs=[self.totals, _LINE_SEARCH_TRIALS], outputs=[self.t_step],
                   device=dev)
         wp.launch(ki._take_step, dim=n, inputs=[m.vertex_fixed, self.direction, self.t_step],

@@ -614,31 +614,12 @@ def _guess_fallback(
 
 
 # ---------------------------------------------------------------------------- reductions
-# Deterministic sum of an energy array: each thread adds a fixed chunk in order (float64), then
-# one thread adds the chunks in order and writes total_out[slot]. No atomics: the same sum on
-# every run and device. The solver takes chunks of about sqrt(n) entries, so neither pass has a
-# long serial chain (measured on an H100 at level 2: threads striding over the whole array, 512
-# of them, took 10x as long as contiguous chunks: every load a cache miss).
-@wp.kernel
-def _chunk_sums(values: wp.array(dtype=float), chunk: int, partial_out: wp.array(dtype=wp.float64)):
-    c = wp.tid()
-    n = values.shape[0]
-    s = wp.float64(0.0)
-    for i in range(c * chunk, wp.min((c + 1) * chunk, n)):
-        s = s + wp.float64(values[i])
-    partial_out[c] = s
-
-
-@wp.kernel
-def _final_sum(partial: wp.array(dtype=wp.float64), slot: int, total_out: wp.array(dtype=wp.float64)):
-    s = wp.float64(0.0)
-    for i in range(partial.shape[0]):
-        s = s + partial[i]
-    total_out[slot] = s
-
-
-# Rows of a 2-D energy array (the line search's trials) summed the same way: row j into
-# total_out[first_slot + j].
+# Deterministic sums of the rows of an energy array (the energy at x: one row; the line search's
+# trials: one row each): each thread adds a fixed chunk of a row in order (float64), then one
+# thread per row adds the chunks in order and writes total_out[first_slot + j]. No atomics: the
+# same sum on every run and device. The solver takes chunks of about sqrt(n) entries, so neither
+# pass has a long serial chain (measured on an H100 at level 2: threads striding over the whole
+# array, 512 of them, took 10x as long as contiguous chunks: every load a cache miss).
 @wp.kernel
 def _chunk_sums_rows(values: wp.array2d(dtype=float), chunk: int, partial_out: wp.array2d(dtype=wp.float64)):
     j, c = wp.tid()
