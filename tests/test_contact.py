@@ -423,6 +423,11 @@ def test_a_gliding_lid_node_is_held_on_its_sphere_by_the_verlet_forces():
     k, kg = 5e4, 2e3
     stage = ContactStage(Rig(), np.full(len(V), k), "cpu", geometry=g, glide_stiffness=np.full(len(V), kg))
     assert stage.counts["lid_eye"] == 4 and stage.counts["lid_glide"] == 2
+    from facewarp import InputError
+
+    for bad in (np.full(len(V) + 1, kg), np.full(len(V), -kg), np.full(len(V), np.nan)):
+        with pytest.raises(InputError, match="glide_stiffness"):
+            ContactStage(Rig(), np.full(len(V), k), "cpu", geometry=g, glide_stiffness=bad)
     d0 = np.linalg.norm(V[mid] - centre, axis=1)
     n = (V[mid] - centre) / d0[:, None]
     move = np.array([5e-4, -3e-4, 5e-4, -3e-4])  # out, in, out, in (radially) [m]
