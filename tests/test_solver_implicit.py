@@ -105,6 +105,17 @@ def test_bad_step_arguments_are_input_errors():
         SolverImplicit(model, method="newton-pcg", linear_iterations=0)
 
 
+def test_cg_iterations_grow_with_the_square_root_of_the_node_count():
+    from facewarp.physics import default_linear_iterations
+
+    # levels 0-3 of the default head: 10 up to 10,000 nodes, then 10 sqrt(n / 10,000)
+    assert [default_linear_iterations(n) for n in (2448, 9470, 36930, 146450)] == [10, 10, 19, 38]
+    V, T = grid_tets(1, 1, 1)
+    model = ModelBuilder(V, T, material="physical").finalize("cpu")
+    assert SolverImplicit(model, method="newton-pcg").linear_iterations == 10
+    assert SolverImplicit(model, method="newton-pcg", linear_iterations=3).linear_iterations == 3
+
+
 def test_nan_control_is_a_simulation_error_not_a_nan_frame():
     V, T = grid_tets(1, 1, 1)
     model = ModelBuilder(V, T, material="physical").finalize("cpu")

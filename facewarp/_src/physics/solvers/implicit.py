@@ -39,7 +39,8 @@ Methods (``method=``):
   jaw's 0.3 s opening of laugh and surprise, none once the expression is held).
 * ``"newton"`` (CPU): Newton with a fresh factorisation every iteration and the same line search.
 * ``"newton-pcg"`` (default on CUDA, runs on the CPU too): Newton iterations, each with a fixed
-  number (``linear_iterations``, 10) of block-Jacobi preconditioned conjugate-gradient iterations
+  number (``linear_iterations``, 10 up to 10,000 nodes, growing with the square root of the node
+  count beyond: :func:`default_linear_iterations`) of block-Jacobi preconditioned conjugate-gradient iterations
   on the block-sparse Hessian assembled by kernels, one launch per CG iteration (the
   Chronopoulos-Gear form with the product fused into the update, kernels ``_cg_*``: about a tenth
   of ``warp.optim.linear.cg``'s launches, the same iterates), and a backtracking line search
@@ -57,7 +58,7 @@ Methods (``method=``):
   pcg``; every FDP of the five Table 6.4 presets during attack, hold and release; on an H100):
   within 0.03-0.25 mm at 3.8-6.9 Newton iterations per frame. ``iterations=k`` gives a fixed count
   instead (the interactive mode): 3 stay within 0.32 mm, 2 and 1 miss the 0.5 mm on some presets
-  (0.6 and 1.9 mm, on the CPU). A level-0 frame is launch bound (H100: 319 frames/s adaptive, 443
+  (0.6 and 1.9 mm, on the CPU). A level-0 frame is launch bound (H100: 381 frames/s adaptive, 522
   with 3 iterations; ``benchmarks/physics_steps.py``): the four line-search trials are one pass
   (``_trial_energies``), every stage's springs one pooled launch (``_SpringPool``), a CG iteration
   one launch, so a Newton iteration is 36 launches where it was ~140 (179 frames/s). Before the
@@ -98,7 +99,7 @@ from ..model import Control, Model, State, group_indices
 from . import kernels_implicit as ki
 from .base import SolverBase, check_step_args, stage_springs
 
-__all__ = ["IMPLICIT_METHODS", "SolverImplicit", "factorization_backend"]
+__all__ = ["IMPLICIT_METHODS", "SolverImplicit", "default_linear_iterations", "factorization_backend"]
 
 IMPLICIT_METHODS = ("lbfgs", "newton", "newton-pcg")
 """The methods of :class:`SolverImplicit` (see the module doc)."""
@@ -124,6 +125,19 @@ def factorization_backend() -> str:
         except ImportError:  # pragma: no cover - a broken install
             pass
     return "splu"
+
+
+def default_linear_iterations(node_count: int) -> int:
+    """Conjugate-gradient iterations per Newton iteration of ``"newton-pcg"`` for a mesh of
+    ``node_count`` nodes: 10 up to 10,000 nodes, then ``10 sqrt(node_count / 10,000)`` rounded.
+
+    The skin is a sheet: each level halves the edge length h and quarters the node count, the
+    Hessian's condition number grows as h^-2, and the CG iterations that reach a given reduction as
+    its square root, h^-1 ~ sqrt(node_count). Levels 0-3 of the default head (2,448 / 9,470 /
+    36,930 / 146,450 nodes) get 10 / 10 / 19 / 38.
+    """
+    n = int(node_count)
+    return 10 if n <= 10_000 else int(round(10.0 * np.sqrt(n / 10_000.0)))
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> float:
@@ -219,11 +233,14 @@ class SolverImplicit(SolverBase):
             lag of the interactive mode during the jaw's opening drops from 2.9 to 1.9 mm at 2
             iterations; 1.0 overshoots and rings) and with ``"newton-pcg"`` (its adaptive loop:
             1.0 took as many iterations), 0 otherwise (converged L-BFGS steps gain nothing).
-        linear_iterations: Conjugate-gradient iterations per Newton iteration (``"newton-pcg"``,
-            default 10. Measured per frame against the converged steps, every FDP of the five
-            Table 6.4 presets: 10 gave the errors of 20 (and 20 those of 50 and 200) at about 0.3
-            more Newton iterations per frame; the Newton count is the limit. On an H100 at level 0,
-            3 Newton iterations, a frame took a quarter less time than with 20).
+        linear_iterations: Conjugate-gradient iterations per Newton iteration (``"newton-pcg"``;
+            default :func:`default_linear_iterations` of the node count: 10 up to 10,000 nodes,
+            levels 0 and 1. Measured per frame against the converged steps, every FDP of the five
+            Table 6.4 presets at level 0: 10 gave the errors of 20 (and 20 those of 50 and 200) at
+            about 0.3 more Newton iterations per frame; on an H100 at level 0, 3 Newton iterations,
+            a frame took a quarter less time than with 20. At level 2 (36,930 nodes) 10 left the
+            adaptive loop at its cap, 22.5 Newton iterations per frame of the laugh's attack on the
+            CPU; 20 took 6.6 and 40 took 7.9).
         refactor_after: ``"lbfgs"`` renews the factorisation at the current shape when the
             iterations beyond one per step since the last one add up to this (with a fixed
             ``iterations``: all iterations of steps whose last update was above ``tolerance``),
@@ -257,7 +274,7 @@ class SolverImplicit(SolverBase):
 
     def __init__(self, model: Model, *, stages=(), method: str | None = None, tolerance: float = 1e-5,
                  max_iterations: int | None = None, iterations: int | None = None, history: int = 8,
-                 extrapolate: float | None = None, linear_iterations: int = 10, refactor_after: int = 20,
+                 extrapolate: float | None = None, linear_iterations: int | None = None, refactor_after: int = 20,
                  spring_updates: int = 4, spring_tolerance: float = 0.01, backend: str | None = None,
                  rounds: int = 2):
         super().__init__(model, stages=stages)
@@ -273,6 +290,8 @@ class SolverImplicit(SolverBase):
             max_iterations = 12 if method == "newton-pcg" else 50
         if extrapolate is None:
             extrapolate = 0.5 if iterations is not None or method == "newton-pcg" else 0.0
+        if linear_iterations is None:
+            linear_iterations = default_linear_iterations(model.vertex_count)
         for name, val in (("tolerance", tolerance), ("extrapolate", extrapolate)):
             if not (np.isfinite(val) and val >= 0):
                 raise InputError(f"{name}: expected a finite number >= 0, got {val!r}")
