@@ -16,8 +16,9 @@
   count of CG iterations) on ``--device`` at several (Newton, CG) counts, against the fully
   converged CPU solution of the same steps (L-BFGS, tolerance 1e-7 m), per phase as ``frames``,
   with frames per second: which counts keep every FDP within 0.5 mm or 10 %.
-* ``levels``: the same static shapes on level 1 (27k tets) against level 0: the relative difference
-  of the FDP displacements (FDPs moving more than 1 mm on level 0).
+* ``levels``: the same static shapes on level 1 (27k tets) against level 0 (``--compare-levels``:
+  further pairs, e.g. 0 1 2 also compares level 2 with level 1): the relative difference of the
+  FDP displacements (FDPs moving more than 1 mm on the coarser level), per FDP and over the field.
 
 Writes benchmarks/results/solver_accuracy_<device>.json.
 """
@@ -168,23 +169,32 @@ def part_pcg(fr, material, presets, device, counts=PCG_COUNTS) -> list:
     return rows
 
 
-def part_levels(fr0, material, presets, device) -> list:
-    fr1 = _rig(1)
+def part_levels(fr0, material, presets, device, levels=(0, 1)) -> list:
+    """Each consecutive pair of ``levels`` (default 0 vs 1): per FDP moving more than 1 mm on the
+    coarser level, |d_fine - d_coarse| / |d_coarse|; also the field's ||d_fine - d_coarse|| / ||d_coarse||."""
+    rigs = {lv: fr0 if lv == 0 else _rig(lv) for lv in levels}
     rows = []
     for name in presets:
-        x0, r0, _ = _static(fr0, name, material, device, tolerance=1e-6)
-        x1, r1, _ = _static(fr1, name, material, device, tolerance=1e-6)
-        d0, d1 = x0 - r0, x1 - r1
-        n0 = np.linalg.norm(d0, axis=1)
-        moving = n0 > 1e-3
-        rel = np.linalg.norm(d1 - d0, axis=1)[moving] / n0[moving]
-        row = {"preset": name, "material": material, "fdps_moving_over_1mm": int(moving.sum()),
-               "median_relative_difference": round(float(np.median(rel)), 4) if moving.any() else None,
-               "max_relative_difference": round(float(rel.max()), 4) if moving.any() else None,
-               "displacement_norm_ratio_l1_over_l0": round(float(np.linalg.norm(d1[moving]) / np.linalg.norm(d0[moving])), 4)
-               if moving.any() else None}
-        print(row, flush=True)
-        rows.append(row)
+        disp = {}
+        for lv in levels:
+            x, r, _ = _static(rigs[lv], name, material, device, tolerance=1e-6)
+            disp[lv] = x - r
+        for lc, lf in zip(levels[:-1], levels[1:]):
+            d0, d1 = disp[lc], disp[lf]
+            n0 = np.linalg.norm(d0, axis=1)
+            moving = n0 > 1e-3
+            rel = np.linalg.norm(d1 - d0, axis=1)[moving] / n0[moving]
+            row = {"preset": name, "material": material, "levels": [lc, lf],
+                   "fdps_moving_over_1mm": int(moving.sum()),
+                   "median_relative_difference": round(float(np.median(rel)), 4) if moving.any() else None,
+                   "max_relative_difference": round(float(rel.max()), 4) if moving.any() else None,
+                   "field_relative_difference": round(float(np.linalg.norm(d1[moving] - d0[moving])
+                                                            / np.linalg.norm(d0[moving])), 4) if moving.any() else None,
+                   "displacement_norm_ratio_fine_over_coarse": round(float(np.linalg.norm(d1[moving])
+                                                                           / np.linalg.norm(d0[moving])), 4)
+                   if moving.any() else None}
+            print(row, flush=True)
+            rows.append(row)
     return rows
 
 
@@ -195,6 +205,8 @@ def main():
     ap.add_argument("--parts", nargs="+", default=["frames", "static", "levels"])
     ap.add_argument("--presets", nargs="+", default=list(PRESETS))
     ap.add_argument("--name", default=None, help="result file suffix")
+    ap.add_argument("--compare-levels", type=int, nargs="+", default=[0, 1],
+                    help="levels part: the levels compared pairwise in order (e.g. 0 1 2: 0 vs 1 and 1 vs 2)")
     ap.add_argument("--pcg-counts", nargs="+", default=PCG_COUNTS,
                     help="pcg part: Newton x CG iteration counts, e.g. 3x50, ax20 (adaptive), 3x20+e0 (extrapolate 0; "
                          "default 0.5), ax20+r3 (3 rounds)")
@@ -208,7 +220,8 @@ def main():
     for mat in args.materials:
         for part in args.parts:
             fn = {"frames": part_frames, "static": part_static, "levels": part_levels, "pcg": part_pcg}[part]
-            extra = dict(counts=args.pcg_counts) if part == "pcg" else {}
+            extra = (dict(counts=args.pcg_counts) if part == "pcg"
+                     else dict(levels=tuple(args.compare_levels)) if part == "levels" else {})
             result[f"{part}_{mat}"] = fn(fr, mat, args.presets, args.device, **extra)
             save(name, result)  # after every part: a long run keeps what it measured
     print("wrote", save(name, result))
