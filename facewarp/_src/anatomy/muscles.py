@@ -47,7 +47,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..geometry.mesh import SurfacePoints, closest_surface_points
-from ..geometry.surface import vertex_normals
+from ..geometry.surface import gaussian_sums, vertex_normals
 from .attach import MuscleAttachment, attach_by_area, sheet_samples
 from .bezier import arc_length_params, bezier_quadratic
 from .ellipsoids import Ellipsoids, segment_ellipsoids
@@ -274,8 +274,6 @@ def depth_normals(V, F, points, depth, *, footprint: float | None = None) -> np.
     Returns:
         Unit normals, shape (k, 3), float64.
     """
-    from scipy.spatial import cKDTree
-
     footprint = NORMAL_FOOTPRINT if footprint is None else footprint
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
@@ -285,14 +283,10 @@ def depth_normals(V, F, points, depth, *, footprint: float | None = None) -> np.
         raise InputError(f"depth_normals: depth * footprint must be positive lengths [m], got {width}")
     an = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])  # twice the area times the unit normal
     C = V[F].mean(1)
-    tree = cKDTree(C)
-    out = np.zeros((len(P), 3))
-    for i, (p, w) in enumerate(zip(P, width)):
-        near = np.asarray(tree.query_ball_point(p, 2.5 * w), dtype=np.int64)
-        if len(near) == 0:
-            near = np.asarray([tree.query(p)[1]], dtype=np.int64)
-        g = np.exp(-((np.linalg.norm(C[near] - p, axis=1) / w) ** 2))
-        out[i] = g @ an[near]
+    out, count = gaussian_sums(P, C, an, width)
+    for i in np.flatnonzero(count == 0):  # no face within reach: the nearest one
+        j = int(np.argmin(np.linalg.norm(C - P[i], axis=1)))
+        out[i] = np.exp(-((np.linalg.norm(C[j] - P[i]) / width[i]) ** 2)) * an[j]
     n = np.linalg.norm(out, axis=1, keepdims=True)
     if (n <= 0).any():
         raise InputError("depth_normals: the skin around a control point has no mean normal (faces cancel)")

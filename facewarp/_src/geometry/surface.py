@@ -24,6 +24,7 @@ __all__ = [
     "closest_point",
     "face_areas",
     "face_normals",
+    "gaussian_sums",
     "mean_curvature",
     "vertex_normals",
 ]
@@ -120,6 +121,42 @@ def vertex_normals(V, F) -> np.ndarray:
         N[:, 2] += np.bincount(F[:, k], weights=c[:, 2], minlength=len(V))
     n = np.linalg.norm(N, axis=1, keepdims=True)
     return np.divide(N, n, out=np.zeros_like(N), where=n > 0)
+
+
+def gaussian_sums(P, S, vectors, width, weights=None, *, reach: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian-weighted sums of vectors held at sample points, around each query point: row i is
+    ``sum_j w_j exp(-(|S_j - P_i| / width_i)^2) vectors_j`` over the samples within
+    ``reach * width_i`` of P_i (w_j = ``weights`` or 1). The smoothing behind the skin normals
+    that do not depend on the mesh resolution (muscle placement, sliding supports).
+
+    Args:
+        P: Query points [m], shape (k, 3), float.
+        S: Sample points [m], shape (s, 3), float.
+        vectors: Vector at each sample, shape (s, 3), float.
+        width: Gaussian width [m], a scalar or shape (k,), float, > 0.
+        weights: Weight of each sample (e.g. its area), shape (s,), float, or None.
+        reach: Samples farther than ``reach * width`` are left out.
+
+    Returns:
+        ``(sums (k, 3) float64, counts (k,) int64)``: counts the samples within reach.
+    """
+    from scipy.spatial import cKDTree
+
+    P = np.asarray(P, np.float64).reshape(-1, 3)
+    S = np.asarray(S, np.float64).reshape(-1, 3)
+    vectors = np.asarray(vectors, np.float64)
+    width = np.broadcast_to(np.asarray(width, np.float64), (len(P),))
+    out = np.zeros((len(P), 3))
+    count = np.zeros(len(P), np.int64)
+    tree = cKDTree(S)
+    for i, near in enumerate(tree.query_ball_point(P, reach * width)):
+        j = np.asarray(near, np.int64)
+        g = np.exp(-((np.linalg.norm(S[j] - P[i], axis=1) / width[i]) ** 2))
+        if weights is not None:
+            g = weights[j] * g
+        out[i] = g @ vectors[j]
+        count[i] = len(j)
+    return out, count
 
 
 def boundary_edges(F) -> np.ndarray:

@@ -26,6 +26,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..anatomy.jaw import JawKinematic
+from ..geometry.surface import gaussian_sums
 from .muscle_stage import PIVOT_CENTER, PIVOT_FIXED, MuscleRig
 from ..template import FRONTAL_REGIONS, REGIONS
 
@@ -244,9 +245,8 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
         if m.attachment is not None and len(m.attachment):
             np.add.at(share, m.attachment.nodes, m.attachment.weight)
     attached = share >= 0.5
-    # over bone: the forehead (frontal bone), nose (nasal bone and cartilage), chin and the bottom
-    # face (mandible); the cheeks (buccal space), lips and lids glide freely over soft tissue,
-    # teeth and eyeballs
+    # over bone: the nose (nasal bone and cartilage), chin and the bottom face (mandible); the
+    # cheeks (buccal space), lips and lids glide freely over soft tissue, teeth and eyeballs
     bone_ids = [REGIONS.index(r) for r in BONE_REGIONS]
     Ff = head.faces.ravel()
     on_bone = np.bincount(Ff, weights=np.repeat(np.isin(head.face_region, bone_ids), 3).astype(float),
@@ -370,8 +370,6 @@ def substrate_normals(X, F, directions, nodes, *, width: float = SUPPORT_SMOOTHI
     Returns:
         Unit normals, shape (s, 3), float64.
     """
-    from scipy.spatial import cKDTree
-
     if not (np.isfinite(width) and width > 0):
         raise InputError(f"width: expected a positive length [m], got {width!r}")
     X = np.asarray(X, np.float64)
@@ -382,16 +380,9 @@ def substrate_normals(X, F, directions, nodes, *, width: float = SUPPORT_SMOOTHI
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     node_area = np.bincount(F.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(X))
     sheet = np.flatnonzero(node_area > 0)
-    tree = cKDTree(X[sheet])
-    out = np.array(D[nodes], np.float64)
-    for i, near in enumerate(tree.query_ball_point(X[nodes], 2.5 * width)):
-        j = sheet[near]
-        w = node_area[j] * np.exp(-((np.linalg.norm(X[j] - X[nodes[i]], axis=1) / width) ** 2))
-        v = w @ D[j]
-        n = np.linalg.norm(v)
-        if n > 1e-12:
-            out[i] = v / n
-    return out
+    v, _ = gaussian_sums(X[nodes], X[sheet], D[sheet], width, node_area[sheet])
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(n > 1e-12, v / np.maximum(n, 1e-300), D[nodes])
 
 
 _RIG_FIELDS = ("activation_index", "contraction", "center", "center_jaw", "ctrl_rest", "ctrl_muscle", "ctrl_pivot",
