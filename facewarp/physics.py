@@ -24,6 +24,7 @@ from ._src.physics.materials import (  # noqa: F401
     MaterialPhysical,
     MaterialThesis,
     isotropic_moduli,
+    linear_stiffness,
     material_profile,
 )
 from ._src.physics.potential import (  # noqa: F401

@@ -16,7 +16,8 @@ import pytest
 from conftest import grid_tets
 from facewarp import InputError, SimulationError
 from facewarp.physics import (MaterialPhysical, MaterialThesis, ModelBuilder, SolverImplicit, SolverVerlet,
-                              StepPotential, isotropic_moduli, material_profile, simulate, stable_dt)
+                              StepPotential, isotropic_moduli, linear_stiffness, material_profile, simulate,
+                              stable_dt)
 
 CM = 0.01
 
@@ -72,6 +73,62 @@ def test_material_profiles_and_isotropic_moduli():
     b = ModelBuilder(*one_tet(), material="physical")
     assert b.damping_rate == 50.0 and b.stiffness_damping == 2e-5
     np.testing.assert_allclose(b.edge_damping_coef, 2e-5 * b.edge_k0)
+
+
+def _mandel(S):
+    r2 = np.sqrt(2.0)
+    return np.array([S[0, 0], S[1, 1], S[2, 2], r2 * S[1, 2], r2 * S[0, 2], r2 * S[0, 1]])
+
+
+@pytest.mark.parametrize("material", ["physical", "thesis"])
+def test_linear_stiffness_is_the_energy_of_a_small_uniform_strain(material):
+    # oracle: the elements' own constraints measured on the strained positions
+    V, T = grid_tets(2, 1, 1, CM)
+    V = perturbed(V, 0.1, 3).astype(np.float32).astype(np.float64)  # the rest state the model measures
+    b = ModelBuilder(V, T, material=material)
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        eps = rng.normal(scale=1e-4, size=(3, 3))
+        eps = 0.5 * (eps + eps.T)
+        X = V @ (np.eye(3) + eps).T
+        d = np.linalg.norm(X[b.edges[:, 0]] - X[b.edges[:, 1]], axis=1)
+        ce = d / b.edge_rest_lengths - 1.0
+        af = 0.5 * np.linalg.norm(np.cross(X[b.faces[:, 1]] - X[b.faces[:, 0]], X[b.faces[:, 2]] - X[b.faces[:, 0]]),
+                                  axis=1)
+        cf = af / b.face_rest_areas - 1.0
+        x = X[b.tets]
+        vt = np.einsum("ij,ij->i", x[:, 1] - x[:, 0], np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 0])) / 6.0
+        ct = vt / b.tet_rest_volumes - 1.0
+        energy = 0.5 * (np.sum(b.edge_k0 * ce**2) + np.sum(b.face_k * cf**2) + np.sum(b.tet_k * ct**2))
+        C = linear_stiffness(b)
+        e = _mandel(eps)
+        assert 0.5 * np.sum(b.tet_rest_volumes * np.einsum("a,kab,b->k", e, C, e)) == pytest.approx(energy, rel=1e-3)
+
+
+def test_linear_stiffness_over_evenly_spread_directions_is_the_isotropic_material():
+    # one tet seen in many random orientations: the average tensor is lambda 1 1^T + 2 G I with the
+    # Lame constants of isotropic_moduli (the module doc's even-spread assumption)
+    mat = MaterialPhysical(distance_modulus=(3e5, 3e5, 3e5), area_modulus=1.5e5, volume_modulus=1.5e5)
+    V, T = one_tet()
+    V = perturbed(V, 0.2, 1)
+    b = ModelBuilder(V, T, material=mat)
+    rng = np.random.default_rng(2)
+    q = rng.normal(size=(4000, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    R = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+                  np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+                  np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
+    C = np.mean([linear_stiffness(b, frames=r[None])[0] for r in R], axis=0)
+    lam = 3e5 / 15 + 2 * 1.5e5 / 5 + 1.5e5
+    g = (3e5 + 1.5e5) / 15
+    want = 2 * g * np.eye(6)
+    want[:3, :3] += lam
+    np.testing.assert_allclose(C, want, atol=0.03 * want.max())
+    E, nu = isotropic_moduli(3e5, 1.5e5, 1.5e5)
+    assert E == pytest.approx(g * (3 * lam + 2 * g) / (lam + g)) and nu == pytest.approx(lam / (2 * (lam + g)))
+    with pytest.raises(InputError, match="frames must have shape"):
+        linear_stiffness(b, frames=np.eye(3))
 
 
 @pytest.mark.parametrize("kwargs, match", [

@@ -58,6 +58,7 @@ from ..core.errors import InputError
 
 __all__ = [
     "MATERIALS",
+    "linear_stiffness",
     "MaterialPhysical",
     "MaterialThesis",
     "isotropic_moduli",
@@ -209,6 +210,79 @@ def material_profile(material) -> MaterialPhysical | MaterialThesis:
         return MATERIALS[material]
     raise InputError(f"material: expected one of {sorted(MATERIALS)} or a MaterialPhysical / MaterialThesis, "
                      f"got {material!r}")
+
+
+_TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
+_TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+_SQRT2 = float(np.sqrt(2.0))
+
+
+def _mandel(S: np.ndarray) -> np.ndarray:
+    """Mandel vectors (..., 6) of symmetric matrices (..., 3, 3): (xx, yy, zz, sqrt2 yz, sqrt2 xz, sqrt2 xy)."""
+    return np.stack([S[..., 0, 0], S[..., 1, 1], S[..., 2, 2], _SQRT2 * S[..., 1, 2], _SQRT2 * S[..., 0, 2],
+                     _SQRT2 * S[..., 0, 1]], axis=-1)
+
+
+def linear_stiffness(builder, frames=None) -> np.ndarray:
+    """The material each tet of a model stands for: the stiffness tensor of its energies at rest.
+
+    Under a small uniform strain eps every constraint of the thesis's energies is linear in eps:
+    an edge along the unit vector n has ``C = n . eps n``, a face with unit normal m
+    ``C = tr(eps) - m . eps m``, a tet ``C = tr(eps)``; so ``E = 1/2 k C^2`` is the quadratic form
+    ``1/2 k (a . e)^2`` of the strain's Mandel vector e, with a = Mandel(n n^T), Mandel(I - m m^T),
+    Mandel(I). Each unique element's coefficient k is split among the tets that share it in
+    proportion to their volumes (for the physical profile this is exactly the per-tet share the
+    profile gives), and a tet's tensor is ``sum k a a^T / V`` [Pa]: ``1/2 e^T C e`` is the
+    energy density of that strain. An isotropic material has ``C = lambda 1 1^T + 2 G I`` in
+    these coordinates; the module doc's Lame constants are the average over evenly spread
+    element directions, which a thin layer of flat tets is not.
+
+    Args:
+        builder: A :class:`~facewarp._src.physics.model.ModelBuilder` (its rest geometry and
+            per-element coefficients).
+        frames: Optional local axes per tet, shape (k, 3, 3), float, rows orthonormal
+            (e.g. two tangents and the layer's thickness direction): the tensors are then given
+            in those axes. None: world axes.
+
+    Returns:
+        Stiffness tensors in Mandel notation, shape (k, 6, 6), float64 [Pa].
+
+    Raises:
+        InputError: ``frames`` of the wrong shape or not orthonormal.
+    """
+    V = np.asarray(builder.vertices, dtype=np.float64).astype(np.float32).astype(np.float64)
+    T = np.asarray(builder.tets, dtype=np.int64)
+    vol = np.asarray(builder.tet_rest_volumes, dtype=np.float64)
+    X = V[T]  # (k, 4, 3)
+    if frames is not None:
+        R = np.asarray(frames, dtype=np.float64)
+        if R.shape != (len(T), 3, 3):
+            raise InputError(f"frames must have shape ({len(T)}, 3, 3), got {R.shape}")
+        if not np.allclose(np.einsum("kab,kcb->kac", R, R), np.eye(3), atol=1e-6):
+            raise InputError("frames must hold orthonormal rows (local axes per tet)")
+        X = np.einsum("kab,kib->kia", R, X)
+
+    # each unique element's k over its tets, by volume
+    def per_tet(local, unique, k):
+        allk = np.sort(T[:, local].reshape(-1, local.shape[1]), axis=1)
+        _, inv = np.unique(allk, axis=0, return_inverse=True)
+        inv = inv.reshape(len(T), len(local))
+        vsum = np.bincount(inv.ravel(), weights=np.repeat(vol, len(local)), minlength=len(unique))
+        return np.asarray(k, np.float64)[inv] * vol[:, None] / vsum[inv]
+
+    ke = per_tet(_TET_EDGES, builder.edges, builder.edge_k0)  # (k, 6)
+    kf = per_tet(_TET_FACES, builder.faces, builder.face_k)  # (k, 4)
+    e = X[:, _TET_EDGES[:, 1]] - X[:, _TET_EDGES[:, 0]]
+    n = e / np.linalg.norm(e, axis=2, keepdims=True)
+    f = X[:, _TET_FACES]
+    m = np.cross(f[:, :, 1] - f[:, :, 0], f[:, :, 2] - f[:, :, 0])
+    m /= np.linalg.norm(m, axis=2, keepdims=True)
+    a_e = _mandel(n[..., :, None] * n[..., None, :])
+    a_f = _mandel(np.eye(3) - m[..., :, None] * m[..., None, :])
+    a_v = _mandel(np.eye(3))
+    C = np.einsum("kj,kja,kjb->kab", ke, a_e, a_e) + np.einsum("kj,kja,kjb->kab", kf, a_f, a_f)
+    C += np.asarray(builder.tet_k, np.float64)[:, None, None] * np.outer(a_v, a_v)
+    return C / vol[:, None, None]
 
 
 __all__ += ["TISSUE_DENSITY"]
