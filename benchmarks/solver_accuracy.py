@@ -2,7 +2,7 @@
 
     python -m benchmarks.solver_accuracy [--materials physical thesis] [--parts frames static levels]
                                          [--presets smile laugh surprise angry sad] [--device cpu]
-                                         (parts: frames static levels pcg)
+                                         (parts: frames static levels pcg loads)
 
 * ``frames``: each Table 6.4 preset (attack 0.3 s, hold 0.7 s, release 0.3 s) on the default head
   (level 0) with the default solver (tolerance 3e-5 m), the interactive mode (1, 2, 3 iterations
@@ -19,6 +19,15 @@
 * ``levels``: the same static shapes on level 1 (27k tets) against level 0 (``--compare-levels``:
   further pairs, e.g. 0 1 2 also compares level 2 with level 1): the relative difference of the
   FDP displacements (FDPs moving more than 1 mm on the coarser level), per FDP and over the field.
+
+* ``loads``: per preset and level (``--compare-levels``), the muscle springs' load at the static
+  shape: the active attachments' stiffness sum, the stiffness-weighted mean travel of their
+  targets and of the attached nodes, beside the largest FDP displacement: whether levels differ in
+  the load or in the tissue's response to it.
+
+``--shear-modulus MU`` adds a run of every part with the physical profile's shear term (modulus MU
+[Pa]) in place of its distance and area energies (``physical+shear<MU>`` in the results): the
+volume energy plus a shear energy that is the same material for any tet shape.
 
 Writes benchmarks/results/solver_accuracy_<device>.json.
 """
@@ -50,6 +59,20 @@ def _run(fr, timeline, seconds, **kw):
     return frames, sim
 
 
+def _label(material) -> str:
+    """A profile's name in the results: its name, or ``physical+shear<mu>`` for the shear variant."""
+    if isinstance(material, str):
+        return material
+    return f"{material.name}+shear{material.shear_modulus:g}" if getattr(material, "shear_modulus", 0) else material.name
+
+
+def shear_material(mu: float):
+    """The physical profile with the shear term (``mu`` [Pa]) in place of the distance and area energies."""
+    from facewarp.physics import MaterialPhysical
+
+    return MaterialPhysical(distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0, shear_modulus=mu)
+
+
 def _within(err, disp, mm=5e-4, rel=0.1):
     """Every FDP within ``mm`` metres or ``rel`` of its displacement."""
     return bool(np.all((err <= mm) | (err <= rel * disp)))
@@ -67,7 +90,7 @@ def part_frames(fr, material, presets, device) -> list:
         t = conv.times
         phase = np.where(t < START + ATTACK, "attack", np.where(t < START + ATTACK + HOLD, "hold", "release"))
         disp = np.linalg.norm(conv.fdp_points - conv.fdp_points[:1], axis=2)
-        row = {"preset": name, "material": material, "frames": int(len(t)),
+        row = {"preset": name, "material": _label(material), "frames": int(len(t)),
                "max_fdp_displacement_mm": round(float(disp.max()) * 1e3, 3),
                "converged_fps": round(conv.frames_per_second, 2)}
         for label, kw in (("default", {}), ("iterations_1", dict(iterations=1)), ("iterations_2", dict(iterations=2)),
@@ -106,13 +129,13 @@ def part_static(fr, material, presets, device) -> list:
         try:
             ref, rest, sim = _static(fr, name, material, device, solver="verlet")
         except SimulationError as e:  # the explicit reference itself failed
-            row = {"preset": name, "material": material, "verlet_error": str(e)}
+            row = {"preset": name, "material": _label(material), "verlet_error": str(e)}
             print(row, flush=True)
             rows.append(row)
             continue
         tv = time.perf_counter() - t0
         disp = np.linalg.norm(ref - rest, axis=1)
-        row = {"preset": name, "material": material, "verlet_substeps_per_frame": sim.substeps,
+        row = {"preset": name, "material": _label(material), "verlet_substeps_per_frame": sim.substeps,
                "verlet_seconds": round(tv, 1), "max_fdp_displacement_mm": round(float(disp.max()) * 1e3, 3)}
         for steps in (1, 2, 4, 8):
             x, _, _ = _static(fr, name, material, device, substeps=steps, tolerance=1e-6)
@@ -142,7 +165,7 @@ def part_pcg(fr, material, presets, device, counts=PCG_COUNTS) -> list:
         t = conv.times
         phase = np.where(t < START + ATTACK, "attack", np.where(t < START + ATTACK + HOLD, "hold", "release"))
         disp = np.linalg.norm(conv.fdp_points - conv.fdp_points[:1], axis=2)
-        row = {"preset": name, "material": material, "device": device, "frames": int(len(t)),
+        row = {"preset": name, "material": _label(material), "device": device, "frames": int(len(t)),
                "max_fdp_displacement_mm": round(float(disp.max()) * 1e3, 3)}
         for label in counts:
             label_, _, rounds = label.partition("+r")
@@ -184,7 +207,7 @@ def part_levels(fr0, material, presets, device, levels=(0, 1)) -> list:
             n0 = np.linalg.norm(d0, axis=1)
             moving = n0 > 1e-3
             rel = np.linalg.norm(d1 - d0, axis=1)[moving] / n0[moving]
-            row = {"preset": name, "material": material, "levels": [lc, lf],
+            row = {"preset": name, "material": _label(material), "levels": [lc, lf],
                    "fdps_moving_over_1mm": int(moving.sum()),
                    "median_relative_difference": round(float(np.median(rel)), 4) if moving.any() else None,
                    "max_relative_difference": round(float(rel.max()), 4) if moving.any() else None,
@@ -198,6 +221,49 @@ def part_levels(fr0, material, presets, device, levels=(0, 1)) -> list:
     return rows
 
 
+def part_loads(fr0, material, presets, device, levels=(0, 1)) -> list:
+    """Per preset and level, the muscle springs' load at the static shape: the sum of the active
+    attachments' stiffness [N/m] (:meth:`facewarp.physics.MuscleRig.weighted_stiffness`, the
+    profile's ``muscle_modulus`` times each node's sheet area), the stiffness-weighted mean travel of
+    their targets on the contracted muscles [mm] and of the attached nodes [mm]: whether the levels
+    differ in the load or in the tissue's response to it."""
+    from dataclasses import replace
+
+    from facewarp.physics import material_profile, rig_reference, sheet_areas
+
+    rigs = {lv: fr0 if lv == 0 else _rig(lv) for lv in levels}
+    mat = material_profile(material)
+    rows = []
+    for name in presets:
+        row = {"preset": name, "material": _label(material)}
+        for lv in levels:
+            fr = rigs[lv]
+            x, rest, sim = _static(fr, name, material, device, tolerance=1e-6)
+            X = sim.positions()
+            rig = fr.rig
+            modulus = getattr(mat, "muscle_modulus", None)
+            if modulus is not None:  # the simulator's per-node stiffness of the physical profile
+                area = sheet_areas(fr.nodes, fr.tets, fr.layer)
+                per_node = np.bincount(rig.att_node, minlength=len(fr.nodes))
+                rig = replace(rig, att_stiffness=modulus * area[rig.att_node] / np.maximum(per_node[rig.att_node], 1))
+            k = rig.weighted_stiffness()
+            acts = sim.activations
+            att_muscle = np.asarray(rig.ctrl_muscle)[np.asarray(rig.curve_ctrl)[np.asarray(rig.seg_curve)[rig.att_seg], 0]]
+            on = np.clip(acts[np.asarray(rig.activation_index)[att_muscle]], 0, 1) > 0
+            _, p1 = rig_reference(rig, acts, jaw=sim.jaw, jaw_angles=tuple(sim.jaw_angles))
+            _, p0 = rig_reference(rig, np.zeros_like(acts))
+            kk = k[on]
+            travel = np.linalg.norm(((p1 - p0)[on] * kk[:, None]).sum(0) / kk.sum())
+            node = np.linalg.norm(((X - fr.nodes)[rig.att_node[on]] * kk[:, None]).sum(0) / kk.sum())
+            row[f"level{lv}"] = {"attachments": int(on.sum()), "stiffness_sum_N_per_m": round(float(kk.sum()), 1),
+                                 "target_mean_travel_mm": round(float(travel) * 1e3, 3),
+                                 "attached_node_mean_travel_mm": round(float(node) * 1e3, 3),
+                                 "fdp_max_displacement_mm": round(float(np.linalg.norm(x - rest, axis=1).max()) * 1e3, 3)}
+        print(row, flush=True)
+        rows.append(row)
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cpu")
@@ -205,6 +271,10 @@ def main():
     ap.add_argument("--parts", nargs="+", default=["frames", "static", "levels"])
     ap.add_argument("--presets", nargs="+", default=list(PRESETS))
     ap.add_argument("--name", default=None, help="result file suffix")
+    ap.add_argument("--shear-modulus", type=float, default=None,
+                    help="physical profile with the shear term of this modulus [Pa] in place of the distance "
+                         "and area energies (MaterialPhysical.shear_modulus); reported as material "
+                         "'physical+shear<mu>'")
     ap.add_argument("--compare-levels", type=int, nargs="+", default=[0, 1],
                     help="levels part: the levels compared pairwise in order (e.g. 0 1 2: 0 vs 1 and 1 vs 2)")
     ap.add_argument("--pcg-counts", nargs="+", default=PCG_COUNTS,
@@ -217,12 +287,16 @@ def main():
     result = {"machine": machine(args.device), "factorization_backend": factorization_backend(),
               "level0_tets": int(len(fr.tets))}
     name = "solver_accuracy_" + args.device.split(":")[0] + (f"_{args.name}" if args.name else "")
-    for mat in args.materials:
+    materials = list(args.materials)
+    if args.shear_modulus is not None:
+        materials.append(shear_material(args.shear_modulus))
+    for mat in materials:
         for part in args.parts:
-            fn = {"frames": part_frames, "static": part_static, "levels": part_levels, "pcg": part_pcg}[part]
+            fn = {"frames": part_frames, "static": part_static, "levels": part_levels, "pcg": part_pcg,
+                  "loads": part_loads}[part]
             extra = (dict(counts=args.pcg_counts) if part == "pcg"
-                     else dict(levels=tuple(args.compare_levels)) if part == "levels" else {})
-            result[f"{part}_{mat}"] = fn(fr, mat, args.presets, args.device, **extra)
+                     else dict(levels=tuple(args.compare_levels)) if part in ("levels", "loads") else {})
+            result[f"{part}_{_label(mat)}"] = fn(fr, mat, args.presets, args.device, **extra)
             save(name, result)  # after every part: a long run keeps what it measured
     print("wrote", save(name, result))
 

@@ -150,16 +150,20 @@ def test_cpu_and_cuda_agree_adaptive(rig):
     assert np.linalg.norm(x_cpu - x_gpu, axis=1).max() <= 1e-4
 
 
-def test_cpu_and_cuda_agree(rig):
+@pytest.mark.parametrize("material", ["physical", "with_shear"])
+def test_cpu_and_cuda_agree(rig, material):
     from conftest import warp_devices
+    from facewarp.physics import MaterialPhysical
 
     if "cuda:0" not in warp_devices():
         pytest.skip("compares a GPU with the CPU")
+    if material == "with_shear":  # the optional shear term in place of the distance and area energies
+        material = MaterialPhysical(distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0, shear_modulus=3e4)
     # the same solver method on both (newton-pcg, the CUDA default, runs on the CPU too), at a
     # fixed Newton count: the adaptive count may stop one iteration apart on the two (its CG sums
     # use atomics on the GPU), which moves nodes by up to its tolerance
-    x_cpu = _laugh_frames(rig, "cpu", method="newton-pcg", iterations=3)
-    x_gpu = _laugh_frames(rig, "cuda:0", method="newton-pcg", iterations=3)
+    x_cpu = _laugh_frames(rig, "cpu", method="newton-pcg", iterations=3, material=material)
+    x_gpu = _laugh_frames(rig, "cuda:0", method="newton-pcg", iterations=3, material=material)
     moved = np.linalg.norm(x_cpu - rig.nodes, axis=1).max()
     diff = np.linalg.norm(x_cpu - x_gpu, axis=1).max()
     assert moved > 1e-3 and diff <= 1e-4 * moved, (diff, moved)

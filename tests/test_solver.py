@@ -16,8 +16,8 @@ import warp as wp
 from conftest import grid_tets
 from facewarp import InputError, SimulationError
 from facewarp.geometry import signed_tet_volumes as signed_volumes
-from facewarp.physics import (DT_STABLE_1CM, EDGE_CROSS, EDGE_INNER, EDGE_OUTER, ModelBuilder, SolverVerlet,
-                              node_stable_dt, scale_masses, simulate, stable_dt, thesis_substep)
+from facewarp.physics import (DT_STABLE_1CM, EDGE_CROSS, EDGE_INNER, EDGE_OUTER, MaterialPhysical, ModelBuilder,
+                              SolverVerlet, node_stable_dt, scale_masses, simulate, stable_dt, thesis_substep)
 
 CM = 0.01
 
@@ -63,6 +63,14 @@ def oracle_energy(b: ModelBuilder, X: np.ndarray) -> float:
     e += 0.5 * np.sum(b.face_k * c**2)
     c = signed_volumes(X, b.tets) / b.tet_rest_volumes - 1.0
     e += 0.5 * np.sum(b.tet_k * c**2)
+    # the shear term (physical profile, shear_modulus mu): mu V0 |G|^2, G = (F^T F - I) / 2, F = D_s D_m^-1
+    R = b.vertices.astype(np.float32).astype(np.float64)
+    for t, (i0, i1, i2, i3) in enumerate(b.tets):
+        if b.tet_shear_k[t] > 0.0:
+            Dm = np.column_stack([R[i1] - R[i0], R[i2] - R[i0], R[i3] - R[i0]])
+            F = np.column_stack([X[i1] - X[i0], X[i2] - X[i0], X[i3] - X[i0]]) @ np.linalg.inv(Dm)
+            G = 0.5 * (F.T @ F - np.eye(3))
+            e += 0.5 * b.tet_shear_k[t] * np.sum(G * G)
     e += 0.5 * np.sum(b.hold_stiffness * np.sum((X - b.vertices) ** 2, axis=1))
     return float(e)
 
@@ -184,6 +192,10 @@ TERMS = {
     "area": dict(k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_volume=0.0),
     "volume": dict(k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_area=0.0),
     "all": dict(),
+    "shear": dict(material=MaterialPhysical(distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0, volume_modulus=0.0,
+                                            shear_modulus=1e6)),
+    "physical_with_shear": dict(material=MaterialPhysical(distance_modulus=(3e6, 2e6, 1e6), area_modulus=1.5e6,
+                                                          volume_modulus=1.5e6, shear_modulus=3e6)),
 }
 
 
@@ -256,6 +268,31 @@ def test_rigid_motion_produces_no_internal_force(device):
     # a rigid translation velocity is not damped by the edge dashpots either
     F = kernel_forces(b, device, X, X - np.array([1e-4, 2e-4, -1e-4]))
     np.testing.assert_allclose(F, 0.0, atol=1e-5 * 15.0 / CM, err_msg="translating body has internal forces")
+
+
+def test_shear_term_is_rigid_motion_invariant_and_damps_its_strain_rate(device):
+    V, T = grid_tets(2, 1, 1)
+    b = ModelBuilder(V, T, layer=slab_layers(V), material=MaterialPhysical(
+        distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0, volume_modulus=0.0, shear_modulus=1e5,
+        stiffness_damping=1e-3))
+    R = random_rotation(3)
+    X = V @ R.T + np.array([0.01, 0.02, -0.03])
+    dt = 1e-3
+    # rotated rest state, moving rigidly (translation plus a small rotation per step): no force
+    R2 = random_rotation(4)
+    w = 1e-4 * (R2 - R2.T)
+    prev = (X - 0.01) @ (np.eye(3) - w).T + 0.01 - np.array([1e-5, 0.0, 2e-5])
+    F = kernel_forces(b, device, X, prev, dt=dt)
+    k_s = b.tet_shear_k.max()
+    assert np.abs(F).max() < 1e-4 * k_s / CM
+    # a pure stretch rate: the dashpot beta k_s dG/dt equals the finite difference of the elastic force
+    S = np.diag([1.0, -0.5, 0.3]) * 1e-3
+    X = V
+    prev = V - V @ S.T  # velocity (S / dt) x at rest: dG/dt = S / dt
+    F_damp = kernel_forces(b, device, X, prev, dt=dt)
+    F_el = kernel_forces(b, device, V + (V @ S.T), dt=dt)  # elastic force of the strain S (small)
+    beta = 1e-3
+    np.testing.assert_allclose(F_damp, beta / dt * F_el, rtol=2e-2, atol=2e-3 * np.abs(F_el).max() * beta / dt)
 
 
 def test_rest_state_stays_at_rest(device):

@@ -205,13 +205,17 @@ TERMS = {
     "area": dict(k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_volume=0.0, damping_rate=0.0),
     "volume": dict(k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_area=0.0, damping_rate=0.0),
     "dashpots_inertia": dict(stiffness_damping=3e-3, damping_rate=7.0),
+    "shear_and_its_dashpot": dict(material=MaterialPhysical(distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0,
+                                                            volume_modulus=0.0, shear_modulus=3e4,
+                                                            stiffness_damping=3e-3), damping_rate=0.0),
 }
 
 
 def potential_case(term, seed):
     V, T = one_tet()
-    b = ModelBuilder(V, T, layer=[0, 0, 1, 1], material="physical", held=[False, True, False, False],
-                     **TERMS[term])
+    kw = dict(TERMS[term])
+    b = ModelBuilder(V, T, layer=[0, 0, 1, 1], material=kw.pop("material", "physical"),
+                     held=[False, True, False, False], **kw)
     P = StepPotential(b.finalize("cpu"))
     rng = np.random.default_rng(seed)
     Xn, Xp = perturbed(V, 0.1, seed), perturbed(V, 0.1, seed + 10)
@@ -247,6 +251,9 @@ def test_potential_hessian_is_the_finite_difference_where_exact():
     cases.append(("distance, holds, springs (stretched)", b, X, springs_for(V * 1.5, rng)[:1] + springs_for(V, rng)[1:]))
     b = ModelBuilder(V, T, material="physical", k0_outer=0.0, k0_inner=0.0, k0_cross=0.0)
     cases.append(("area, volume at rest", b, V.copy(), []))
+    b = ModelBuilder(V, T, material=MaterialPhysical(distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0,
+                                                     volume_modulus=0.0, shear_modulus=3e4))
+    cases.append(("shear term at rest (Gauss-Newton)", b, V.copy(), []))
     for name, b, X, springs in cases:
         P = StepPotential(b.finalize("cpu"))
         data = P.begin_step(V, V, 0.02, V, springs=springs)
@@ -262,14 +269,15 @@ def test_potential_hessian_is_the_finite_difference_where_exact():
         assert np.linalg.eigvalsh(H).min() > -1e-9 * np.abs(H).max(), f"{name}: not PSD"
 
 
-@pytest.mark.parametrize("method", ["lbfgs", "newton-pcg"])
-def test_kernels_evaluate_the_reference_potential(method):
+@pytest.mark.parametrize("method, material", [("lbfgs", "physical"), ("newton-pcg", "physical"),
+                                              ("lbfgs", MaterialPhysical(shear_modulus=3e4, stiffness_damping=1e-3))])
+def test_kernels_evaluate_the_reference_potential(method, material):
     """The solver's Warp kernels (energy, gradient, Hessian) equal the float64 NumPy reference."""
     V, T = grid_tets(2, 1, 1)
     bottom = np.isclose(V[:, 2], 0.0)
     held = np.zeros(len(V), bool)
     held[[9, 11]] = True
-    b = ModelBuilder(V, T, layer=layers(V), fixed=bottom, held=held, material="physical")
+    b = ModelBuilder(V, T, layer=layers(V), fixed=bottom, held=held, material=material)
     model = b.finalize("cpu")
     solver = SolverImplicit(model, method=method)
     state, control = model.state(), model.control()
@@ -365,11 +373,16 @@ def loaded_slab(material="physical"):
     b = ModelBuilder(V, T, layer=layers(V), fixed=bottom, held=held, material=material)
     f = np.zeros((len(V), 3), np.float32)
     f[~bottom] = [0.4, 0.0, 1.0]
-    return V, b, f * (1e-2 if material == "physical" else 20.0)
+    return V, b, f * (20.0 if material == "thesis" else 1e-2)
 
 
-def test_static_shape_independent_of_steps_per_frame_and_equal_to_verlet():
-    V, b, f = loaded_slab()
+#: The physical profile with the shear term in place of the distance and area energies (MaterialPhysical.shear_modulus).
+WITH_SHEAR = MaterialPhysical(distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0, shear_modulus=1e4)
+
+
+@pytest.mark.parametrize("material", ["physical", WITH_SHEAR], ids=["physical", "with_shear"])
+def test_static_shape_independent_of_steps_per_frame_and_equal_to_verlet(material):
+    V, b, f = loaded_slab(material)
     model = b.finalize("cpu")
     frame = 1 / 30
     shapes = []
@@ -393,8 +406,9 @@ def test_static_shape_independent_of_steps_per_frame_and_equal_to_verlet():
     np.testing.assert_allclose(ref.positions.numpy(), shapes[0], atol=5e-3 * moved, err_msg="Verlet at rest")
 
 
-def test_newton_pcg_reaches_the_direct_solution():
-    V, b, f = loaded_slab()
+@pytest.mark.parametrize("material", ["physical", WITH_SHEAR], ids=["physical", "with_shear"])
+def test_newton_pcg_reaches_the_direct_solution(material):
+    V, b, f = loaded_slab(material)
     model = b.finalize("cpu")
     out = {}
     counts = []

@@ -142,6 +142,9 @@ def _tet_forces(
     tet_rest_volume: wp.array(dtype=float),
     tet_k: wp.array(dtype=float),
     tet_damping: wp.array(dtype=float),
+    tet_rest_inverse: wp.array(dtype=wp.mat33),
+    tet_shear_k: wp.array(dtype=float),
+    tet_shear_damping: wp.array(dtype=float),
     inv_dt: float,
     slot_offset: int,
     # State in:
@@ -176,10 +179,38 @@ def _tet_forces(
         vl = (positions_in[l] - prev_positions_in[l]) * inv_dt
         s = s + dmp * (wp.dot(gi, vi) + wp.dot(gj, vj) + wp.dot(gk, vk) + wp.dot(gl, vl)) / v0
     s = -s / v0
-    slots_out[o] = s * gi
-    slots_out[o + 1] = s * gj
-    slots_out[o + 2] = s * gk
-    slots_out[o + 3] = s * gl
+    fi = s * gi
+    fj = s * gj
+    fk = s * gk
+    fl = s * gl
+    # shear term (model doc): F = D_s D_m^-1, G = (F^T F - I) / 2, S = k_s G + d_s dG/dt with
+    # dG/dt = sym(F^T dF/dt); the force on corner a is -F S b_a (b_a: rows of D_m^-1, b_0 = -sum)
+    ks = tet_shear_k[t]
+    ds = tet_shear_damping[t]
+    if ks > 0.0 or ds > 0.0:
+        dmi = tet_rest_inverse[t]
+        f = wp.matrix_from_cols(e1, e2, e3) * dmi
+        g = 0.5 * (wp.transpose(f) * f - wp.identity(n=3, dtype=float))
+        sm = ks * g
+        if ds > 0.0:
+            vi = (xi - prev_positions_in[i]) * inv_dt
+            fd = wp.matrix_from_cols((positions_in[j] - prev_positions_in[j]) * inv_dt - vi,
+                                     (positions_in[k] - prev_positions_in[k]) * inv_dt - vi,
+                                     (positions_in[l] - prev_positions_in[l]) * inv_dt - vi) * dmi
+            ftd = wp.transpose(f) * fd
+            sm = sm + ds * 0.5 * (ftd + wp.transpose(ftd))
+        pm = f * sm * wp.transpose(dmi)
+        pj = wp.vec3(pm[0, 0], pm[1, 0], pm[2, 0])
+        pk = wp.vec3(pm[0, 1], pm[1, 1], pm[2, 1])
+        pl = wp.vec3(pm[0, 2], pm[1, 2], pm[2, 2])
+        fi = fi + (pj + pk + pl)
+        fj = fj - pj
+        fk = fk - pk
+        fl = fl - pl
+    slots_out[o] = fi
+    slots_out[o + 1] = fj
+    slots_out[o + 2] = fk
+    slots_out[o + 3] = fl
 
 
 # Each node adds its slots, in a fixed order, to the forces of the stages (deterministic, no

@@ -28,6 +28,15 @@ Damping (the same for every solver)
   face and tet (``edge_damping``, ``face_damping``, ``tet_damping``): Rayleigh stiffness damping
   ``d = beta k`` plus, on edges, the thesis profile's dashpot ``c`` [N s/m] along the edge
   (``d = c D0^2``). They act on deformation rates only, never on a rigid motion.
+
+Shear term (physical profile, ``shear_modulus`` > 0; absent from Table 6.3)
+--------------------------------------------------------------------------
+Beside the thesis's three energies, a tet may carry ``E = 1/2 k_s |G|^2`` of its Green strain
+``G = (F^T F - I) / 2``, ``F = D_s D_m^-1`` (the deformation gradient of the linear tet), with
+``k_s = 2 mu V0`` [J] (Saint Venant-Kirchhoff with lambda = 0: a shear modulus mu) and the dashpot
+``d_s = beta k_s`` on ``dG/dt``. Unlike the edge and face energies it is the same material for
+any tet shape (:func:`~facewarp._src.physics.materials.linear_stiffness`); see
+:class:`~facewarp._src.physics.materials.MaterialPhysical`.
 """
 
 from __future__ import annotations
@@ -204,7 +213,8 @@ class ModelBuilder:
         edge_class (e,) EDGE_*; edge_k0 (e,) [J]; edge_damping_coef (e,) [J s];
         faces (f, 3) unique, sorted; face_rest_areas (f,) [m^2]; face_k (f,) [J];
         face_damping_coef (f,) [J s]; tet_rest_volumes (k,) [m^3]; tet_k (k,) [J];
-        tet_damping_coef (k,) [J s]; damping_rate [1/s]; stiffness_damping [s];
+        tet_damping_coef (k,) [J s]; tet_rest_inverse (k, 3, 3) [1/m]; tet_shear_k (k,) [J];
+        tet_shear_damping (k,) [J s] (the shear term, module doc); damping_rate [1/s]; stiffness_damping [s];
         edge_damping [N s/m]; material (the profile); muscle_count.
     """
 
@@ -336,7 +346,8 @@ class ModelBuilder:
         mass = mass_default if mass is None else _vertex_array(mass, n, "mass", np.float64)
         if not (np.isfinite(mass).all() and (mass > 0).all()):
             raise InputError(f"mass must be positive and finite [kg], got min {mass.min()}")
-        if k0.max(initial=0.0) + face_k.max(initial=0.0) + tet_k.max(initial=0.0) <= 0.0:
+        shear = float(mat.shear_modulus) if physical else 0.0
+        if k0.max(initial=0.0) + face_k.max(initial=0.0) + tet_k.max(initial=0.0) + shear <= 0.0:
             raise InputError("the material has no stiffness: k0, k_area and k_volume are all 0")
         beta = _opt(stiffness_damping, beta)
         c_edge = _opt(edge_damping, c_edge)
@@ -380,6 +391,10 @@ class ModelBuilder:
         self.tet_rest_volumes = vol
         self.tet_k = tet_k
         self.tet_damping_coef = beta * tet_k
+        Dm = np.stack([V32[T[:, c]] - V32[T[:, 0]] for c in (1, 2, 3)], axis=2)  # columns: rest edge vectors
+        self.tet_rest_inverse = np.linalg.inv(Dm)
+        self.tet_shear_k = (2.0 * mat.shear_modulus * vol) if physical else np.zeros(len(T))
+        self.tet_shear_damping = beta * self.tet_shear_k
         self.hold_stiffness = np.where(self.held, hold, 0.0)
         self.muscle_count = int(muscle_count)
 
@@ -432,6 +447,9 @@ class ModelBuilder:
             tet_rest_volume=f32(self.tet_rest_volumes),
             tet_k=f32(self.tet_k),
             tet_damping=f32(self.tet_damping_coef),
+            tet_rest_inverse=f32(self.tet_rest_inverse, wp.mat33),
+            tet_shear_k=f32(self.tet_shear_k),
+            tet_shear_damping=f32(self.tet_shear_damping),
             slot_count=len(slot_node),
             node_slot_start=i32(start),
             node_slots=i32(order),
@@ -503,6 +521,13 @@ class Model:
     """Volume stiffness [J] (Eq. 6.4.8), shape (tet_count,), float32."""
     tet_damping: object
     """Dashpot on the tet's volume strain rate [J s], shape (tet_count,), float32."""
+    tet_rest_inverse: object
+    """Inverse of the rest edge matrix D_m = [x1 - x0, x2 - x0, x3 - x0] [1/m], shape (tet_count,),
+    wp.mat33 (float32): F = D_s D_m^-1 (the shear term, module doc)."""
+    tet_shear_k: object
+    """Shear term stiffness k_s = 2 mu V0 [J] (module doc; 0: no shear term), shape (tet_count,), float32."""
+    tet_shear_damping: object
+    """Dashpot on the Green strain rate [J s], shape (tet_count,), float32."""
 
     slot_count: int
     """Number of per-element force slots: 2 per edge, 3 per face, 4 per tet (edges first)."""

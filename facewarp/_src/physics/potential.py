@@ -68,13 +68,16 @@ class StepData:
         targets: Targets of fixed and held nodes [m], shape (n, 3).
         force: External force [N], shape (n, 3).
         edge_c, face_c, tet_c: Constraints at the step's start (for the dashpots).
+        tet_g: Green strain of every tet at the step's start (the shear term's dashpot), shape
+            (t, 3, 3), or None (zero).
         springs: list of ``(node (k,), point (k, 3), stiffness (k,), rest_length (k,) or None,
             axis (k, 3) or None[, one_sided bool])`` (one_sided: False when left out).
     """
 
-    def __init__(self, h, z, mu, targets, force, edge_c, face_c, tet_c, springs):
+    def __init__(self, h, z, mu, targets, force, edge_c, face_c, tet_c, springs, tet_g=None):
         self.h, self.z, self.mu, self.targets, self.force = h, z, mu, targets, force
         self.edge_c, self.face_c, self.tet_c, self.springs = edge_c, face_c, tet_c, springs
+        self.tet_g = tet_g
 
 
 class StepPotential:
@@ -110,6 +113,10 @@ class StepPotential:
         self.V0 = _host(model.tet_rest_volume)
         self.kt = _host(model.tet_k)
         self.dt_ = _host(model.tet_damping)
+        self.Dmi = _host(model.tet_rest_inverse).reshape(-1, 3, 3)
+        self.ks = _host(model.tet_shear_k)
+        self.ds = _host(model.tet_shear_damping)
+        self.shear = bool(self.ks.any() or self.ds.any())
         self.free = ~self.fixed
         self.free_index = np.flatnonzero(self.free)
         # gradient gather: every element corner's vector adds to its node (fixed order)
@@ -174,6 +181,13 @@ class StepPotential:
         v = np.einsum("ij,ij->i", X[T[:, 1]] - x0, np.cross(X[T[:, 2]] - x0, X[T[:, 3]] - x0)) / 6.0
         return ce, cf, v / self.V0 - 1.0
 
+    def green(self, X) -> np.ndarray:
+        """Green strain ``(F^T F - I) / 2`` of every tet at X (n, 3), ``F = D_s D_m^-1``: (t, 3, 3)."""
+        T = self.T
+        Ds = np.stack([X[T[:, c]] - X[T[:, 0]] for c in (1, 2, 3)], axis=2)
+        F = Ds @ self.Dmi
+        return 0.5 * (np.einsum("kji,kjl->kil", F, F) - np.eye(3))
+
     def begin_step(self, x_n, x_prev, h: float, targets, *, force=None, springs=(), cranium_velocity=None) -> StepData:
         """The step's data: inertial target, dashpot constraints at the start, springs.
 
@@ -199,7 +213,8 @@ class StepPotential:
         mu = np.where(self.free, self.mass * (1.0 + ah) / (h * h), 0.0)
         ce, cf, ct = self.constraints(x_n)
         f = np.zeros((self.n, 3)) if force is None else np.asarray(force, np.float64) * self.free[:, None]
-        return StepData(h, z, mu, np.asarray(targets, np.float64), f, ce, cf, ct, list(springs))
+        g = self.green(x_n) if self.shear else None
+        return StepData(h, z, mu, np.asarray(targets, np.float64), f, ce, cf, ct, list(springs), tet_g=g)
 
     def start_positions(self, x_guess, data: StepData) -> np.ndarray:
         """``x_guess`` with the fixed nodes on their targets, float64 (n, 3)."""
@@ -234,6 +249,13 @@ class StepPotential:
         ct = v / self.V0 - 1.0
         dct = ct - data.tet_c
         e_sum += 0.5 * np.sum(self.kt * ct * ct) + 0.5 * ih * np.sum(self.dt_ * dct * dct)
+        Fd = None
+        if self.shear:  # the shear term (model doc): k_s / 2 |G|^2 + d_s / (2h) |G - G_n|^2
+            Fd = np.stack([t1, t2, t3], axis=2) @ self.Dmi
+            G = 0.5 * (np.einsum("kji,kjl->kil", Fd, Fd) - np.eye(3))
+            dG = G - (0.0 if data.tet_g is None else data.tet_g)
+            e_sum += 0.5 * np.sum(self.ks * np.einsum("kij,kij->k", G, G))
+            e_sum += 0.5 * ih * np.sum(self.ds * np.einsum("kij,kij->k", dG, dG))
         if not want_grad:
             return e_sum, None, None
         n_e = d / np.maximum(l, 1e-300)[:, None]
@@ -253,9 +275,13 @@ class StepPotential:
         gt[:, 1] = s_t[:, None] * c23
         gt[:, 2] = s_t[:, None] * np.cross(t3, t1)
         gt[:, 3] = s_t[:, None] * np.cross(t1, t2)
+        if self.shear:  # dE/dx_{1,2,3} = columns of F S D_m^-T, S = k_s G + d_s / h (G - G_n)
+            S = self.ks[:, None, None] * G + ih * self.ds[:, None, None] * dG
+            P = Fd @ S @ np.transpose(self.Dmi, (0, 2, 1))
+            gt[:, 1:] += np.transpose(P, (0, 2, 1))
         gt[:, 0] = -(gt[:, 1] + gt[:, 2] + gt[:, 3])
         corners = np.concatenate([ge.reshape(-1, 3), gf.reshape(-1, 3), gt.reshape(-1, 3)])
-        return e_sum, corners, (n_e, l, ce, dc, m, nl, gj, gk, cf, c23, t1, t2, t3, ct)
+        return e_sum, corners, (n_e, l, ce, dc, m, nl, gj, gk, cf, c23, t1, t2, t3, ct, Fd)
 
     def _node_terms(self, X, data: StepData, want_grad: bool):
         """Inertia, holds, springs and the external force: energy and per-node gradient."""
@@ -336,7 +362,7 @@ class StepPotential:
         """Flattened (block-major, 9 components) element Hessian contributions, in scatter order."""
         ih = 1.0 / data.h
         _, _, aux = self._elements(X, data, True)
-        n_e, l, ce, dc, m, nl, gj, gk, cf, c23, t1, t2, t3, ct = aux
+        n_e, l, ce, dc, m, nl, gj, gk, cf, c23, t1, t2, t3, ct, Fd = aux
         I3 = np.eye(3)
         # distance: a n n^T / L^2 + max(b, 0) / (L l) (I - n n^T), signs [[+, -], [-, +]]
         a = (self.k0 * (1.0 + 3.0 * ce * ce) + ih * self.de) / self.L**2
@@ -362,6 +388,15 @@ class StepPotential:
         gv[:, 0] = -(gv[:, 1] + gv[:, 2] + gv[:, 3])
         s = (self.kt + ih * self.dt_) / self.V0**2
         Ht = s[:, None, None, None, None] * gv[:, :, None, :, None] * gv[:, None, :, None, :]
+        if Fd is not None:
+            # shear term, Gauss-Newton: block (a, b)_cd = (k_s + d_s / h) / 2 ((F F^T)_cd (b_a . b_b) + (F b_b)_c (F b_a)_d)
+            b = np.concatenate([-self.Dmi.sum(axis=1)[:, None], self.Dmi], axis=1)  # (t, 4, 3)
+            fb = np.einsum("kij,kaj->kai", Fd, b)  # F b_a
+            FF = np.einsum("kij,klj->kil", Fd, Fd)
+            bb = np.einsum("kai,kbi->kab", b, b)
+            ss = 0.5 * (self.ks + ih * self.ds)
+            Ht = Ht + ss[:, None, None, None, None] * (bb[:, :, :, None, None] * FF[:, None, None]
+                                                       + fb[:, None, :, :, None] * fb[:, :, None, None, :])
         return np.concatenate([He.ravel(), Hf.ravel(), Ht.ravel()])
 
     # ------------------------------------------------------------------------------ helpers

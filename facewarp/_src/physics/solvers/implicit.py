@@ -356,6 +356,7 @@ class SolverImplicit(SolverBase):
         self.c_face = wp.zeros(m.face_count, dtype=float, device=dev)
         self.c_tet = wp.zeros(m.tet_count, dtype=float, device=dev)
         self.c_tet_trial = wp.zeros(m.tet_count, dtype=float, device=dev)
+        self.g_tet = wp.zeros(m.tet_count, dtype=wp.mat33, device=dev)  # Green strain at the step's start
         self.nodes = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=dev)
         self._host_slack = wp.zeros(1, dtype=float, device=dev)
         # one energy array: edges, faces, tets, nodes, then the pooled springs
@@ -481,8 +482,8 @@ class SolverImplicit(SolverBase):
                   outputs=[self.c_edge], device=dev)
         wp.launch(ki._face_constraints, dim=m.face_count, inputs=[m.face_indices, m.face_rest_area, x],
                   outputs=[self.c_face], device=dev)
-        wp.launch(ki._tet_constraints, dim=m.tet_count, inputs=[m.tet_indices, m.tet_rest_volume, x],
-                  outputs=[self.c_tet], device=dev)
+        wp.launch(ki._tet_constraints, dim=m.tet_count, inputs=[m.tet_indices, m.tet_rest_volume, m.tet_rest_inverse, x],
+                  outputs=[self.c_tet, self.g_tet], device=dev)
         wp.launch(ki._inertial_target, dim=m.vertex_count,
                   inputs=[m.damping_rate, h, control.cranium_velocity, x, state_in.prev_positions],
                   outputs=[self.z], device=dev)
@@ -513,7 +514,8 @@ class SolverImplicit(SolverBase):
                           2 * m.edge_count, x],
                   outputs=[ef, self.slots], device=dev)
         wp.launch(ki._tet_energy, dim=m.tet_count,
-                  inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, self.c_tet, ih,
+                  inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, self.c_tet,
+                          m.tet_rest_inverse, m.tet_shear_k, m.tet_shear_damping, self.g_tet, ih,
                           2 * m.edge_count + 3 * m.face_count, x],
                   outputs=[et, self.slots, self.c_tet_trial], device=dev)
         wp.launch(ki._node_energy, dim=m.vertex_count,
@@ -561,7 +563,8 @@ class SolverImplicit(SolverBase):
                   inputs=[m.face_indices, m.face_rest_area, m.face_k, m.face_damping, ih, int(o[1]), x],
                   outputs=[self.block_slots], device=dev)
         wp.launch(ki._tet_hessian, dim=m.tet_count,
-                  inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, ih, int(o[2]), x],
+                  inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, m.tet_rest_inverse,
+                          m.tet_shear_k, m.tet_shear_damping, ih, int(o[2]), x],
                   outputs=[self.block_slots], device=dev)
         wp.launch(ki._node_hessian, dim=m.vertex_count,
                   inputs=[m.vertex_mass, m.vertex_hold_stiffness, self._mass_scale(h), int(o[3])],
@@ -682,6 +685,7 @@ class SolverImplicit(SolverBase):
                   inputs=[m.edge_indices, m.edge_rest_length, m.edge_k0, m.edge_damping, self.c_edge,
                           m.face_indices, m.face_rest_area, m.face_k, m.face_damping, self.c_face,
                           m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, self.c_tet,
+                          m.tet_rest_inverse, m.tet_shear_k, m.tet_shear_damping, self.g_tet,
                           m.vertex_mass, m.vertex_fixed, m.vertex_hold_stiffness, self._mass_scale(h), self.z,
                           self.targets, control.external_force, pool.sets, pool.set_index, pool.local,
                           1.0 / h, self.x, self.direction],

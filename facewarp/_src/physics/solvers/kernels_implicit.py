@@ -40,6 +40,30 @@ def _pick4(g0: wp.vec3, g1: wp.vec3, g2: wp.vec3, g3: wp.vec3, a: int):
     return g3
 
 
+# Shear term (model doc, "Shear term"): F = D_s D_m^-1, G = (F^T F - I) / 2,
+# E = k_s / 2 |G|^2 + d_s / (2h) |G - G_n|^2, dE/dx_a = F S b_a with S = k_s G + d_s / h (G - G_n) and
+# b_a the gradient of corner a's shape function (rows of D_m^-1; b_0 = -(b_1 + b_2 + b_3)).
+@wp.func
+def _deformation(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3, rest_inverse: wp.mat33):
+    return wp.matrix_from_cols(xj - xi, xk - xi, xl - xi) * rest_inverse
+
+
+@wp.func
+def _green(f: wp.mat33):
+    return 0.5 * (wp.transpose(f) * f - wp.identity(n=3, dtype=float))
+
+
+@wp.func
+def _shear_e(g: wp.mat33, k: float, dmp: float, g_start: wp.mat33):
+    dg = g - g_start
+    return 0.5 * k * wp.ddot(g, g) + 0.5 * dmp * wp.ddot(dg, dg)
+
+
+@wp.func
+def _row(m: wp.mat33, r: int):
+    return wp.vec3(m[r, 0], m[r, 1], m[r, 2])
+
+
 # ---------------------------------------------------------------------------- step start
 # The constraints of every element at the step's start (the dashpots' C_n), and the inertial
 # target z = (2 x_n - x_prev + alpha h (x_n + h v_c(x_n))) / (1 + alpha h): backward Euler's
@@ -84,11 +108,15 @@ def _tet_constraint(tet_indices: wp.array(dtype=wp.vec4i), tet_rest_volume: wp.a
 def _tet_constraints(
     tet_indices: wp.array(dtype=wp.vec4i),
     tet_rest_volume: wp.array(dtype=float),
+    tet_rest_inverse: wp.array(dtype=wp.mat33),
     positions: wp.array(dtype=wp.vec3),
     c_out: wp.array(dtype=float),
+    g_out: wp.array(dtype=wp.mat33),
 ):
     t = wp.tid()
     c_out[t] = _tet_constraint(tet_indices, tet_rest_volume, positions, t)
+    g_out[t] = _green(_deformation(positions[tet_indices[t][0]], positions[tet_indices[t][1]],
+                                   positions[tet_indices[t][2]], positions[tet_indices[t][3]], tet_rest_inverse[t]))
 
 
 @wp.kernel
@@ -263,6 +291,10 @@ def _tet_energy(
     tet_k: wp.array(dtype=float),
     tet_damping: wp.array(dtype=float),
     tet_c_start: wp.array(dtype=float),
+    tet_rest_inverse: wp.array(dtype=wp.mat33),
+    tet_shear_k: wp.array(dtype=float),
+    tet_shear_damping: wp.array(dtype=float),
+    tet_g_start: wp.array(dtype=wp.mat33),
     inv_h: float,
     slot_offset: int,
     positions: wp.array(dtype=wp.vec3),
@@ -281,11 +313,24 @@ def _tet_energy(
     c_out[t] = c  # C <= -1: inverted (the host line search rejects such a step)
     dc = c - tet_c_start[t]
     dmp = tet_damping[t] * inv_h
-    energy_out[t] = _tet_e(c, tet_k[t], dmp, tet_c_start[t])
+    e = _tet_e(c, tet_k[t], dmp, tet_c_start[t])
     s = (tet_k[t] * c + dmp * dc) / (6.0 * v0)
     gj = s * wp.cross(e2, e3)
     gk = s * wp.cross(e3, e1)
     gl = s * wp.cross(e1, e2)
+    ks = tet_shear_k[t]
+    ds = tet_shear_damping[t] * inv_h
+    if ks > 0.0 or ds > 0.0:
+        dmi = tet_rest_inverse[t]
+        f = wp.matrix_from_cols(e1, e2, e3) * dmi
+        g = _green(f)
+        g0 = tet_g_start[t]
+        e = e + _shear_e(g, ks, ds, g0)
+        pm = f * (ks * g + ds * (g - g0)) * wp.transpose(dmi)  # columns: dE/dx_j, dE/dx_k, dE/dx_l
+        gj = gj + wp.vec3(pm[0, 0], pm[1, 0], pm[2, 0])
+        gk = gk + wp.vec3(pm[0, 1], pm[1, 1], pm[2, 1])
+        gl = gl + wp.vec3(pm[0, 2], pm[1, 2], pm[2, 2])
+    energy_out[t] = e
     slots_out[o] = -(gj + gk + gl)
     slots_out[o + 1] = gj
     slots_out[o + 2] = gk
@@ -458,6 +503,9 @@ def _tet_hessian(
     tet_rest_volume: wp.array(dtype=float),
     tet_k: wp.array(dtype=float),
     tet_damping: wp.array(dtype=float),
+    tet_rest_inverse: wp.array(dtype=wp.mat33),
+    tet_shear_k: wp.array(dtype=float),
+    tet_shear_damping: wp.array(dtype=float),
     inv_h: float,
     block_offset: int,
     positions: wp.array(dtype=wp.vec3),
@@ -476,10 +524,25 @@ def _tet_hessian(
     g0 = -(g1 + g2 + g3)
     v0 = tet_rest_volume[t]
     s = (tet_k[t] + tet_damping[t] * inv_h) / (v0 * v0)
+    # shear term, Gauss-Newton: (k_s + d_s / h) dG/dx_a : dG/dx_b, block (c, d) =
+    # (k_s + d_s / h) / 2 ((F F^T)_cd (b_a . b_b) + (F b_b)_c (F b_a)_d)
+    ss = 0.5 * (tet_shear_k[t] + tet_shear_damping[t] * inv_h)
+    dmi = tet_rest_inverse[t]
+    f = wp.matrix_from_cols(e1, e2, e3) * dmi
+    ff = f * wp.transpose(f)
+    b1 = _row(dmi, 0)
+    b2 = _row(dmi, 1)
+    b3 = _row(dmi, 2)
+    b0 = -(b1 + b2 + b3)
     for a in range(4):
         ga = _pick4(g0, g1, g2, g3, a)
+        ba = _pick4(b0, b1, b2, b3, a)
         for b in range(4):
-            blocks_out[o + (4 * a + b) * nt] = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
+            blk = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
+            if ss > 0.0:
+                bb = _pick4(b0, b1, b2, b3, b)
+                blk = blk + ss * (wp.dot(ba, bb) * ff + _outer(f * bb, f * ba))
+            blocks_out[o + (4 * a + b) * nt] = blk
 
 
 # Diagonal blocks of every node: (mu + k_h) I; fixed nodes: the identity (their DOFs are not
@@ -672,6 +735,10 @@ def _trial_energies(
     tet_k: wp.array(dtype=float),
     tet_damping: wp.array(dtype=float),
     tet_c_start: wp.array(dtype=float),
+    tet_rest_inverse: wp.array(dtype=wp.mat33),
+    tet_shear_k: wp.array(dtype=float),
+    tet_shear_damping: wp.array(dtype=float),
+    tet_g_start: wp.array(dtype=wp.mat33),
     vertex_mass: wp.array(dtype=float),
     vertex_fixed: wp.array(dtype=wp.int32),
     vertex_hold_stiffness: wp.array(dtype=float),
@@ -717,11 +784,17 @@ def _trial_energies(
         q = i - ne - nf
         tet = tet_indices[q]
         dmp = tet_damping[q] * inv_h
+        ks = tet_shear_k[q]
+        ds = tet_shear_damping[q] * inv_h
         for j in range(trials):
-            c = _tet_c(_trial_x(x, d, vertex_fixed, tet[0], t), _trial_x(x, d, vertex_fixed, tet[1], t),
-                       _trial_x(x, d, vertex_fixed, tet[2], t), _trial_x(x, d, vertex_fixed, tet[3], t),
-                       tet_rest_volume[q])
+            xa = _trial_x(x, d, vertex_fixed, tet[0], t)
+            xb = _trial_x(x, d, vertex_fixed, tet[1], t)
+            xc = _trial_x(x, d, vertex_fixed, tet[2], t)
+            xd = _trial_x(x, d, vertex_fixed, tet[3], t)
+            c = _tet_c(xa, xb, xc, xd, tet_rest_volume[q])
             e = _tet_e(c, tet_k[q], dmp, tet_c_start[q])
+            if ks > 0.0 or ds > 0.0:
+                e = e + _shear_e(_green(_deformation(xa, xb, xc, xd, tet_rest_inverse[q])), ks, ds, tet_g_start[q])
             if c <= -1.0:
                 e = 1.0e30
             energy_out[j, i] = e

@@ -110,6 +110,9 @@ def _gershgorin_rates(builder) -> tuple[np.ndarray, np.ndarray]:
     gj, gk, gl = np.cross(e2, e3) / 6, np.cross(e3, e1) / 6, np.cross(e1, e2) / 6
     add(T, np.stack([-(gj + gk + gl), gj, gk, gl], 1) / builder.tet_rest_volumes[:, None, None], builder.tet_k,
         builder.tet_damping_coef)
+    # shear term: rest blocks (k_s / 2) ((b_a . b_b) I + b_b b_a^T), rows bounded by k_s |b_a| sum |b_b|
+    Dmi = builder.tet_rest_inverse
+    add(T, np.concatenate([-Dmi.sum(axis=1)[:, None], Dmi], axis=1), builder.tet_shear_k, builder.tet_shear_damping)
     return K + builder.hold_stiffness, D
 
 
@@ -250,8 +253,9 @@ class SolverVerlet(SolverBase):
         wp.launch(
             kt._tet_forces,
             dim=m.tet_count,
-            inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, 1.0 / dt,
-                    2 * m.edge_count + 3 * m.face_count, state_in.positions, state_in.prev_positions],
+            inputs=[m.tet_indices, m.tet_rest_volume, m.tet_k, m.tet_damping, m.tet_rest_inverse, m.tet_shear_k,
+                    m.tet_shear_damping, 1.0 / dt, 2 * m.edge_count + 3 * m.face_count, state_in.positions,
+                    state_in.prev_positions],
             outputs=[self.slots],
             device=self.device,
         )
