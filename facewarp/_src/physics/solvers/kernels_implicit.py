@@ -527,22 +527,26 @@ def _tet_hessian(
     # shear term, Gauss-Newton: (k_s + d_s / h) dG/dx_a : dG/dx_b, block (c, d) =
     # (k_s + d_s / h) / 2 ((F F^T)_cd (b_a . b_b) + (F b_b)_c (F b_a)_d)
     ss = 0.5 * (tet_shear_k[t] + tet_shear_damping[t] * inv_h)
-    dmi = tet_rest_inverse[t]
-    f = wp.matrix_from_cols(e1, e2, e3) * dmi
-    ff = f * wp.transpose(f)
-    b1 = _row(dmi, 0)
-    b2 = _row(dmi, 1)
-    b3 = _row(dmi, 2)
-    b0 = -(b1 + b2 + b3)
-    for a in range(4):
-        ga = _pick4(g0, g1, g2, g3, a)
-        ba = _pick4(b0, b1, b2, b3, a)
-        for b in range(4):
-            blk = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
-            if ss > 0.0:
+    if ss > 0.0:
+        dmi = tet_rest_inverse[t]
+        f = wp.matrix_from_cols(e1, e2, e3) * dmi
+        ff = f * wp.transpose(f)
+        b1 = _row(dmi, 0)
+        b2 = _row(dmi, 1)
+        b3 = _row(dmi, 2)
+        b0 = -(b1 + b2 + b3)
+        for a in range(4):
+            ga = _pick4(g0, g1, g2, g3, a)
+            ba = _pick4(b0, b1, b2, b3, a)
+            for b in range(4):
                 bb = _pick4(b0, b1, b2, b3, b)
-                blk = blk + ss * (wp.dot(ba, bb) * ff + _outer(f * bb, f * ba))
-            blocks_out[o + (4 * a + b) * nt] = blk
+                blocks_out[o + (4 * a + b) * nt] = s * _outer(ga, _pick4(g0, g1, g2, g3, b)) + ss * (
+                    wp.dot(ba, bb) * ff + _outer(f * bb, f * ba))
+    else:
+        for a in range(4):
+            ga = _pick4(g0, g1, g2, g3, a)
+            for b in range(4):
+                blocks_out[o + (4 * a + b) * nt] = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
 
 
 # Diagonal blocks of every node: (mu + k_h) I; fixed nodes: the identity (their DOFs are not
