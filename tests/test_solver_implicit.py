@@ -136,6 +136,8 @@ def test_linear_stiffness_over_evenly_spread_directions_is_the_isotropic_materia
     (dict(distance_modulus=(0, 0, 0), area_modulus=0.0, volume_modulus=0.0), "no stiffness"),
     (dict(distance_modulus=(1e5, 1e5)), "distance_modulus must be 3 values"),
     (dict(damping_rate=float("nan")), "damping_rate must be finite"),
+    (dict(shear_modulus=-1.0), "shear_modulus must be finite and >= 0"),
+    (dict(shear_modulus=float("inf")), "shear_modulus must be finite"),
 ])
 def test_bad_material_is_an_input_error(kwargs, match):
     with pytest.raises(InputError, match=match):
