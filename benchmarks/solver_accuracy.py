@@ -60,17 +60,22 @@ def _run(fr, timeline, seconds, **kw):
 
 
 def _label(material) -> str:
-    """A profile's name in the results: its name, or ``physical+shear<mu>`` for the shear variant."""
+    """A profile's name in the results: its name, or ``physical+shear<mu>[+volume<K>]`` for the shear variant."""
     if isinstance(material, str):
         return material
-    return f"{material.name}+shear{material.shear_modulus:g}" if getattr(material, "shear_modulus", 0) else material.name
+    if not getattr(material, "shear_modulus", 0):
+        return material.name
+    label = f"{material.name}+shear{material.shear_modulus:g}"
+    return label if material.volume_modulus == 1.5e5 else label + f"+volume{material.volume_modulus:g}"
 
 
-def shear_material(mu: float):
-    """The physical profile with the shear term (``mu`` [Pa]) in place of the distance and area energies."""
+def shear_material(mu: float, volume_modulus: float | None = None):
+    """The physical profile with the shear term (``mu`` [Pa]) in place of the distance and area
+    energies (and, if given, another volume modulus [Pa])."""
     from facewarp.physics import MaterialPhysical
 
-    return MaterialPhysical(distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0, shear_modulus=mu)
+    kw = {} if volume_modulus is None else {"volume_modulus": volume_modulus}
+    return MaterialPhysical(distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0, shear_modulus=mu, **kw)
 
 
 def _within(err, disp, mm=5e-4, rel=0.1):
@@ -267,7 +272,7 @@ def part_loads(fr0, material, presets, device, levels=(0, 1)) -> list:
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cpu")
-    ap.add_argument("--materials", nargs="+", default=["physical", "thesis"])
+    ap.add_argument("--materials", nargs="*", default=["physical", "thesis"])
     ap.add_argument("--parts", nargs="+", default=["frames", "static", "levels"])
     ap.add_argument("--presets", nargs="+", default=list(PRESETS))
     ap.add_argument("--name", default=None, help="result file suffix")
@@ -275,6 +280,8 @@ def main():
                     help="physical profile with the shear term of this modulus [Pa] in place of the distance "
                          "and area energies (MaterialPhysical.shear_modulus); reported as material "
                          "'physical+shear<mu>'")
+    ap.add_argument("--volume-modulus", type=float, default=None,
+                    help="with --shear-modulus: the volume modulus [Pa] of that run (default the profile's 150 kPa)")
     ap.add_argument("--compare-levels", type=int, nargs="+", default=[0, 1],
                     help="levels part: the levels compared pairwise in order (e.g. 0 1 2: 0 vs 1 and 1 vs 2)")
     ap.add_argument("--pcg-counts", nargs="+", default=PCG_COUNTS,
@@ -289,7 +296,7 @@ def main():
     name = "solver_accuracy_" + args.device.split(":")[0] + (f"_{args.name}" if args.name else "")
     materials = list(args.materials)
     if args.shear_modulus is not None:
-        materials.append(shear_material(args.shear_modulus))
+        materials.append(shear_material(args.shear_modulus, args.volume_modulus))
     for mat in materials:
         for part in args.parts:
             fn = {"frames": part_frames, "static": part_static, "levels": part_levels, "pcg": part_pcg,
