@@ -65,8 +65,11 @@ def _label(material) -> str:
         return material
     if not getattr(material, "shear_modulus", 0):
         return material.name
+    from facewarp.physics import MaterialPhysical
+
     label = f"{material.name}+shear{material.shear_modulus:g}"
-    return label if material.volume_modulus == 1.5e5 else label + f"+volume{material.volume_modulus:g}"
+    same = material.volume_modulus == MaterialPhysical().volume_modulus
+    return label if same else label + f"+volume{material.volume_modulus:g}"
 
 
 def shear_material(mu: float, volume_modulus: float | None = None):
@@ -232,12 +235,9 @@ def part_loads(fr0, material, presets, device, levels=(0, 1)) -> list:
     profile's ``muscle_modulus`` times each node's sheet area), the stiffness-weighted mean travel of
     their targets on the contracted muscles [mm] and of the attached nodes [mm]: whether the levels
     differ in the load or in the tissue's response to it."""
-    from dataclasses import replace
-
-    from facewarp.physics import material_profile, rig_reference, sheet_areas
+    from facewarp.physics import rig_reference
 
     rigs = {lv: fr0 if lv == 0 else _rig(lv) for lv in levels}
-    mat = material_profile(material)
     rows = []
     for name in presets:
         row = {"preset": name, "material": _label(material)}
@@ -245,12 +245,7 @@ def part_loads(fr0, material, presets, device, levels=(0, 1)) -> list:
             fr = rigs[lv]
             x, rest, sim = _static(fr, name, material, device, tolerance=1e-6)
             X = sim.positions()
-            rig = fr.rig
-            modulus = getattr(mat, "muscle_modulus", None)
-            if modulus is not None:  # the simulator's per-node stiffness of the physical profile
-                area = sheet_areas(fr.nodes, fr.tets, fr.layer)
-                per_node = np.bincount(rig.att_node, minlength=len(fr.nodes))
-                rig = replace(rig, att_stiffness=modulus * area[rig.att_node] / np.maximum(per_node[rig.att_node], 1))
+            rig = sim.muscles.rig  # with the stiffness the simulator gave each attachment
             k = rig.weighted_stiffness()
             acts = sim.activations
             att_muscle = np.asarray(rig.ctrl_muscle)[np.asarray(rig.curve_ctrl)[np.asarray(rig.seg_curve)[rig.att_seg], 0]]

@@ -61,6 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import InputError
+from .model import _TET_EDGES, _TET_FACES
 
 __all__ = [
     "MATERIALS",
@@ -233,8 +234,6 @@ def material_profile(material) -> MaterialPhysical | MaterialThesis:
                      f"got {material!r}")
 
 
-_TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
-_TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 _SQRT2 = float(np.sqrt(2.0))
 
 
@@ -284,15 +283,12 @@ def linear_stiffness(builder, frames=None) -> np.ndarray:
         X = np.einsum("kab,kib->kia", R, X)
 
     # each unique element's k over its tets, by volume
-    def per_tet(local, unique, k):
-        allk = np.sort(T[:, local].reshape(-1, local.shape[1]), axis=1)
-        _, inv = np.unique(allk, axis=0, return_inverse=True)
-        inv = inv.reshape(len(T), len(local))
-        vsum = np.bincount(inv.ravel(), weights=np.repeat(vol, len(local)), minlength=len(unique))
+    def per_tet(inv, k):
+        vsum = np.bincount(inv.ravel(), weights=np.repeat(vol, inv.shape[1]), minlength=len(k))
         return np.asarray(k, np.float64)[inv] * vol[:, None] / vsum[inv]
 
-    ke = per_tet(_TET_EDGES, builder.edges, builder.edge_k0)  # (k, 6)
-    kf = per_tet(_TET_FACES, builder.faces, builder.face_k)  # (k, 4)
+    ke = per_tet(builder.tet_edge_index, builder.edge_k0)  # (k, 6)
+    kf = per_tet(builder.tet_face_index, builder.face_k)  # (k, 4)
     e = X[:, _TET_EDGES[:, 1]] - X[:, _TET_EDGES[:, 0]]
     n = e / np.linalg.norm(e, axis=2, keepdims=True)
     f = X[:, _TET_FACES]
@@ -304,7 +300,7 @@ def linear_stiffness(builder, frames=None) -> np.ndarray:
     C = np.einsum("kj,kja,kjb->kab", ke, a_e, a_e) + np.einsum("kj,kja,kjb->kab", kf, a_f, a_f)
     C += np.asarray(builder.tet_k, np.float64)[:, None, None] * np.outer(a_v, a_v)
     # the shear term 1/2 k_s |G|^2 is 1/2 k_s e.e at small strain: k_s I in any axes
-    C += np.asarray(getattr(builder, "tet_shear_k", np.zeros(len(T))), np.float64)[:, None, None] * np.eye(6)
+    C += np.asarray(builder.tet_shear_k, np.float64)[:, None, None] * np.eye(6)
     return C / vol[:, None, None]
 
 

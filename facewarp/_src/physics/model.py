@@ -214,7 +214,8 @@ class ModelBuilder:
         faces (f, 3) unique, sorted; face_rest_areas (f,) [m^2]; face_k (f,) [J];
         face_damping_coef (f,) [J s]; tet_rest_volumes (k,) [m^3]; tet_k (k,) [J];
         tet_damping_coef (k,) [J s]; tet_rest_inverse (k, 3, 3) [1/m]; tet_shear_k (k,) [J];
-        tet_shear_damping (k,) [J s] (the shear term, module doc); damping_rate [1/s]; stiffness_damping [s];
+        tet_shear_damping (k,) [J s] (the shear term, module doc); tet_edge_index (k, 6), tet_face_index
+        (k, 4): each tet's edges and faces as rows of ``edges`` / ``faces``; damping_rate [1/s]; stiffness_damping [s];
         edge_damping [N s/m]; material (the profile); muscle_count.
     """
 
@@ -380,6 +381,8 @@ class ModelBuilder:
         self.stiffness_damping = float(beta)
         self.edge_damping = float(c_edge)
         self.edges = E
+        self.tet_edge_index = e_inv.reshape(len(T), 6)  # each tet's edges (_TET_EDGES order) in self.edges
+        self.tet_face_index = f_inv.reshape(len(T), 4)  # each tet's faces (_TET_FACES order) in self.faces
         self.edge_rest_lengths = D0
         self.edge_class = edge_class
         self.edge_k0 = k0
@@ -393,7 +396,7 @@ class ModelBuilder:
         self.tet_damping_coef = beta * tet_k
         Dm = np.stack([V32[T[:, c]] - V32[T[:, 0]] for c in (1, 2, 3)], axis=2)  # columns: rest edge vectors
         self.tet_rest_inverse = np.linalg.inv(Dm)
-        self.tet_shear_k = (2.0 * mat.shear_modulus * vol) if physical else np.zeros(len(T))
+        self.tet_shear_k = 2.0 * shear * vol
         self.tet_shear_damping = beta * self.tet_shear_k
         self.hold_stiffness = np.where(self.held, hold, 0.0)
         self.muscle_count = int(muscle_count)
