@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import machine, save
+from benchmarks._common import save
 
 NRICP = r"""
 import sys, json, numpy as np, trimesh
@@ -64,13 +64,12 @@ def timed(cmd: list[str], env: dict) -> dict:
     return {"wall_s": round(wall, 3), "cpu_s": round(cpu, 3)}
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=None)
-    args = ap.parse_args()
-    from benchmarks.adapt_ict import ICT_FDP, ict_dir
-    from benchmarks.adapt_unseen import error_stats, load_model, make_case
+    args = ap.parse_args(argv)
+    from benchmarks._ict import ICT_FDP, error_stats, ict_dir, load_model, make_case
     from facewarp.geometry import load_mesh, save_obj
 
     if not (ict_dir() / "generic_neutral_mesh.obj").is_file():
@@ -108,7 +107,7 @@ def main() -> None:
         report = json.loads((d / "out" / "report.json").read_text())
     best = min(warm, key=lambda r: r["wall_s"])
     result = {
-        "machine": machine("cpu"), "load_average_1_5_15_min": list(os.getloadavg()), "seed": seed, "case": case.info(),
+        "load_average_1_5_15_min": list(os.getloadavg()), "seed": seed, "case": case.info(),
         "command": "facewarp adapt scan.obj --units mm --landmarks scan_lm.json --template-mesh template.obj "
                    "--template-landmarks template_lm.json --template-units mm --out out",
         "pinned_to_one_core": bool(pin), "cold": cold, "warm": warm, "warm_best": best, "nricp_amberg": nr,
@@ -123,4 +122,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -23,109 +23,22 @@ beforehand (a warm-up adaptation that is not timed).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
+from benchmarks._common import limit_threads, threads_from_argv
 
-def _limit_threads(n: int) -> None:
-    for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS", "VECLIB_MAXIMUM_THREADS"):
-        os.environ[k] = str(n)
-    if hasattr(os, "sched_setaffinity"):
-        try:
-            cpus = sorted(os.sched_getaffinity(0))
-            os.sched_setaffinity(0, set(cpus[:n]))
-        except OSError:
-            pass
-
+THREADS = 1  # timed on one core: pinned before numpy loads (the runner does it too; --threads N)
 
 if __name__ == "__main__":
-    _pre = argparse.ArgumentParser(add_help=False)
-    _pre.add_argument("--threads", type=int, default=1)
-    _limit_threads(_pre.parse_known_args()[0].threads)
+    limit_threads(threads_from_argv(sys.argv[1:], THREADS))
 
-import json  # noqa: E402
-import platform  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from benchmarks._common import shared_dir  # noqa: E402
-
-REPO = Path(__file__).resolve().parents[1]
-RESULTS = REPO / "benchmarks" / "results"
-
-FACE_VERTS = 9409  # ICT face area: vertices 0-9408
-HEAD_VERTS = 11248  # face + head and neck: vertices 0-11247
-
-# FDP -> ICT vertex index (docs/MPEG4_FDP.md)
-ICT_FDP = {
-    "2.1": 966, "3.7": 3721, "3.12": 1507, "3.8": 1528, "3.11": 3742, "8.3": 6213,
-    "8.4": 5708, "9.3": 4857, "8.1": 0, "8.2": 5518, "2.2": 5533, "2.3": 5517,
-}  # fmt: skip
-
-
-def ict_dir() -> Path:
-    return shared_dir() / "data" / "ict-facekit"
-
-
-def load_ict(d: Path):
-    from facewarp.geometry import load_mesh
-
-    neutral = load_mesh(d / "generic_neutral_mesh.obj", units="cm")
-    F = neutral.faces[(neutral.faces < HEAD_VERTS).all(axis=1)]
-    markers = json.loads((d / "vertex_indices.json").read_text())["idx_to_landmark_verts"]
-    return neutral.vertices[:HEAD_VERTS].copy(), F, [int(i) for i in markers]
-
-
-def _random_rotation(rng, max_angle: float) -> np.ndarray:
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    a = rng.uniform(-max_angle, max_angle)
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
-
-
-def make_scan(V_true: np.ndarray, F: np.ndarray, seed: int, *, faces: int = 60000, noise_mm: float = 0.15, holes: int = 4):
-    """A scan-like mesh of the head V_true [m]: new tessellation, noise, holes, pose, mm.
-
-    Returns (scan_V_mm, scan_F, pose) with pose = (R, t_mm): scan_mm = 1000 * R @ x + t_mm.
-    """
-    import igl
-
-    from facewarp.geometry import vertex_normals
-
-    rng = np.random.default_rng(seed)
-    V2, F2 = igl.upsample(V_true, F, 2)
-    res = igl.decimate(V2, F2, faces)
-    SV, SF = np.asarray(res[0], dtype=np.float64), np.asarray(res[1], dtype=np.int64)
-    N = vertex_normals(SV, SF)
-    SV = SV + N * rng.normal(scale=noise_mm * 1e-3, size=(len(SV), 1))
-    # holes: discs on the face (not at the landmarks)
-    lm = V_true[list(ICT_FDP.values())]
-    cent = []
-    while len(cent) < holes:
-        c = V_true[rng.integers(0, FACE_VERTS)]
-        if np.linalg.norm(lm - c, axis=1).min() > 0.02:
-            cent.append(c)
-    C = SV[SF].mean(axis=1)
-    keep = np.ones(len(SF), dtype=bool)
-    for c in cent:
-        keep &= np.linalg.norm(C - c, axis=1) > 0.006
-    SF = SF[keep]
-    used = np.unique(SF)
-    remap = np.full(len(SV), -1)
-    remap[used] = np.arange(len(used))
-    SV, SF = SV[used], remap[SF]
-    R = _random_rotation(rng, np.radians(30))
-    t = rng.uniform(-200, 200, size=3)
-    return 1000.0 * SV @ R.T + t, SF, (R, t)
-
-
-def to_scan_frame(X: np.ndarray, pose) -> np.ndarray:
-    R, t = pose
-    return 1000.0 * X @ R.T + t
-
+from benchmarks._common import RESULTS, load, machine_line, save  # noqa: E402
+from benchmarks._ict import FACE_VERTS, HEAD_VERTS, ICT_FDP, ict_dir, load_ict, make_scan, to_scan_frame  # noqa: E402
 
 def run_case(k: int, TV, TF, markers_idx, *, peers: bool, levels: int, method: str):
     from facewarp.adaptation import adapt, calibrate, distance_error, vertex_error
@@ -199,24 +112,7 @@ def run_case(k: int, TV, TF, markers_idx, *, peers: bool, levels: int, method: s
     return case
 
 
-def machine_info() -> dict:
-    import scipy
-    import warp
-
-    return {
-        "platform": platform.platform(),
-        "processor": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "cpus_used": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "warp": warp.__version__,
-        "warp_device": "cpu",
-    }
-
-
-def write_markdown(result: dict, path: Path) -> None:
+def write_markdown(result: dict, path: Path, doc: dict) -> None:
     lines = [
         "# Template-to-scan adaptation on ICT-FaceKit identities",
         "",
@@ -248,7 +144,7 @@ def write_markdown(result: dict, path: Path) -> None:
             f"| {r['level']}{'' if r['accepted'] else ' (undone)'} | {r['kind']} | {r['fp_count']} | {r['new_feature']} | {r['new_curvature']} | {sig} | "
             f"{r['iterations']} | {r['E_d'] * 1e6:.3f} | {r['E_m'] * 1e6:.2f} | {r['E'] * 1e6:.3f} | {r['seconds']:.3f} |"
         )
-    lines += ["", "Machine: " + ", ".join(f"{k} {v}" for k, v in result["machine"].items()), ""]
+    lines += ["", machine_line(doc), ""]
     path.write_text("\n".join(lines))
 
 
@@ -293,14 +189,14 @@ def main(argv=None) -> int:
         rows = [c[m] for c in cases if m in c]
         if rows:
             summary[m] = {key: float(np.mean([r[key] for r in rows])) for key in ("seconds", "E_v_median_mm", "E_v_rms_mm", "E_d_mm2", "dist_median_mm")}
-    result = {"method": args.method, "levels": args.levels, "machine": machine_info(), "threads": args.threads, "cases": cases, "summary": summary}
+    result = {"method": args.method, "levels": args.levels, "threads": args.threads, "cases": cases, "summary": summary}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "adapt_ict.json").write_text(json.dumps(result, indent=2, default=float))
-    write_markdown(result, out / "adapt_ict.md")
+    path = save("adapt_ict", result, folder=out)
+    write_markdown(result, out / "adapt_ict.md", load(path))
     print(f"wrote {out / 'adapt_ict.json'} and {out / 'adapt_ict.md'}")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -32,20 +32,20 @@ import argparse
 import os
 import sys
 
+from benchmarks._common import limit_threads, threads_from_argv
+
+THREADS = 1  # timed on one core: pinned before numpy loads (the runner does it too; --threads N)
+
 if __name__ == "__main__":
-    from benchmarks.adapt_ict import _limit_threads
+    limit_threads(threads_from_argv(sys.argv[1:], THREADS))
 
-    _pre = argparse.ArgumentParser(add_help=False)
-    _pre.add_argument("--threads", type=int, default=1)
-    _limit_threads(_pre.parse_known_args()[0].threads)
-
-import json  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from benchmarks.adapt_ict import HEAD_VERTS, ICT_FDP, RESULTS, ict_dir, load_ict, machine_info, make_scan, to_scan_frame  # noqa: E402
+from benchmarks._common import RESULTS, load, machine_line, save  # noqa: E402
+from benchmarks._ict import HEAD_VERTS, ICT_FDP, ict_dir, load_ict, make_scan, to_scan_frame  # noqa: E402
 
 TARGET_MEDIAN_MM = 0.5
 
@@ -98,7 +98,7 @@ def run_one(name: str, t, tlm, face, groups, SV_mm, SF, scan_lm_mm, *, levels: i
     return case
 
 
-def write_markdown(result: dict, path: Path) -> None:
+def write_markdown(result: dict, path: Path, doc: dict) -> None:
     lines = [
         "# The default template adapted to ICT identities and unseen random faces: distance and surface quality",
         "",
@@ -127,7 +127,7 @@ def write_markdown(result: dict, path: Path) -> None:
               "| region | folds | max dihedral | template's max | ok | curvature diff RMS |", "|---|---|---|---|---|---|"]
     for g, r in c0["regions"].items():
         lines.append(f"| {g} | {r['folds']} | {r['dihedral_max_deg']:.1f} | {r['template_dihedral_max_deg']:.1f} | {'yes' if r['dihedral_ok'] else 'NO'} | {r['curvature_rms_diff_per_m']:.1f} |")
-    lines += ["", "Machine: " + ", ".join(f"{k} {v}" for k, v in result["machine"].items()), ""]
+    lines += ["", machine_line(doc), ""]
     path.write_text("\n".join(lines))
 
 
@@ -158,7 +158,7 @@ def main(argv=None) -> int:
     cases = []
     jobs = [("identity%03d" % k, k) for k in args.identities]
     if args.unseen:
-        from benchmarks.adapt_unseen import load_model, make_case
+        from benchmarks._ict import load_model, make_case
 
         model = load_model()
         seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=args.unseen)
@@ -189,12 +189,12 @@ def main(argv=None) -> int:
                                                                 for g in sorted({g for c in cases for g in (c["curvature_ok"] or {})})},
         "mean time [s] (CPU)": f"{np.mean([c['seconds'] for c in cases]):.2f} ({np.mean([c['cpu_seconds'] for c in cases]):.2f})",
     }
-    result = {"levels": args.levels, "threads": args.threads, "seed": seed, "machine": machine_info(),
+    result = {"levels": args.levels, "threads": args.threads, "seed": seed,
               "template_vertices": int(len(t.vertices)), "face_vertices": int(len(face)), "target_median_mm": TARGET_MEDIAN_MM,
               "cases": cases, "summary": summary}
     out.mkdir(parents=True, exist_ok=True)
-    (out / "adapt_template_ict.json").write_text(json.dumps(result, indent=2, default=float))
-    write_markdown(result, out / "adapt_template_ict.md")
+    path = save("adapt_template_ict", result, folder=out)
+    write_markdown(result, out / "adapt_template_ict.md", load(path))
     for k, v in summary.items():
         print(f"{k}: {v}")
     print(f"wrote {out / 'adapt_template_ict.json'} and {out / 'adapt_template_ict.md'}")
@@ -202,4 +202,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -32,189 +32,21 @@ import argparse
 import os
 import sys
 
+from benchmarks._common import limit_threads, threads_from_argv
+
+THREADS = 1  # timed on one core: pinned before numpy loads (the runner does it too; --threads N)
+
 if __name__ == "__main__":
-    from benchmarks.adapt_ict import _limit_threads
+    limit_threads(threads_from_argv(sys.argv[1:], THREADS))
 
-    _pre = argparse.ArgumentParser(add_help=False)
-    _pre.add_argument("--threads", type=int, default=1)
-    _limit_threads(_pre.parse_known_args()[0].threads)
-
-import json  # noqa: E402
 import time  # noqa: E402
-from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from benchmarks.adapt_ict import FACE_VERTS, HEAD_VERTS, ICT_FDP, ict_dir, machine_info  # noqa: E402
-
-RESULTS = Path(__file__).resolve().parent / "results"
+from benchmarks._common import RESULTS, load, machine_line, save  # noqa: E402
+from benchmarks._ict import ICT_FDP, Case, ICTModel, error_stats, ict_dir, load_model, make_case  # noqa: E402
 TARGETS = {"median_mm": 1.0, "rms_mm": 1.5, "p95_mm": 3.0, "beat_nricp_fraction": 0.9}
-
-
-@dataclass
-class ICTModel:
-    """The ICT neutral head and its identity offsets (metres, ICT frame: y up, z front).
-
-    Attributes:
-        neutral: Neutral head vertices [m], shape (11248, 3), float64.
-        faces: Head triangles, shape (m, 3), int64.
-        offsets: identity_k - neutral [m], shape (10, 11248, 3), float64.
-        markers: ICT's 68 landmark vertex indices.
-    """
-
-    neutral: np.ndarray
-    faces: np.ndarray
-    offsets: np.ndarray
-    markers: list
-
-
-def load_model() -> ICTModel:
-    from facewarp.geometry import load_mesh
-
-    d = ict_dir()
-    neutral = load_mesh(d / "generic_neutral_mesh.obj", units="cm")
-    F = neutral.faces[(neutral.faces < HEAD_VERTS).all(axis=1)]
-    V0 = neutral.vertices[:HEAD_VERTS].copy()
-    offs = np.stack([load_mesh(d / f"identity{k:03d}.obj", units="cm").vertices[:HEAD_VERTS] - V0 for k in range(10)])
-    markers = [int(i) for i in json.loads((d / "vertex_indices.json").read_text())["idx_to_landmark_verts"]]
-    return ICTModel(V0, np.asarray(F, dtype=np.int64), offs, markers)
-
-
-@dataclass
-class Case:
-    """One unseen case. The scan frame is ``x_scan_mm = 1000 * scale * R @ x + t_mm``.
-
-    Attributes:
-        seed: The case's seed.
-        weights: Identity weights, shape (10,).
-        truth: The true shape in the ICT frame [m], shape (11248, 3), float64.
-        truth_scan_mm: The true shape in the scan's frame [mm], shape (11248, 3), float64.
-        scan_V_mm: Scan vertices [mm], shape (k, 3), float64.
-        scan_F: Scan triangles, shape (l, 3), int64.
-        landmarks_mm: FDP id -> scan position [mm], shape (3,).
-        rotation, scale, translation_mm: The pose.
-        noise_mm: Normal noise sigma [mm].
-        holes: Hole centres (ICT frame) [m], shape (h, 3), and radii [m], shape (h,).
-    """
-
-    seed: int
-    weights: np.ndarray
-    truth: np.ndarray
-    truth_scan_mm: np.ndarray
-    scan_V_mm: np.ndarray
-    scan_F: np.ndarray
-    landmarks_mm: dict
-    rotation: np.ndarray
-    scale: float
-    translation_mm: np.ndarray
-    noise_mm: float
-    holes: tuple
-
-    def to_scan_mm(self, X: np.ndarray) -> np.ndarray:
-        """ICT-frame points [m] -> scan frame [mm]."""
-        return 1000.0 * self.scale * X @ self.rotation.T + self.translation_mm
-
-    def info(self) -> dict:
-        return {"seed": self.seed, "weights": [float(w) for w in self.weights], "scale": self.scale,
-                "noise_mm": self.noise_mm, "holes": len(self.holes[1]), "hole_radii_mm": [float(r * 1e3) for r in self.holes[1]],
-                "scan_vertices": int(len(self.scan_V_mm)), "scan_faces": int(len(self.scan_F)),
-                "rotation": self.rotation.tolist(), "translation_mm": self.translation_mm.tolist()}
-
-
-def retessellate(V: np.ndarray, F: np.ndarray, rng, *, faces: int = 60000, jitter: float = 0.4):
-    """A new tessellation of the surface (V, F) [m] with about ``faces`` triangles: linear
-    subdivision x2, shortest-edge decimation, then each vertex moved by a random tangent step
-    (up to ``jitter`` of its mean edge length) and put back on the surface (closest point)."""
-    import igl
-
-    from facewarp.geometry import MeshQuery, vertex_normals
-
-    V2, F2 = igl.upsample(V, F, 2)
-    res = igl.decimate(V2, F2, faces)
-    SV, SF = np.asarray(res[0], dtype=np.float64), np.asarray(res[1], dtype=np.int64)
-    used = np.unique(SF)
-    remap = np.full(len(SV), -1)
-    remap[used] = np.arange(len(used))
-    SV, SF = SV[used], remap[SF]
-    N = vertex_normals(SV, SF)
-    E = np.concatenate([SF[:, [0, 1]], SF[:, [1, 2]], SF[:, [2, 0]]])
-    el = np.linalg.norm(SV[E[:, 0]] - SV[E[:, 1]], axis=1)
-    mean_len = np.bincount(E.ravel(), weights=np.repeat(el, 2), minlength=len(SV)) / np.maximum(np.bincount(E.ravel(), minlength=len(SV)), 1)
-    step = rng.normal(size=SV.shape)
-    step -= np.einsum("kd,kd->k", step, N)[:, None] * N
-    step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
-    step *= (rng.uniform(0.0, jitter, size=len(SV)) * mean_len)[:, None]
-    boundary = np.zeros(len(SV), bool)
-    Es = np.sort(E, axis=1)
-    u, c = np.unique(Es, axis=0, return_counts=True)
-    boundary[u[c == 1].ravel()] = True
-    step[boundary] = 0.0
-    cp = MeshQuery(V, F).closest_point(SV + step)
-    SV = np.where(np.isfinite(cp.points), cp.points, SV)
-    return SV, SF
-
-
-def make_case(model: ICTModel, seed: int, *, faces: int = 60000) -> Case:
-    """A random unseen case (see the module docstring) from ``seed``."""
-    from scipy.spatial.transform import Rotation
-
-    from facewarp.geometry import vertex_normals
-
-    rng = np.random.default_rng(seed)
-    w = rng.normal(size=len(model.offsets))
-    truth = model.neutral + np.einsum("k,kvd->vd", w, model.offsets)
-    SV, SF = retessellate(truth, model.faces, rng, faces=faces)
-    noise = float(rng.uniform(0.05, 0.3)) * 1e-3
-    SV = SV + vertex_normals(SV, SF) * rng.normal(scale=noise, size=(len(SV), 1))
-    # holes: discs on the face, away from the landmarks
-    lm = truth[list(ICT_FDP.values())]
-    n_holes = int(rng.integers(2, 7))
-    cent, rad = [], []
-    while len(cent) < n_holes:
-        c = truth[rng.integers(0, FACE_VERTS)]
-        r = float(rng.uniform(0.004, 0.010))
-        if np.linalg.norm(lm - c, axis=1).min() > r + 0.01:
-            cent.append(c)
-            rad.append(r)
-    C = SV[SF].mean(axis=1)
-    keep = np.ones(len(SF), dtype=bool)
-    for c, r in zip(cent, rad):
-        keep &= np.linalg.norm(C - c, axis=1) > r
-    SF = SF[keep]
-    used = np.unique(SF)
-    remap = np.full(len(SV), -1)
-    remap[used] = np.arange(len(used))
-    SV, SF = SV[used], remap[SF]
-    R = Rotation.random(random_state=rng).as_matrix()
-    s = float(rng.uniform(0.8, 1.2))
-    t = rng.uniform(-300, 300, size=3)
-    case = Case(seed, w, truth, np.zeros(0), np.zeros(0), SF, {}, R, s, t, noise * 1e3, (np.array(cent), np.array(rad)))
-    case.scan_V_mm = case.to_scan_mm(SV)
-    case.truth_scan_mm = case.to_scan_mm(truth)
-    case.landmarks_mm = {f: case.truth_scan_mm[i] for f, i in ICT_FDP.items()}
-    return case
-
-
-def error_stats(V_mm: np.ndarray, case: Case, faces: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
-    """E_v over the face vertices (scan frame, mm): stats, per-vertex total and tangential error."""
-    from facewarp.geometry import vertex_normals
-
-    T = case.truth_scan_mm
-    d = V_mm - T
-    e = np.linalg.norm(d, axis=1)
-    N = vertex_normals(T, faces)
-    tang = np.linalg.norm(d - np.einsum("kd,kd->k", d, N)[:, None] * N, axis=1)
-    f = e[:FACE_VERTS]
-    ft = tang[:FACE_VERTS]
-    stats = {
-        "E_v_median_mm": float(np.median(f)), "E_v_rms_mm": float(np.sqrt(np.mean(f**2))),
-        "E_v_p95_mm": float(np.percentile(f, 95)), "E_v_max_mm": float(f.max()),
-        "E_v_over_5mm": int((f > 5).sum()), "E_v_over_20mm": int((f > 20).sum()),
-        "tangential_median_mm": float(np.median(ft)), "tangential_rms_mm": float(np.sqrt(np.mean(ft**2))),
-        "head_E_v_rms_mm": float(np.sqrt(np.mean(e**2))),
-    }
-    return stats, e, tang
 
 
 def run_facewarp(model: ICTModel, case: Case, **settings):
@@ -282,7 +114,7 @@ def summarise(rows: list) -> dict:
     return out
 
 
-def write_markdown(result: dict, path: Path) -> None:
+def write_markdown(result: dict, path: Path, doc: dict) -> None:
     T = result["targets"]
     methods = [m for m in ("facewarp", "nricp_amberg", "facewarp_levels_only", "facewarp_detected") if m in result["summary"]]
     lines = [
@@ -320,7 +152,7 @@ def write_markdown(result: dict, path: Path) -> None:
     lines += ["", "Verdict:", ""] + [f"- {k}: {val}" for k, val in v.items()]
     if result.get("heat_maps"):
         lines += ["", "Heat maps (total and tangential E_v of the worst cases): " + ", ".join(f"`{p}`" for p in result["heat_maps"])]
-    lines += ["", "Machine: " + ", ".join(f"{k} {val}" for k, val in result["machine"].items()), ""]
+    lines += ["", machine_line(doc), ""]
     path.write_text("\n".join(lines))
 
 
@@ -421,11 +253,11 @@ def main(argv=None) -> int:
     for c in cases:
         c.pop("_e")
     methods = [m for m in ("facewarp", "facewarp_detected", "facewarp_levels_only", "nricp_amberg") if m in cases[0]]
-    result = {"seed": seed, "threads": args.threads, "machine": machine_info(), "targets": TARGETS, "cases": cases,
+    result = {"seed": seed, "threads": args.threads, "targets": TARGETS, "cases": cases,
               "summary": {m: summarise([c[m] for c in cases]) for m in methods}, "verdict": verdict(cases), "heat_maps": heat}
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"{args.name}.json").write_text(json.dumps(result, indent=2, default=float))
-    write_markdown(result, out / f"{args.name}.md")
+    path = save(args.name, result, folder=out)
+    write_markdown(result, out / f"{args.name}.md", load(path))
     for k, v in result["verdict"].items():
         print(f"{k}: {v}")
     print(f"wrote {out / (args.name + '.json')} and {out / (args.name + '.md')}")
@@ -433,4 +265,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

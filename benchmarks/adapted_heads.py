@@ -20,15 +20,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks._common import machine, save
-from benchmarks.adapt_ict import ICT_FDP, ict_dir, load_ict, make_scan
+from benchmarks._common import save
+from benchmarks._ict import ICT_FDP, ict_dir, load_ict, make_scan
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--identities", type=int, nargs="+", default=list(range(10)))
     ap.add_argument("--keep", type=Path)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     d = ict_dir()
     if not (d / "generic_neutral_mesh.obj").is_file():
         print(f"ICT-FaceKit data not found at {d}: nothing to measure")
@@ -76,8 +76,8 @@ def main():
         rows.append(row)
     ok = all(r["inverted"] == 0 and r["conforming"] for r in rows)
     print("all heads: 0 inverted and conforming" if ok else "some heads failed")
-    print("wrote", save("adapted_heads", {"machine": machine(), "heads": rows, "all_ok": ok, "folders": str(root)}))
+    print("wrote", save("adapted_heads", {"heads": rows, "all_ok": ok, "folders": str(root)}))
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -10,13 +10,13 @@ from __future__ import annotations
 import argparse
 import time
 
-from benchmarks._common import machine, save
+from benchmarks._common import save
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2, 3])
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     from facewarp import InputError, build_anatomy, default_template
 
     rows = []
@@ -36,8 +36,8 @@ def main():
             row = {"level": lv, "error": str(e), "seconds": time.perf_counter() - t0}
         print(row, flush=True)
         rows.append(row)
-    print("wrote", save("anatomy_levels", {"machine": machine(), "levels": rows}))
+    print("wrote", save("anatomy_levels", {"levels": rows}))
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import machine, save, shared_dir
+from benchmarks._common import save, shared_dir
 
 
 def timed(argv: list[str]) -> dict:
@@ -46,7 +46,7 @@ def timed(argv: list[str]) -> dict:
 def ict_cases(d: Path, ict: Path) -> dict[str, Path]:
     """Landmark files with faults for ICT identity 000 as the scan (cm), made from its 12 FDPs at
     the ICT vertices of docs/MPEG4_FDP.md: too few, coplanar, one 8 cm off, or in mm."""
-    from benchmarks.adapt_ict import ICT_FDP
+    from benchmarks._ict import ICT_FDP
 
     import facewarp
 
@@ -66,10 +66,10 @@ def ict_cases(d: Path, ict: Path) -> dict[str, Path]:
     return files
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=2, help="runs of each command in a row (default 2)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     rows = []
 
     def measure(name: str, argv: list[str], expect: int):
@@ -98,10 +98,10 @@ def main() -> None:
                                            "--out", str(d / "o")], 2)
     else:
         print(f"no ICT-FaceKit data at {ict.parent}: adapt error timings skipped")
-    result = {"machine": machine("cpu"), "load_average_1_5_15_min": list(os.getloadavg()), "repeat": args.repeat,
+    result = {"load_average_1_5_15_min": list(os.getloadavg()), "repeat": args.repeat,
               "rows": rows}
     print(f"wrote {save('cli_startup', result)}")
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks._common import machine, save
+from benchmarks._common import save
 
 
 def run_demo(out: Path, cache: Path, *, device: str, seconds: float | None, quick: bool) -> dict:
@@ -72,7 +72,6 @@ def main(argv=None) -> None:
                   file=sys.stderr)
     seconds = runs[0]["demo"]["seconds"]
     data = {
-        "machine": machine(args.device),
         "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None,
         "command": f"facewarp --device {args.device} demo --out DIR" + (f" --seconds {args.seconds:g}" if args.seconds else "")
                    + (" --quick" if args.quick else ""),
@@ -83,9 +82,9 @@ def main(argv=None) -> None:
     }
     dev = args.device.split(":")[0]
     name = f"demo_{dev}" if args.seconds is None and not args.quick else f"demo_{dev}_{seconds:g}s"
-    path = save(name, data)
+    path = save(name, data, device=args.device)
     print(f"wrote {path}", file=sys.stderr)
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -16,7 +16,7 @@ import argparse
 
 import numpy as np
 
-from benchmarks._common import machine, save
+from benchmarks._common import save
 
 POINTS = ("8.3", "8.4", "2.1", "4.1", "4.2", "4.3", "4.4", "4.5", "4.6", "5.1", "5.2", "3.1", "3.2", "3.3", "3.4")
 DISTANCES = {"fissure_L": ("3.1", "3.3"), "fissure_R": ("3.2", "3.4"), "lip_gap": ("2.2", "2.3"),
@@ -36,7 +36,7 @@ TARGETS = {
 }
 
 
-def main() -> None:
+def main(argv=None) -> None:
     import facewarp
     from facewarp.geometry import signed_tet_volumes
 
@@ -44,7 +44,7 @@ def main() -> None:
     ap.add_argument("--level", type=int, default=0)
     ap.add_argument("--seconds", type=float, default=1.5)
     ap.add_argument("--device", default="cpu")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     rig = facewarp.build_face(facewarp.default_template(args.level))
     T = rig.tets
@@ -70,13 +70,13 @@ def main() -> None:
         c = row["displacement_mm"]
         print(f"{name:18s} 8.3 {c['8.3']} 8.4 {c['8.4']} 2.1 {c['2.1']} 4.1 {c['4.1']} 4.3 {c['4.3']}", flush=True)
     save(f"expression_targets_L{args.level}", {
-        "machine": machine(args.device), "level": args.level, "seconds": args.seconds,
+        "level": args.level, "seconds": args.seconds,
         "jaw_lever_m": facewarp.jaw_lever(rig), "solver": "implicit", "material": "physical", "jaw": "kinematic",
         "contact": True,
         "muscles": "two-way anchors, Fig. 6.4 region filter, saturating activation curve (muscle_defs.json)",
         "note": "displacements [mm] at the end (x left, y up, z out); distances [mm] at rest and at the end",
-        "presets": rows})
+        "presets": rows}, device=args.device)
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

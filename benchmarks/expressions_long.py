@@ -1,7 +1,7 @@
 """All Table 6.4 presets and the Fig. 6.16 sequence for 10 simulated seconds each: no NaN, no inverted tet,
 no lip-lip, lip-teeth or lid-lid crossing in any frame.
 
-    python -m benchmarks.expressions_long [--device cpu|cuda] [--seconds 10] [--head default|BUILD_DIR] [--name NAME]
+    python -m benchmarks.expressions_long [--device cpu|cuda] [--seconds 10] [--head default|identityNNN|BUILD_DIR] [--name NAME]
                                           [--solver implicit|verlet] [--material physical|thesis]
 
 Each expression ramps up, holds and releases within the run; the solver's guard checks every frame
@@ -19,37 +19,30 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
-
 import numpy as np
 
-from benchmarks._common import RESULTS, machine, save
+from benchmarks._common import RESULTS, add_case_args, case_face, head_tag, save
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--device", default="cpu")
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--fps", type=float, default=30.0)
-    ap.add_argument("--head", default="default")
+    add_case_args(ap, device="cpu", head="default")
     ap.add_argument("--name", help="tag of the head in the output names")
     ap.add_argument("--expressions", nargs="+", default=["smile", "laugh", "surprise", "angry", "sad", "sequence"])
     ap.add_argument("--solver", default="implicit", choices=["implicit", "verlet"])
     ap.add_argument("--material", default="physical", choices=["physical", "thesis"])
-    args = ap.parse_args()
-    from facewarp import (FaceSimulator, SimulationError, build_face, load_face_rig, load_head, render_strip, save_png,
-                          timeline_from_spec)
+    args = ap.parse_args(argv)
+    from facewarp import FaceSimulator, SimulationError, render_strip, save_png, timeline_from_spec
     from facewarp.render import displacement_max
 
-    if Path(args.head, "face_rig.npz").is_file():
-        fr = load_face_rig(args.head)
-    else:
-        fr = build_face(load_head(args.head))
+    fr = case_face(args.head)
     rows = []
     outdir = RESULTS / "expressions"
     outdir.mkdir(parents=True, exist_ok=True)
     tag = args.device.split(":")[0]
-    head_name = args.name or ("" if args.head == "default" else Path(args.head).resolve().parent.name)
+    head_name = args.name or head_tag(args.head)
     prefix = f"{head_name}_" if head_name else ""
     if (args.solver, args.material) != ("implicit", "physical"):
         prefix += f"{args.solver}_{args.material}_"
@@ -92,9 +85,9 @@ def main():
         rows.append(row)
     variant = "" if (args.solver, args.material) == ("implicit", "physical") else f"_{args.solver}_{args.material}"
     out = f"expressions_long_{tag}{variant}" + (f"_{head_name}" if head_name else "")
-    print("wrote", save(out, {"machine": machine(args.device), "head": args.head, "tets": int(len(fr.tets)),
-                              "all_ok": all(r.get("ok") for r in rows), "runs": rows}))
+    print("wrote", save(out, {"head": args.head, "tets": int(len(fr.tets)),
+                              "all_ok": all(r.get("ok") for r in rows), "runs": rows}, device=args.device))
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import machine, save
+from benchmarks._common import save
+from benchmarks._ict import ict_dir
 
-ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_ICT = ROOT.parent / "shared" / "data" / "ict-facekit"
+DEFAULT_ICT = ict_dir()
 
 CASES = {
     "smile": ("zygomatic_major=1", ("mouthSmile_L", "mouthSmile_R")),
@@ -52,14 +52,14 @@ def _cos(a: np.ndarray, b: np.ndarray) -> float:
     return float(a @ b / den) if den > 0 else float("nan")
 
 
-def main() -> None:
+def main(argv=None) -> None:
     import facewarp
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=1.5)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--ict", type=Path, default=DEFAULT_ICT)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if not (args.ict / "generic_neutral_mesh.obj").is_file():
         raise SystemExit(f"--ict: {args.ict} holds no ICT-FaceKit generic_neutral_mesh.obj")
 
@@ -134,12 +134,12 @@ def main() -> None:
         print(f"{case:11s} cos {row['cosine_fdp']:.3f} amp {row['amplitude_sim_mm']:.1f}/{row['amplitude_rig_mm']:.1f} mm "
               f"({row['amplitude_ratio']}) {row.get('cosine_face_vertices', '')}", flush=True)
     save("ict_rig_compare", {
-        "machine": machine(args.device), "template": "ICT-FaceKit neutral imported (facewarp.import_ict)",
+        "template": "ICT-FaceKit neutral imported (facewarp.import_ict)",
         "nodes": int(len(rig.nodes)), "tets": int(len(rig.tets)), "build_s": round(build_s, 1),
         "solver": "implicit", "material": "physical", "jaw": "kinematic",
         "targets": "cosine >= 0.7 over the FDP displacement field; amplitude within 25 % at activation 1.0",
-        "cases": rows})
+        "cases": rows}, device=args.device)
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -20,20 +20,17 @@ import argparse
 
 import numpy as np
 
-from benchmarks._common import machine, save
-from benchmarks.solver_accuracy import _label, _rig, _static, shear_material
+from benchmarks._common import RESULTS, case_face, material_label, save, shear_material, static_shape
 
 
 def _head_displacement(fr, preset, material):
     """Rest head vertices (n, 3) and their displacement at the static shape (n, 3) [m]."""
-    _, _, sim = _static(fr, preset, material, "cpu", tolerance=1e-6)
+    _, _, sim = static_shape(fr, preset, material, "cpu", tolerance=1e-6)
     rest = sim.surface(fr.nodes, jaw_angles=(0.0, 0.0))
     return rest, sim.surface() - rest
 
 
-def main():
-    from pathlib import Path
-
+def main(argv=None):
     from facewarp.geometry import closest_surface_points
     from facewarp.render import colormap, render_mesh, save_png
 
@@ -41,10 +38,10 @@ def main():
     ap.add_argument("--presets", nargs="+", default=["angry", "sad"])
     ap.add_argument("--shear-modulus", type=float, default=3e4)
     ap.add_argument("--size", type=int, default=360)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
-    rigs = {0: _rig(0), 1: _rig(1)}
-    out = Path(__file__).resolve().parent / "results" / "levels"
+    rigs = {0: case_face("default", 0), 1: case_face("default", 1)}
+    out = RESULTS / "levels"
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for preset in args.presets:
@@ -57,7 +54,7 @@ def main():
             diff = np.linalg.norm(d1_on_0 - d0, axis=1) * 1e3
             n0, n1 = np.linalg.norm(d0, axis=1) * 1e3, np.linalg.norm(d1, axis=1) * 1e3
             moving = n0 > 1.0
-            row = {"preset": preset, "material": _label(material),
+            row = {"preset": preset, "material": material_label(material),
                    "max_displacement_mm": [round(float(n0.max()), 2), round(float(n1.max()), 2)],
                    "difference_median_mm": round(float(np.median(diff[moving])), 3),
                    "difference_p95_mm": round(float(np.quantile(diff[moving], 0.95)), 3),
@@ -78,8 +75,8 @@ def main():
                         title=f"{preset}: L0 | L1 | |L1 - L0| x4; top thesis energies, bottom shear term",
                         colorbar=(0.0, vmax, "mm"))
         print("wrote", path)
-    print("wrote", save("level_maps", {"machine": machine("cpu"), "rows": rows}))
+    print("wrote", save("level_maps", {"rows": rows}))
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -24,7 +24,7 @@ import argparse
 
 import numpy as np
 
-from benchmarks._common import machine, save
+from benchmarks._common import save
 
 
 def layer_frames(nodes, tets, layer) -> np.ndarray:
@@ -86,14 +86,14 @@ def best_fit_residual(X, lam: float, g: float) -> np.ndarray:
     return res
 
 
-def main():
+def main(argv=None):
     import facewarp
     from facewarp.physics import ModelBuilder, isotropic_moduli, linear_stiffness, material_profile
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--materials", nargs="+", default=["physical", "thesis"])
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     rows = []
     for level in args.levels:
@@ -129,9 +129,9 @@ def main():
                                                  "E_Pa": round(E), "nu": round(float(nu), 3)}
             print(row, flush=True)
             rows.append(row)
-    path = save("material_levels", {"machine": machine("cpu"), "rows": rows})
+    path = save("material_levels", {"rows": rows})
     print("wrote", path)
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 import facewarp as fw
-from benchmarks._common import machine, save
+from benchmarks._common import save
 
 
 def run(jaw: str, rig, head, *, seconds: float, device: str) -> dict:
@@ -66,10 +66,10 @@ def main(argv=None) -> int:
     runs = {jaw: run(jaw, rig, head, seconds=a.seconds, device=a.device) for jaw in ("kinematic", "mujoco")}
     k, m = runs["kinematic"], runs["mujoco"]
     overhead = (m["wall_s"] - k["wall_s"]) / max(m["frames"], 1)
-    result = {"machine": machine(a.device), "level": a.level, "seconds": a.seconds, "runs": runs,
+    result = {"level": a.level, "seconds": a.seconds, "runs": runs,
               "coupling_overhead_s_per_frame": overhead,
               "coupling_overhead_fraction": m["wall_s"] / max(k["wall_s"], 1e-9) - 1.0}
-    path = save(f"mujoco_coupling_{a.device.split(':')[0]}", result)
+    path = save(f"mujoco_coupling_{a.device.split(':')[0]}", result, device=a.device)
     for r in runs.values():
         print(f"{r['jaw']:>9}: {r['frames']} frames, {r['frames_per_second']:.1f} frames/s, finite {r['finite']}, "
               f"max jaw {r['max_jaw_rad']:.3f} rad, chin drop {1e3 * r['max_chin_drop_m']:.1f} mm"

@@ -65,7 +65,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import RESULTS, machine, save
+from benchmarks import _common
+from benchmarks._common import RESULTS, save
 
 FPS = 30.0
 WITHIN = 2e-4  # m: "within 0.2 mm of its own converged shape"
@@ -425,7 +426,7 @@ def pairwise(shapes: dict, solvers: dict, free) -> dict:
             for i, a in enumerate(ok) for b in ok[i + 1:]}
 
 
-def markdown(result: dict) -> str:
+def markdown(result: dict, doc: dict) -> str:
     rows = ["| solver | settings | ms / frame (median; mean of first 10) | x ours | frames to 0.2 mm | "
             "wall s to 0.2 mm | x ours | max displacement [mm] | static shape vs ours max / mean [mm] |",
             "|---|---|---|---|---|---|---|---|---|"]
@@ -452,7 +453,7 @@ def markdown(result: dict) -> str:
                  "| pair | max | mean |", "|---|---|---|"]
         rows += [f"| {k} | {v['max_mm']} | {v['mean_mm']} |" for k, v in pw.items()]
     p = result["problem"]
-    head = (f"# Peers side by side (CPU, {result['machine']['cpu_count']} cores)\n\n"
+    head = (f"# Peers side by side (CPU, {doc['machine']['cores']} cores)\n\n"
             f"Default head level 0 ({p['nodes']} nodes, {p['tets']} tets, {p['pinned']} pinned, "
             f"{p['supports']} sliding supports); load: {p['load']}; material: E {p['young_range_pa'][0]:.0f}-"
             f"{p['young_range_pa'][1]:.0f} Pa, nu {p['poisson_range'][0]:.3f}-{p['poisson_range'][1]:.3f} per tet "
@@ -462,19 +463,19 @@ def markdown(result: dict) -> str:
     return head + "\n".join(rows) + "\n\n" + notes + "\n"
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--preset", default="smile")
     ap.add_argument("--peers-python", default=PEERS_PYTHON, help="a Python whose environment has newton")
     ap.add_argument("--skip", nargs="*", default=[], choices=["vbd", "xpbd", "mujoco"])
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     import facewarp
 
     t_all = time.perf_counter()
     fr = facewarp.build_face(facewarp.default_template(0))
     problem = export_problem(fr, args.preset)
     free = ~problem["pinned"]
-    result = {"machine": machine("cpu"), "preset": args.preset, "within_m": WITHIN, "fps": FPS}
+    result = {"preset": args.preset, "within_m": WITHIN, "fps": FPS}
     result["problem"] = {
         "nodes": int(len(problem["nodes"])), "tets": int(len(problem["tets"])), "pinned": int(problem["pinned"].sum()),
         "supports": int(len(problem["support_node"])),
@@ -534,8 +535,9 @@ def main():
     result["static_shapes_pairwise_mm"] = pairwise(shapes, solvers, free)
     result["notes"] = NOTES
     result["total_seconds"] = round(time.perf_counter() - t_all, 1)
-    print("wrote", save("peers_cpu", result))
-    (RESULTS / "peers_cpu.md").write_text(markdown(result))
+    path = save("peers_cpu", result)
+    print("wrote", path)
+    (RESULTS / "peers_cpu.md").write_text(markdown(result, _common.load(path)))
 
 
 NOTES = [
@@ -567,4 +569,4 @@ NOTES = [
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -37,7 +37,7 @@ import argparse
 
 import numpy as np
 
-from benchmarks._common import machine, save
+from benchmarks._common import save
 
 
 def _frames(fr, device, expression, seconds, **kw) -> dict:
@@ -186,13 +186,13 @@ def main_contact(args):
                         r = {"expression": ex, "contact": contact, "error": str(e)}
                         print(r, flush=True)
                     rows.append({"head": name, **r})
-    result = {"machine": machine(args.device), "seconds": args.seconds, "rows": rows}
+    result = {"seconds": args.seconds, "rows": rows}
     tag = "" if heads == ["default"] else "_" + "_".join(r["head"] for r in rows[:: 2 * len(args.expressions)])
     tag += f"_{args.tag}" if args.tag else ""
-    print("wrote", save("physics_steps_contact_" + args.device.split(":")[0] + tag, result))
+    print("wrote", save("physics_steps_contact_" + args.device.split(":")[0] + tag, result, device=args.device))
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--levels", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--device", default="cpu")
@@ -207,14 +207,14 @@ def main():
     ap.add_argument("--modes", nargs="+", default=list(MODES), choices=list(MODES),
                     help="the implicit solver's settings to time per level")
     ap.add_argument("--tag", help="a suffix of the results file's name")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.contact:
         return main_contact(args)
     from facewarp import SimulationError
     from facewarp.physics import factorization_backend
 
     rows = []
-    result = {"machine": machine(args.device), "expression": args.expression, "seconds": args.seconds,
+    result = {"expression": args.expression, "seconds": args.seconds,
               "factorization_backend": factorization_backend(), "levels": rows}
     name = "physics_steps_" + args.device.split(":")[0] + (f"_{args.tag}" if args.tag else "")
     for lv in args.levels:
@@ -224,12 +224,12 @@ def main():
         except SimulationError as e:
             r = {"level": lv, "error": str(e)}
         rows.append(r)
-        save(name, result)  # after every level: a long run keeps what it measured
+        save(name, result, device=args.device)  # after every level: a long run keeps what it measured
     if args.parity:
         result["parity_cpu_cuda"] = parity()
         print(result["parity_cpu_cuda"])
-    print("wrote", save(name, result))
+    print("wrote", save(name, result, device=args.device))
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

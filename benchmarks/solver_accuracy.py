@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from benchmarks._common import machine, save
+from benchmarks._common import save
 
 PRESETS = ("smile", "laugh", "surprise", "angry", "sad")
 ATTACK, HOLD, RELEASE, START = 0.3, 0.7, 0.3, 0.1
@@ -264,7 +264,7 @@ def part_loads(fr0, material, presets, device, levels=(0, 1)) -> list:
     return rows
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--materials", nargs="*", default=["physical", "thesis"])
@@ -282,11 +282,11 @@ def main():
     ap.add_argument("--pcg-counts", nargs="+", default=PCG_COUNTS,
                     help="pcg part: Newton x CG iteration counts, e.g. 3x50, ax20 (adaptive), 3x20+e0 (extrapolate 0; "
                          "default 0.5), ax20+r3 (3 rounds)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     from facewarp.physics import factorization_backend
 
     fr = _rig(0)
-    result = {"machine": machine(args.device), "factorization_backend": factorization_backend(),
+    result = {"factorization_backend": factorization_backend(),
               "level0_tets": int(len(fr.tets))}
     name = "solver_accuracy_" + args.device.split(":")[0] + (f"_{args.name}" if args.name else "")
     materials = list(args.materials)
@@ -299,9 +299,9 @@ def main():
             extra = (dict(counts=args.pcg_counts) if part == "pcg"
                      else dict(levels=tuple(args.compare_levels)) if part in ("levels", "loads") else {})
             result[f"{part}_{_label(mat)}"] = fn(fr, mat, args.presets, args.device, **extra)
-            save(name, result)  # after every part: a long run keeps what it measured
-    print("wrote", save(name, result))
+            save(name, result, device=args.device)  # after every part: a long run keeps what it measured
+    print("wrote", save(name, result, device=args.device))
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

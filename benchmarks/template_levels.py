@@ -12,13 +12,13 @@ import time
 
 import numpy as np
 
-from benchmarks._common import machine, save, shared_dir
+from benchmarks._common import save, shared_dir
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2, 3])
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     from facewarp import default_template, mesh_report
 
     rows = []
@@ -33,7 +33,7 @@ def main():
                      "boundary_loops": rep["boundary_loop_count"],
                      "consistently_oriented": rep["consistently_oriented"]})
         print(rows[-1])
-    result = {"machine": machine(), "levels": rows}
+    result = {"levels": rows}
     ict = shared_dir() / "data" / "ict-facekit"
     if (ict / "generic_neutral_mesh.obj").is_file():
         from facewarp import human_likeness
@@ -51,4 +51,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())
