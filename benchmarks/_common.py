@@ -204,30 +204,34 @@ def machine_line(doc: dict) -> str:
 # --- case setup ------------------------------------------------------------------------------------------------------
 
 
-def add_case_args(ap, *, device: str | None = "cpu", head: str | None = None, level: int | None = None,
-                  levels: list[int] | None = None, preset: str | None = None, presets: list[str] | None = None,
-                  seed: int | None = None) -> None:
-    """Add the shared case options to an ``argparse`` parser; each only when its default is given.
+_UNSET = object()
 
-    ``--device cpu|cuda[:N]``, ``--head default|identityNNN|DIR``, ``--level N``, ``--levels N ...``,
-    ``--preset NAME``, ``--presets NAME ...``, ``--seed S``.
+
+def add_case_args(ap, *, device=_UNSET, head=_UNSET, level=_UNSET, levels=_UNSET, preset=_UNSET, presets=_UNSET,
+                  seed=_UNSET) -> None:
+    """Add the shared case options to an ``argparse`` parser, each only when its default is given.
+
+    ``--device cpu|cuda[:N]``, ``--head default|identityNNN|DIR`` (:func:`case_face`), ``--level N``,
+    ``--levels N ...``, ``--preset NAME``, ``--presets NAME ...``, ``--seed S`` (``seed=None``: a new
+    seed per run, recorded in the figures).
     """
-    if device is not None:
+    if device is not _UNSET:
         ap.add_argument("--device", default=device, help=f"cpu or cuda[:N] (default {device})")
-    if head is not None:
+    if head is not _UNSET:
         ap.add_argument("--head", default=head,
                         help="default (the built-in template at --level), identityNNN (the default template adapted "
                              "to that ICT-FaceKit identity, made on first use) or a template / build folder")
-    if level is not None:
+    if level is not _UNSET:
         ap.add_argument("--level", type=int, default=level, help=f"template level (default {level})")
-    if levels is not None:
+    if levels is not _UNSET:
         ap.add_argument("--levels", type=int, nargs="+", default=list(levels), help="template levels")
-    if preset is not None:
+    if preset is not _UNSET:
         ap.add_argument("--preset", default=preset, help=f"expression preset (default {preset})")
-    if presets is not None:
+    if presets is not _UNSET:
         ap.add_argument("--presets", nargs="+", default=list(presets), help="expression presets")
-    if seed is not None:
-        ap.add_argument("--seed", type=int, default=seed, help=f"random seed (default {seed})")
+    if seed is not _UNSET:
+        ap.add_argument("--seed", type=int, default=seed,
+                        help="random seed (default: a new one per run)" if seed is None else f"random seed (default {seed})")
 
 
 def heads_dir() -> Path:

@@ -254,11 +254,11 @@ def error_stats(V_mm: np.ndarray, case: Case, faces: np.ndarray) -> tuple[dict, 
     return stats, e, tang
 
 
-def adapted_identity(k: int, root: Path) -> dict:
+def adapted_identity(k: int, root: Path, *, fresh: bool = False) -> dict:
     """The default template adapted to ICT identity ``k`` (scan: :func:`make_scan`, seed 100 + k) and built.
 
     Runs ``facewarp adapt`` and ``facewarp build`` into ``root/identityNNN/{adapt,build}`` unless that
-    build folder already holds a ``face_rig.npz``. Returns ``{"dir", "report" (adapt's report.json or
+    build folder already holds a ``face_rig.npz`` (``fresh=True``: always). Returns ``{"dir", "report" (adapt's report.json or
     None when reused), "adapt_seconds", "build_seconds"}``.
     """
     import contextlib
@@ -269,7 +269,7 @@ def adapted_identity(k: int, root: Path) -> dict:
     from facewarp.cli import main as facewarp_cli
 
     case = Path(root) / f"identity{k:03d}"
-    if (case / "build" / "face_rig.npz").is_file():
+    if not fresh and (case / "build" / "face_rig.npz").is_file():
         return {"dir": case, "report": None, "adapt_seconds": None, "build_seconds": None}
 
     def cli(*argv):  # `facewarp ...`; the results are the files it writes

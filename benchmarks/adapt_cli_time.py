@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import save
+from benchmarks._common import add_case_args, save
 
 NRICP = r"""
 import sys, json, numpy as np, trimesh
@@ -67,7 +67,7 @@ def timed(cmd: list[str], env: dict) -> dict:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--seed", type=int, default=None)
+    add_case_args(ap, seed=None)
     args = ap.parse_args(argv)
     from benchmarks._ict import ICT_FDP, error_stats, ict_dir, load_model, make_case
     from facewarp.geometry import load_mesh, save_obj

@@ -37,7 +37,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from benchmarks._common import RESULTS, load, machine_line, save  # noqa: E402
+from benchmarks._common import RESULTS, add_case_args, load, machine_line, save  # noqa: E402
 from benchmarks._ict import FACE_VERTS, ICT_FDP, ict_dir  # noqa: E402
 STAGES = {
     "L1 FDP RBF": {"levels": 0, "refine": "none", "project": False},
@@ -161,7 +161,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=2)
     ap.add_argument("--sets", type=int, default=20)
-    ap.add_argument("--seed", type=int, default=None)
+    add_case_args(ap, seed=None)
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
     if not (ict_dir() / "generic_neutral_mesh.obj").is_file():

@@ -44,7 +44,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from benchmarks._common import RESULTS, load, machine_line, save  # noqa: E402
+from benchmarks._common import RESULTS, add_case_args, load, machine_line, save  # noqa: E402
 from benchmarks._ict import HEAD_VERTS, ICT_FDP, ict_dir, load_ict, make_scan, to_scan_frame  # noqa: E402
 
 TARGET_MEDIAN_MM = 0.5
@@ -135,7 +135,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--identities", type=int, nargs="*", default=list(range(10)))
     ap.add_argument("--unseen", type=int, default=5, help="random unseen faces (benchmarks.adapt_unseen)")
-    ap.add_argument("--seed", type=int, default=None)
+    add_case_args(ap, seed=None)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--levels", type=int, default=2)
     ap.add_argument("--out", default=str(RESULTS))

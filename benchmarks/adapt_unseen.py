@@ -44,7 +44,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from benchmarks._common import RESULTS, load, machine_line, save  # noqa: E402
+from benchmarks._common import RESULTS, add_case_args, load, machine_line, save  # noqa: E402
 from benchmarks._ict import ICT_FDP, Case, ICTModel, error_stats, ict_dir, load_model, make_case  # noqa: E402
 TARGETS = {"median_mm": 1.0, "rms_mm": 1.5, "p95_mm": 3.0, "beat_nricp_fraction": 0.9}
 
@@ -197,7 +197,7 @@ def verdict(cases: list) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=20)
-    ap.add_argument("--seed", type=int, default=None, help="repeat a run (default: a new seed)")
+    add_case_args(ap, seed=None)
     ap.add_argument("--no-peers", action="store_true", help="skip nricp_amberg and the levels-only run")
     ap.add_argument("--no-detect", action="store_true", help="skip the automatic landmarks")
     ap.add_argument("--threads", type=int, default=1)

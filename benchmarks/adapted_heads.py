@@ -13,15 +13,12 @@ the adapt/build folders (e.g. to simulate one of them). Writes benchmarks/result
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
 import tempfile
-import time
 from pathlib import Path
 
 from benchmarks._common import save
-from benchmarks._ict import ICT_FDP, ict_dir, load_ict, make_scan
+from benchmarks._ict import adapted_identity, ict_dir
 
 
 def main(argv=None):
@@ -33,40 +30,20 @@ def main(argv=None):
     if not (d / "generic_neutral_mesh.obj").is_file():
         print(f"ICT-FaceKit data not found at {d}: nothing to measure")
         return
-    from facewarp import ModelBuilder, load_face_rig, load_mesh, save_obj
-    from facewarp.cli import main as facewarp_cli
+    from facewarp import ModelBuilder, load_face_rig
     from facewarp.physics import node_stable_dt, scale_masses
 
-    def cli(*argv):  # `facewarp ...`; the results are the files it writes
-        with contextlib.redirect_stdout(io.StringIO()):
-            code = facewarp_cli([str(a) for a in argv])
-        if code != 0:
-            raise SystemExit(f"facewarp {' '.join(map(str, argv))} failed with exit code {code}")
-
-    _, F, _ = load_ict(d)
     rows = []
     root = args.keep or Path(tempfile.mkdtemp(prefix="facewarp_heads_"))
     for k in args.identities:
-        V = load_mesh(d / f"identity{k:03d}.obj", units="cm").vertices[:11248]
-        SV, SF, pose = make_scan(V, F, seed=100 + k)
-        case = root / f"identity{k:03d}"
-        case.mkdir(parents=True, exist_ok=True)
-        save_obj(case / "scan.obj", SV, SF)
-        lm = {fid: (1000.0 * V[i] @ pose[0].T + pose[1]).tolist() for fid, i in ICT_FDP.items()}
-        (case / "scan_landmarks.json").write_text(json.dumps(lm))
-        t0 = time.perf_counter()
-        cli("adapt", case / "scan.obj", "--landmarks", case / "scan_landmarks.json", "--out", case / "adapt",
-            "--units", "mm")
-        rep = json.loads((case / "adapt" / "report.json").read_text())
-        t1 = time.perf_counter()
-        cli("build", case / "adapt", "--out", case / "build")
+        made = adapted_identity(k, root, fresh=True)
+        case, rep = made["dir"], made["report"]
         q = json.loads((case / "build" / "anatomy.json").read_text())
-        t2 = time.perf_counter()
         fr = load_face_rig(case / "build")
         b = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held)
         dt_min = float(node_stable_dt(b)[~b.fixed].min())
         dt, added = scale_masses(b)
-        row = {"identity": k, "adapt_seconds": t1 - t0, "build_seconds": t2 - t1,
+        row = {"identity": k, "adapt_seconds": made["adapt_seconds"], "build_seconds": made["build_seconds"],
                "distance_to_scan_median_mm": rep["distance_to_scan_m"]["median"] * 1e3,
                "tets": q["tet_count"], "inverted": q["inverted_count"], "conforming": q["conforming"],
                "min_dihedral_deg": q["min_dihedral_deg"], "min_attached_nodes": q["min_attached_nodes"],

@@ -10,12 +10,12 @@ from __future__ import annotations
 import argparse
 import time
 
-from benchmarks._common import save
+from benchmarks._common import add_case_args, save
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2, 3])
+    add_case_args(ap, levels=[0, 1, 2, 3])
     args = ap.parse_args(argv)
     from facewarp import InputError, build_anatomy, default_template
 

@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks._common import save
+from benchmarks._common import add_case_args, save
 
 
 def run_demo(out: Path, cache: Path, *, device: str, seconds: float | None, quick: bool) -> dict:
@@ -52,7 +52,7 @@ def run_demo(out: Path, cache: Path, *, device: str, seconds: float | None, quic
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--device", default="cpu", help="cpu (default) or cuda[:N]")
+    add_case_args(ap, device="cpu")
     ap.add_argument("--seconds", type=float, help="sequence length [s] (default: the full 8 s sequence)")
     ap.add_argument("--quick", action="store_true", help="the demo's --quick smoke run")
     ap.add_argument("--warm-runs", type=int, default=1, help="runs with the filled kernel cache (default 1)")

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import RESULTS, save
+from benchmarks._common import RESULTS, add_case_args, save
 
 PRESETS = ("smile", "laugh", "surprise", "sad", "angry", "blink")
 
@@ -72,8 +72,7 @@ def main(argv=None) -> None:
     ap.add_argument("--heads", nargs="*", type=Path, default=[])
     ap.add_argument("--default", action="store_true", help="also the default template, level 0")
     ap.add_argument("--seconds", type=float, default=1.5)
-    ap.add_argument("--device", default="cpu")
-    ap.add_argument("--levels", type=int, nargs="+", default=[0], help="levels of the default template (--default)")
+    add_case_args(ap, device="cpu", levels=[0])
     ap.add_argument("--presets", nargs="+", default=list(PRESETS), choices=list(facewarp.PRESETS))
     ap.add_argument("--method", default=None, help="implicit method (default: lbfgs on the CPU, newton-pcg on CUDA)")
     ap.add_argument("--name", default="expression_heads", help="results file name (benchmarks/results/NAME.json)")

@@ -16,7 +16,7 @@ import argparse
 
 import numpy as np
 
-from benchmarks._common import save
+from benchmarks._common import add_case_args, save
 
 POINTS = ("8.3", "8.4", "2.1", "4.1", "4.2", "4.3", "4.4", "4.5", "4.6", "5.1", "5.2", "3.1", "3.2", "3.3", "3.4")
 DISTANCES = {"fissure_L": ("3.1", "3.3"), "fissure_R": ("3.2", "3.4"), "lip_gap": ("2.2", "2.3"),
@@ -41,9 +41,8 @@ def main(argv=None) -> None:
     from facewarp.geometry import signed_tet_volumes
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--level", type=int, default=0)
+    add_case_args(ap, level=0, device="cpu")
     ap.add_argument("--seconds", type=float, default=1.5)
-    ap.add_argument("--device", default="cpu")
     args = ap.parse_args(argv)
 
     rig = facewarp.build_face(facewarp.default_template(args.level))

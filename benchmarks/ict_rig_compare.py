@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import save
+from benchmarks._common import add_case_args, save
 from benchmarks._ict import ict_dir
 
 DEFAULT_ICT = ict_dir()
@@ -57,7 +57,7 @@ def main(argv=None) -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=1.5)
-    ap.add_argument("--device", default="cpu")
+    add_case_args(ap, device="cpu")
     ap.add_argument("--ict", type=Path, default=DEFAULT_ICT)
     args = ap.parse_args(argv)
     if not (args.ict / "generic_neutral_mesh.obj").is_file():

@@ -20,7 +20,7 @@ import argparse
 
 import numpy as np
 
-from benchmarks._common import RESULTS, case_face, material_label, save, shear_material, static_shape
+from benchmarks._common import RESULTS, add_case_args, case_face, material_label, save, shear_material, static_shape
 
 
 def _head_displacement(fr, preset, material):
@@ -35,7 +35,7 @@ def main(argv=None):
     from facewarp.render import colormap, render_mesh, save_png
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--presets", nargs="+", default=["angry", "sad"])
+    add_case_args(ap, presets=["angry", "sad"])
     ap.add_argument("--shear-modulus", type=float, default=3e4)
     ap.add_argument("--size", type=int, default=360)
     args = ap.parse_args(argv)

@@ -24,7 +24,7 @@ import argparse
 
 import numpy as np
 
-from benchmarks._common import save
+from benchmarks._common import add_case_args, save
 
 
 def layer_frames(nodes, tets, layer) -> np.ndarray:
@@ -91,7 +91,7 @@ def main(argv=None):
     from facewarp.physics import ModelBuilder, isotropic_moduli, linear_stiffness, material_profile
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2])
+    add_case_args(ap, levels=[0, 1, 2])
     ap.add_argument("--materials", nargs="+", default=["physical", "thesis"])
     args = ap.parse_args(argv)
 

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 import facewarp as fw
-from benchmarks._common import save
+from benchmarks._common import add_case_args, save
 
 
 def run(jaw: str, rig, head, *, seconds: float, device: str) -> dict:
@@ -57,9 +57,8 @@ def run(jaw: str, rig, head, *, seconds: float, device: str) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--device", default="cpu")
+    add_case_args(ap, device="cpu", level=0)
     ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--level", type=int, default=0)
     a = ap.parse_args(argv)
     head = fw.default_template(a.level)
     rig = fw.build_face(head)

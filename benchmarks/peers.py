@@ -66,7 +66,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import _common
-from benchmarks._common import RESULTS, save
+from benchmarks._common import RESULTS, add_case_args, save
 
 FPS = 30.0
 WITHIN = 2e-4  # m: "within 0.2 mm of its own converged shape"
@@ -465,7 +465,7 @@ def markdown(result: dict, doc: dict) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--preset", default="smile")
+    add_case_args(ap, preset="smile")
     ap.add_argument("--peers-python", default=PEERS_PYTHON, help="a Python whose environment has newton")
     ap.add_argument("--skip", nargs="*", default=[], choices=["vbd", "xpbd", "mujoco"])
     args = ap.parse_args(argv)

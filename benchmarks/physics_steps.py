@@ -37,7 +37,7 @@ import argparse
 
 import numpy as np
 
-from benchmarks._common import save
+from benchmarks._common import add_case_args, save
 
 
 def _frames(fr, device, expression, seconds, **kw) -> dict:
@@ -194,8 +194,7 @@ def main_contact(args):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--levels", type=int, nargs="+", default=[0, 1])
-    ap.add_argument("--device", default="cpu")
+    add_case_args(ap, levels=[0, 1], device="cpu")
     ap.add_argument("--expression", default="laugh")
     ap.add_argument("--seconds", type=float, default=2.0)
     ap.add_argument("--verlet-frames", type=int, default=2)

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._common import RESULTS
+from benchmarks._common import RESULTS, add_case_args
 
 COLUMNS = 4
 """Heads per row of the picture."""
@@ -77,9 +77,8 @@ def _captions(grid: np.ndarray, labels: list, tile: tuple, gap: int) -> np.ndarr
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--level", type=int, default=0)
+    add_case_args(ap, level=0, device="cpu")
     ap.add_argument("--seconds", type=float, default=1.0, help="length of each run [s] (the picture)")
-    ap.add_argument("--device", default="cpu")
     ap.add_argument("--face-height", type=int, default=240, help="face height in the picture [px]")
     ap.add_argument("--table-only", action="store_true", help="only the table (no simulation, no picture)")
     ap.add_argument("--readme", action="store_true", help="also replace the table in README.md")

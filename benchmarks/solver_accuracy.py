@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from benchmarks._common import save
+from benchmarks._common import add_case_args, save
 
 PRESETS = ("smile", "laugh", "surprise", "angry", "sad")
 ATTACK, HOLD, RELEASE, START = 0.3, 0.7, 0.3, 0.1
@@ -266,10 +266,9 @@ def part_loads(fr0, material, presets, device, levels=(0, 1)) -> list:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--device", default="cpu")
+    add_case_args(ap, device="cpu", presets=list(PRESETS))
     ap.add_argument("--materials", nargs="*", default=["physical", "thesis"])
     ap.add_argument("--parts", nargs="+", default=["frames", "static", "levels"])
-    ap.add_argument("--presets", nargs="+", default=list(PRESETS))
     ap.add_argument("--name", default=None, help="result file suffix")
     ap.add_argument("--shear-modulus", type=float, default=None,
                     help="physical profile with the shear term of this modulus [Pa] in place of the distance "

@@ -12,12 +12,12 @@ import time
 
 import numpy as np
 
-from benchmarks._common import save, shared_dir
+from benchmarks._common import add_case_args, save, shared_dir
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--levels", type=int, nargs="+", default=[0, 1, 2, 3])
+    add_case_args(ap, levels=[0, 1, 2, 3])
     args = ap.parse_args(argv)
     from facewarp import default_template, mesh_report
 
