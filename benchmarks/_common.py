@@ -75,8 +75,11 @@ def threads_from_argv(argv: list[str], default: int = 1) -> int:
 # --- the machine, the device, the versions -------------------------------------------------------------------------
 
 
-def machine() -> dict:
-    """The host: CPU model, logical cores, cores this process may use, memory [GiB], platform."""
+def machine(device: str | None = None) -> dict:
+    """The host: CPU model, logical cores, cores this process may use, memory [GiB], platform.
+
+    ``device`` is accepted for scripts written before the schema and ignored (the device is the
+    result's own key, :func:`save`'s ``device``)."""
     cpu = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -171,6 +174,12 @@ def save(name: str, figures: dict, *, device: str = "cpu", benchmark: str | None
     """
     if benchmark is None:
         benchmark = Path(sys._getframe(1).f_globals.get("__file__", name)).stem
+    if isinstance(figures, dict) and isinstance(figures.get("machine"), dict):
+        # a script written before the schema put machine(device) among its figures: it belongs outside
+        figures = dict(figures)
+        old = figures.pop("machine")
+        if device == "cpu" and str(old.get("device", "cpu")).startswith("cuda"):
+            device = old["device"]
     doc = result(benchmark, figures, device=device, machine_extra=machine_extra)
     out = Path(folder) if folder is not None else RESULTS
     out.mkdir(parents=True, exist_ok=True)

@@ -39,46 +39,11 @@ import time
 
 import numpy as np
 
-from benchmarks._common import add_case_args, save
+from benchmarks._common import (add_case_args, case_face, material_label, run_timeline, save, shear_material,
+                                static_shape)
 
 PRESETS = ("smile", "laugh", "surprise", "angry", "sad")
 ATTACK, HOLD, RELEASE, START = 0.3, 0.7, 0.3, 0.1
-
-
-def _rig(level: int):
-    import facewarp
-
-    return facewarp.build_face(facewarp.default_template(level))
-
-
-def _run(fr, timeline, seconds, **kw):
-    import facewarp
-
-    sim = facewarp.FaceSimulator(fr, **kw)
-    frames = sim.run(timeline, seconds)
-    return frames, sim
-
-
-def _label(material) -> str:
-    """A profile's name in the results: its name, or ``physical+shear<mu>[+volume<K>]`` for the shear variant."""
-    if isinstance(material, str):
-        return material
-    if not getattr(material, "shear_modulus", 0):
-        return material.name
-    from facewarp.physics import MaterialPhysical
-
-    label = f"{material.name}+shear{material.shear_modulus:g}"
-    same = material.volume_modulus == MaterialPhysical().volume_modulus
-    return label if same else label + f"+volume{material.volume_modulus:g}"
-
-
-def shear_material(mu: float, volume_modulus: float | None = None):
-    """The physical profile with the shear term (``mu`` [Pa]) in place of the distance and area
-    energies (and, if given, another volume modulus [Pa])."""
-    from facewarp.physics import MaterialPhysical
-
-    kw = {} if volume_modulus is None else {"volume_modulus": volume_modulus}
-    return MaterialPhysical(distance_modulus=(0.0, 0.0, 0.0), area_modulus=0.0, shear_modulus=mu, **kw)
 
 
 def _within(err, disp, mm=5e-4, rel=0.1):
@@ -93,17 +58,17 @@ def part_frames(fr, material, presets, device) -> list:
     seconds = START + ATTACK + HOLD + RELEASE + 0.2
     for name in presets:
         tl = facewarp.timeline_for(name, attack=ATTACK, hold=HOLD, release=RELEASE, start=START)
-        conv, _ = _run(fr, tl, seconds, device=device, material=material, tolerance=1e-7,
+        conv, _ = run_timeline(fr, tl, seconds, device=device, material=material, tolerance=1e-7,
                        solver_options=dict(spring_tolerance=1e-4, max_iterations=500))
         t = conv.times
         phase = np.where(t < START + ATTACK, "attack", np.where(t < START + ATTACK + HOLD, "hold", "release"))
         disp = np.linalg.norm(conv.fdp_points - conv.fdp_points[:1], axis=2)
-        row = {"preset": name, "material": _label(material), "frames": int(len(t)),
+        row = {"preset": name, "material": material_label(material), "frames": int(len(t)),
                "max_fdp_displacement_mm": round(float(disp.max()) * 1e3, 3),
                "converged_fps": round(conv.frames_per_second, 2)}
         for label, kw in (("default", {}), ("iterations_1", dict(iterations=1)), ("iterations_2", dict(iterations=2)),
                           ("iterations_3", dict(iterations=3))):
-            frames, sim = _run(fr, tl, seconds, device=device, material=material, **kw)
+            frames, sim = run_timeline(fr, tl, seconds, device=device, material=material, **kw)
             err = np.linalg.norm(frames.fdp_points - conv.fdp_points, axis=2)  # (f, 84)
             r = {"fps": round(frames.frames_per_second, 2), "realtime_factor": round(frames.realtime_factor, 3),
                  "max_error_mm": round(float(err.max()) * 1e3, 4), "within_0.5mm_or_10pct": _within(err, disp)}
@@ -120,14 +85,6 @@ def part_frames(fr, material, presets, device) -> list:
     return rows
 
 
-def _static(fr, name, material, device, **kw):
-    import facewarp
-
-    tl = facewarp.timeline_for(name, attack=0.3, hold=10.0, release=0.3, start=0.0)
-    frames, sim = _run(fr, tl, 0.8, device=device, material=material, **kw)
-    return frames.fdp_points[-1].astype(np.float64), frames.fdp_points[0].astype(np.float64), sim
-
-
 def part_static(fr, material, presets, device) -> list:
     rows = []
     from facewarp import SimulationError
@@ -135,18 +92,18 @@ def part_static(fr, material, presets, device) -> list:
     for name in presets:
         t0 = time.perf_counter()
         try:
-            ref, rest, sim = _static(fr, name, material, device, solver="verlet")
+            ref, rest, sim = static_shape(fr, name, material, device, solver="verlet")
         except SimulationError as e:  # the explicit reference itself failed
-            row = {"preset": name, "material": _label(material), "verlet_error": str(e)}
+            row = {"preset": name, "material": material_label(material), "verlet_error": str(e)}
             print(row, flush=True)
             rows.append(row)
             continue
         tv = time.perf_counter() - t0
         disp = np.linalg.norm(ref - rest, axis=1)
-        row = {"preset": name, "material": _label(material), "verlet_substeps_per_frame": sim.substeps,
+        row = {"preset": name, "material": material_label(material), "verlet_substeps_per_frame": sim.substeps,
                "verlet_seconds": round(tv, 1), "max_fdp_displacement_mm": round(float(disp.max()) * 1e3, 3)}
         for steps in (1, 2, 4, 8):
-            x, _, _ = _static(fr, name, material, device, substeps=steps, tolerance=1e-6)
+            x, _, _ = static_shape(fr, name, material, device, substeps=steps, tolerance=1e-6)
             err = np.linalg.norm(x - ref, axis=1)
             moving = disp > 1e-3
             row[f"steps_{steps}"] = {
@@ -168,12 +125,12 @@ def part_pcg(fr, material, presets, device, counts=PCG_COUNTS) -> list:
     seconds = START + ATTACK + HOLD + RELEASE + 0.2
     for name in presets:
         tl = facewarp.timeline_for(name, attack=ATTACK, hold=HOLD, release=RELEASE, start=START)
-        conv, _ = _run(fr, tl, seconds, device="cpu", method="lbfgs", material=material, tolerance=1e-7,
+        conv, _ = run_timeline(fr, tl, seconds, device="cpu", method="lbfgs", material=material, tolerance=1e-7,
                        solver_options=dict(spring_tolerance=1e-4, max_iterations=500))
         t = conv.times
         phase = np.where(t < START + ATTACK, "attack", np.where(t < START + ATTACK + HOLD, "hold", "release"))
         disp = np.linalg.norm(conv.fdp_points - conv.fdp_points[:1], axis=2)
-        row = {"preset": name, "material": _label(material), "device": device, "frames": int(len(t)),
+        row = {"preset": name, "material": material_label(material), "device": device, "frames": int(len(t)),
                "max_fdp_displacement_mm": round(float(disp.max()) * 1e3, 3)}
         for label in counts:
             label_, _, rounds = label.partition("+r")
@@ -184,8 +141,8 @@ def part_pcg(fr, material, presets, device, counts=PCG_COUNTS) -> list:
                       solver_options=dict(linear_iterations=cg, extrapolate=float(ex or 0.5)))
             if rounds:
                 kw["solver_options"]["rounds"] = int(rounds)
-            _run(fr, tl, 0.1, **kw)  # warm: kernels, graph
-            frames, sim = _run(fr, tl, seconds, **kw)
+            run_timeline(fr, tl, 0.1, **kw)  # warm: kernels, graph
+            frames, sim = run_timeline(fr, tl, seconds, **kw)
             err = np.linalg.norm(frames.fdp_points - conv.fdp_points, axis=2)
             r = {"fps": round(frames.frames_per_second, 1), "max_error_mm": round(float(err.max()) * 1e3, 4),
                  # a fixed count replayed from a CUDA graph is not counted on the host
@@ -203,19 +160,19 @@ def part_pcg(fr, material, presets, device, counts=PCG_COUNTS) -> list:
 def part_levels(fr0, material, presets, device, levels=(0, 1)) -> list:
     """Each consecutive pair of ``levels`` (default 0 vs 1): per FDP moving more than 1 mm on the
     coarser level, |d_fine - d_coarse| / |d_coarse|; also the field's ||d_fine - d_coarse|| / ||d_coarse||."""
-    rigs = {lv: fr0 if lv == 0 else _rig(lv) for lv in levels}
+    rigs = {lv: fr0 if lv == 0 else case_face("default", lv) for lv in levels}
     rows = []
     for name in presets:
         disp = {}
         for lv in levels:
-            x, r, _ = _static(rigs[lv], name, material, device, tolerance=1e-6)
+            x, r, _ = static_shape(rigs[lv], name, material, device, tolerance=1e-6)
             disp[lv] = x - r
         for lc, lf in zip(levels[:-1], levels[1:]):
             d0, d1 = disp[lc], disp[lf]
             n0 = np.linalg.norm(d0, axis=1)
             moving = n0 > 1e-3
             rel = np.linalg.norm(d1 - d0, axis=1)[moving] / n0[moving]
-            row = {"preset": name, "material": _label(material), "levels": [lc, lf],
+            row = {"preset": name, "material": material_label(material), "levels": [lc, lf],
                    "fdps_moving_over_1mm": int(moving.sum()),
                    "median_relative_difference": round(float(np.median(rel)), 4) if moving.any() else None,
                    "max_relative_difference": round(float(rel.max()), 4) if moving.any() else None,
@@ -237,13 +194,13 @@ def part_loads(fr0, material, presets, device, levels=(0, 1)) -> list:
     differ in the load or in the tissue's response to it."""
     from facewarp.physics import rig_reference
 
-    rigs = {lv: fr0 if lv == 0 else _rig(lv) for lv in levels}
+    rigs = {lv: fr0 if lv == 0 else case_face("default", lv) for lv in levels}
     rows = []
     for name in presets:
-        row = {"preset": name, "material": _label(material)}
+        row = {"preset": name, "material": material_label(material)}
         for lv in levels:
             fr = rigs[lv]
-            x, rest, sim = _static(fr, name, material, device, tolerance=1e-6)
+            x, rest, sim = static_shape(fr, name, material, device, tolerance=1e-6)
             X = sim.positions()
             rig = sim.muscles.rig  # with the stiffness the simulator gave each attachment
             k = rig.weighted_stiffness()
@@ -284,7 +241,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     from facewarp.physics import factorization_backend
 
-    fr = _rig(0)
+    fr = case_face("default", 0)
     result = {"factorization_backend": factorization_backend(),
               "level0_tets": int(len(fr.tets))}
     name = "solver_accuracy_" + args.device.split(":")[0] + (f"_{args.name}" if args.name else "")
@@ -297,7 +254,7 @@ def main(argv=None):
                   "loads": part_loads}[part]
             extra = (dict(counts=args.pcg_counts) if part == "pcg"
                      else dict(levels=tuple(args.compare_levels)) if part in ("levels", "loads") else {})
-            result[f"{part}_{_label(mat)}"] = fn(fr, mat, args.presets, args.device, **extra)
+            result[f"{part}_{material_label(mat)}"] = fn(fr, mat, args.presets, args.device, **extra)
             save(name, result, device=args.device)  # after every part: a long run keeps what it measured
     print("wrote", save(name, result, device=args.device))
 
