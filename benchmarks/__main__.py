@@ -24,9 +24,12 @@ def _usage() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] in ("-h", "--help"):
-        print(__doc__.strip() if argv else _usage())
-        return 0 if argv else 2
+    if not argv:
+        print(_usage(), file=sys.stderr)
+        return 2
+    if argv[0] in ("-h", "--help"):
+        print(__doc__.strip())
+        return 0
     if argv[0] == "--results":
         if len(argv) < 3:
             print("python -m benchmarks: error: --results needs a folder and a case name", file=sys.stderr)
