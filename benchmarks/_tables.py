@@ -363,7 +363,7 @@ def measured(r: Results) -> str:
                  f"{ic['smile_L']['cosine_fdp']:.2f}; target 0.7); amplitude at activation 1.0: smile "
                  f"{ic['smile']['amplitude_ratio']:.2f}, brow {ic['brow_raise']['amplitude_ratio']:.2f} of ICT's (target "
                  f"within 25 %): {'met' if ic_ok else 'NOT met'}", "`ict_rig_compare.json`"])
-    rows.append(["contact, CPU level 0", _TYPED_CONTACT, "`physics_steps_contact_cpu*.json`"])
+    rows.append(_contact_row(r["physics_steps_contact_cpu"], r["physics_steps_contact_cpu_sequence"]))
     rows.append(_peers_row(r["peers_cpu"]))
     runs = [x for name in r.glob("expressions_long_cuda*") for x in r[name]["runs"]]
     n_ok = sum(bool(x.get("ok")) for x in runs)
@@ -434,6 +434,23 @@ def _expression_heads_row(fig: dict) -> list[str]:
     return [what, result, "`expression_heads.md`"]
 
 
+def _contact_row(presets: dict, sequence: dict) -> list[str]:
+    """Crossings and cost with and without contact on the default head (physics_steps_contact_cpu*.json)."""
+    rows = [x for x in presets["rows"] + sequence["rows"] if x["head"] == "default_L0" and x["method"] == "lbfgs"]
+    on, off = [x for x in rows if x["contact"]], [x for x in rows if not x["contact"]]
+    lips = all(x["worst_per_frame"]["lip_lip"] == 0 and x["worst_per_frame"]["lip_teeth"] == 0 for x in on)
+    pucker = next(x for x in off if x["expression"] == "pucker")["worst_per_frame"]
+    seq = {x["contact"]: x["frames_per_second"] for x in sequence["rows"]}
+    return ["contact, CPU level 0",
+            ("0 lip-lip and 0 lip-teeth crossings" if lips else "lip-lip or lip-teeth crossings")
+            + f" in every frame of every preset and the {sequence['seconds']:g} s sequence on the default head "
+            f"(pucker: {pucker['lip_lip']} nodes, {pucker['lip_lip_depth_mm']:.1f} mm deep without contact); lids at most "
+            f"{max(x['worst_per_frame']['lid_eye_depth_mm'] for x in on):.2f} mm into the eyeball "
+            f"({max(x['worst_per_frame']['lid_eye_depth_mm'] for x in off):.1f} mm without); sequence "
+            f"{seq[False]:.0f} -> {seq[True]:.0f} frames/s",
+            "`physics_steps_contact_cpu*.json`"]
+
+
 def _peers_row(fig: dict) -> list[str]:
     """Ours against Newton VBD / XPBD and MuJoCo flex on one problem (peers_cpu.json)."""
     sv = fig["solvers"]
@@ -475,10 +492,6 @@ def _preset_summary(p: dict) -> str:
             f"blink fissure {_pair(fl[1], fr[1])} mm (target 1); {inverted} inverted, {nan} NaN "
             "(table in \"Expressions on the default head\")")
 
-
-_TYPED_CONTACT = ("0 lip-lip and 0 lip-teeth crossings in every frame of every preset and the 10 s sequence on the "
-                  "default head (pucker: 24 nodes, 1.2 mm deep without contact); lids at most 0.07 mm into the eyeball "
-                  "(1.8 mm without); sequence 55 -> 41 frames/s")
 
 
 # ------------------------------------------------------------------ README
