@@ -23,7 +23,7 @@ from ..coupling.drivers import JAWS, jaw_driver
 from ..expressions import Timeline
 from ..sim.play import Sink, play
 
-__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "UsdAnimation", "check_usd_path", "part_points",
+__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "FdpMotion", "UsdAnimation", "check_usd_path", "part_points",
            "part_transforms", "peak_frames", "play_timeline", "sim_controls"]
 
 USD_SUFFIXES = (".usda", ".usdc", ".usdz")
@@ -174,6 +174,32 @@ class UsdAnimation(Sink):
 
     def __exit__(self, exc_type, exc, tb) -> None:
         self.writer.__exit__(exc_type, exc, tb)
+
+
+class FdpMotion(Sink):
+    """The largest distance from rest of FDPs over a run [m] (a sink of :func:`~facewarp.play`).
+
+    Args:
+        ids: FDP ids to follow (those the head has); default all of them.
+
+    After the run, :attr:`ids` (str) and :attr:`moved` (shape (len(ids),), float64, m) hold the result.
+    """
+
+    def __init__(self, ids=None):
+        self.want = None if ids is None else [str(k) for k in ids]
+
+    def start(self, sim, frame_count: int) -> None:
+        ids = [str(k) for k in sim.fr.fdp_ids]
+        self.ids = ids if self.want is None else [k for k in self.want if k in ids]
+        self.idx = [ids.index(k) for k in self.ids]
+        self.rest = None
+        self.moved = np.zeros(len(self.idx))
+
+    def frame(self, sim, k: int, t: float) -> None:
+        p = sim.fdp_points()[self.idx]
+        if self.rest is None:  # frame 0: the rest
+            self.rest = p
+        np.maximum(self.moved, np.linalg.norm(p - self.rest, axis=1), out=self.moved)
 
 
 def play_timeline(sim, timeline: Timeline, seconds: float, *, on_frame=(), progress=None, jaw: str = "kinematic",
