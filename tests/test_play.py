@@ -72,6 +72,8 @@ def test_timeline_converted_once(rig):
     head = tl.for_head(rig)
     assert head.lever == pytest.approx(fw.jaw_lever(rig)) and head.for_head(rig) is head
     assert head.segments[0].expression.jaw_u == pytest.approx(0.022 / fw.jaw_lever(rig))
+    smile = fw.timeline_for("smile")  # no chin drop: nothing to convert
+    assert smile.for_head(rig) is smile
     other = head.for_head(0.2)  # another head: converted again from the chin drop
     assert other.lever == 0.2 and other.segments[0].expression.jaw_u == pytest.approx(0.022 / 0.2)
 

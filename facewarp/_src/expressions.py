@@ -296,8 +296,10 @@ class Timeline:
     def for_head(self, rig) -> Timeline:
         """The timeline with every chin drop turned into the jaw angle of ``rig`` (a FaceRig, a
         FaceSimulator or a lever [m]; :meth:`Expression.for_head`), its :attr:`lever` set; this
-        timeline itself when it is already converted with that lever. :func:`~facewarp.play`
-        converts the timeline it is given."""
+        timeline itself when it has no chin drop or is already converted with that lever.
+        :func:`~facewarp.play` converts the timeline it is given."""
+        if all(s.expression.jaw_drop_m is None for s in self.segments):
+            return self
         lever = jaw_lever(rig)
         if self.lever == lever:
             return self
