@@ -66,6 +66,15 @@ def test_recorder_matches_a_user_loop(rig):
     np.testing.assert_array_equal(again.muscle_curves, frames.muscle_curves)
 
 
+def test_usd_is_a_sink(rig, tmp_path):
+    pytest.importorskip("pxr")
+    sim = fw.FaceSimulator(rig)
+    with fw.UsdAnimation(tmp_path / "take.usda", sim) as usd:
+        stats = fw.play(sim, fw.timeline_for("smile", start=0.0), SECONDS, sinks=[usd])
+        assert usd.frame_count == stats.frames == 4
+    assert (tmp_path / "take.usda").is_file()
+
+
 def test_timeline_converted_once(rig):
     tl = fw.timeline_from_spec("laugh", 1.0)
     assert tl.lever is None

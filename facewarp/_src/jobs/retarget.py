@@ -27,7 +27,6 @@ from ..expressions import PRESETS, load_sequence, timeline_from_spec
 from ..physics.face_rig import build_face, load_face_rig
 from ..present.animation import FaceView, label_grid
 from ..present.render import save_png
-from ..coupling.drivers import jaw_driver
 from ..sim.play import _play
 from ..sim.simulator import FaceSimulator
 from .animation import FdpMotion, UsdAnimation, part_transforms, sim_controls
@@ -134,7 +133,7 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
         lm = dict(zip((str(k) for k in fr.fdp_ids), sim.fdp_points()))
         step(f"{name} ({i + 1}/{len(heads)}): simulating")
         with UsdAnimation(out / f"{name}.usdc", sim) as usd:
-            stats = _play(sim, timeline, seconds, [usd, track], jaw_driver(sim, "kinematic"), frame_progress)
+            stats = _play(sim, timeline, seconds, [usd, track], None, frame_progress)  # the kinematic jaw
         view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, device=device)
         used = np.concatenate([P[view.used] for P, _ in track.frames.values()])
         view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, aspect=0.6, device=device,

@@ -113,7 +113,8 @@ class PlayStats:
         frames: Frames played, the rest frame 0 included.
         seconds: Simulated length [s].
         wall_s: Wall-clock time of the whole loop (stepping and sinks) [s].
-        simulation_wall_s: Wall-clock time of the stepping alone (jaw driver included) [s].
+        simulation_wall_s: Wall-clock time of the stepping alone (the jaw driver's steps: the
+            solver, and MuJoCo with its jaw) [s].
         frames_per_second: Simulated frames per second of stepping.
         steps_per_second: Solver substeps per second of stepping.
         realtime_factor: Simulated seconds per second of stepping (1: real time).
@@ -268,9 +269,9 @@ def _play(sim, timeline: Timeline, seconds: float, sinks: list, jaw, progress) -
         t = k / sim.fps
         if k > 0:
             e = timeline.sample(t)
-            s0 = time.perf_counter()
             sim.set_activations(e)
-            jaw.step(e)
+            s0 = time.perf_counter()
+            jaw.step(e)  # the stepping: what frames_per_second measures
             stepping += time.perf_counter() - s0
         for s in sinks:
             s.frame(sim, k, t)
