@@ -70,7 +70,7 @@ _NAMES = {
     # simulation
     "FaceRig": "physics.face_rig", "build_face": "physics.face_rig", "face_rig_from_anatomy": "physics.face_rig",
     "load_face_rig": "physics.face_rig", "save_face_rig": "physics.face_rig",
-    "FaceSimulator": "sim.simulator", "Frames": "sim.play", "save_frames_npz": "sim.play",
+    "FaceSimulator": "sim.simulator", "Frames": "sim.simulator", "save_frames_npz": "sim.simulator",
     # one playback path: a timeline played on a simulator, each frame handed to sinks
     "play": "sim.play", "FrameRecorder": "sim.play", "PlayStats": "sim.play", "Sink": "sim.play",
     # USD animations streamed while simulating (a sink of play)
@@ -144,8 +144,8 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.present.render import colormap, render_mesh, save_png
     from ._src.present.strips import render_strip
     from ._src.present.template import render_previews
-    from ._src.sim.play import FrameRecorder, Frames, PlayStats, Sink, play, save_frames_npz
-    from ._src.sim.simulator import FaceSimulator
+    from ._src.sim.play import FrameRecorder, PlayStats, Sink, play
+    from ._src.sim.simulator import FaceSimulator, Frames, save_frames_npz
     from ._src.template.files import load_template_dir, save_template
     from ._src.template.head import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, default_template
     from ._src.template.likeness import ICT_FDP_VERTICES, human_likeness

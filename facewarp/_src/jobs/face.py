@@ -24,7 +24,8 @@ from ..physics.face_rig import face_rig_from_anatomy, load_face_rig, save_face_r
 from ..present.anatomy import render_anatomy
 from ..present.render import save_png
 from ..present.strips import frames_sheet, sheet_font_size
-from ..sim.play import FrameRecorder, _play, save_frames_npz
+from ..sim.frames import save_frames_npz
+from ..sim.play import FrameRecorder, _play
 from ..sim.simulator import FaceSimulator
 from .animation import USD_SUFFIXES, FdpMotion, UsdAnimation, check_usd_path, peak_frames
 from .checks import check_out_dir, make_out_dir

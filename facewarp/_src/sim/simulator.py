@@ -17,7 +17,8 @@ from ..core.warp import get_warp
 from ..expressions import MUSCLES, Timeline
 from ..coupling.head_pose import HeadPose
 from ..physics.face_rig import EDGE_DAMPING, FaceRig, node_jaw_amounts
-from .play import FrameRecorder, Frames, fdp_points_of, play, save_frames_npz
+from .frames import Frames, save_frames_npz
+from .play import FrameRecorder, play
 
 __all__ = ["SOLVERS", "FaceSimulator", "Frames", "save_frames_npz"]
 
@@ -527,4 +528,14 @@ class FaceSimulator:
         return out
 
     def _fdp_points(self, pts, parts_frames) -> np.ndarray:
-        return fdp_points_of(self.fr, pts, parts_frames)
+        fr = self.fr
+        out = np.zeros((len(pts), len(fr.fdp_ids), 3), np.float32)
+        for i, (part, f, b) in enumerate(zip(fr.fdp_part, fr.fdp_face, fr.fdp_bary)):
+            if part == "head":
+                tri = fr.head_faces[f]
+                out[:, i] = np.einsum("k,fkd->fd", b, pts[:, tri])
+            else:
+                V = parts_frames[str(part)]
+                tri = fr.parts[str(part)][1][f]
+                out[:, i] = np.einsum("k,fkd->fd", b, V[:, tri])
+        return out
