@@ -9,7 +9,8 @@ The pipeline, in the order data flows (thesis chapters 4-6):
    which also packs the solver inputs (:class:`FaceRig`);
 4. simulation: :class:`FaceSimulator` (``set_activations``, ``set_jaw``, ``step``, ``reset``,
    ``surface``, ``fdp``) and expressions (:func:`preset`, :class:`Timeline`, ...);
-5. output: :class:`Frames`, :func:`save_frames_npz`, pictures (:func:`render_mesh`, ...), and
+5. output: :func:`play` (a timeline on a simulator, each frame to sinks: :class:`FrameRecorder`
+   -> :class:`Frames`, :class:`UsdAnimation`), :func:`save_frames_npz`, pictures (:func:`render_mesh`, ...), and
    the ``usd_export`` package.
 
 Lower level, after Newton's layout: :class:`ModelBuilder` -> :class:`Model` / :class:`State` /
@@ -70,7 +71,9 @@ _NAMES = {
     "FaceRig": "physics.face_rig", "build_face": "physics.face_rig", "face_rig_from_anatomy": "physics.face_rig",
     "load_face_rig": "physics.face_rig", "save_face_rig": "physics.face_rig",
     "FaceSimulator": "sim.simulator", "Frames": "sim.simulator", "save_frames_npz": "sim.simulator",
-    # USD animations streamed while simulating
+    # one playback path: a timeline played on a simulator, each frame handed to sinks
+    "play": "sim.play", "FrameRecorder": "sim.play", "PlayStats": "sim.play", "Sink": "sim.play",
+    # USD animations streamed while simulating (a sink of play)
     "UsdAnimation": "jobs.animation", "play_timeline": "jobs.animation",
     # lower level
     "ModelBuilder": "physics.model", "Model": "physics.model", "State": "physics.model", "Control": "physics.model",
@@ -141,6 +144,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.present.render import colormap, render_mesh, save_png
     from ._src.present.strips import render_strip
     from ._src.present.template import render_previews
+    from ._src.sim.play import FrameRecorder, PlayStats, Sink, play
     from ._src.sim.simulator import FaceSimulator, Frames, save_frames_npz
     from ._src.template.files import load_template_dir, save_template
     from ._src.template.head import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, default_template

@@ -318,16 +318,20 @@ def cmd_build(args):
 
 def cmd_simulate(args):
     from ._src.core.errors import InputError
+    from ._src.expressions import Timeline, expression_from_activations, timeline_from_spec
     from ._src.jobs.face import simulate_files
 
     if (args.expression is None) == (args.activations is None):
         raise InputError("simulate: give exactly one of expression or activations")
-    expression = args.expression if args.activations is None else args.activations
-    if args.activations is not None and "=" not in expression:
-        raise InputError(f"activations: expected 'muscle=value,...', got {expression!r}")
+    if args.activations is not None:  # the user's own muscles, held over the run
+        name = args.activations
+        timeline = Timeline.held(expression_from_activations(args.activations), args.seconds)
+    else:  # a preset, "sequence" or a sequence file
+        name = args.expression
+        timeline = timeline_from_spec(args.expression, args.seconds)
     bar = _FrameBar(not args.json)
     try:
-        rep = simulate_files(args.head, expression, args.out, seconds=args.seconds, fps=args.fps,
+        rep = simulate_files(args.head, timeline, args.out, seconds=args.seconds, fps=args.fps, name=name,
                              substeps=args.substeps, device=args.device, usd=args.usd, tets=args.tets, progress=bar,
                              solver=args.solver, material=args.material, jaw=args.jaw)
     finally:

@@ -1,10 +1,12 @@
 """Coupling the face to rigid bodies (public): the head as MJCF (cranium, mandible on two hinges,
-optional neck), the two-way MuJoCo jaw coupler, the moving-head pose, the kinematic jaw stages.
+optional neck), the two-way MuJoCo jaw coupler, the moving-head pose, the kinematic jaw stages,
+and the jaw drivers :func:`facewarp.play` steps a frame with (kinematic or MuJoCo).
 
 Re-exports of ``facewarp._src.coupling``; see each name's docstring for shapes and units."""
 
 from __future__ import annotations
 
+from ._src.coupling.drivers import JAWS, KinematicJawDriver, MujocoJawDriver, jaw_driver  # noqa: F401
 from ._src.coupling.head_pose import GRAVITY, HeadPose, check_pose  # noqa: F401
 from ._src.coupling.kinematic import CarryStage, JawStage  # noqa: F401
 from ._src.coupling.mjcf import (  # noqa: F401
@@ -21,6 +23,6 @@ from ._src.coupling.mjcf import (  # noqa: F401
 )
 from ._src.coupling.mujoco import MujocoJaw  # noqa: F401
 
-__all__ = ["BONE_DENSITY", "GRAVITY", "HEAD_MASS", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "MANDIBLE_PLATE", "CarryStage",
-           "HeadPose", "JawStage", "MandibleInertia", "MujocoJaw", "check_pose", "head_mjcf", "mandible_geometry",
-           "mandible_inertia", "write_head_mjcf"]
+__all__ = ["BONE_DENSITY", "GRAVITY", "HEAD_MASS", "JAWS", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "MANDIBLE_PLATE",
+           "CarryStage", "HeadPose", "JawStage", "KinematicJawDriver", "MandibleInertia", "MujocoJaw", "MujocoJawDriver",
+           "check_pose", "head_mjcf", "jaw_driver", "mandible_geometry", "mandible_inertia", "write_head_mjcf"]

@@ -91,7 +91,7 @@ def test_simulate_activation_errors(built, tmp_path, capsys):
         (["simulate", str(built), "--expression", "smile", "--activations", "corrugator=1", "--out", o], "exactly one"),
         (["simulate", str(built), "--activations", "corrugator=2", "--out", o], "[0, 1]"),
         (["simulate", str(built), "--activations", "nose=0.5", "--out", o], "nose"),
-        (["simulate", str(built), "--activations", "smile", "--out", o], "muscle=value"),
+        (["simulate", str(built), "--activations", "smile", "--out", o], "muscle=number"),
     ]:
         code = main(argv)
         err = capsys.readouterr().err

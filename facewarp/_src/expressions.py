@@ -261,9 +261,33 @@ class Segment:
 
 @dataclass
 class Timeline:
-    """Segments over time; :meth:`sample` gives activations and jaw angles at a time."""
+    """Segments over time; :meth:`sample` gives activations and jaw angles at a time.
+
+    Attributes:
+        segments: The segments; overlapping ones add.
+        lever: The condyle-to-chin lever [m] the chin drops were converted with
+            (:meth:`for_head`); None until then.
+    """
 
     segments: list[Segment]
+    lever: float | None = None
+
+    @classmethod
+    def held(cls, expression: Expression, seconds: float, *, start: float = 0.05) -> Timeline:
+        """``expression`` over ``seconds`` [s]: from ``start`` it ramps up over up to 0.3 s (a
+        quarter of the time at most), holds, and ramps down to end 0.05 s before ``seconds``
+        (the envelope ``facewarp simulate`` gives a preset or ``--activations``).
+
+        Raises:
+            InputError: ``expression`` not an :class:`Expression`, ``seconds`` not a finite number > 0.
+        """
+        if not isinstance(expression, Expression):
+            raise InputError(f"expression: expected a facewarp Expression, got {type(expression).__name__}")
+        if not (isinstance(seconds, (int, float)) and not isinstance(seconds, bool) and math.isfinite(seconds)
+                and seconds > 0):
+            raise InputError(f"seconds: expected a positive finite number, got {seconds!r}")
+        ramp = min(0.3, seconds / 4)
+        return cls([Segment(expression, start, ramp, max(seconds - 2 * ramp - 0.1, 0.0), ramp)])
 
     @property
     def duration(self) -> float:
@@ -271,8 +295,15 @@ class Timeline:
 
     def for_head(self, rig) -> Timeline:
         """The timeline with every chin drop turned into the jaw angle of ``rig`` (a FaceRig, a
-        FaceSimulator or a lever [m]; :meth:`Expression.for_head`). Simulators should be fed this."""
-        return Timeline([replace(s, expression=s.expression.for_head(rig)) for s in self.segments])
+        FaceSimulator or a lever [m]; :meth:`Expression.for_head`), its :attr:`lever` set; this
+        timeline itself when it has no chin drop or is already converted with that lever.
+        :func:`~facewarp.play` converts the timeline it is given."""
+        if all(s.expression.jaw_drop_m is None for s in self.segments):
+            return self
+        lever = jaw_lever(rig)
+        if self.lever == lever:
+            return self
+        return Timeline([replace(s, expression=s.expression.for_head(lever)) for s in self.segments], lever)
 
     def sample(self, t: float) -> Expression:
         acts: dict[str, float] = {}
@@ -415,14 +446,11 @@ def timeline_from_spec(expression: str, seconds: float) -> Timeline:
     if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
         raise InputError(f"seconds: expected a positive finite number, got {seconds!r}")
     if expression in PRESETS:
-        ramp = min(0.3, seconds / 4)
-        return timeline_for(expression, attack=ramp, hold=max(seconds - 2 * ramp - 0.1, 0.0), release=ramp, start=0.05)
+        return Timeline.held(preset(expression), seconds)
     if expression == "sequence":
         return thesis_sequence(each=max(seconds / 5 + 0.3, 0.8))
     if "=" in expression and not expression.lower().endswith(".json"):  # muscle=value,... (a user's own)
-        ramp = min(0.3, seconds / 4)
-        return Timeline([Segment(expression_from_activations(expression), 0.05, ramp,
-                                 max(seconds - 2 * ramp - 0.1, 0.0), ramp)])
+        return Timeline.held(expression_from_activations(expression), seconds)
     p = Path(expression)
     if p.suffix.lower() == ".json" or p.exists():
         return load_sequence(p)

@@ -5,8 +5,8 @@
 rest moved by the jaw), the rigid parts as ``Xform``\\ s with time-sampled transforms (lower teeth
 and tongue turn with the jaw by their jaw amount: the jaw transform is the rotation about
 ``jaw_pivot`` by the jaw angles of Sec. 6.4.3; eyes and upper teeth stay), and the muscles as
-``BasisCurves`` with their activations. :func:`play_timeline` steps a simulator through a
-timeline and hands each frame to callbacks (the USD writer, picture makers), keeping no frames.
+``BasisCurves`` with their activations; it is a sink of :func:`~facewarp.play`, which steps a
+simulator through a timeline and hands each frame to its sinks, keeping no frames itself.
 
 The file appears only when the animation is complete (``usd_export`` writes to a temporary
 folder and renames); an error or Ctrl-C leaves nothing behind.
@@ -14,16 +14,16 @@ folder and renames); an error or Ctrl-C leaves nothing behind.
 
 from __future__ import annotations
 
-import math
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import InputError
+from ..coupling.drivers import JAWS, jaw_driver
 from ..expressions import Timeline
+from ..sim.play import Sink, play
 
-__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "UsdAnimation", "check_usd_path", "part_points",
+__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "FdpMotion", "UsdAnimation", "check_usd_path", "part_points",
            "part_transforms", "peak_frames", "play_timeline", "sim_controls"]
 
 USD_SUFFIXES = (".usda", ".usdc", ".usdz")
@@ -31,10 +31,6 @@ USD_SUFFIXES = (".usda", ".usdc", ".usdz")
 
 MUSCLE_SAMPLES = 24
 """Points per muscle curve in the USD (as in :meth:`FaceSimulator.run`)."""
-
-JAWS = ("kinematic", "mujoco")
-"""How the jaw is driven: the kinematic jaw of Eq. 6.4.9 (angles set per frame) or the MuJoCo
-hinge body of ``head.xml`` (angles as actuator targets, two-way coupled)."""
 
 
 def check_usd_path(path, name: str = "out") -> Path:
@@ -111,10 +107,11 @@ def muscle_curves(sim, samples: int = MUSCLE_SAMPLES) -> np.ndarray:
     return sim.muscle_curves(samples)
 
 
-class UsdAnimation:
+class UsdAnimation(Sink):
     """Stream a simulator's frames into a USD file (see the module docstring).
 
-    Use as a context manager; :meth:`add` writes the simulator's current state::
+    A sink of :func:`~facewarp.play` (``play(sim, timeline, seconds, sinks=[usd])``), or in a
+    user's own loop a context manager whose :meth:`add` writes the simulator's current state::
 
         with UsdAnimation("take.usdc", sim) as usd:
             for k in range(frames):
@@ -162,6 +159,10 @@ class UsdAnimation:
         except self._error as e:
             raise InputError(str(e)) from None
 
+    def frame(self, sim, k: int, t: float) -> None:
+        """The sink's frame: :meth:`add` at ``t``."""
+        self.add(sim, t)
+
     def close(self) -> Path:
         return self.writer.close()
 
@@ -175,100 +176,36 @@ class UsdAnimation:
         self.writer.__exit__(exc_type, exc, tb)
 
 
-class _KinematicJaw:
-    """The jaw angles set directly each frame (Eq. 6.4.9)."""
-
-    def __init__(self, sim):
-        self.sim = sim
-
-    def step(self, expr) -> None:
-        self.sim.set_jaw(expr.jaw_u, expr.jaw_v)
-        self.sim.step()
-
-
-class _MujocoJawDriver:
-    """The jaw as the MuJoCo hinge body of ``head.xml``: the expression's angles are the actuator
-    targets, :class:`~facewarp.coupling.MujocoJaw` steps skin and body together."""
-
-    def __init__(self, sim, mjcf):
-        from ..coupling.mujoco import MujocoJaw, _mujoco
-
-        mj = _mujoco()
-        if mjcf is None or not Path(mjcf).is_file():
-            raise InputError(f"jaw: the MuJoCo jaw needs the head's head.xml, not found at {mjcf}")
-        self.model = mj.MjModel.from_xml_path(str(mjcf))
-        self.data = mj.MjData(self.model)
-        self.coupler = MujocoJaw(sim, self.model, self.data)
-        self.act = [mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_ACTUATOR, n) for n in ("jaw_open", "jaw_side")]
-
-    def step(self, expr) -> None:
-        for i, target in zip(self.act, (expr.jaw_u, expr.jaw_v)):
-            if i >= 0:
-                self.data.ctrl[i] = target
-        self.coupler.step()
-
-
-def jaw_driver(sim, jaw: str = "kinematic", *, mjcf=None):
-    """The object that advances ``sim`` one frame toward an expression's jaw angles.
+class FdpMotion(Sink):
+    """The largest distance from rest of FDPs over a run [m] (a sink of :func:`~facewarp.play`).
 
     Args:
-        sim: The simulator.
-        jaw: One of :data:`JAWS`.
-        mjcf: ``head.xml`` of the head (for ``"mujoco"``).
+        ids: FDP ids to follow (those the head has); default all of them.
+
+    After the run, :attr:`ids` (str) and :attr:`moved` (shape (len(ids),), float64, m) hold the result.
     """
-    if jaw == "kinematic":
-        return _KinematicJaw(sim)
-    if jaw == "mujoco":
-        return _MujocoJawDriver(sim, mjcf)
-    raise InputError(f"jaw: expected one of {', '.join(JAWS)}, got {jaw!r}")
+
+    def __init__(self, ids=None):
+        self.want = None if ids is None else [str(k) for k in ids]
+
+    def start(self, sim, frame_count: int) -> None:
+        ids = [str(k) for k in sim.fr.fdp_ids]
+        self.ids = ids if self.want is None else [k for k in self.want if k in ids]
+        self.idx = [ids.index(k) for k in self.ids]
+        self.rest = None
+        self.moved = np.zeros(len(self.idx))
+
+    def frame(self, sim, k: int, t: float) -> None:
+        p = sim.fdp_points()[self.idx]
+        if self.rest is None:  # frame 0: the rest
+            self.rest = p
+        np.maximum(self.moved, np.linalg.norm(p - self.rest, axis=1), out=self.moved)
 
 
 def play_timeline(sim, timeline: Timeline, seconds: float, *, on_frame=(), progress=None, jaw: str = "kinematic",
                   mjcf=None) -> dict:
-    """Simulate ``seconds`` of ``timeline`` from rest, one frame every ``1 / sim.fps``, frame 0 at
-    rest, calling ``f(sim, k, t)`` for each ``f`` in ``on_frame`` after frame ``k`` at time ``t``.
-
-    Nothing is kept per frame here: the callbacks decide what to keep (a USD writer streams it
-    to disk). Activations and jaw angles ramp across each step (:meth:`FaceSimulator.step`).
-
-    Args:
-        sim: The :class:`~facewarp.FaceSimulator` (reset first).
-        timeline: The expressions over time (its chin drops are converted by the head's lever,
-            :meth:`Timeline.for_head`).
-        seconds: Length [s], > 0.
-        on_frame: Callbacks ``f(sim, k, t)``.
-        progress: Optional ``progress(k, frame_count)`` after each frame.
-        jaw: ``"kinematic"`` or ``"mujoco"`` (:data:`JAWS`).
-        mjcf: ``head.xml`` for the MuJoCo jaw.
-
-    Returns:
-        ``frames``, ``seconds`` (simulated), ``wall_s``, ``frames_per_second`` (simulated frames
-        per wall-clock second, the first step included), ``steps_per_second`` (substeps per
-        wall-clock second), ``substeps``, ``dt_s``, ``device``, ``jaw``.
-    """
-    if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
-        raise InputError(f"seconds: expected a finite number > 0, got {seconds!r}")
-    driver = jaw_driver(sim, jaw, mjcf=mjcf)
-    callbacks = [on_frame] if callable(on_frame) else list(on_frame)
-    timeline = timeline.for_head(sim.fr)  # chin drops -> this head's jaw angles
-    sim.reset()
-    nf = int(round(seconds * sim.fps)) + 1
-    t0 = time.perf_counter()
-    sim_wall = 0.0
-    for k in range(nf):
-        t = k / sim.fps
-        e = timeline.sample(t)
-        sim.set_activations(e)
-        if k > 0:
-            s0 = time.perf_counter()
-            driver.step(e)
-            sim_wall += time.perf_counter() - s0
-        for f in callbacks:
-            f(sim, k, t)
-        if progress:
-            progress(k, nf)
-    wall = time.perf_counter() - t0
-    steps = (nf - 1) * sim.substeps
-    return {"frames": nf, "seconds": float(seconds), "wall_s": wall, "simulation_wall_s": sim_wall,
-            "frames_per_second": (nf - 1) / max(sim_wall, 1e-9), "steps_per_second": steps / max(sim_wall, 1e-9),
-            "substeps": int(sim.substeps), "dt_s": float(sim.dt), "device": str(sim.device), "jaw": jaw}
+    """:func:`~facewarp.play` under its old name: ``on_frame`` are the sinks, ``jaw`` one of
+    :data:`JAWS` (``mjcf``: the head's ``head.xml`` for ``"mujoco"``); returns the
+    :class:`~facewarp.PlayStats` as a dict."""
+    sinks = [on_frame] if callable(on_frame) else list(on_frame)
+    return play(sim, timeline, seconds, sinks=sinks, jaw=jaw_driver(sim, jaw, mjcf=mjcf), progress=progress).to_dict()

@@ -30,6 +30,7 @@ import numpy as np
 from ..adapt.transfer import load_head
 from ..core.errors import InputError
 from ..core.fileio import atomic_write, write_json
+from ..coupling.drivers import JAWS, jaw_driver
 from ..expressions import Timeline, thesis_sequence
 from ..geometry.landmarks import save_landmarks_json
 from ..geometry.mesh import load_mesh, save_obj
@@ -38,11 +39,12 @@ from ..present.animation import FaceView, label_grid, save_gif
 from ..present.render import colormap, render_mesh, save_png
 from ..present.strips import expression_sheet, sheet_font_size
 from ..present.template import colored_scene
+from ..sim.play import Sink, _play
 from ..sim.simulator import FaceSimulator
 from ..template.head import FRONTAL_REGIONS, REGIONS, default_template
 from ..template.synthetic import synthetic_scan
 from .adapt import adapt_files
-from .animation import JAWS, UsdAnimation, part_points, part_transforms, peak_frames, play_timeline, sim_controls
+from .animation import UsdAnimation, part_points, part_transforms, peak_frames, sim_controls
 from .checks import check_out_dir, make_out_dir
 from .face import build_head_files
 
@@ -129,7 +131,7 @@ def _adapted_picture(head, error: np.ndarray, path: Path, *, device: str, size: 
              colorbar=(0.0, top, "distance to the true point [mm]"))
 
 
-class _KeyFrames:
+class _KeyFrames(Sink):
     """Keeps the surface and part vertices of a few frames (the expression sheet)."""
 
     def __init__(self, fr, frames: dict):
@@ -137,29 +139,29 @@ class _KeyFrames:
         self.points: dict = {}
         self.parts: dict = {}
 
-    def __call__(self, sim, k: int, t: float) -> None:
+    def frame(self, sim, k: int, t: float) -> None:
         if k in self.want.values():
             self.points[k] = sim.surface()
             self.parts[k] = part_points(self.fr, sim_controls(sim)[1])
 
 
-class _GifFrames:
+class _GifFrames(Sink):
     """Renders every ``every``-th frame with a fixed camera."""
 
     def __init__(self, view: FaceView, fr, every: int):
         self.view, self.fr, self.every = view, fr, max(1, int(every))
         self.images: list = []
 
-    def __call__(self, sim, k: int, t: float) -> None:
+    def frame(self, sim, k: int, t: float) -> None:
         if k % self.every == 0:
             self.images.append(self.view.render(sim.surface(), part_transforms(self.fr, sim_controls(sim)[1])))
 
 
 def _jaw_bounds(fr, timeline: Timeline, seconds: float, fps: float) -> list:
-    """The head at rest and with the jaw at the widest opening of ``timeline`` (moved kinematically
-    by its Eq. 6.4.9 amounts): what the GIF's fixed camera frames."""
+    """The head at rest and with the jaw at the widest opening of ``timeline`` (converted for
+    ``fr``, :meth:`~facewarp.Timeline.for_head`; moved kinematically by its Eq. 6.4.9 amounts):
+    what the GIF's fixed camera frames."""
     times = np.arange(int(round(seconds * fps)) + 1) / fps
-    timeline = timeline.for_head(fr)  # chin drops -> this head's jaw angles
     e = max((timeline.sample(float(t)) for t in times), key=lambda x: x.jaw_u)
     V = fr.head_vertices
     opened = fr.jaw.apply(V, fr.vertex_jaw, e.jaw_u, e.jaw_v) if fr.vertex_jaw is not None else V
@@ -240,6 +242,7 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
 
     step("simulate")
     fr = load_face_rig(build_dir)
+    timeline = timeline.for_head(fr)  # chin drops -> this head's jaw angles, once (play keeps it)
     sim = FaceSimulator(fr, device=device, fps=fps)
     landmarks = dict(zip((str(k) for k in fr.fdp_ids), sim.fdp_points()))
     labels = peak_frames(timeline, seconds, fps)
@@ -248,9 +251,9 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
                         face_height=100 if quick else GIF_FACE_HEIGHT, bounds=_jaw_bounds(fr, timeline, seconds, fps),
                         supersample=1, device=device)
     gif = _GifFrames(gif_view, fr, int(round(fps / GIF_FPS)))
+    driver = jaw_driver(sim, jaw, mjcf=out / "head.xml")
     with UsdAnimation(out / "animation.usdc", sim) as usd:
-        sim_stats = play_timeline(sim, timeline, seconds, on_frame=(lambda s, k, tt: usd.add(s, tt), keys, gif),
-                                  progress=frame_progress, jaw=jaw, mjcf=out / "head.xml")
+        sim_stats = _play(sim, timeline, seconds, [usd, keys, gif], driver, frame_progress).to_dict()
     t = lap("simulate", t)
 
     step("pictures")

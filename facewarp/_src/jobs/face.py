@@ -18,13 +18,16 @@ from ..anatomy.build import build_anatomy, write_anatomy
 from ..core.errors import InputError
 from ..core.fileio import write_json
 from ..coupling.mjcf import write_head_mjcf
-from ..expressions import timeline_from_spec
+from ..coupling.drivers import JAWS, jaw_driver
+from ..expressions import Expression, Timeline, timeline_from_spec
 from ..physics.face_rig import face_rig_from_anatomy, load_face_rig, save_face_rig
 from ..present.anatomy import render_anatomy
 from ..present.render import save_png
 from ..present.strips import frames_sheet, sheet_font_size
-from ..sim.simulator import FaceSimulator, save_frames_npz
-from .animation import JAWS, USD_SUFFIXES, UsdAnimation, check_usd_path, jaw_driver, peak_frames, play_timeline
+from ..sim.frames import save_frames_npz
+from ..sim.play import FrameRecorder, _play
+from ..sim.simulator import FaceSimulator
+from .animation import USD_SUFFIXES, FdpMotion, UsdAnimation, check_usd_path, peak_frames
 from .checks import check_out_dir, make_out_dir
 
 __all__ = ["MAX_FRAMES", "USD_NAME", "build_files", "build_head_files", "simulate_files"]
@@ -82,14 +85,19 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     return q
 
 
-def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps: float = 30.0,
+def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: float = 30.0,
                    substeps: int | None = None, device: str = "cpu", usd: bool = False, tets: bool = False,
-                   progress=None, solver: str = "implicit", material: str = "physical", jaw: str = "mujoco") -> dict:
+                   progress=None, solver: str = "implicit", material: str = "physical", jaw: str = "mujoco",
+                   name: str | None = None) -> dict:
     """Simulate ``expression`` on a ``build`` output and write its frames.
 
-    ``expression`` is what :func:`~facewarp.timeline_from_spec` reads: a preset, ``"sequence"``,
-    a sequence file, or a user's own ``"muscle=value,...,jaw_drop_mm=D"``; chin drops become this
-    head's jaw angles by its condyle-to-chin lever (:meth:`~facewarp.Timeline.for_head`).
+    ``expression`` is a :class:`~facewarp.Timeline` (what ``facewarp simulate`` builds from its
+    ``--expression`` or ``--activations``), an :class:`~facewarp.Expression` (held over the run,
+    :meth:`~facewarp.Timeline.held`), or what :func:`~facewarp.timeline_from_spec` reads: a preset,
+    ``"sequence"``, a sequence file, or ``"muscle=value,...,jaw_drop_mm=D"``; ``name`` labels it in
+    the report and picture (default: the string, or the expression's name). Chin drops become
+    this head's jaw angles by its condyle-to-chin lever, once, where :func:`~facewarp.play` meets
+    the head (:meth:`~facewarp.Timeline.for_head`).
 
     ``solver`` (``"implicit"``, default, or ``"verlet"``) and ``material`` (``"physical"``, default,
     or ``"thesis"``) choose the :class:`~facewarp.FaceSimulator`'s solver and material profile;
@@ -105,16 +113,18 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
     frame cap (:mod:`~facewarp._src.jobs.animation`). With ``tets`` the USD also holds the skin's
     tet layer (a ``TetMesh`` of purpose ``guide``).
     """
-    usd_out = Path(out).suffix.lower() in USD_SUFFIXES
-    out = check_usd_path(out) if usd_out else check_out_dir(out)
-    for name, v in (("seconds", seconds), ("fps", fps)):
+    for key, v in (("seconds", seconds), ("fps", fps)):
         if not (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
                 and math.isfinite(v) and v > 0):
-            raise InputError(f"{name}: expected a finite number > 0, got {v!r}")
+            raise InputError(f"{key}: expected a finite number > 0, got {v!r}")
+    seconds = float(seconds)
+    timeline, name = _timeline(expression, seconds, name)
+    usd_out = Path(out).suffix.lower() in USD_SUFFIXES
+    out = check_usd_path(out) if usd_out else check_out_dir(out)
     if substeps is not None and not (isinstance(substeps, (int, np.integer)) and not isinstance(substeps, bool)
                                      and substeps >= 1):
         raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
-    if not usd_out and not seconds * fps < MAX_FRAMES:  # FaceSimulator.run keeps round(seconds * fps) + 1 frames
+    if not usd_out and not seconds * fps < MAX_FRAMES:  # a FrameRecorder keeps round(seconds * fps) + 1 frames
         raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
                          f"more than {MAX_FRAMES} per run")
     if jaw not in JAWS:
@@ -124,60 +134,46 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
     if jaw == "mujoco" and not mjcf.is_file():
         raise InputError(f"{head_path}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, "
                          "or simulate with the kinematic jaw)")
-    timeline = timeline_from_spec(expression, seconds).for_head(fr)  # chin drops -> this head's angles
     sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps, solver=solver, material=material)
-    if usd_out:
-        return _simulate_to_usd(sim, timeline, seconds, out, expression, progress, tets=tets, jaw=jaw, mjcf=mjcf)
-    make_out_dir(out)
-    anim = UsdAnimation(out / USD_NAME, sim, tets=tets) if usd else None
-
-    def on_frame(k: int, n: int) -> None:  # the USD is written as the frames are simulated
-        if anim is not None:
-            anim.add(sim, k / sim.fps)
-        if progress:
-            progress(k, n)
-
+    driver = jaw_driver(sim, jaw, mjcf=mjcf)
+    # the sinks: every frame kept (a folder) or only the FDPs' largest motion (a USD file alone)
+    keep = None if usd_out else FrameRecorder()
+    motion = FdpMotion() if usd_out else None
+    usd_path = out if usd_out else (out / USD_NAME if usd else None)
+    if not usd_out:
+        make_out_dir(out)
+    anim = UsdAnimation(usd_path, sim, tets=tets) if usd_path is not None else None
+    sinks = [s for s in (keep, motion, anim) if s is not None]
     with anim if anim is not None else contextlib.nullcontext():
-        frames = sim.run(timeline, seconds, progress=on_frame,
-                         jaw=jaw_driver(sim, jaw, mjcf=mjcf) if jaw == "mujoco" else None)
-    save_frames_npz(out / "frames.npz", frames)
-    nf = len(frames.times)
-    sheet, hmax = frames_sheet(frames, peak_frames(timeline, seconds, fps), device=device)
-    save_png(out / "frames.png", sheet, title=f"{Path(str(expression)).name}: rest and peak",
-             colorbar=(0.0, hmax * 1e3, "displacement from rest [mm]"), font_size=sheet_font_size(sheet))
-    written = ["frames.npz", "frames.png"]
-    if usd:
-        written.append(USD_NAME)
-    moved = np.linalg.norm(frames.fdp_points - frames.fdp_points[:1], axis=2).max(0)
+        stats = _play(sim, timeline, seconds, sinks, driver, progress)
+    if keep is not None:
+        frames = keep.frames
+        save_frames_npz(out / "frames.npz", frames)
+        sheet, hmax = frames_sheet(frames, peak_frames(timeline, seconds, fps), device=device)
+        save_png(out / "frames.png", sheet, title=f"{Path(name).name}: rest and peak",
+                 colorbar=(0.0, hmax * 1e3, "displacement from rest [mm]"), font_size=sheet_font_size(sheet))
+        written = [out / "frames.npz", out / "frames.png"] + ([usd_path] if usd_path is not None else [])
+        moved = np.linalg.norm(frames.fdp_points - frames.fdp_points[:1], axis=2).max(0)
+    else:
+        written = [out]
+        moved = motion.moved
     return {
-        "expression": str(expression), "frames": nf, "seconds": float(seconds), "fps": fps, "substeps": sim.substeps,
-        "dt_s": sim.dt, "steps_per_second": frames.steps_per_second, "device": str(sim.device),
-        "solver": sim.solver_name, "material": sim.material.name, "jaw": jaw, "frames_per_second": frames.frames_per_second,
-        "realtime_factor": frames.realtime_factor,
-        "nodes": int(len(fr.nodes)), "tets": int(len(fr.tets)), "files": [str(out / w) for w in written],
-        "max_fdp_motion_m": {str(k): float(v) for k, v in zip(frames.fdp_ids, moved) if v > 1e-4},
-    }
-
-
-def _simulate_to_usd(sim, timeline, seconds: float, path: Path, expression, progress, *, tets: bool = False,
-                     jaw: str = "kinematic", mjcf=None) -> dict:
-    """Stream ``seconds`` of ``timeline`` into the USD file ``path``; the report of :func:`simulate_files`."""
-    fr = sim.fr
-    rest = sim.fdp_points()
-    moved = np.zeros(len(rest))
-
-    def track(s, k: int, t: float) -> None:
-        np.maximum(moved, np.linalg.norm(s.fdp_points() - rest, axis=1), out=moved)
-
-    with UsdAnimation(path, sim, tets=tets) as anim:
-        stats = play_timeline(sim, timeline, seconds, on_frame=(lambda s, k, t: anim.add(s, t), track),
-                              progress=progress, jaw=jaw, mjcf=mjcf)
-    return {
-        "expression": str(expression), "frames": stats["frames"], "seconds": float(seconds), "fps": sim.fps,
-        "substeps": sim.substeps, "dt_s": sim.dt, "steps_per_second": stats["steps_per_second"],
-        "frames_per_second": stats["frames_per_second"], "realtime_factor": stats["frames_per_second"] / sim.fps,
-        "solver": sim.solver_name, "material": sim.material.name, "jaw": jaw,
-        "device": str(sim.device), "nodes": int(len(fr.nodes)),
-        "tets": int(len(fr.tets)), "files": [str(path)],
+        "expression": name, "frames": stats.frames, "seconds": stats.seconds, "fps": sim.fps,
+        "substeps": stats.substeps, "dt_s": stats.dt_s, "steps_per_second": stats.steps_per_second,
+        "device": stats.device, "solver": sim.solver_name, "material": sim.material.name, "jaw": jaw,
+        "frames_per_second": stats.frames_per_second, "realtime_factor": stats.realtime_factor,
+        "nodes": int(len(fr.nodes)), "tets": int(len(fr.tets)), "files": [str(w) for w in written],
         "max_fdp_motion_m": {str(k): float(v) for k, v in zip(fr.fdp_ids, moved) if v > 1e-4},
     }
+
+
+def _timeline(expression, seconds: float, name: str | None) -> tuple[Timeline, str]:
+    """The timeline of ``expression`` (a Timeline, an Expression or a spec string) and its label."""
+    if isinstance(expression, Timeline):
+        return expression, name or "timeline"
+    if isinstance(expression, Expression):
+        return Timeline.held(expression, seconds), name or expression.name
+    if isinstance(expression, (str, Path)):
+        return timeline_from_spec(str(expression), seconds), name or str(expression)
+    raise InputError(f"expression: expected a Timeline, an Expression or a preset / sequence / file name, "
+                     f"got {type(expression).__name__}")

@@ -27,8 +27,9 @@ from ..expressions import PRESETS, load_sequence, timeline_from_spec
 from ..physics.face_rig import build_face, load_face_rig
 from ..present.animation import FaceView, label_grid
 from ..present.render import save_png
+from ..sim.play import _play
 from ..sim.simulator import FaceSimulator
-from .animation import UsdAnimation, part_transforms, play_timeline, sim_controls
+from .animation import FdpMotion, UsdAnimation, part_transforms, sim_controls
 from .checks import check_out_dir, make_out_dir
 
 __all__ = ["RELAX_SECONDS", "TRACKED_FDPS", "load_rig", "retarget_files"]
@@ -69,22 +70,17 @@ def _names(heads) -> list[str]:
     return out
 
 
-class _Tracker:
-    """Largest distance from rest of the tracked FDPs, and the frames of the strip."""
+class _Tracker(FdpMotion):
+    """Largest distance from rest of the tracked FDPs (:data:`TRACKED_FDPS`), and the frames of the strip."""
 
-    def __init__(self, sim, want: set):
-        ids = [str(k) for k in sim.fr.fdp_ids]
-        self.ids = [k for k in TRACKED_FDPS if k in ids]
-        self.idx = [ids.index(k) for k in self.ids]
-        self.rest = sim.fdp_points()[self.idx]
-        self.moved = np.zeros(len(self.idx))
-        self.want = want
+    def __init__(self, want: set):
+        super().__init__(TRACKED_FDPS)
+        self.shots = want
         self.frames: dict = {}
 
-    def __call__(self, sim, k: int, t: float) -> None:
-        d = np.linalg.norm(sim.fdp_points()[self.idx] - self.rest, axis=1)
-        np.maximum(self.moved, d, out=self.moved)
-        if k in self.want:
+    def frame(self, sim, k: int, t: float) -> None:
+        super().frame(sim, k, t)
+        if k in self.shots:
             self.frames[k] = (sim.surface(), part_transforms(sim.fr, sim_controls(sim)[1]))
 
 
@@ -133,12 +129,11 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
         step(f"{name} ({i + 1}/{len(heads)}): anatomy")
         fr = load_rig(head)
         sim = FaceSimulator(fr, device=device, fps=fps)
-        track = _Tracker(sim, {k for _, k in labels})
+        track = _Tracker({k for _, k in labels})
         lm = dict(zip((str(k) for k in fr.fdp_ids), sim.fdp_points()))
         step(f"{name} ({i + 1}/{len(heads)}): simulating")
         with UsdAnimation(out / f"{name}.usdc", sim) as usd:
-            stats = play_timeline(sim, timeline, seconds, on_frame=(lambda s, k, t: usd.add(s, t), track),
-                                  progress=frame_progress)
+            stats = _play(sim, timeline, seconds, [usd, track], None, frame_progress)  # the kinematic jaw
         view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, device=device)
         used = np.concatenate([P[view.used] for P, _ in track.frames.values()])
         view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, aspect=0.6, device=device,
@@ -146,8 +141,8 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
         rows.append([view.render(*track.frames[k]) for _, k in labels if k in track.frames])
         per_head.append({
             "head": str(head), "name": name, "usd": str(out / f"{name}.usdc"), "vertex_count": int(len(fr.head_vertices)),
-            "tets": int(len(fr.tets)), "frames": stats["frames"], "frames_per_second": stats["frames_per_second"],
-            "steps_per_second": stats["steps_per_second"], "substeps": stats["substeps"],
+            "tets": int(len(fr.tets)), "frames": stats.frames, "frames_per_second": stats.frames_per_second,
+            "steps_per_second": stats.steps_per_second, "substeps": stats.substeps,
             "max_fdp_motion_mm": {k: float(v * 1e3) for k, v in zip(track.ids, track.moved)},
         })
     step("picture")

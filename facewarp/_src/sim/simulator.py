@@ -8,64 +8,19 @@ and keeps the controls (muscle activations, jaw angles); :class:`Frames` is what
 
 from __future__ import annotations
 
-import io
 import time
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import InputError
-from ..core.fileio import atomic_write
 from ..core.warp import get_warp
 from ..expressions import MUSCLES, Timeline
 from ..coupling.head_pose import HeadPose
 from ..physics.face_rig import EDGE_DAMPING, FaceRig, node_jaw_amounts
+from .frames import Frames, save_frames_npz
+from .play import FrameRecorder, play
 
 __all__ = ["SOLVERS", "FaceSimulator", "Frames", "save_frames_npz"]
-
-
-# ------------------------------------------------------------------------------------ frames
-@dataclass
-class Frames:
-    """The frame stream of a simulation (what exporters consume).
-
-    Attributes:
-        times: Frame times [s], shape (f,).
-        points: Head surface vertices [m], shape (f, n, 3), float32.
-        faces: Head triangles, shape (m, 3).
-        fdp_ids: FDP ids, shape (84,).
-        fdp_points: FDP positions [m], shape (f, 84, 3).
-        parts: Rigid part name -> (frames (f, k, 3), faces (l, 3)).
-        muscle_names: Muscle instance names (M,).
-        muscle_curves: Muscle fibre polylines [m], shape (f, M, samples, 3) (closed rings for
-            sphincters repeat their first point).
-        activations: Activations per frame, shape (f, M); jaw: (f, 2) [rad].
-        steps_per_second: Simulated substeps per wall-clock second.
-        substeps: Solver steps per frame; dt: step [s].
-        frames_per_second: Frames simulated per wall-clock second (the stepping only, not the
-            surface and curve read-back of each frame).
-        realtime_factor: Simulated seconds per wall-clock second of stepping (1: real time).
-        solver, material: The solver and material profile names.
-    """
-
-    times: np.ndarray
-    points: np.ndarray
-    faces: np.ndarray
-    fdp_ids: np.ndarray
-    fdp_points: np.ndarray
-    parts: dict
-    muscle_names: list
-    muscle_curves: np.ndarray
-    activations: np.ndarray
-    jaw: np.ndarray
-    steps_per_second: float = 0.0
-    substeps: int = 0
-    dt: float = 0.0
-    frames_per_second: float = 0.0
-    realtime_factor: float = 0.0
-    solver: str = ""
-    material: str = ""
 
 
 def _unit_value(name: str, value) -> float:
@@ -550,56 +505,11 @@ class FaceSimulator:
         return {k: self._pose.to_world(P) for k, P in out.items()} if frame == "world" else out
 
     def run(self, timeline: Timeline, seconds: float, *, progress=None, curve_samples: int = 24, jaw=None) -> Frames:
-        """Simulate ``seconds`` of ``timeline`` from rest (it calls :meth:`reset`); one frame
-        every 1/fps s, frame 0 at rest.
-
-        Args:
-            jaw: None (the kinematic jaw: the timeline's angles), or a driver with
-                ``step(expression)`` that sets the jaw and steps this simulator one frame (the MuJoCo
-                jaw of ``facewarp simulate --jaw mujoco``).
-        """
-        if not (isinstance(seconds, (int, float)) and np.isfinite(seconds) and seconds > 0):
-            raise InputError(f"seconds: expected a positive number, got {seconds!r}")
-        fr = self.fr
-        timeline = timeline.for_head(fr)  # chin drops -> this head's jaw angles (idempotent)
-        self.reset()
-        nf = int(round(seconds * self.fps)) + 1
-        times = np.arange(nf) / self.fps
-        names = fr.rig.names
-        pts = np.zeros((nf, len(fr.head_vertices), 3), np.float32)
-        acts = np.zeros((nf, len(names)), np.float32)
-        jaws = np.zeros((nf, 2), np.float32)
-        curves = np.zeros((nf, len(names), curve_samples, 3), np.float32)
-        parts_frames = {k: np.zeros((nf, len(V), 3), np.float32) for k, (V, _) in fr.parts.items()}
-        t0 = time.perf_counter()
-        step0 = self.step_seconds
-        e0 = timeline.sample(0.0)
-        self._a = self._target_a = _activation_vector(names, e0)
-        self._j = self._target_j = np.array([e0.jaw_u, e0.jaw_v], np.float32)
-        for k, t in enumerate(times):
-            if k > 0:
-                e = timeline.sample(float(t))
-                self._target_a = _activation_vector(names, e)
-                self._target_j = np.array([e.jaw_u, e.jaw_v], np.float32)
-                if jaw is None:
-                    self.step()
-                else:  # e.g. the MuJoCo jaw: it sets the angles it reached and steps
-                    jaw.step(e)
-            pts[k] = self.surface()
-            acts[k], jaws[k] = self._a, self._j
-            curves[k] = self._curves(curve_samples)
-            for name, P in self._parts_now(self._j).items():
-                parts_frames[name][k] = P
-            if progress:
-                progress(k, nf)
-        wall = time.perf_counter() - t0
-        stepping = max(self.step_seconds - step0, 1e-9)
-        fdp = self._fdp_points(pts, parts_frames)
-        return Frames(times, pts, fr.head_faces, fr.fdp_ids, fdp,
-                      {k: (v, fr.parts[k][1]) for k, v in parts_frames.items()}, list(names), curves, acts, jaws,
-                      self._steps_taken / max(wall, 1e-9), self.substeps, self.dt,
-                      frames_per_second=(nf - 1) / stepping, realtime_factor=(nf - 1) / self.fps / stepping,
-                      solver=self.solver_name, material=self.material.name)
+        """Simulate ``seconds`` of ``timeline`` from rest and keep every frame: :func:`~facewarp.play`
+        with a :class:`~facewarp.FrameRecorder` (its ``jaw`` and ``progress``: the same)."""
+        rec = FrameRecorder(curve_samples=curve_samples)
+        play(self, timeline, seconds, sinks=(rec,), jaw=jaw, progress=progress)
+        return rec.frames
 
     def _curves(self, samples: int) -> np.ndarray:
         from ..physics.muscle_stage import _bezier_np
@@ -629,15 +539,3 @@ class FaceSimulator:
                 tri = fr.parts[str(part)][1][f]
                 out[:, i] = np.einsum("k,fkd->fd", b, V[:, tri])
         return out
-
-
-def save_frames_npz(path, frames: Frames) -> Path:
-    """``frames.npz``: points (f, n, 3) [m], times (f,), fdp_ids (84,), fdp_points (f, 84, 3), faces,
-    activations (f, M), muscle_names (M,), jaw (f, 2) [rad], muscle_curves (f, M, s, 3)."""
-    buf = io.BytesIO()
-    np.savez_compressed(buf, points=frames.points, times=frames.times, fdp_ids=frames.fdp_ids,
-                        fdp_points=frames.fdp_points, faces=frames.faces, activations=frames.activations,
-                        muscle_names=np.array(frames.muscle_names), jaw=frames.jaw, muscle_curves=frames.muscle_curves)
-    with atomic_write(path, "wb", encoding=None) as f:
-        f.write(buf.getvalue())
-    return Path(path)
