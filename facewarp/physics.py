@@ -59,15 +59,17 @@ from ._src.physics.muscle_stage import (  # noqa: F401
     segment_frames,
 )
 from ._src.physics.face_rig import (  # noqa: F401
-    BONE_REGIONS,
-    MUSCLE_STIFFNESS,
     FaceRig,
-    build_face,
-    face_rig_from_anatomy,
     load_face_rig,
-    muscle_rig,
     node_jaw_amounts,
     save_face_rig,
+)
+from ._src.anatomy.rig import (  # noqa: F401
+    BONE_REGIONS,
+    MUSCLE_STIFFNESS,
+    build_face,
+    face_rig_from_anatomy,
+    muscle_rig,
 )
 from ._src.physics.contact import (  # noqa: F401
     CONTACT_GAP,
@@ -76,6 +78,8 @@ from ._src.physics.contact import (  # noqa: F401
     ContactGeometry,
     ContactStage,
     contact_crossings,
+)
+from ._src.anatomy.contact import (  # noqa: F401
     contact_geometry,
     lid_contact_geometry,
     lip_contact_geometry,

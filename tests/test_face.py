@@ -39,6 +39,23 @@ def test_face_rig_roundtrip(rig, tmp_path):
     np.testing.assert_allclose(r2.rig.ctrl_rest, rig.rig.ctrl_rest)
     assert r2.rig.names == rig.rig.names and set(r2.parts) == set(rig.parts)
     assert rig.fixed.any() and rig.held.any() and len(rig.support_nodes) and len(rig.jaw_nodes)
+    # the contact geometry is built once and saved with the rig
+    g, g2 = rig.contact, r2.contact
+    for name in ("node_side", "eye_nodes", "eye_centers", "lid_nodes", "lid_partner", "glide_radii"):
+        np.testing.assert_array_equal(getattr(g2, name), getattr(g, name), err_msg=name)
+    assert [len(n) for n in g2.lip_nodes] == [len(n) for n in g.lip_nodes] and g2.excluded == g.excluded
+    assert [t[0] for t in g2.teeth] == [t[0] for t in g.teeth]
+    np.testing.assert_array_equal(g2.teeth[0][4], g.teeth[0][4])
+
+
+def test_old_face_rig_without_contact_asks_for_a_rebuild(rig, tmp_path):
+    p = save_face_rig(tmp_path / "face_rig.npz", rig)
+    with np.load(p) as z:
+        old = {k: z[k] for k in z.files if not k.startswith("contact_")}
+    np.savez(tmp_path / "old.npz", **old)
+    with pytest.raises(InputError, match="rebuild it with `facewarp build`") as e:
+        load_face_rig(tmp_path / "old.npz")
+    assert "\n" not in str(e.value)
 
 
 def test_rest_stays_at_rest(rig):

@@ -47,7 +47,7 @@ import numpy as np
 
 from ..core.warp import get_warp
 from ..core.errors import InputError
-from ..geometry.tets import signed_tet_volumes
+from ..geometry.tets import TET_EDGES, TET_FACES, signed_tet_volumes
 
 __all__ = [
     "EDGE_CROSS",
@@ -82,8 +82,7 @@ TABLE_6_3 = {
 }
 """Table 6.3 of the thesis in SI as it stands (the ``thesis`` material profile)."""
 
-_TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
-_TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+_TET_EDGES, _TET_FACES = TET_EDGES, TET_FACES
 
 
 

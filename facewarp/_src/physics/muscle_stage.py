@@ -262,7 +262,7 @@ def contraction_curve(activation, contraction, saturation):
 def rig_reference(rig: MuscleRig, activations, jaw=None, jaw_angles=(0.0, 0.0)):
     """NumPy reference of the whole muscle stage: (control points (P, 3), attachment points
     (K, 3)). ``jaw`` is a :class:`facewarp._src.jaw.JawKinematic` or None."""
-    from ..anatomy.jaw import jaw_rotation
+    from ..geometry.jaw import jaw_rotation
 
     acts = np.asarray(activations, dtype=np.float64)
     if jaw is not None:

@@ -20,7 +20,8 @@ from ..core.fileio import atomic_write
 from ..core.warp import get_warp
 from ..expressions import MUSCLES, Timeline
 from ..coupling.head_pose import HeadPose
-from ..physics.face_rig import EDGE_DAMPING, FaceRig, node_jaw_amounts
+from ..physics.face_rig import FaceRig, node_jaw_amounts
+from ..physics.materials import EDGE_DAMPING
 
 __all__ = ["SOLVERS", "FaceSimulator", "Frames", "save_frames_npz"]
 
@@ -147,7 +148,7 @@ class FaceSimulator:
         from dataclasses import replace
 
         from ..coupling.kinematic import CarryStage, JawStage
-        from ..physics.contact import CONTACT_MODULUS, CONTACT_MUSCLE_RATIO, ContactStage, contact_geometry
+        from ..physics.contact import CONTACT_MODULUS, CONTACT_MUSCLE_RATIO, ContactStage
         from ..physics.materials import MaterialPhysical, material_profile
         from ..physics.model import ModelBuilder
         from ..physics.muscle_stage import MuscleStage, SupportStage
@@ -203,7 +204,10 @@ class FaceSimulator:
             else:
                 k_contact = np.full(len(fr.nodes), float(builder.hold_stiffness.max()) if fr.held.any() else 0.0)
             k_contact = k_contact + CONTACT_MUSCLE_RATIO * k_muscle
-            self.contact_geometry = contact_geometry(fr)
+            if fr.contact is None:
+                raise InputError("fr: the face rig has no contact geometry (make it with facewarp.build_face, or "
+                                 "rebuild an older build with `facewarp build`); or pass contact=False")
+            self.contact_geometry = fr.contact
             g = self.contact_geometry
             cand = np.unique(np.concatenate([*g.lip_nodes, *[t[4] for t in g.teeth], g.eye_nodes]).astype(np.int64))
             extra[cand] += k_contact[cand]
@@ -519,12 +523,9 @@ class FaceSimulator:
         """Crossings at node positions X (default the current state; head frame): lip nodes inside
         the other lip, nodes inside the teeth, lid nodes inside an eyeball
         (:func:`~facewarp.physics.contact_crossings`; 0 each while the contact holds)."""
-        from ..physics.contact import contact_crossings, contact_geometry
+        from ..physics.contact import contact_crossings
 
-        if self.contact_geometry is None:
-            self.contact_geometry = contact_geometry(self.fr)
-        return contact_crossings(self.fr, self.positions() if X is None else X, self._j,
-                                 geometry=self.contact_geometry)
+        return contact_crossings(self.fr, self.positions() if X is None else X, self._j)
 
     def fdp(self, fdp_id: str) -> np.ndarray:
         """Current position [m] of one FDP (e.g. ``"2.1"``, the chin), shape (3,), float64."""
