@@ -91,6 +91,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.warp import get_warp
+from .materials import CONTACT_MODULUS, CONTACT_MUSCLE_RATIO
 from ..geometry.surface import winding_numbers
 from ..geometry.tets import lip_crossings
 from .model import Springs
@@ -98,10 +99,6 @@ from .model import Springs
 __all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "LIP_REACH_M", "TEETH_REACH_M", "ContactGeometry",
            "ContactStage", "contact_crossings", "contact_from_arrays", "contact_to_arrays"]
 
-CONTACT_MODULUS = 2.0e9
-"""Contact stiffness per unit sheet area [N/m^3] (module doc)."""
-CONTACT_MUSCLE_RATIO = 50.0
-"""A node's contact spring is at least this many times the muscle springs on it (module doc)."""
 CONTACT_GAP = 2.5e-4
 """Distance [m] outside the other surface at which a half-space contact spring starts to push."""
 LIP_REACH_M = 3.0e-3
@@ -442,6 +439,12 @@ class ContactStage:
                     axis=wp.array(np.asarray(g.lid_tangent, np.float32), dtype=wp.vec3, device=device))
                 sets.append(self.tie_springs)
         self.springs = tuple(sets)
+
+    @classmethod
+    def from_model(cls, model) -> ContactStage:
+        """The contact of ``model.contact`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_contacts`)."""
+        c = model.contact
+        return cls(c, c.node_stiffness, model.device, geometry=c.geometry, glide_stiffness=c.glide_stiffness)
 
     @property
     def counts(self) -> dict:

@@ -64,6 +64,8 @@ from ..core.errors import InputError
 from ..geometry.tets import TET_EDGES as _TET_EDGES, TET_FACES as _TET_FACES
 
 __all__ = [
+    "CONTACT_MODULUS",
+    "CONTACT_MUSCLE_RATIO",
     "EDGE_DAMPING",
     "MATERIALS",
     "linear_stiffness",
@@ -74,10 +76,15 @@ __all__ = [
 ]
 
 EDGE_DAMPING = 500.0
-"""The face simulator's thesis profile: dashpot along every tet edge [N s/m] (Eq. 6.4.5 on the relative velocity). Table 6.3's
-per-substep damping alone leaves the stiff skin ringing for many periods when the jaw moves the
+"""Dashpot along every tet edge [N s/m] of the face's thesis profile (Eq. 6.4.5 on the relative
+velocity; :meth:`~facewarp._src.physics.model.ModelBuilder.add_face`). Table 6.3's per-substep damping alone leaves the stiff skin ringing for many periods when the jaw moves the
 held nodes; about a quarter of the edges' critical damping 2 sqrt(k0 / D0^2 m) calms it without
 slowing rigid motion (and stays far below the explicit limit 2 m / dt)."""
+
+CONTACT_MODULUS = 2.0e9
+"""Contact stiffness per unit sheet area [N/m^3] (:mod:`facewarp._src.physics.contact`)."""
+CONTACT_MUSCLE_RATIO = 50.0
+"""A node's contact spring is at least this many times the muscle springs on it (:mod:`facewarp._src.physics.contact`)."""
 
 #: Density of soft tissue [kg/m^3] (skin and subcutis ~1,050-1,150; ICRP 89 "soft tissue" 1,030).
 TISSUE_DENSITY = 1100.0

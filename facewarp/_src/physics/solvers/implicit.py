@@ -583,6 +583,7 @@ class SolverImplicit(SolverBase):
         wp = get_warp()
         wp.copy(state_out.prev_positions, state_in.positions)
         wp.copy(state_out.positions, self.x)
+        state_out.assign_stage_data(state_in)  # what the stages carry (muscle geometry, jaw carry)
         wp.launch(ki._advance_counter, dim=1, inputs=[], outputs=[self.step_counter], device=self.device)
         self._launch_guard(state_out)
 
