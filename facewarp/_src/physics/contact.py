@@ -14,12 +14,12 @@ Hessian are in the solvers' kernels and in :mod:`.potential`):
   lower teeth turn with the jaw by the part's Eq. 6.4.9 amount);
 * lid on eyeball: free nodes within ``EYE_NEAR_M`` of an eyeball's sphere, pushed out of the ball
   ``|x - c| >= r`` (analytic, static springs). The lids' inner sheet there glides on the eyeball
-  (:func:`~facewarp._src.anatomy.contact.eyeball_sheet_nodes`): it has no planar sliding support (``face_rig``) but a two-sided
-  spring of the support's stiffness that keeps each node on its glide sphere, and a one-sided
+  (:func:`~facewarp._src.anatomy.contact.eyeball_sheet_nodes`): it has no planar sliding support
+  (``face_rig``) but a two-sided spring of the support's stiffness that keeps each node on its glide sphere, and a one-sided
   floor there at the contact's stiffness (besides its one-sided contact), so the lid slides
   over the ball and neither sinks into it nor lifts off. The glide sphere
-  (:func:`~facewarp._src.anatomy.contact.glide_spheres`) runs through the node's rest position and meets the fissure plane on
-  the eyeball's surface: the two lids close at one depth, on the ball, whatever their depths at
+  (:func:`~facewarp._src.anatomy.contact.glide_spheres`) runs through the node's rest position and
+  meets the fissure plane on the eyeball's surface: the two lids close at one depth, on the ball, whatever their depths at
   rest (a sphere about the eyeball's centre kept each at its rest depth: on the ICT-adapted heads
   the lower lid's inner sheet lies 0.5-1.5 mm deeper than the upper one's, up to 1 mm inside
   the ball's sphere, and the closed upper margin stayed up to 1.2 mm in front of the lower one;

@@ -42,7 +42,7 @@ any tet shape (:func:`~facewarp._src.physics.materials.linear_stiffness`); see
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

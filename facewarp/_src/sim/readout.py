@@ -12,8 +12,8 @@ import numpy as np
 from ..core.errors import InputError
 from ..expressions import MUSCLES
 
-__all__ = ["activation_vector", "expression_activations", "fdp_points", "head_surface", "muscle_curves",
-           "parts_at", "surface_index"]
+__all__ = ["activation_vector", "expression_activations", "fdp_points", "head_surface", "jaw_vector",
+           "muscle_curves", "parts_at", "surface_index"]
 
 
 def surface_index(fr) -> tuple[np.ndarray, np.ndarray]:
@@ -139,3 +139,20 @@ def activation_vector(names: list[str], activations) -> np.ndarray:
     if len(bad):
         raise InputError(f"activations: {names[bad[0]]} is {a[bad[0]]!r}, expected a value in [0, 1]")
     return a.astype(np.float32)
+
+
+def jaw_vector(opening: float, side: float = 0.0) -> np.ndarray:
+    """Jaw angles [rad] as the (2,) float32 array the solver reads: ``opening`` about the condyle
+    u-axis (Sec. 6.4.3, 0..60 deg), ``side`` about the vertical v-axis (+-5 deg).
+
+    Raises:
+        InputError: a non-finite angle or one outside its range.
+    """
+    from ..expressions import JAW_U_MAX, JAW_V_MAX
+
+    u, v = float(opening), float(side)
+    if not (np.isfinite(u) and -1e-9 <= u <= JAW_U_MAX + 1e-9):
+        raise InputError(f"jaw opening: expected 0..{JAW_U_MAX:.4f} rad (0..60 deg), got {opening!r}")
+    if not (np.isfinite(v) and abs(v) <= JAW_V_MAX + 1e-9):
+        raise InputError(f"jaw side: expected within +-{JAW_V_MAX:.4f} rad (+-5 deg), got {side!r}")
+    return np.array([max(u, 0.0), v], np.float32)

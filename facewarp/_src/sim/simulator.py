@@ -1,11 +1,8 @@
 """The face simulator: a :class:`~facewarp._src.physics.face_rig.FaceRig` made into a Model
-(:meth:`~facewarp._src.physics.model.ModelBuilder.add_face`) on a device and stepped, by a user's
-loop or by an expression timeline.
-
-What is simulated (tissue, muscles, supports, jaw, contact, every stiffness) is the Model's; what
-a step changes is the State's (:class:`~facewarp._src.physics.model.State`), so :meth:`reset` is a
-copy of the rest State. The read-outs (surface, FDPs, fibres) are functions of the rig and the
-positions (:mod:`.readout`); :class:`~facewarp._src.sim.frames.Frames` is what :meth:`run` records.
+(:meth:`~facewarp._src.physics.model.ModelBuilder.add_face`: what is simulated, every stiffness)
+and stepped on a device by a user's loop or a timeline. What a step changes is the State's, so
+:meth:`FaceSimulator.reset` is a copy of the rest State; the read-outs are functions of the rig
+and the positions (:mod:`.readout`), the frame loop is :class:`.stepper.FrameStepper`'s.
 """
 
 from __future__ import annotations
@@ -21,27 +18,10 @@ from ..physics.face_rig import FaceRig
 from ..physics.materials import material_profile
 from .frames import Frames, save_frames_npz
 from .readout import activation_vector, expression_activations as _activation_vector, fdp_points, head_surface
-from .readout import muscle_curves, parts_at, surface_index
-from .stepper import FrameStepper
+from .readout import jaw_vector, muscle_curves, parts_at, surface_index
+from .stepper import SOLVERS, FrameStepper, check_timing, face_stages, substep_count
 
 __all__ = ["SOLVERS", "FaceSimulator", "Frames", "face_stages", "save_frames_npz"]
-
-SOLVERS = ("implicit", "verlet")
-"""Solvers of :class:`FaceSimulator`: ``implicit`` (backward Euler, a few steps per frame; the
-default) and ``verlet`` (the explicit reference, hundreds of substeps per frame)."""
-
-
-def face_stages(model) -> dict:
-    """The kernel groups of a face Model, in step order: ``carry``, ``jaw``, ``support``,
-    ``muscles`` (Eq. 6.4.9, supports, Eq. 6.4.1) and ``contact`` (None without it)."""
-    from ..coupling.kinematic import CarryStage, JawStage
-    from ..physics.contact import ContactStage
-    from ..physics.muscle_stage import MuscleStage, SupportStage
-
-    return {"carry": CarryStage.from_model(model), "jaw": JawStage.from_model(model),
-            "support": SupportStage.from_model(model), "muscles": MuscleStage.from_model(model),
-            "contact": ContactStage.from_model(model) if model.contact is not None else None}
-
 
 class FaceSimulator:
     """A simulated face: the Model of one :class:`~facewarp.FaceRig` on one device, its solver
@@ -53,14 +33,12 @@ class FaceSimulator:
     Args:
         fr: The face rig (:func:`~facewarp.build_face` or :func:`~facewarp.load_face_rig`).
         device: Warp device, ``"cpu"`` or ``"cuda[:N]"``.
-        solver: ``"implicit"`` (default: backward Euler, stable at one step per frame;
-            :class:`~facewarp.physics.SolverImplicit`) or ``"verlet"`` (the explicit reference,
-            :class:`~facewarp.physics.SolverVerlet`, at its stable substep).
-        material: ``"physical"`` (default), ``"thesis"`` (Table 6.3 as it stands) or a material
-            object; ``solver="verlet", material="thesis"`` is the simulator before the implicit solver.
-        dt: Substep [s]; default: implicit one step per frame, Verlet its stable step.
-        substeps: Substeps (steps) per frame (overrides ``dt``).
-        fps: Frames per second of :meth:`step` / :meth:`run`.
+        solver: ``"implicit"`` (default: backward Euler, one step per frame) or ``"verlet"`` (the
+            explicit reference at its stable substep); :data:`.stepper.SOLVERS`.
+        material: ``"physical"`` (default), ``"thesis"`` (Table 6.3; with ``"verlet"`` the
+            simulator before the implicit solver) or a material object.
+        dt, substeps, fps: Substep [s] (default: implicit one per frame, Verlet its stable step),
+            substeps per frame (overrides ``dt``), frames per second of :meth:`step` / :meth:`run`.
         iterations, tolerance, method, solver_options: The implicit solver's (a fixed iteration
             count per step; the convergence step [m], default 3e-5; ``"lbfgs"`` on the CPU,
             ``"newton-pcg"`` on CUDA by default; further keywords of :class:`~facewarp.physics.SolverImplicit`).
@@ -83,18 +61,10 @@ class FaceSimulator:
         from ..physics.solvers.implicit import SolverImplicit
         from ..physics.solvers.verlet import SolverVerlet
 
-        if solver not in SOLVERS:
-            raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
-        mat = material_profile(material)
-        if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
-            raise InputError(f"fps: expected a positive number, got {fps!r}")
-        if substeps is not None and not (isinstance(substeps, (int, np.integer)) and substeps >= 1):
-            raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
-        if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-            raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
-        self.fr, self.fps, self.solver_name, self.material = fr, float(fps), solver, mat
+        check_timing(solver, fps, dt, substeps)
+        self.fr, self.fps, self.solver_name, self.material = fr, float(fps), solver, material_profile(material)
         builder = ModelBuilder()
-        builder.add_face(fr, material=mat, edge_damping=edge_damping, support_stiffness=support_stiffness,
+        builder.add_face(fr, material=self.material, edge_damping=edge_damping, support_stiffness=support_stiffness,
                          contact=contact, contact_modulus=contact_modulus, mass_scaling=mass_scaling)
         frame_dt = 1.0 / self.fps
         self.added_mass_fraction = 0.0
@@ -147,30 +117,14 @@ class FaceSimulator:
         self._target_a = self.activation_vector(activations)
 
     def set_jaw(self, opening: float, side: float = 0.0) -> None:
-        """Set the jaw angles [rad] reached at the end of the next :meth:`step`: ``opening`` about
-        the condyle u-axis (Sec. 6.4.3, 0..60 deg), ``side`` about the vertical v-axis (+-5 deg).
-
-        Raises:
-            InputError: a non-finite angle or one outside its range.
-        """
-        from ..expressions import JAW_U_MAX, JAW_V_MAX
-
-        u, v = float(opening), float(side)
-        if not (np.isfinite(u) and -1e-9 <= u <= JAW_U_MAX + 1e-9):
-            raise InputError(f"jaw opening: expected 0..{JAW_U_MAX:.4f} rad (0..60 deg), got {opening!r}")
-        if not (np.isfinite(v) and abs(v) <= JAW_V_MAX + 1e-9):
-            raise InputError(f"jaw side: expected within +-{JAW_V_MAX:.4f} rad (+-5 deg), got {side!r}")
-        self._target_j = np.array([max(u, 0.0), v], np.float32)
+        """Set the jaw angles [rad] reached at the end of the next :meth:`step`
+        (:func:`.readout.jaw_vector`: ``opening`` 0..60 deg, ``side`` +-5 deg)."""
+        self._target_j = jaw_vector(opening, side)
 
     def set_head_pose(self, R, t) -> None:
-        """Set the cranium's pose in the world (R (3, 3) rotation, t (3,) [m]), reached at the end
-        of the next step. The face is simulated in the head's own frame; the motion acts through
-        the loads of the accelerating frame (:class:`~facewarp.HeadPose`). :meth:`surface`,
-        :meth:`fdp` and :meth:`fdp_points` answer in the world frame, :meth:`positions` in the head's.
-
-        Raises:
-            InputError: R not a rotation, or non-finite values.
-        """
+        """Set the cranium's pose (R (3, 3) rotation, t (3,) [m]) reached at the end of the next
+        step; the face, simulated in the head's frame, feels the loads of the accelerating frame
+        (:class:`~facewarp.HeadPose`). :meth:`surface` and :meth:`fdp` answer in the world frame."""
         self._pose.set(R, t)
 
     def reset(self) -> None:
@@ -188,19 +142,10 @@ class FaceSimulator:
 
     # ------------------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
-        """Advance by ``dt`` [s] (default one frame, ``1 / fps``), in whole substeps; the controls
-        set since the last step ramp linearly across it (a jump would jolt the held nodes).
-
-        Raises:
-            InputError: ``dt`` not positive and finite.
-            SimulationError: a substep produced a NaN or an inverted tet.
-        """
-        if dt is None:
-            n = self.substeps
-        else:
-            if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-                raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
-            n = max(1, int(round(float(dt) / self.dt)))
+        """Advance by ``dt`` [s] (default one frame, ``1 / fps``) in whole substeps, the controls set
+        since the last step ramping across it. Raises InputError (a bad ``dt``) or SimulationError
+        (a substep made a NaN or an inverted tet)."""
+        n = self.substeps if dt is None else substep_count(dt, self.dt)
         t0 = time.perf_counter()
         if not self._pose.identity:  # the head rides a moving body: loads of the accelerating frame
             f = self._pose.node_forces(self.positions(), self.builder.mass, n * self.dt)
@@ -275,13 +220,12 @@ class FaceSimulator:
 
     def fdp_points(self) -> np.ndarray:
         """Current positions [m] of all FDPs, shape (84, 3), float64 (order: ``rig.fdp_ids``)."""
-        parts = self._parts_now(self._j)
-        return self._fdp_points(self.surface()[None], {k: P[None] for k, P in parts.items()})[0].astype(np.float64)
+        parts = {k: P[None] for k, P in self._parts_now(self._j).items()}
+        return fdp_points(self.fr, self.surface()[None], parts)[0].astype(np.float64)
 
     def part_points(self, *, frame: str = "world") -> dict:
-        """The rigid parts now (eyes, teeth, tongue): name -> vertices [m], shape (k, 3), float64;
-        the lower teeth and tongue turned by the current jaw, ``frame="world"`` with the head pose
-        applied (as :meth:`surface`), ``"head"`` without it."""
+        """The rigid parts now (eyes, teeth, tongue; the lower ones turned by the jaw): name ->
+        vertices [m], (k, 3), float64, in the ``"world"`` frame (as :meth:`surface`) or the ``"head"``'s."""
         return self._parts_now(self._j, frame=frame)
 
     def muscle_curves(self, samples: int = 24) -> np.ndarray:

@@ -8,9 +8,53 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.errors import InputError
 from ..core.warp import get_warp
 
-__all__ = ["FrameStepper"]
+__all__ = ["SOLVERS", "FrameStepper", "check_timing", "face_stages", "substep_count"]
+
+SOLVERS = ("implicit", "verlet")
+"""Solvers of :class:`FaceSimulator`: ``implicit`` (backward Euler, a few steps per frame; the
+default) and ``verlet`` (the explicit reference, hundreds of substeps per frame)."""
+
+
+def face_stages(model) -> dict:
+    """The kernel groups of a face Model, in step order: ``carry``, ``jaw``, ``support``,
+    ``muscles`` (Eq. 6.4.9, supports, Eq. 6.4.1) and ``contact`` (None without it)."""
+    from ..coupling.kinematic import CarryStage, JawStage
+    from ..physics.contact import ContactStage
+    from ..physics.muscle_stage import MuscleStage, SupportStage
+
+    return {"carry": CarryStage.from_model(model), "jaw": JawStage.from_model(model),
+            "support": SupportStage.from_model(model), "muscles": MuscleStage.from_model(model),
+            "contact": ContactStage.from_model(model) if model.contact is not None else None}
+
+
+def check_timing(solver: str, fps, dt, substeps) -> None:
+    """The simulator's solver name and frame timing, checked at the public edge.
+
+    Raises:
+        InputError: an unknown solver, a non-positive ``fps`` or ``dt``, ``substeps`` < 1.
+    """
+    if solver not in SOLVERS:
+        raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
+    if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
+        raise InputError(f"fps: expected a positive number, got {fps!r}")
+    if substeps is not None and not (isinstance(substeps, (int, np.integer)) and substeps >= 1):
+        raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
+    if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+        raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
+
+
+def substep_count(dt, step: float) -> int:
+    """Whole substeps of ``step`` [s] in ``dt`` [s] (at least one).
+
+    Raises:
+        InputError: ``dt`` not a positive finite number.
+    """
+    if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+        raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
+    return max(1, int(round(float(dt) / step)))
 
 
 class FrameStepper:
