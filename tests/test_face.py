@@ -228,3 +228,30 @@ def test_two_states_stepped_alternately_equal_one(rig):
     assert np.abs(out[0][0] - rig.nodes).max() > 1e-4, "the controls must move the face"
     for name, x, y in zip(("positions", "prev_positions", "muscle_ctrl", "jaw_carry"), *out):
         np.testing.assert_array_equal(x, y, err_msg=name)
+
+
+def test_builder_add_face_makes_the_whole_model(rig):
+    from facewarp.physics import CONTACT_MODULUS, ModelBuilder
+
+    with pytest.raises(InputError, match="add the tissue first"):
+        ModelBuilder().add_muscles(rig.rig)
+    b = ModelBuilder()
+    b.add_face(rig, material="physical")
+    with pytest.raises(InputError, match="one head per builder"):
+        b.add_tissue(rig.nodes, rig.tets)
+    m = b.finalize("cpu")
+    n, M = len(rig.nodes), len(rig.rig.names)
+    assert m.head_count == 1 and m.head_node_start.tolist() == [0, n] and m.head_tet_start.tolist() == [0, len(rig.tets)]
+    assert m.head_muscle_start.tolist() == [0, M] and m.control().activations.shape == (M,)
+    # every material-dependent stiffness is the builder's: physical muscles, supports and contact per sheet area
+    area = b.vertex_area
+    k = m.muscles.rig.att_stiffness
+    per_node = np.bincount(rig.rig.att_node, minlength=n)[rig.rig.att_node]
+    np.testing.assert_allclose(k * per_node, b.material.muscle_modulus * area[rig.rig.att_node], rtol=1e-12)
+    np.testing.assert_allclose(m.supports.stiffness, b.material.support_modulus * area[rig.support_nodes], rtol=1e-12)
+    assert m.contact is not None and m.contact.geometry is rig.contact
+    np.testing.assert_array_less(CONTACT_MODULUS * area - 1e-9, m.contact.node_stiffness)
+    # the State starts at rest with the muscles' rest control points
+    s = m.state()
+    np.testing.assert_array_equal(s.muscle_ctrl.numpy(), rig.rig.ctrl_rest.astype(np.float32))
+    np.testing.assert_array_equal(s.jaw_carry.numpy(), np.zeros(2, np.float32))
