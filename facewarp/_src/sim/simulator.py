@@ -19,7 +19,7 @@ from ..physics.materials import material_profile
 from .frames import Frames, save_frames_npz
 from .readout import activation_vector, expression_activations as _activation_vector, fdp_points, head_surface
 from .readout import jaw_vector, muscle_curves, parts_at, surface_index
-from .stepper import SOLVERS, FrameStepper, check_timing, face_stages, substep_count
+from .stepper import SOLVERS, FrameStepper, check_timing, face_stages, frame_timing, make_solver, substep_count
 
 __all__ = ["SOLVERS", "FaceSimulator", "Frames", "face_stages", "save_frames_npz"]
 
@@ -55,36 +55,25 @@ class FaceSimulator:
     def __init__(self, fr: FaceRig, *, device: str = "cpu", solver: str = "implicit", material="physical",
                  dt: float | None = None, substeps: int | None = None, fps: float = 30.0,
                  iterations: int | None = None, tolerance: float | None = None, method: str | None = None,
-                 solver_options: dict | None = None, support_stiffness: float | None = None, edge_damping: float | None = None,
-                 mass_scaling: bool = True, contact: bool = True, contact_modulus: float | None = None):
+                 solver_options: dict | None = None, support_stiffness: float | None = None,
+                 edge_damping: float | None = None, mass_scaling: bool = True, contact: bool = True,
+                 contact_modulus: float | None = None):
         from ..physics.model import ModelBuilder
-        from ..physics.solvers.implicit import SolverImplicit
-        from ..physics.solvers.verlet import SolverVerlet
 
         check_timing(solver, fps, dt, substeps)
         self.fr, self.fps, self.solver_name, self.material = fr, float(fps), solver, material_profile(material)
         builder = ModelBuilder()
         builder.add_face(fr, material=self.material, edge_damping=edge_damping, support_stiffness=support_stiffness,
                          contact=contact, contact_modulus=contact_modulus, mass_scaling=mass_scaling)
-        frame_dt = 1.0 / self.fps
-        self.added_mass_fraction = 0.0
-        if solver == "verlet":
-            self.substeps, self.dt, self.added_mass_fraction = builder.explicit_step(
-                frame_dt, dt=dt, substeps=substeps, mass_scaling=mass_scaling)
-        else:
-            self.substeps = int(substeps if substeps is not None else 1 if dt is None else np.ceil(frame_dt / dt))
-            self.dt = frame_dt / self.substeps
+        self.substeps, self.dt, self.added_mass_fraction = frame_timing(builder, solver, self.fps, dt, substeps,
+                                                                        mass_scaling=mass_scaling)
         self.builder, self.model = builder, builder.finalize(device)
         self.device, self.jaw, self.contact_geometry = self.model.device, fr.jaw, fr.contact if contact else None
         st = face_stages(self.model)
         self.carry, self.jaw_stage, self.support, self.muscles, self.contact = (
             st["carry"], st["jaw"], st["support"], st["muscles"], st["contact"])
-        stages = [s for s in st.values() if s is not None]
-        if solver == "verlet":
-            self.solver = SolverVerlet(self.model, stages=stages)
-        else:
-            opts = {"tolerance": 3e-5 if tolerance is None else tolerance, **(solver_options or {})}
-            self.solver = SolverImplicit(self.model, stages=stages, method=method, iterations=iterations, **opts)
+        self.solver = make_solver(self.model, [s for s in st.values() if s is not None], solver, method=method,
+                                  iterations=iterations, tolerance=tolerance, solver_options=solver_options)
         self.control = self.model.control()
         self.rest_state = self.model.state()  # the rest fibres of zero control (frame 0 of run() draws them)
         self.muscles.update_geometry(self.control, self.rest_state)

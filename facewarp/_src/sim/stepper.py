@@ -11,7 +11,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.warp import get_warp
 
-__all__ = ["SOLVERS", "FrameStepper", "check_timing", "face_stages", "substep_count"]
+__all__ = ["SOLVERS", "FrameStepper", "check_timing", "face_stages", "frame_timing", "make_solver", "substep_count"]
 
 SOLVERS = ("implicit", "verlet")
 """Solvers of :class:`FaceSimulator`: ``implicit`` (backward Euler, a few steps per frame; the
@@ -44,6 +44,31 @@ def check_timing(solver: str, fps, dt, substeps) -> None:
         raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
     if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
         raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
+
+
+def frame_timing(builder, solver: str, fps: float, dt=None, substeps=None, *, mass_scaling: bool = True):
+    """Substeps per frame and the substep [s] of ``solver`` for a face builder: the implicit
+    solver one step per frame (or ``substeps``, or as many as ``dt`` needs), the Verlet reference
+    its stable step (:meth:`~facewarp._src.physics.model.ModelBuilder.explicit_step`, which may
+    scale masses). Returns ``(substeps, dt [s], added mass fraction)``."""
+    frame_dt = 1.0 / fps
+    if solver == "verlet":
+        return builder.explicit_step(frame_dt, dt=dt, substeps=substeps, mass_scaling=mass_scaling)
+    n = int(substeps if substeps is not None else 1 if dt is None else np.ceil(frame_dt / dt))
+    return n, frame_dt / n, 0.0
+
+
+def make_solver(model, stages, solver: str, *, method=None, iterations=None, tolerance=None, solver_options=None):
+    """The solver of a face Model: :class:`~facewarp._src.physics.solvers.verlet.SolverVerlet`, or
+    :class:`~facewarp._src.physics.solvers.implicit.SolverImplicit` (``tolerance`` default 3e-5 m,
+    ``solver_options`` its further keywords)."""
+    from ..physics.solvers.implicit import SolverImplicit
+    from ..physics.solvers.verlet import SolverVerlet
+
+    if solver == "verlet":
+        return SolverVerlet(model, stages=stages)
+    opts = {"tolerance": 3e-5 if tolerance is None else tolerance, **(solver_options or {})}
+    return SolverImplicit(model, stages=stages, method=method, iterations=iterations, **opts)
 
 
 def substep_count(dt, step: float) -> int:
