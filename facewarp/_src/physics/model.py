@@ -1,6 +1,15 @@
-"""Builder -> Model / State / Control for the skin tissue (thesis Sec. 6.4, Table 6.3).
+"""Builder -> Model / State / Control: what is simulated, built once (thesis Sec. 6.4, Table 6.3).
 
-:class:`ModelBuilder` takes a generic tetrahedral mesh (numpy), validates it and derives the
+:class:`ModelBuilder` collects a head's parts, computes every material-dependent number and
+finalizes one :class:`Model`: :meth:`~ModelBuilder.add_tissue` (the tet mesh, below),
+:meth:`~ModelBuilder.add_muscles` (Eq. 6.4.1), :meth:`~ModelBuilder.add_supports`,
+:meth:`~ModelBuilder.add_jaw` (Eq. 6.4.9) and :meth:`~ModelBuilder.add_contacts`, or all of them
+from a face rig with :meth:`~ModelBuilder.add_face`. The Model carries per-head ranges
+(``head_*_start``), so more heads are an append. Every array a step changes is in :class:`State`
+(positions, previous positions, the muscle control points, the jaw carry); the inputs are in
+:class:`Control`.
+
+The tissue: a generic tetrahedral mesh (numpy), validated, gives the
 elements of the deformation model: unique tet edges (distance energy, Eq. 6.4.4 with the
 nonlinear stiffness of Eq. 6.4.6), unique tet faces (area energy, Eq. 6.4.7) and the tets
 themselves (volume energy, Eq. 6.4.8), with per-element stiffness, damping and per-node masses
@@ -166,9 +175,13 @@ def sheet_areas(V, T, layer) -> np.ndarray:
 
 
 class ModelBuilder:
-    """Validates a tet mesh and derives the elements of the deformation model (Sec. 6.4).
+    """Collects what is simulated and finalizes the :class:`Model` (module doc).
 
-    Args:
+    ``ModelBuilder()`` starts empty (then :meth:`add_face`, or :meth:`add_tissue` and the other
+    ``add_*``); ``ModelBuilder(vertices, tets, **tissue)`` calls :meth:`add_tissue` at once. The
+    tissue validates a tet mesh and derives the elements of the deformation model (Sec. 6.4).
+
+    Args (of :meth:`add_tissue`; ``muscle_count`` of the constructor):
         vertices: Rest positions [m], shape (n, 3), float.
         tets: Tetrahedra, shape (k, 4), int; each must have positive signed volume
             ``(1/6) (x1 - x0) . ((x2 - x0) x (x3 - x0))`` (see :func:`facewarp.geometry.signed_tet_volumes`).
@@ -204,7 +217,8 @@ class ModelBuilder:
             ``4 k0 / D0^2`` (6e5 N/m for 1 cm outer edges), stiff against the tissue; a few very
             short edges (a crease of an adapted head) do not stiffen every hold. Physical:
             ``hold_modulus`` [N/m^3] times the node's sheet area (:func:`sheet_areas`).
-        muscle_count: Number of muscle activations in :class:`Control`. Default 0.
+        muscle_count: Number of muscle activations in :class:`Control` (default 0; :meth:`add_muscles`
+            sets it to the rig's muscles).
 
     Raises:
         InputError: on bad shapes, indices out of range, repeated vertices in a tet, an
@@ -222,7 +236,11 @@ class ModelBuilder:
         tet_damping_coef (k,) [J s]; tet_rest_inverse (k, 3, 3) [1/m]; tet_shear_k (k,) [J];
         tet_shear_damping (k,) [J s] (the shear term, module doc); tet_edge_index (k, 6), tet_face_index
         (k, 4): each tet's edges and faces as rows of ``edges`` / ``faces``; damping_rate [1/s]; stiffness_damping [s];
-        edge_damping [N s/m]; material (the profile); muscle_count.
+        edge_damping [N s/m]; material (the profile); muscle_count; head_count. The other
+        ``add_*`` set ``muscle_rig``, ``muscle_node_amount``; ``support_nodes``, ``support_normal``,
+        ``support_amount``, ``support_stiffness`` (s,) [N/m]; ``jaw``, ``jaw_nodes``, ``jaw_amount``,
+        ``carry_nodes``, ``carry_amount``; ``contact_geometry``, ``contact_stiffness`` and
+        ``glide_stiffness`` (n,) [N/m].
     """
 
     def __init__(self, vertices=None, tets=None, *, muscle_count: int = 0, **tissue):
