@@ -15,22 +15,22 @@ Hessian are in the solvers' kernels and in :mod:`.potential`):
 * lid on eyeball: free nodes within ``EYE_NEAR_M`` of an eyeball's sphere, pushed out of the ball
   ``|x - c| >= r`` (analytic, static springs). The lids' inner sheet there glides on the eyeball
   (:func:`~facewarp._src.anatomy.contact.eyeball_sheet_nodes`): it has no planar sliding support
-  (``face_rig``) but a two-sided spring of the support's stiffness that keeps each node on its glide sphere, and a one-sided
-  floor there at the contact's stiffness (besides its one-sided contact), so the lid slides
-  over the ball and neither sinks into it nor lifts off. The glide sphere
+  (``face_rig``) but a two-sided spring of the support's stiffness that keeps each node on its glide
+  sphere, and a one-sided floor there at the contact's stiffness (besides its one-sided contact), so
+  the lid slides over the ball and neither sinks into it nor lifts off. The glide sphere
   (:func:`~facewarp._src.anatomy.contact.glide_spheres`) runs through the node's rest position and
-  meets the fissure plane on the eyeball's surface: the two lids close at one depth, on the ball, whatever their depths at
-  rest (a sphere about the eyeball's centre kept each at its rest depth: on the ICT-adapted heads
-  the lower lid's inner sheet lies 0.5-1.5 mm deeper than the upper one's, up to 1 mm inside
-  the ball's sphere, and the closed upper margin stayed up to 1.2 mm in front of the lower one;
-  the floor: the ring pulls the lids into the ball with ~2.5 N, and on the support's stiffness
-  alone the lower lid stopped 0.5 mm short of its sphere). A plane tangent at rest, as the
+  meets the fissure plane on the eyeball's surface: the two lids close at one depth, on the ball,
+  whatever their depths at rest (a sphere about the eyeball's centre kept each at its rest depth: on
+  the ICT-adapted heads the lower lid's inner sheet lies 0.5-1.5 mm deeper than the upper one's, up
+  to 1 mm inside the ball's sphere, and the closed upper margin stayed up to 1.2 mm in front of the
+  lower one; the floor: the ring pulls the lids into the ball with ~2.5 N, and on the support's
+  stiffness alone the lower lid stopped 0.5 mm short of its sphere). A plane tangent at rest, as the
   sliding support of the cheeks, holds a node that slides 4-5 mm down a 12 mm ball against the
-  ball's push (20-25 degrees off the plane): pulled back along the plane's normal, smoothed over
-  1 cm and tilted laterally, the default head's upper lid went medially as it closed (with the
-  ring's lopsided attachments,
-  :func:`~facewarp._src.anatomy.attach.attach_by_area`: FDP 3.1 2.6 mm), and at level 1 the lid
-  lifted off the ball (its margin 0.9 mm off, rolled forward in front of the lower one);
+  ball's push (20-25 degrees off the plane): pulled back along the plane's normal, smoothed over 1
+  cm and tilted laterally, the default head's upper lid went medially as it closed (with the ring's
+  lopsided attachments, :func:`~facewarp._src.anatomy.attach.attach_by_area`: FDP 3.1 2.6 mm), and
+  at level 1 the lid lifted off the ball (its margin 0.9 mm off, rolled forward in front of the
+  lower one);
 * lid on lid: the orbicularis oculi closes the lids toward the plane of the palpebral fissure
   (a sphincter with ``to_plane``: the plane through its centre with normal ``center_normal``,
   between its two fixed corners; :mod:`.kernels_muscle`), where the two lid margins meet. Every
@@ -134,8 +134,8 @@ class ContactGeometry:
             planar support, :func:`~facewarp._src.anatomy.contact.eyeball_sheet_nodes`), shape (c,), bool.
         glide_centers, glide_radii: The sphere each of ``eye_nodes`` glides on (used where
             ``eye_glide``): centre [m], shape (c, 3), and radius [m], shape (c,), float64
-            (:func:`~facewarp._src.anatomy.contact.glide_spheres`; empty: the sphere about its eyeball's centre through its rest
-            position).
+            (:func:`~facewarp._src.anatomy.contact.glide_spheres`; empty: the sphere about its
+            eyeball's centre through its rest position).
         excluded: Candidates left out because they already touch or cross at rest, per kind
             (``{"lip_lip": n, "lip_teeth": n}``; a separated build has 0), and
             ``lid_eye_inside_at_rest``: lid nodes inside the eyeball's sphere at rest (kept, with
@@ -181,12 +181,14 @@ def contact_to_arrays(g: ContactGeometry) -> dict:
     """The arrays of ``g`` for an ``.npz`` file, keys ``contact_*`` (:func:`contact_from_arrays`)."""
     out = {f"contact_{k}": np.asarray(getattr(g, k)) for k in _CONTACT_ARRAYS}
     for i, (S, nodes) in enumerate(zip(g.lip_faces, g.lip_nodes)):
-        out[f"contact_lip_faces_{i}"], out[f"contact_lip_nodes_{i}"] = np.asarray(S, np.int64), np.asarray(nodes, np.int64)
+        out[f"contact_lip_faces_{i}"] = np.asarray(S, np.int64)
+        out[f"contact_lip_nodes_{i}"] = np.asarray(nodes, np.int64)
     out["contact_lip_count"] = np.array(len(g.lip_faces))
     out["contact_teeth_names"] = np.array([t[0] for t in g.teeth], dtype=str)
     for i, (_, TV, TF, amount, nodes) in enumerate(g.teeth):
         out[f"contact_teeth_{i}_V"], out[f"contact_teeth_{i}_F"] = np.asarray(TV, np.float64), np.asarray(TF, np.int64)
-        out[f"contact_teeth_{i}_jaw"], out[f"contact_teeth_{i}_nodes"] = np.array(float(amount)), np.asarray(nodes, np.int64)
+        out[f"contact_teeth_{i}_jaw"] = np.array(float(amount))
+        out[f"contact_teeth_{i}_nodes"] = np.asarray(nodes, np.int64)
     out["contact_excluded_names"] = np.array(list(g.excluded), dtype=str)
     out["contact_excluded_counts"] = np.array([int(v) for v in g.excluded.values()], np.int64)
     return out
