@@ -60,7 +60,7 @@ _NAMES = {
     "AdaptOptions": "adapt.pipeline", "detect_landmarks": "adapt.detect",
     # anatomy
     "Anatomy": "anatomy.build", "build_anatomy": "anatomy.build", "write_anatomy": "anatomy.build",
-    "JawKinematic": "anatomy.jaw",
+    "JawKinematic": "geometry.jaw",
     # expressions
     "MUSCLES": "expressions", "PRESETS": "expressions", "Expression": "expressions", "Segment": "expressions",
     "Timeline": "expressions", "blend": "expressions", "load_sequence": "expressions", "preset": "expressions",
@@ -68,7 +68,7 @@ _NAMES = {
     "jaw_angle_for_drop": "expressions", "jaw_lever": "expressions", "expression_from_activations": "expressions",
     "REFERENCE_JAW_LEVER": "expressions",
     # simulation
-    "FaceRig": "physics.face_rig", "build_face": "physics.face_rig", "face_rig_from_anatomy": "physics.face_rig",
+    "FaceRig": "physics.face_rig", "build_face": "anatomy.rig", "face_rig_from_anatomy": "anatomy.rig",
     "load_face_rig": "physics.face_rig", "save_face_rig": "physics.face_rig",
     "FaceSimulator": "sim.simulator", "Frames": "sim.simulator", "save_frames_npz": "sim.simulator",
     # one playback path: a timeline played on a simulator, each frame handed to sinks
@@ -117,7 +117,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.adapt.pipeline import AdaptOptions, AdaptResult, adapt
     from ._src.adapt.transfer import load_head
     from ._src.anatomy.build import Anatomy, build_anatomy, write_anatomy
-    from ._src.anatomy.jaw import JawKinematic
+    from ._src.geometry.jaw import JawKinematic
     from ._src.core.errors import FacewarpError, InputError, SimulationError
     from ._src.coupling.head_pose import HeadPose
     from ._src.coupling.kinematic import CarryStage, JawStage
@@ -133,7 +133,8 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.importers.ict import ICT_INNER_LIP_VERTICES, ICT_PART_RANGES, ICT_SKIN_VERTICES, import_ict
     from ._src.jobs.animation import UsdAnimation, play_timeline
     from ._src.jobs.template import export_template
-    from ._src.physics.face_rig import FaceRig, build_face, face_rig_from_anatomy, load_face_rig, save_face_rig
+    from ._src.anatomy.rig import build_face, face_rig_from_anatomy
+    from ._src.physics.face_rig import FaceRig, load_face_rig, save_face_rig
     from ._src.physics.model import Control, Model, ModelBuilder, State
     from ._src.physics.muscle_stage import MuscleRig, MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis

@@ -93,7 +93,7 @@ from ._src.anatomy.lips import (  # noqa: F401
     separate_lips,
     separate_skin_lips,
 )
-from ._src.anatomy.jaw import (  # noqa: F401
+from ._src.geometry.jaw import (  # noqa: F401
     JawKinematic,
     JAW_REGIONS,
     jaw_rotation,

@@ -13,6 +13,10 @@ from ._src.physics.model import (  # noqa: F401
     Control,
     Model,
     ModelBuilder,
+    ModelContact,
+    ModelJaw,
+    ModelMuscles,
+    ModelSupports,
     Springs,
     State,
     sheet_areas,
@@ -59,15 +63,17 @@ from ._src.physics.muscle_stage import (  # noqa: F401
     segment_frames,
 )
 from ._src.physics.face_rig import (  # noqa: F401
-    BONE_REGIONS,
-    MUSCLE_STIFFNESS,
     FaceRig,
-    build_face,
-    face_rig_from_anatomy,
     load_face_rig,
-    muscle_rig,
     node_jaw_amounts,
     save_face_rig,
+)
+from ._src.anatomy.rig import (  # noqa: F401
+    BONE_REGIONS,
+    MUSCLE_STIFFNESS,
+    build_face,
+    face_rig_from_anatomy,
+    muscle_rig,
 )
 from ._src.physics.contact import (  # noqa: F401
     CONTACT_GAP,
@@ -76,6 +82,8 @@ from ._src.physics.contact import (  # noqa: F401
     ContactGeometry,
     ContactStage,
     contact_crossings,
+)
+from ._src.anatomy.contact import (  # noqa: F401
     contact_geometry,
     lid_contact_geometry,
     lip_contact_geometry,
@@ -92,4 +100,4 @@ from ._src.sim.simulator import (  # noqa: F401
 )
 
 __all__ = ["BONE_REGIONS", "CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "CarryStage", "ContactGeometry",
-           "ContactStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "IMPLICIT_METHODS", "JawStage", "MASS_SCALING_QUANTILE", "MATERIALS", "MUSCLE_STIFFNESS", "MaterialPhysical", "MaterialThesis", "Model", "ModelBuilder", "MuscleRig", "MuscleStage", "SOLVERS", "SolverBase", "SolverImplicit", "SolverStage", "SolverVerlet", "Springs", "State", "StepData", "StepPotential", "SupportStage", "TABLE_6_3", "TISSUE_DENSITY", "build_face", "contact_crossings", "contraction_curve", "contact_geometry", "default_linear_iterations", "ellipsoid_uv", "lid_contact_geometry", "lip_contact_geometry", "face_rig_from_anatomy", "factorization_backend", "isotropic_moduli", "linear_stiffness", "load_face_rig", "material_profile", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "sheet_areas", "simulate", "stable_dt", "thesis_substep"]
+           "ContactStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "IMPLICIT_METHODS", "JawStage", "MASS_SCALING_QUANTILE", "MATERIALS", "MUSCLE_STIFFNESS", "MaterialPhysical", "MaterialThesis", "Model", "ModelBuilder", "ModelContact", "ModelJaw", "ModelMuscles", "ModelSupports", "MuscleRig", "MuscleStage", "SOLVERS", "SolverBase", "SolverImplicit", "SolverStage", "SolverVerlet", "Springs", "State", "StepData", "StepPotential", "SupportStage", "TABLE_6_3", "TISSUE_DENSITY", "build_face", "contact_crossings", "contraction_curve", "contact_geometry", "default_linear_iterations", "ellipsoid_uv", "lid_contact_geometry", "lip_contact_geometry", "face_rig_from_anatomy", "factorization_backend", "isotropic_moduli", "linear_stiffness", "load_face_rig", "material_profile", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "sheet_areas", "simulate", "stable_dt", "thesis_substep"]

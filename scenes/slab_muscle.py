@@ -64,9 +64,10 @@ class SlabMuscle:
         border = np.isclose(np.abs(skin.vertices[:, :2]), SIZE / 2).any(1)
         rig = physics.muscle_rig(self.anatomy.muscles, stiffness=STIFFNESS)
         self.attached = len(rig.att_node)
-        self.model = fw.ModelBuilder(skin.vertices, skin.tets, layer=skin.layer, fixed=border,
-                                     muscle_count=1).finalize(device)
-        self.solver = fw.SolverVerlet(self.model, stages=[fw.MuscleStage(rig, None, self.model.device)])
+        builder = fw.ModelBuilder(skin.vertices, skin.tets, layer=skin.layer, fixed=border)
+        builder.add_muscles(rig)  # the muscle's control points are State: the Model knows the muscles
+        self.model = builder.finalize(device)
+        self.solver = fw.SolverVerlet(self.model, stages=[fw.MuscleStage.from_model(self.model)])
         dt = physics.stable_dt(self.model)
         self.substeps = max(1, math.ceil(1.0 / (self.fps * dt)))
         self.dt = 1.0 / (self.fps * self.substeps)

@@ -39,6 +39,23 @@ def test_face_rig_roundtrip(rig, tmp_path):
     np.testing.assert_allclose(r2.rig.ctrl_rest, rig.rig.ctrl_rest)
     assert r2.rig.names == rig.rig.names and set(r2.parts) == set(rig.parts)
     assert rig.fixed.any() and rig.held.any() and len(rig.support_nodes) and len(rig.jaw_nodes)
+    # the contact geometry is built once and saved with the rig
+    g, g2 = rig.contact, r2.contact
+    for name in ("node_side", "eye_nodes", "eye_centers", "lid_nodes", "lid_partner", "glide_radii"):
+        np.testing.assert_array_equal(getattr(g2, name), getattr(g, name), err_msg=name)
+    assert [len(n) for n in g2.lip_nodes] == [len(n) for n in g.lip_nodes] and g2.excluded == g.excluded
+    assert [t[0] for t in g2.teeth] == [t[0] for t in g.teeth]
+    np.testing.assert_array_equal(g2.teeth[0][4], g.teeth[0][4])
+
+
+def test_old_face_rig_without_contact_asks_for_a_rebuild(rig, tmp_path):
+    p = save_face_rig(tmp_path / "face_rig.npz", rig)
+    with np.load(p) as z:
+        old = {k: z[k] for k in z.files if not k.startswith("contact_")}
+    np.savez(tmp_path / "old.npz", **old)
+    with pytest.raises(InputError, match="rebuild it with `facewarp build`") as e:
+        load_face_rig(tmp_path / "old.npz")
+    assert "\n" not in str(e.value)
 
 
 def test_rest_stays_at_rest(rig):
@@ -167,3 +184,74 @@ def test_cpu_and_cuda_agree(rig, material):
     moved = np.linalg.norm(x_cpu - rig.nodes, axis=1).max()
     diff = np.linalg.norm(x_cpu - x_gpu, axis=1).max()
     assert moved > 1e-3 and diff <= 1e-4 * moved, (diff, moved)
+
+
+def _drive(sim, steps=4):
+    for k in range(steps):
+        sim.set_activations({"zygomatic_major": 0.2 * k, "orbicularis_oris": 0.1 * k, "frontalis_major": 0.15 * k})
+        sim.set_jaw(np.deg2rad(4.0 * k))
+        sim.step()
+    return sim.positions(), sim.state.muscle_ctrl.numpy(), sim.state.jaw_carry.numpy(), sim.fdp_points()
+
+
+def test_reset_is_a_fresh_simulator(rig):
+    # reset() copies the rest State (and zeroes the controls): after any sequence of steps,
+    # controls and head poses the next run is bit for bit a fresh simulator's
+    used = FaceSimulator(rig)
+    used.run(timeline_for("smile"), 0.5)  # the CPU solver refactorises on the way (a later Hessian)
+    _drive(used, 6)
+    used.set_head_pose(np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), np.array([0.0, 0.01, 0.0]))
+    used.set_activations({"orbicularis_oculi": 1.0})
+    used.step()
+    used.reset()
+    again, fresh = _drive(used), _drive(FaceSimulator(rig))
+    for name, a, b in zip(("positions", "muscle_ctrl", "jaw_carry", "fdp"), again, fresh):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+
+
+def test_two_states_stepped_alternately_equal_one(rig):
+    # solver.step(state_in, state_out, control, dt): every per-step array is in the State, so
+    # swapping two States step by step gives the same as stepping one State and copying back
+    out = []
+    for swap in (True, False):
+        sim = FaceSimulator(rig)
+        a, b = sim.model.state(), sim.model.state()
+        for k in range(5):
+            sim.control.activations.assign(np.full(len(sim.muscle_names), 0.15 * k, np.float32))
+            sim.control.jaw_angles.assign(np.array([np.deg2rad(3.0 * k), 0.0], np.float32))
+            sim.solver.step(a, b, sim.control, sim.dt)
+            if swap:
+                a, b = b, a
+            else:
+                a.assign(b)
+        out.append([x.numpy() for x in (a.positions, a.prev_positions, a.muscle_ctrl, a.jaw_carry)])
+    assert np.abs(out[0][0] - rig.nodes).max() > 1e-4, "the controls must move the face"
+    for name, x, y in zip(("positions", "prev_positions", "muscle_ctrl", "jaw_carry"), *out):
+        np.testing.assert_array_equal(x, y, err_msg=name)
+
+
+def test_builder_add_face_makes_the_whole_model(rig):
+    from facewarp.physics import CONTACT_MODULUS, ModelBuilder
+
+    with pytest.raises(InputError, match="add the tissue first"):
+        ModelBuilder().add_muscles(rig.rig)
+    b = ModelBuilder()
+    b.add_face(rig, material="physical")
+    with pytest.raises(InputError, match="one head per builder"):
+        b.add_tissue(rig.nodes, rig.tets)
+    m = b.finalize("cpu")
+    n, M = len(rig.nodes), len(rig.rig.names)
+    assert m.head_count == 1 and m.head_node_start.tolist() == [0, n] and m.head_tet_start.tolist() == [0, len(rig.tets)]
+    assert m.head_muscle_start.tolist() == [0, M] and m.control().activations.shape == (M,)
+    # every material-dependent stiffness is the builder's: physical muscles, supports and contact per sheet area
+    area = b.vertex_area
+    k = m.muscles.rig.att_stiffness
+    per_node = np.bincount(rig.rig.att_node, minlength=n)[rig.rig.att_node]
+    np.testing.assert_allclose(k * per_node, b.material.muscle_modulus * area[rig.rig.att_node], rtol=1e-12)
+    np.testing.assert_allclose(m.supports.stiffness, b.material.support_modulus * area[rig.support_nodes], rtol=1e-12)
+    assert m.contact is not None and m.contact.geometry is rig.contact
+    np.testing.assert_array_less(CONTACT_MODULUS * area - 1e-9, m.contact.node_stiffness)
+    # the State starts at rest with the muscles' rest control points
+    s = m.state()
+    np.testing.assert_array_equal(s.muscle_ctrl.numpy(), rig.rig.ctrl_rest.astype(np.float32))
+    np.testing.assert_array_equal(s.jaw_carry.numpy(), np.zeros(2, np.float32))

@@ -14,6 +14,13 @@ from facewarp.physics import (CarryStage, JawStage, ModelBuilder, MuscleRig, Mus
 S2 = np.sqrt(0.5)
 
 
+def muscle_builder(V, T, layer, rig):
+    """A builder of the slab with the muscles of ``rig`` (their control points are State)."""
+    b = ModelBuilder(V, T, layer=layer)
+    b.add_muscles(rig)
+    return b
+
+
 def slab(n=4, h=0.01):
     """A 2-layer slab of tets (n x n cells, h spacing) with outer layer on top (z = 0)."""
     g = np.stack(np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij"), -1).reshape(-1, 2) * h
@@ -85,7 +92,7 @@ def test_kernels_match_reference(device):
     V, T, layer = slab()
     inner = np.where(layer == 1)[0]
     rig = small_rig(inner, V[inner])
-    b = ModelBuilder(V, T, layer=layer, muscle_count=2)
+    b = muscle_builder(V, T, layer, rig)
     model = b.finalize(device)
     jaw = JawKinematic(np.array([0.02, 0.05, 0.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
                        np.array([[0.03, 0, 0], [0.01, 0, 0]]), np.array([0.02, 0, 0]))
@@ -96,9 +103,10 @@ def test_kernels_match_reference(device):
     acts, angles = np.array([0.8, 0.5]), np.array([0.3, 0.05])
     control.activations.assign(acts.astype(np.float32))
     control.jaw_angles.assign(angles.astype(np.float32))
-    stage.update_geometry(control)
+    state = model.state()
+    stage.update_geometry(control, state)
     ctrl_ref, _ = rig_reference(rig, acts, jaw, angles)
-    np.testing.assert_allclose(stage.ctrl.numpy(), ctrl_ref, atol=2e-6, err_msg="control points")
+    np.testing.assert_allclose(state.muscle_ctrl.numpy(), ctrl_ref, atol=2e-6, err_msg="control points")
     c, f, r = segment_frames(rig, ctrl_ref)
     np.testing.assert_allclose(stage.seg_radii.numpy(), r, rtol=1e-4, err_msg="radii")
     np.testing.assert_allclose(stage.seg_center.numpy(), c, atol=2e-6, err_msg="centres")
@@ -112,7 +120,7 @@ def test_rest_has_no_muscle_force_and_contraction_pulls(device):
     V, T, layer = slab()
     inner = np.where(layer == 1)[0]
     rig = small_rig(inner, V[inner])
-    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    model = muscle_builder(V, T, layer, rig).finalize(device)
     stage = MuscleStage(rig, None, model.device)
     solver = SolverVerlet(model, stages=[stage])
     state, control = model.state(), model.control()
@@ -155,8 +163,8 @@ def test_carry_stage_moves_nodes_rigidly_without_velocity(device):
     assert np.abs(f).max() < 1e-2, "a rigid carry strains nothing"
     solver.step(state, out, control, 1e-5)  # same angles: no further carry, the slab stays put
     np.testing.assert_allclose(out.positions.numpy(), target, atol=2e-6)
-    stage.reset()
-    assert np.all(stage.prev.numpy() == 0)
+    np.testing.assert_array_equal(state.jaw_carry.numpy(), np.array([0.2, 0.03], np.float32))  # the angles the positions are at
+    np.testing.assert_array_equal(out.jaw_carry.numpy(), np.array([0.2, 0.03], np.float32))  # handed on to the step's end State
 
 
 def test_jaw_alone_strains_no_muscle_spring(device):
@@ -168,7 +176,7 @@ def test_jaw_alone_strains_no_muscle_spring(device):
     rig.ctrl_jaw = np.full(11, 0.5)
     rig.center_jaw = np.full(2, 0.5)
     node_amount = np.linspace(0.2, 0.9, len(V))
-    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    model = muscle_builder(V, T, layer, rig).finalize(device)
     jaw = JawKinematic(np.array([0.02, 0.05, 0.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
                        np.array([[0.03, 0, 0], [0.01, 0, 0]]), np.array([0.02, 0, 0]))
     np.testing.assert_allclose(rig.attachment_jaw(), 0.5)
@@ -195,7 +203,7 @@ def contracted_stage(device, activation=0.9):
     V, T, layer = slab()
     inner = np.where(layer == 1)[0]
     rig = small_rig(inner, V[inner])
-    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    model = muscle_builder(V, T, layer, rig).finalize(device)
     stage = MuscleStage(rig, None, model.device)
     control = model.control()
     control.activations.assign(np.array([activation, 0.3], np.float32))
@@ -273,20 +281,21 @@ def test_contraction_curve_saturates():
     np.testing.assert_allclose(contraction_curve([-1.0, 2.0], 0.5, 2.0), [0.0, 0.5])  # clamped to [0, 1]
 
 
-def _moved(stage, control, acts):
+def _moved(stage, control, acts, state):
     control.activations.assign(np.asarray(acts, np.float32))
-    stage.update_geometry(control)
-    return stage.ctrl.numpy().astype(np.float64) - stage.rig.ctrl_rest
+    stage.update_geometry(control, state)
+    return state.muscle_ctrl.numpy().astype(np.float64) - stage.rig.ctrl_rest
 
 
 def test_two_way_anchor(device):
     """Fig. 6.3 two-way: the linear insertion (control point 0) and the ring point 3 it is anchored
     to move by the same displacement, the stiffness-weighted mean of their own ones
     (k = passive + activation): the active member drags the passive one, not a diluted mean."""
-    _, rig, _, stage, control = contracted_stage(device)  # _moved sets the activations
+    _, rig, model, stage, control = contracted_stage(device)  # _moved sets the activations
+    state = model.state()
     lin = np.ones(len(rig.ctrl_rest), bool)
     for acts in ([1.0, 0.0], [0.0, 1.0], [0.6, 0.3]):
-        d = _moved(stage, control, acts)
+        d = _moved(stage, control, acts, state)
         free = rig_reference(rig, acts)[0] - rig.ctrl_rest
         # each member's own displacement, without the anchor
         loose = MuscleRig(**{**rig.__dict__, "anchor_ctrl": np.zeros(0, int), "anchor_group": np.zeros(0, int),
@@ -299,11 +308,11 @@ def test_two_way_anchor(device):
         others = lin.copy()
         others[[0, 3]] = False
         np.testing.assert_allclose(d[others], own[others], atol=2e-7, err_msg="non-members follow their own muscle")
-    d = _moved(stage, control, [1.0, 0.0])
+    d = _moved(stage, control, [1.0, 0.0], state)
     assert np.linalg.norm(d[3]) > 0.9 * np.linalg.norm(
         rig_reference(rig, [1.0, 0.0])[0][0] - rig.ctrl_rest[0]) > 1e-3  # the ring point follows (1.1 / 1.2)
     # members keep their rest offset: pulled together, not averaged into one point
-    X = stage.ctrl.numpy().astype(np.float64)
+    X = state.muscle_ctrl.numpy().astype(np.float64)
     np.testing.assert_allclose(X[3] - X[0], rig.ctrl_rest[3] - rig.ctrl_rest[0], atol=2e-7)
 
 
@@ -316,14 +325,14 @@ def test_sphincter_to_plane_keeps_fixed_points(device):
     rig = small_rig(inner, V[inner])
     rig.ctrl_pivot[[3, 7]] = -2  # ring points 0 and 4: fixed
     rig.center_normal = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    model = muscle_builder(V, T, layer, rig).finalize(device)
     control = model.control()
     ring = np.arange(3, 11)
     for c_max in (1.0, 1.6):
         rig.contraction = np.array([0.3, c_max])
         stage = MuscleStage(rig, None, model.device)
         acts = [0.0, 1.0]
-        d = _moved(stage, control, acts)
+        d = _moved(stage, control, acts, model.state())
         X = rig.ctrl_rest + d
         np.testing.assert_allclose(X, rig_reference(rig, acts)[0], atol=2e-7, err_msg="kernel against NumPy")
         np.testing.assert_allclose(d[[3, 7]], 0.0, atol=1e-8, err_msg="fixed points")
@@ -356,10 +365,10 @@ def test_sphincter_glides_over_a_sphere(device):
     rig = small_rig(inner, V[inner])
     g = rig.center[1] + np.array([0.0, 0.0, -0.015])
     rig.glide, rig.glide_center = np.array([0, 1]), np.array([[0.0, 0.0, 0.0], g])
-    model = ModelBuilder(V, T, layer=layer, muscle_count=2).finalize(device)
+    model = muscle_builder(V, T, layer, rig).finalize(device)
     stage = MuscleStage(rig, None, model.device)
     acts = [0.0, 1.0]
-    X = rig.ctrl_rest + _moved(stage, model.control(), acts)
+    X = rig.ctrl_rest + _moved(stage, model.control(), acts, model.state())
     np.testing.assert_allclose(X, rig_reference(rig, acts)[0], atol=2e-7, err_msg="kernel against NumPy")
     ring = np.arange(4, 11)  # the ring but point 3, which the anchor ties to the linear insertion
     r = lambda P: np.linalg.norm(P - g, axis=1)  # noqa: E731

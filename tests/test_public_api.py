@@ -66,3 +66,31 @@ def test_import_facewarp_is_light():
             "print(sorted(m for m in ('warp', 'mujoco', 'pxr') if m in sys.modules))")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert run.stdout.strip() == "[]", f"import facewarp loaded {run.stdout.strip()}"
+
+
+def _imports_of(path: Path) -> list[str]:
+    """Modules a source file imports (absolute names, relative ones resolved against the file)."""
+    pkg = path.relative_to(ROOT).with_suffix("").parts[:-1]
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = list(pkg[: len(pkg) - node.level + 1]) if node.level else []
+            mod = ".".join(base + ([node.module] if node.module else []))
+            out += [mod] + [f"{mod}.{a.name}" for a in node.names]
+    return out
+
+
+def test_layers_physics_and_sim_import_nothing_from_anatomy():
+    # the house (issue 22): the anatomy builds the face rig (contact geometry included) once; the
+    # physics and the simulator only read it. And the model and its materials do not import each other.
+    engine = ROOT / "facewarp" / ("_" + "src")
+    anatomy = ".".join(("facewarp", "_" + "src", "anatomy"))
+    offenders = [f"{p.relative_to(ROOT)}: {m}" for folder in ("physics", "sim") for p in sorted((engine / folder).rglob("*.py"))
+                 for m in _imports_of(p) if m == anatomy or m.startswith(anatomy + ".")]
+    assert not offenders, "physics/sim import the anatomy:\n" + "\n".join(offenders)
+    physics = ".".join(("facewarp", "_" + "src", "physics"))
+    model = [m for m in _imports_of(engine / "physics" / "model.py") if m.startswith(physics + ".materials")]
+    materials = [m for m in _imports_of(engine / "physics" / "materials.py") if m.startswith(physics + ".model")]
+    assert not (model and materials), f"model.py and materials.py import each other: {model}, {materials}"

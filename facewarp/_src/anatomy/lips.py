@@ -21,8 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import InputError
-from ..geometry.tets import signed_tet_volumes
-from .tet_quality import boundary_faces
+from ..geometry.tets import boundary_faces, lip_crossings, lip_tets, points_in_tets, signed_tet_volumes
 
 __all__ = ["LIP_BAND", "LIP_CLEARANCE", "LIP_REACH", "lip_sides", "lip_tets", "lip_crossings", "mouth_slit",
            "points_in_tets", "separate_lips", "separate_skin_lips"]
@@ -120,90 +119,6 @@ def lip_sides(V, F, mouth_center, *, reach: float = LIP_REACH, band: float = LIP
     side[(du <= reach) & (du + band < dl)] = 1
     side[(dl <= reach) & (dl + band < du)] = -1
     return side
-
-
-def lip_tets(T, node_side) -> tuple[np.ndarray, np.ndarray]:
-    """Tets of the upper and of the lower lip: those whose four nodes are on that side.
-
-    Args:
-        T: Tets, shape (k, 4), int.
-        node_side: Side of every node (+1 upper, -1 lower, 0 neither), shape (p,), int.
-
-    Returns:
-        ``(upper, lower)``: boolean masks, shape (k,) each.
-    """
-    s = np.asarray(node_side)[np.asarray(T)]
-    return (s == 1).all(axis=1), (s == -1).all(axis=1)
-
-
-def points_in_tets(P, V, T, *, eps: float = 1e-9) -> np.ndarray:
-    """Index of a tet of (V, T) containing each point (barycentric weights all > ``eps``), or -1.
-
-    Args:
-        P: Points [m], shape (k, 3), float.
-        V: Vertices [m], shape (n, 3), float.
-        T: Tets, shape (t, 4), int.
-
-    Returns:
-        Shape (k,), int64.
-    """
-    from scipy.spatial import cKDTree
-
-    P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
-    V = np.asarray(V, dtype=np.float64)
-    T = np.asarray(T, dtype=np.int64).reshape(-1, 4)
-    out = np.full(len(P), -1, np.int64)
-    if len(P) == 0 or len(T) == 0:
-        return out
-    X = V[T]
-    C = X.mean(axis=1)
-    R = np.linalg.norm(X - C[:, None], axis=2).max(axis=1)
-    lists = cKDTree(C).query_ball_point(P, R.max() * (1 + 1e-9))
-    pi = np.repeat(np.arange(len(P)), [len(x) for x in lists])
-    ti = np.fromiter((t for x in lists for t in x), dtype=np.int64, count=len(pi))
-    if len(pi) == 0:
-        return out
-    A = np.transpose(X[ti, 1:] - X[ti, :1], (0, 2, 1))  # columns x1-x0, x2-x0, x3-x0
-    ok = np.abs(np.linalg.det(A)) > 1e-30
-    lam = np.zeros((len(pi), 3))
-    lam[ok] = np.linalg.solve(A[ok], (P[pi] - X[ti, 0])[ok][..., None])[..., 0]
-    hit = ok & (lam > eps).all(axis=1) & (lam.sum(axis=1) < 1 - eps)
-    out[pi[hit]] = ti[hit]
-    return out
-
-
-def lip_crossings(V, T, node_side, *, movable=None) -> dict:
-    """Nodes of each lip inside a tet of the other lip, and how deep.
-
-    Args:
-        V: Node positions [m], shape (p, 3), float.
-        T: Tets, shape (k, 4), int.
-        node_side: +1 upper / -1 lower / 0 per node, shape (p,), int.
-        movable: Only these nodes count, shape (p,), bool (default all).
-
-    Returns:
-        ``{"nodes": (c,) int64 crossing nodes, "depth": (c,) float64 distance [m] to the other
-        lip's surface, "count": c}``.
-    """
-    from ..geometry.surface import closest_point
-
-    V = np.asarray(V, dtype=np.float64)
-    side = np.asarray(node_side)
-    up, lo = lip_tets(T, side)
-    movable = np.ones(len(V), bool) if movable is None else np.asarray(movable, bool)
-    nodes, depth = [], []
-    for mine, other in ((1, lo), (-1, up)):
-        cand = np.flatnonzero((side == mine) & movable)
-        if not other.any() or len(cand) == 0:
-            continue
-        hit = cand[points_in_tets(V[cand], V, np.asarray(T)[other]) >= 0]
-        if len(hit):
-            S = boundary_faces(np.asarray(T)[other])
-            nodes.append(hit)
-            depth.append(closest_point(V, S, V[hit]).dist)
-    nodes = np.concatenate(nodes) if nodes else np.zeros(0, np.int64)
-    depth = np.concatenate(depth) if depth else np.zeros(0)
-    return {"nodes": nodes, "depth": depth, "count": int(len(nodes))}
 
 
 def separate_lips(V, T, node_side, *, movable=None, clearance: float = LIP_CLEARANCE,

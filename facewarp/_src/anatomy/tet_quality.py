@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..geometry.surface import check_cells
-from ..geometry.tets import signed_tet_volumes
+from ..geometry.tets import TET_EDGES, TET_FACES, boundary_faces, signed_tet_volumes
 
 __all__ = [
     "boundary_faces",
@@ -41,8 +41,7 @@ def tet_volumes(V, T) -> np.ndarray:
     return signed_tet_volumes(*_check_VT(V, T))
 
 
-_TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])  # face k opposite vertex k, outward
-_TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
+_TET_FACES, _TET_EDGES = TET_FACES, TET_EDGES
 
 
 def tet_dihedral_angles(V, T) -> np.ndarray:
@@ -109,22 +108,6 @@ def tet_conformity(T) -> dict:
         "max_face_share": int(counts.max()),
         "duplicate_tet_count": int(dup),
     }
-
-
-def boundary_faces(T) -> np.ndarray:
-    """Triangles used by exactly one tet, oriented outward.
-
-    Args:
-        T: Tetrahedra, shape (k, 4), int64, positively oriented.
-
-    Returns:
-        Boundary triangles, shape (b, 3), int64.
-    """
-    T = np.asarray(T, dtype=np.int64)
-    Fall = T[:, _TET_FACES].reshape(-1, 3)
-    key = np.sort(Fall, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return Fall[counts[inv.reshape(-1)] == 1]
 
 
 def boundary_self_intersections(V, T, *, chunk: int = 200_000) -> int:

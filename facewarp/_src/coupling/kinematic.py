@@ -31,6 +31,12 @@ class _JawNodes:
 class JawStage(_JawNodes):
     """Moves the targets of the jaw-carried held nodes (Eq. 6.4.9) each substep (solver stage)."""
 
+    @classmethod
+    def from_model(cls, model: Model) -> JawStage:
+        """The targets of ``model.jaw`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_jaw`)."""
+        j = model.jaw
+        return cls(j.joint, j.nodes, j.amounts, model.rest_positions, model.device)
+
     def __init__(self, jaw, nodes, amounts, rest_positions, device):
         super().__init__(jaw, nodes, amounts, device)
         self.rest = rest_positions
@@ -56,17 +62,16 @@ class CarryStage(_JawNodes):
     injected) moves by ``J(a theta) J(a theta_prev)^-1``; the skin forces then only answer the
     strain of the amount field, not the whole rigid swing. Without it the thin skin layer of a
     lower lip is dragged by the chin (amount 1) over its own inner sheet (amount ~0.5) and
-    inverts at a 30 degree jaw angle. The last angles live on the device (no host round trip);
-    :meth:`reset` sets them back to the rest pose.
+    inverts at a 30 degree jaw angle. The angles the positions correspond to are State
+    (``State.jaw_carry``, on the device: no host round trip), carried in place in ``state_in``
+    with its positions.
     """
 
-    def __init__(self, jaw, nodes, amounts, device):
-        super().__init__(jaw, nodes, amounts, device)
-        self.prev = get_warp().zeros(2, dtype=float, device=device)
-
-    def reset(self, angles=(0.0, 0.0)) -> None:
-        """Set the remembered jaw angles [rad] (those the state's positions correspond to)."""
-        self.prev.assign(np.asarray(angles, np.float32))
+    @classmethod
+    def from_model(cls, model: Model) -> CarryStage:
+        """The carry of ``model.jaw`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_jaw`)."""
+        j = model.jaw
+        return cls(j.joint, j.carry_nodes, j.carry_amounts, model.device)
 
     def prepare(self, model: Model, state_in, control, dt, targets) -> None:
         """Implicit solvers: the same carry, once per step (by the change over the step)."""
@@ -77,6 +82,7 @@ class CarryStage(_JawNodes):
             return
         wp = get_warp()
         wp.launch(self.km._jaw_carry, dim=self.count,
-                  inputs=[self.nodes, self.amounts, self.pivot, self.u, self.v, control.jaw_angles, self.prev],
+                  inputs=[self.nodes, self.amounts, self.pivot, self.u, self.v, control.jaw_angles, state_in.jaw_carry],
                   outputs=[state_in.positions, state_in.prev_positions], device=self.device)
-        wp.launch(self.km._jaw_remember, dim=1, inputs=[control.jaw_angles], outputs=[self.prev], device=self.device)
+        wp.launch(self.km._jaw_remember, dim=1, inputs=[control.jaw_angles], outputs=[state_in.jaw_carry],
+                  device=self.device)

@@ -5,7 +5,7 @@
 - a ``cranium`` body carrying the skull, upper teeth and eyes as visual meshes;
 - a ``mandible`` body at the midpoint of this head's condyles with two hinges: ``jaw_open``
   about the condyle u-axis (0..60 deg; positive opens the mouth, as in
-  :class:`~facewarp._src.anatomy.jaw.JawKinematic`) and ``jaw_side`` about the vertical v-axis
+  :class:`~facewarp._src.geometry.jaw.JawKinematic`) and ``jaw_side`` about the vertical v-axis
   (+-5 deg); its mass and inertia come from bone density over a mandible geometry (the skull
   surface under the chin and bottom-face regions, taken as a cortical plate of
   :data:`MANDIBLE_PLATE` thickness), its visual meshes are that plate and the lower teeth;
@@ -29,7 +29,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ..anatomy.jaw import JawKinematic
+from ..geometry.jaw import JawKinematic
 from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..geometry.surface import face_areas, face_normals

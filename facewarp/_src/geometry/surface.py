@@ -15,7 +15,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.warp import get_warp
 
-__all__ = [
+__all__ = ["winding_numbers", 
     "ClosestPoints",
     "MeshQuery",
     "RayHits",
@@ -476,3 +476,20 @@ def closest_point(V, F, P, *, max_dist: float = np.inf, device: str = "cpu") -> 
         :class:`ClosestPoints` ``(face, bary, points, dist)``.
     """
     return MeshQuery(V, F, device=device).closest_point(P, max_dist)
+
+
+def winding_numbers(V, F, P) -> np.ndarray:
+    """Generalised winding number of the closed, outward surface (V, F) at each point of P
+    (Van Oosterom and Strackee's solid angle per triangle): ~1 inside, ~0 outside; shape (k,)."""
+    P = np.asarray(P, np.float64).reshape(-1, 3)
+    A = np.asarray(V, np.float64)[np.asarray(F)]  # (m, 3, 3)
+    out = np.zeros(len(P))
+    for s in range(0, len(P), 256):
+        R = A[None] - P[s : s + 256, None, None]  # (k, m, 3, 3)
+        a, b, c = R[..., 0, :], R[..., 1, :], R[..., 2, :]
+        la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
+        det = np.einsum("kmi,kmi->km", a, np.cross(b, c))
+        den = (la * lb * lc + np.einsum("kmi,kmi->km", a, b) * lc + np.einsum("kmi,kmi->km", b, c) * la
+               + np.einsum("kmi,kmi->km", c, a) * lb)
+        out[s : s + 256] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)
+    return out

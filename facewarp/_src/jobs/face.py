@@ -20,7 +20,8 @@ from ..core.fileio import write_json
 from ..coupling.mjcf import write_head_mjcf
 from ..coupling.drivers import JAWS, jaw_driver
 from ..expressions import Expression, Timeline, timeline_from_spec
-from ..physics.face_rig import face_rig_from_anatomy, load_face_rig, save_face_rig
+from ..anatomy.rig import face_rig_from_anatomy
+from ..physics.face_rig import load_face_rig, save_face_rig
 from ..present.anatomy import render_anatomy
 from ..present.render import save_png
 from ..present.strips import frames_sheet, sheet_font_size

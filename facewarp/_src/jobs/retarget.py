@@ -24,7 +24,8 @@ from ..adapt.transfer import load_head
 from ..core.errors import InputError
 from ..core.fileio import write_json
 from ..expressions import PRESETS, load_sequence, timeline_from_spec
-from ..physics.face_rig import build_face, load_face_rig
+from ..anatomy.rig import build_face
+from ..physics.face_rig import load_face_rig
 from ..present.animation import FaceView, label_grid
 from ..present.render import save_png
 from ..sim.play import _play

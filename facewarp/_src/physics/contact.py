@@ -14,23 +14,23 @@ Hessian are in the solvers' kernels and in :mod:`.potential`):
   lower teeth turn with the jaw by the part's Eq. 6.4.9 amount);
 * lid on eyeball: free nodes within ``EYE_NEAR_M`` of an eyeball's sphere, pushed out of the ball
   ``|x - c| >= r`` (analytic, static springs). The lids' inner sheet there glides on the eyeball
-  (:func:`eyeball_sheet_nodes`): it has no planar sliding support (``face_rig``) but a two-sided
-  spring of the support's stiffness that keeps each node on its glide sphere, and a one-sided
-  floor there at the contact's stiffness (besides its one-sided contact), so the lid slides
-  over the ball and neither sinks into it nor lifts off. The glide sphere
-  (:func:`glide_spheres`) runs through the node's rest position and meets the fissure plane on
-  the eyeball's surface: the two lids close at one depth, on the ball, whatever their depths at
-  rest (a sphere about the eyeball's centre kept each at its rest depth: on the ICT-adapted heads
-  the lower lid's inner sheet lies 0.5-1.5 mm deeper than the upper one's, up to 1 mm inside
-  the ball's sphere, and the closed upper margin stayed up to 1.2 mm in front of the lower one;
-  the floor: the ring pulls the lids into the ball with ~2.5 N, and on the support's stiffness
-  alone the lower lid stopped 0.5 mm short of its sphere). A plane tangent at rest, as the
+  (:func:`~facewarp._src.anatomy.contact.eyeball_sheet_nodes`): it has no planar sliding support
+  (``face_rig``) but a two-sided spring of the support's stiffness that keeps each node on its glide
+  sphere, and a one-sided floor there at the contact's stiffness (besides its one-sided contact), so
+  the lid slides over the ball and neither sinks into it nor lifts off. The glide sphere
+  (:func:`~facewarp._src.anatomy.contact.glide_spheres`) runs through the node's rest position and
+  meets the fissure plane on the eyeball's surface: the two lids close at one depth, on the ball,
+  whatever their depths at rest (a sphere about the eyeball's centre kept each at its rest depth: on
+  the ICT-adapted heads the lower lid's inner sheet lies 0.5-1.5 mm deeper than the upper one's, up
+  to 1 mm inside the ball's sphere, and the closed upper margin stayed up to 1.2 mm in front of the
+  lower one; the floor: the ring pulls the lids into the ball with ~2.5 N, and on the support's
+  stiffness alone the lower lid stopped 0.5 mm short of its sphere). A plane tangent at rest, as the
   sliding support of the cheeks, holds a node that slides 4-5 mm down a 12 mm ball against the
-  ball's push (20-25 degrees off the plane): pulled back along the plane's normal, smoothed over
-  1 cm and tilted laterally, the default head's upper lid went medially as it closed (with the
-  ring's lopsided attachments,
-  :func:`~facewarp._src.anatomy.attach.attach_by_area`: FDP 3.1 2.6 mm), and at level 1 the lid
-  lifted off the ball (its margin 0.9 mm off, rolled forward in front of the lower one);
+  ball's push (20-25 degrees off the plane): pulled back along the plane's normal, smoothed over 1
+  cm and tilted laterally, the default head's upper lid went medially as it closed (with the ring's
+  lopsided attachments, :func:`~facewarp._src.anatomy.attach.attach_by_area`: FDP 3.1 2.6 mm), and
+  at level 1 the lid lifted off the ball (its margin 0.9 mm off, rolled forward in front of the
+  lower one);
 * lid on lid: the orbicularis oculi closes the lids toward the plane of the palpebral fissure
   (a sphincter with ``to_plane``: the plane through its centre with normal ``center_normal``,
   between its two fixed corners; :mod:`.kernels_muscle`), where the two lid margins meet. Every
@@ -89,54 +89,33 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..anatomy.lips import lip_crossings, lip_sides, lip_tets
-from ..anatomy.tet_quality import boundary_faces
 from ..core.errors import InputError
 from ..core.warp import get_warp
+from .materials import CONTACT_MODULUS, CONTACT_MUSCLE_RATIO
+from ..geometry.surface import winding_numbers
+from ..geometry.tets import lip_crossings
 from .model import Springs
 
-__all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "EYE_NEAR_M", "LIP_REACH_M", "TEETH_NEAR_M",
-           "TEETH_REACH_M", "ContactGeometry", "ContactStage", "contact_crossings", "contact_geometry",
-           "eyeball_sheet_nodes", "eyeball_spheres", "fissure_planes", "glide_spheres", "lid_contact_geometry",
-           "lip_contact_geometry", "node_vertex", "winding_numbers"]
+__all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "LIP_REACH_M", "TEETH_REACH_M", "ContactGeometry",
+           "ContactStage", "contact_crossings", "contact_from_arrays", "contact_to_arrays"]
 
-CONTACT_MODULUS = 2.0e9
-"""Contact stiffness per unit sheet area [N/m^3] (module doc)."""
-CONTACT_MUSCLE_RATIO = 50.0
-"""A node's contact spring is at least this many times the muscle springs on it (module doc)."""
 CONTACT_GAP = 2.5e-4
 """Distance [m] outside the other surface at which a half-space contact spring starts to push."""
 LIP_REACH_M = 3.0e-3
 """Nodes within this distance [m] of the other lip's surface (inside or out) get a contact spring
 (more than the lips' thickness, so a node anywhere inside is found)."""
-TEETH_NEAR_M = 1.2e-2
-"""Inner-sheet nodes within this distance [m] of a dental arch at rest are its contact candidates."""
 TEETH_REACH_M = 4.0e-3
 """Candidates within this distance [m] of the arch (inside or out) get a contact spring."""
 EYE_REST_SLACK_M = 5.0e-5
 """A lid node inside the eyeball's sphere (or within the gap of it) at rest may sink this much
 [m] deeper before its spring pushes: an active set that starts exactly at rest would flicker
 with every step of the solver (measured: 2x the iterations of laugh at level 0)."""
-EYE_NEAR_M = 4.0e-3
-"""Nodes within this distance [m] of an eyeball's sphere at rest are its contact candidates."""
-LID_REACH = 2.0
-"""Lid candidates lie within this many times the ring's height (its control points' largest
-distance from the fissure plane) of the plane: the lids, not the brow or the cheek."""
 LID_STIFFNESS_RATIO = 4.0
 """A lid-on-lid spring is this many times the node's contact stiffness (module doc)."""
 LID_TIE_REACH_M = 1.0e-3
 """A lid node and its partner across the fissure are tied along it while both lie within this
 distance [m] of their half-space springs' planes (``kernels_contact._lid_ties``)."""
-GLIDE_TAPER = 0.15
-"""Share of the corner chord at either end over which the gliding lids' meeting depth tapers to
-their rest depth (:func:`glide_spheres`)."""
-GLIDE_MIN_HEIGHT_M = 1.0e-3
-"""A gliding node's distance [m] from its fissure plane is taken as at least this much
-(:func:`glide_spheres`)."""
-_LID_JAW_MAX = 0.05  # a fissure plane rides the cranium (fissure_planes)
 _ROUNDING_M = 1.0e-6  # float32 positions of ~0.1 m: a node "deeper than at rest" by less is rounding
-_TEETH = ("teeth_upper", "teeth_lower")
-_EYES = ("eye_L", "eye_R")
 
 
 @dataclass
@@ -152,11 +131,11 @@ class ContactGeometry:
         teeth: ``[(name, V (t, 3), F (f, 3), jaw amount, candidate nodes (c,))]``.
         eyes: ``(centers (e, 3), radii (e,))``; eye_nodes (c,), eye_of_node (c,) index into eyes.
         eye_glide: Which of ``eye_nodes`` glide on their eyeball (inner-sheet nodes without a
-            planar support, :func:`eyeball_sheet_nodes`), shape (c,), bool.
+            planar support, :func:`~facewarp._src.anatomy.contact.eyeball_sheet_nodes`), shape (c,), bool.
         glide_centers, glide_radii: The sphere each of ``eye_nodes`` glides on (used where
             ``eye_glide``): centre [m], shape (c, 3), and radius [m], shape (c,), float64
-            (:func:`glide_spheres`; empty: the sphere about its eyeball's centre through its rest
-            position).
+            (:func:`~facewarp._src.anatomy.contact.glide_spheres`; empty: the sphere about its
+            eyeball's centre through its rest position).
         excluded: Candidates left out because they already touch or cross at rest, per kind
             (``{"lip_lip": n, "lip_teeth": n}``; a separated build has 0), and
             ``lid_eye_inside_at_rest``: lid nodes inside the eyeball's sphere at rest (kept, with
@@ -193,344 +172,49 @@ class ContactGeometry:
     glide_radii: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
-def node_vertex(fr) -> np.ndarray:
-    """Head vertex every tet node lies on or under, shape (p,), int64 (-1 where unknown).
 
-    Sheets are stored one after another (node ``l q + i`` under outer node ``i``; see
-    :func:`~facewarp._src.physics.face_rig.node_jaw_amounts`)."""
-    n = len(fr.nodes)
-    q = int((np.asarray(fr.layer) == 0).sum())
-    sv = np.asarray(fr.surface_vertex, np.int64)
-    if q and n % q == 0 and (sv[:q] >= 0).all():
-        return sv[np.arange(n) % q]
-    return sv.copy()
+_CONTACT_ARRAYS = ("node_side", "eye_centers", "eye_radii", "eye_nodes", "eye_of_node", "lid_planes", "lid_nodes",
+                   "lid_plane", "lid_side", "eye_glide", "lid_tangent", "lid_partner", "glide_centers", "glide_radii")
 
 
-def _sphere(V) -> tuple[np.ndarray, float]:
-    V = np.asarray(V, np.float64)
-    c = V.mean(axis=0)
-    return c, float(np.linalg.norm(V - c, axis=1).mean())
-
-
-def eyeball_spheres(parts) -> tuple[np.ndarray, np.ndarray]:
-    """The eyeballs' spheres: centre (the mean of the part's vertices) and radius (their mean
-    distance from it) of ``parts["eye_L"]`` and ``parts["eye_R"]`` where present.
-
-    Args:
-        parts: Rigid parts, ``{name: (V (n, 3) [m], F (m, 3))}``.
-
-    Returns:
-        ``(centers (e, 3) [m], radii (e,) [m])``, float64.
-    """
-    centers, radii = [], []
-    for name in _EYES:
-        if name in (parts or {}):
-            c, r = _sphere(parts[name][0])
-            centers.append(c)
-            radii.append(r)
-    return np.asarray(centers, np.float64).reshape(-1, 3), np.asarray(radii, np.float64)
-
-
-def eyeball_sheet_nodes(V, parts) -> np.ndarray:
-    """Nodes within ``EYE_NEAR_M`` of an eyeball's sphere (:func:`eyeball_spheres`) at rest.
-
-    Their deeper surface is the eyeball: ``face_rig`` gives the inner-sheet ones among them no
-    planar sliding support, and :class:`ContactStage` holds those on their sphere about the
-    eyeball's centre instead (module doc).
-
-    Args:
-        V: Rest node positions [m], shape (p, 3), float.
-        parts: Rigid parts, ``{name: (V (n, 3) [m], F (m, 3))}``.
-
-    Returns:
-        Shape (p,), bool.
-    """
-    X = np.asarray(V, np.float64).reshape(-1, 3)
-    centers, radii = eyeball_spheres(parts)
-    if len(centers) == 0:
-        return np.zeros(len(X), bool)
-    D = np.linalg.norm(X[:, None] - centers[None], axis=2) - radii[None]
-    return D.min(axis=1) < EYE_NEAR_M
-
-
-def glide_spheres(V, nodes, eye_of_node, eye_centers, eye_radii, planes, corners, *,
-                  gap: float = CONTACT_GAP) -> tuple[np.ndarray, np.ndarray]:
-    """The sphere each gliding inner lid node keeps to: through its rest position, and meeting
-    the fissure plane of its eye on the eyeball's surface (``gap`` outside it).
-
-    A sphere about the eyeball's centre o through the node's rest position x0 (radius
-    ``r0 = |x0 - o|``) keeps the node at its rest depth as the lid slides over the ball, and the
-    two lids of an adapted head do not lie at one depth: at identity 007's left lid margins the
-    inner sheet lies 0.9 mm inside the ball's sphere (lower) and 0.4 mm outside it (upper) at
-    rest, and the closed margins stayed 1.2 mm apart front to back. Each node instead gets the
-    sphere about ``o + s n`` (n the unit normal of its eye's fissure plane, through the point p)
-    through x0: on the plane it is the sphere
-    about o of radius ``R_m``, ``R_m^2 = r0^2 - 2 s (x0 - p) . n``, so with
-    ``s = (r0^2 - R_m^2) / (2 (x0 - p) . n)`` the node reaches the plane at ``|x - o| = R_m``.
-    ``R_m = r0 + w (R + gap - r0)``: w is 1 along the middle of the fissure, tapering to 0 over
-    ``GLIDE_TAPER`` of the corner chord at either end (the lids are closed at the corners), and
-    the node's distance from the plane is taken as at least ``GLIDE_MIN_HEIGHT_M`` (a node next
-    to the plane barely moves; its sphere stays near the concentric one).
-
-    Args:
-        V: Rest node positions [m], shape (p, 3), float.
-        nodes: The gliding nodes, shape (c,), int.
-        eye_of_node: Their eyeball (index into ``eye_centers``), shape (c,), int.
-        eye_centers, eye_radii: The eyeballs' spheres [m], shapes (e, 3), (e,), float.
-        planes: The fissure planes, (point [m], unit normal) each, shape (l, 2, 3), float.
-        corners: Each plane's two fixed ring corners [m], shape (l, 2, 3), float.
-        gap: The contact gap [m].
-
-    Returns:
-        ``(centres (c, 3) [m], radii (c,) [m])``, float64; a node whose eyeball has no fissure
-        plane within twice its radius keeps the concentric sphere.
-    """
-    X = np.asarray(V, np.float64)[np.asarray(nodes, np.int64)]
-    which = np.asarray(eye_of_node, np.int64)
-    O, R = np.asarray(eye_centers, np.float64).reshape(-1, 3), np.asarray(eye_radii, np.float64).reshape(-1)
-    Pl, K = np.asarray(planes, np.float64).reshape(-1, 2, 3), np.asarray(corners, np.float64).reshape(-1, 2, 3)
-    if len(Pl) != len(K):
-        raise InputError(f"planes, corners: expected one corner pair per plane, got {len(Pl)} and {len(K)}")
-    o = O[which]
-    centers, radii = o.copy(), np.linalg.norm(X - o, axis=1)
-    for e in range(len(O)):
-        if len(Pl) == 0:
-            break
-        j = int(np.argmin(np.linalg.norm(Pl[:, 0] - O[e], axis=1)))
-        if np.linalg.norm(Pl[j, 0] - O[e]) > 2.0 * R[e]:
-            continue
-        mine = which == e
-        p, n, (a, b) = Pl[j, 0], Pl[j, 1], K[j]
-        t = (X[mine] - a) @ (b - a) / float((b - a) @ (b - a))
-        w = np.clip(np.minimum(t, 1.0 - t) / GLIDE_TAPER, 0.0, 1.0)
-        r0 = radii[mine]
-        rm = r0 + w * (R[e] + gap - r0)
-        h = (X[mine] - p) @ n
-        h = np.where(h < 0.0, -1.0, 1.0) * np.maximum(np.abs(h), GLIDE_MIN_HEIGHT_M)
-        s = (r0**2 - rm**2) / (2.0 * h)
-        centers[mine] = O[e] + s[:, None] * n
-        radii[mine] = np.linalg.norm(X[mine] - centers[mine], axis=1)
-    return centers, radii
-
-
-def winding_numbers(V, F, P) -> np.ndarray:
-    """Generalised winding number of the closed, outward surface (V, F) at each point of P
-    (Van Oosterom and Strackee's solid angle per triangle): ~1 inside, ~0 outside; shape (k,)."""
-    P = np.asarray(P, np.float64).reshape(-1, 3)
-    A = np.asarray(V, np.float64)[np.asarray(F)]  # (m, 3, 3)
-    out = np.zeros(len(P))
-    for s in range(0, len(P), 256):
-        R = A[None] - P[s : s + 256, None, None]  # (k, m, 3, 3)
-        a, b, c = R[..., 0, :], R[..., 1, :], R[..., 2, :]
-        la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
-        det = np.einsum("kmi,kmi->km", a, np.cross(b, c))
-        den = (la * lb * lc + np.einsum("kmi,kmi->km", a, b) * lc + np.einsum("kmi,kmi->km", b, c) * la
-               + np.einsum("kmi,kmi->km", c, a) * lb)
-        out[s : s + 256] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)
+def contact_to_arrays(g: ContactGeometry) -> dict:
+    """The arrays of ``g`` for an ``.npz`` file, keys ``contact_*`` (:func:`contact_from_arrays`)."""
+    out = {f"contact_{k}": np.asarray(getattr(g, k)) for k in _CONTACT_ARRAYS}
+    for i, (S, nodes) in enumerate(zip(g.lip_faces, g.lip_nodes)):
+        out[f"contact_lip_faces_{i}"] = np.asarray(S, np.int64)
+        out[f"contact_lip_nodes_{i}"] = np.asarray(nodes, np.int64)
+    out["contact_lip_count"] = np.array(len(g.lip_faces))
+    out["contact_teeth_names"] = np.array([t[0] for t in g.teeth], dtype=str)
+    for i, (_, TV, TF, amount, nodes) in enumerate(g.teeth):
+        out[f"contact_teeth_{i}_V"], out[f"contact_teeth_{i}_F"] = np.asarray(TV, np.float64), np.asarray(TF, np.int64)
+        out[f"contact_teeth_{i}_jaw"] = np.array(float(amount))
+        out[f"contact_teeth_{i}_nodes"] = np.asarray(nodes, np.int64)
+    out["contact_excluded_names"] = np.array(list(g.excluded), dtype=str)
+    out["contact_excluded_counts"] = np.array([int(v) for v in g.excluded.values()], np.int64)
     return out
 
 
-def lip_contact_geometry(V, T, node_side, *, fixed=None, gap: float = CONTACT_GAP) -> ContactGeometry:
-    """The lip-on-lip part of :func:`contact_geometry` for any tet mesh with two marked regions.
-
-    Args:
-        V: Rest node positions [m], shape (p, 3), float.
-        T: Tets, shape (k, 4), int.
-        node_side: +1 / -1 for the nodes of the two regions (upper, lower lip), 0 elsewhere,
-            shape (p,), int; a region's tets are those whose four nodes are on its side.
-        fixed: Nodes that do not move (no candidates), shape (p,), bool.
-        gap: The contact gap [m] (candidates closer than ``2 gap`` at rest are left out).
-
-    Returns:
-        A :class:`ContactGeometry` without teeth and eyes.
-    """
-    from ..geometry.surface import closest_point
-
-    X = np.asarray(V, np.float64)
-    T = np.asarray(T, np.int64)
-    side = np.asarray(node_side, np.int8)
-    if side.shape != (len(X),):
-        raise InputError(f"node_side: expected shape ({len(X)},), got {side.shape}")
-    free = np.ones(len(X), bool) if fixed is None else ~np.asarray(fixed, bool)
-    up, lo = lip_tets(T, side)
-    excluded = {"lip_lip": 0, "lip_teeth": 0, "lid_eye_inside_at_rest": 0, "lid_lid": 0}
-    lip_faces, lip_nodes = [], []
-    crossing = lip_crossings(X, T, side)["nodes"]
-    for region, mine in ((up, -1), (lo, 1)):  # the lower lip's nodes against the upper lip, and back
-        S = boundary_faces(T[region]) if region.any() else np.zeros((0, 3), np.int64)
-        cand = np.flatnonzero((side == mine) & free)
-        if len(S) and len(cand):
-            d = closest_point(X, S, X[cand], max_dist=1.0).dist
-            bad = (d < 2.0 * gap) | np.isin(cand, crossing)
-            excluded["lip_lip"] += int(bad.sum())
-            cand = cand[~bad]
-        else:
-            cand = np.zeros(0, np.int64)
-        lip_faces.append(S)
-        lip_nodes.append(cand)
-    return ContactGeometry(side, lip_faces, lip_nodes, [], np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64),
-                           np.zeros(0, np.int64), excluded)
+def contact_from_arrays(z) -> ContactGeometry:
+    """The :class:`ContactGeometry` stored by :func:`contact_to_arrays` in ``z`` (a mapping of arrays)."""
+    a = {k: np.asarray(z[f"contact_{k}"]) for k in _CONTACT_ARRAYS}
+    lips = int(z["contact_lip_count"])
+    teeth = [(str(name), np.asarray(z[f"contact_teeth_{i}_V"]), np.asarray(z[f"contact_teeth_{i}_F"]),
+              float(z[f"contact_teeth_{i}_jaw"]), np.asarray(z[f"contact_teeth_{i}_nodes"]))
+             for i, name in enumerate(z["contact_teeth_names"])]
+    excluded = {str(k): int(v) for k, v in zip(z["contact_excluded_names"], z["contact_excluded_counts"])}
+    return ContactGeometry(
+        a["node_side"], [np.asarray(z[f"contact_lip_faces_{i}"]) for i in range(lips)],
+        [np.asarray(z[f"contact_lip_nodes_{i}"]) for i in range(lips)], teeth, a["eye_centers"], a["eye_radii"],
+        a["eye_nodes"], a["eye_of_node"], excluded, a["lid_planes"], a["lid_nodes"], a["lid_plane"], a["lid_side"],
+        a["eye_glide"], a["lid_tangent"], a["lid_partner"], a["glide_centers"], a["glide_radii"])
 
 
-def fissure_planes(fr) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The planes the lid-closing sphincters close toward (the orbicularis oculi's palpebral
-    fissure): every sphincter of ``fr.rig`` with a ``center_normal`` (``to_plane``), two fixed
-    control points (its corners on the palpebral ligaments) and a centre that rides the cranium
-    (a jaw amount below 5 %; the lids' is ~1 %, interpolated from the regions around them): the
-    plane stays where it is at rest.
-
-    Returns:
-        ``(point (l, 3) [m], unit normal (l, 3), corners (l, 2, 3) [m], height (l,) [m])``: the
-        ring centre, the plane's normal, the fixed corners and the ring's height (its control
-        points' largest distance from the plane), float64; l = 0 for a rig without such a ring.
-    """
-    rig = getattr(fr, "rig", None)
-    out = ([], [], [], [])
-    if rig is not None and len(getattr(rig, "center_normal", ())):
-        N = np.asarray(rig.center_normal, np.float64)
-        ctrl_m, piv = np.asarray(rig.ctrl_muscle), np.asarray(rig.ctrl_pivot)
-        P = np.asarray(rig.ctrl_rest, np.float64)
-        for m in np.flatnonzero(np.linalg.norm(N, axis=1) > 0.5):
-            ctrl = np.flatnonzero(ctrl_m == m)
-            corners = ctrl[piv[ctrl] == -2]
-            if len(corners) != 2 or float(np.asarray(rig.center_jaw)[m]) > _LID_JAW_MAX:
-                continue
-            c, n = np.asarray(rig.center[m], np.float64), N[m] / np.linalg.norm(N[m])
-            for a, v in zip(out, (c, n, P[corners], float(np.abs((P[ctrl] - c) @ n).max()))):
-                a.append(v)
-    return (np.asarray(out[0], np.float64).reshape(-1, 3), np.asarray(out[1], np.float64).reshape(-1, 3),
-            np.asarray(out[2], np.float64).reshape(-1, 2, 3), np.asarray(out[3], np.float64))
-
-
-def lid_contact_geometry(V, point, normal, corners, height, *, fixed=None, gap: float = CONTACT_GAP) -> ContactGeometry:
-    """The lid-on-lid part of :func:`contact_geometry`: the nodes kept to their side of each
-    fissure plane (:func:`fissure_planes` gives the planes of a face rig).
-
-    A node is a lid node of a plane when it is free, lies between the plane's corners (its
-    projection on the corner chord strictly inside it), within ``LID_REACH`` times ``height`` of
-    the plane and within half the chord of the ring centre across it (the lids, not the back of
-    the head); its side is the side it lies on at rest. Nodes within ``2 gap`` of the plane at
-    rest (where the lids join at the corners) are left out, as the lips' candidates that touch at
-    rest: no side to keep, and a spring there would be near-closed from the start (the CPU
-    L-BFGS keeps near-closed contacts in its factorised model); they are counted in
-    ``excluded["lid_lid"]``.
-
-    Args:
-        V: Rest node positions [m], shape (p, 3), float.
-        point: A point of each plane [m] (the ring centre), shape (l, 3), float.
-        normal: Each plane's unit normal, shape (l, 3), float.
-        corners: The ring's two fixed corners [m], shape (l, 2, 3), float.
-        height: The ring's height [m], shape (l,), float.
-        fixed: Nodes that do not move (no candidates), shape (p,), bool.
-        gap: The contact gap [m].
-
-    Returns:
-        A :class:`ContactGeometry` with only the lid fields filled.
-    """
-    X = np.asarray(V, np.float64)
-    C, N = np.asarray(point, np.float64).reshape(-1, 3), np.asarray(normal, np.float64).reshape(-1, 3)
-    K, H = np.asarray(corners, np.float64).reshape(-1, 2, 3), np.asarray(height, np.float64).reshape(-1)
-    if not (len(C) == len(N) == len(K) == len(H)):
-        raise InputError(f"lid planes: expected l points, normals, corner pairs and heights, got shapes "
-                         f"{C.shape}, {N.shape}, {K.shape}, {H.shape}")
-    if not (np.isfinite(C).all() and np.isfinite(K).all() and (H > 0).all()
-            and np.allclose(np.linalg.norm(N, axis=1), 1.0, atol=1e-6)):
-        raise InputError("lid planes: expected finite points and corners, unit normals and heights > 0 [m]")
-    free = np.ones(len(X), bool) if fixed is None else ~np.asarray(fixed, bool)  # a node on one plane only
-    nodes, plane, side, tangent, partner, on_plane, count = [], [], [], [], [], 0, 0
-    for j, (c, n, (a, b), h) in enumerate(zip(C, N, K, H)):
-        chord = b - a
-        length = float(np.linalg.norm(chord))
-        e = chord / length
-        t = (X - a) @ e / length
-        d = (X - c) @ n
-        across = np.abs((X - c) @ np.cross(n, e))
-        cand = free & (t > 0.0) & (t < 1.0) & (np.abs(d) <= LID_REACH * h) & (across <= 0.5 * length)
-        flat = cand & (np.abs(d) < 2.0 * gap)
-        on_plane += int(flat.sum())
-        k = np.flatnonzero(cand & ~flat)
-        free[cand] = False
-        nodes.append(k)
-        plane.append(np.full(len(k), j, np.int64))
-        sd = np.sign(d[k]).astype(np.int8)
-        side.append(sd)
-        f = chord - n * float(chord @ n)
-        tangent.append(np.tile(f / np.linalg.norm(f), (len(k), 1)))
-        # the partner: the other lid's node nearest along the plane at rest
-        Y = X[k] - np.outer(d[k], n)
-        mine = np.full(len(k), -1, np.int64)
-        for s in (-1, 1):
-            me, other = np.flatnonzero(sd == s), np.flatnonzero(sd == -s)
-            if len(me) and len(other):
-                mine[me] = count + other[np.argmin(np.linalg.norm(Y[me][:, None] - Y[other][None], axis=2), axis=1)]
-        partner.append(mine)
-        count += len(k)
-    g = ContactGeometry(np.zeros(len(X), np.int8), [], [], [], np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64),
-                        np.zeros(0, np.int64), {"lip_lip": 0, "lip_teeth": 0, "lid_eye_inside_at_rest": 0,
-                                                "lid_lid": on_plane})
-    g.lid_planes = np.stack([C, N], axis=1)
-    if nodes:
-        g.lid_nodes, g.lid_plane, g.lid_side = np.concatenate(nodes), np.concatenate(plane), np.concatenate(side)
-        g.lid_tangent, g.lid_partner = np.concatenate(tangent).reshape(-1, 3), np.concatenate(partner)
+def _geometry_of(fr, geometry):
+    g = geometry if geometry is not None else getattr(fr, "contact", None)
+    if g is None:
+        raise InputError("geometry: the face rig has no contact geometry (made by facewarp.build_face or "
+                         "`facewarp build`; an older build: rebuild it with `facewarp build`)")
     return g
-
-
-def contact_geometry(fr, *, gap: float = CONTACT_GAP) -> ContactGeometry:
-    """The lips, teeth and eyeballs of a face rig and the candidate nodes of each contact.
-
-    Candidates that already touch or cross at rest (within ``2 gap`` of the other surface, or
-    inside it) are left out and counted in ``excluded``: a spring there would push the rest
-    shape away from rest. ``facewarp build`` separates crossing lips (:mod:`..anatomy.lips`).
-    """
-    from ..geometry.surface import closest_point
-
-    X = np.asarray(fr.nodes, np.float64)
-    free = ~np.asarray(fr.fixed, bool)
-    nv = node_vertex(fr)
-    side = lip_sides(fr.head_vertices, fr.head_faces, fr.mouth_center)[np.maximum(nv, 0)]
-    side[nv < 0] = 0
-    g = lip_contact_geometry(X, fr.tets, side, fixed=fr.fixed, gap=gap)
-    excluded, lip_faces, lip_nodes = g.excluded, g.lip_faces, g.lip_nodes
-    inner = (np.asarray(fr.layer) != 0) & free & ~np.asarray(fr.held, bool)
-    teeth = []
-    for name in _TEETH:
-        if name not in fr.parts:
-            continue
-        TV, TF = (np.asarray(a) for a in fr.parts[name])
-        cand = np.flatnonzero(inner)
-        cp = closest_point(TV, TF, X[cand], max_dist=TEETH_NEAR_M)
-        near = cp.face >= 0
-        cand, dist = cand[near], cp.dist[near]
-        bad = (dist < 2.0 * gap) | (winding_numbers(TV, TF, X[cand]) > 0.5)
-        excluded["lip_teeth"] += int(bad.sum())
-        teeth.append((name, TV.astype(np.float64), TF.astype(np.int64), float(fr.part_jaw.get(name, 0.0)), cand[~bad]))
-    centers, radii = eyeball_spheres(fr.parts)
-    eye_nodes, eye_of = np.zeros(0, np.int64), np.zeros(0, np.int64)
-    if len(centers):
-        D = np.linalg.norm(X[:, None] - centers[None], axis=2) - radii[None]
-        which = np.argmin(D, axis=1)
-        dmin = D[np.arange(len(X)), which]
-        # a node already inside the ball at rest (an inner lid sheet extruded into the eyeball)
-        # keeps its rest distance as its radius: it may not sink deeper (ContactStage)
-        eye_nodes = np.flatnonzero(free & (dmin < EYE_NEAR_M))
-        eye_of = which[eye_nodes]
-        excluded["lid_eye_inside_at_rest"] = int((dmin[eye_nodes] < 0.0).sum())
-    # the inner lid sheet over the eyeball without a planar support glides on the eyeball (a rig
-    # built before, with planar supports there, keeps them and gets one-sided contact only)
-    glide = np.zeros(len(eye_nodes), bool)
-    if getattr(fr, "support_nodes", None) is not None:
-        supported = np.zeros(len(X), bool)
-        supported[np.asarray(fr.support_nodes, np.int64)] = True
-        glide = ((np.asarray(fr.layer) != 0) & ~np.asarray(fr.held, bool) & ~supported)[eye_nodes]
-    planes = fissure_planes(fr)
-    lids = lid_contact_geometry(X, *planes, fixed=fr.fixed, gap=gap)
-    excluded["lid_lid"] = lids.excluded["lid_lid"]
-    # the gliding lids close onto the eyeball's surface, whatever their depth at rest
-    gc, gr = glide_spheres(X, eye_nodes, eye_of, centers, radii, lids.lid_planes, planes[2], gap=gap)
-    return ContactGeometry(side, lip_faces, lip_nodes, teeth, centers, radii, eye_nodes, eye_of, excluded,
-                           lids.lid_planes, lids.lid_nodes, lids.lid_plane, lids.lid_side, glide, lids.lid_tangent,
-                           lids.lid_partner, gc, gr)
-
 
 def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeometry | None = None) -> dict:
     """Count the crossings the contact prevents, at node positions X.
@@ -539,7 +223,7 @@ def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeo
         fr: The :class:`~facewarp._src.physics.face_rig.FaceRig`.
         X: Tet node positions [m], shape (p, 3) (default the rest positions), head frame.
         jaw_angles: Jaw angles (u, v) [rad] of the lower teeth.
-        geometry: :func:`contact_geometry` of ``fr`` (default: made here).
+        geometry: The :class:`ContactGeometry` (default: ``fr.contact``, the rig's, computed at build time).
 
     Returns:
         ``{"lip_lip": nodes of one lip inside a tet of the other, "lip_lip_depth_m": the deepest,
@@ -554,7 +238,7 @@ def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeo
     X = Xr if X is None else np.asarray(X, np.float64)
     if X.shape != Xr.shape or not np.isfinite(X).all():
         raise InputError(f"X: expected finite node positions of shape {Xr.shape}, got {X.shape}")
-    g = geometry or contact_geometry(fr)
+    g = _geometry_of(fr, geometry)
     free = ~np.asarray(fr.fixed, bool)
     lip = lip_crossings(X, fr.tets, g.node_side, movable=free)
     teeth, teeth_depth = 0, 0.0
@@ -613,7 +297,7 @@ class ContactStage:
     Args:
         fr: The :class:`~facewarp._src.physics.face_rig.FaceRig` (or anything with ``nodes``
             (p, 3) [m] and, for the lower teeth, ``jaw``; with ``geometry`` given, e.g. by
-            :func:`lip_contact_geometry`).
+            :func:`~facewarp._src.anatomy.contact.lip_contact_geometry`).
         node_stiffness: Contact stiffness of every tet node [N/m], shape (p,) (the simulator:
             ``CONTACT_MODULUS`` times the node's sheet area).
         device: Warp device.
@@ -622,7 +306,7 @@ class ContactStage:
             the gliding inner lid sheet included; ``lids``: lid on lid).
         ties: With ``lids``, tie the closing lid margins along the fissure
             (``kernels_contact._lid_ties``; default True).
-        geometry: :func:`contact_geometry` of ``fr`` (default: made here).
+        geometry: The :class:`ContactGeometry` (default: ``fr.contact``, the rig's, computed at build time).
         glide_stiffness: Stiffness of the two-sided spring that keeps a gliding inner lid node on
             its glide sphere [N/m], shape (p,) (the simulator: the sliding support's,
             ``support_modulus`` times the node's sheet area; default ``node_stiffness``), and of
@@ -657,7 +341,7 @@ class ContactStage:
         kn = np.asarray(node_stiffness, np.float64)
         if kn.shape != (len(X),) or not (np.isfinite(kn).all() and (kn >= 0).all()):
             raise InputError(f"node_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
-        g = geometry or contact_geometry(fr, gap=gap)
+        g = _geometry_of(fr, geometry)
         self.geometry = g
         jaw = getattr(fr, "jaw", None)
         if jaw is not None:
@@ -757,6 +441,12 @@ class ContactStage:
                     axis=wp.array(np.asarray(g.lid_tangent, np.float32), dtype=wp.vec3, device=device))
                 sets.append(self.tie_springs)
         self.springs = tuple(sets)
+
+    @classmethod
+    def from_model(cls, model) -> ContactStage:
+        """The contact of ``model.contact`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_contacts`)."""
+        c = model.contact
+        return cls(c, c.node_stiffness, model.device, geometry=c.geometry, glide_stiffness=c.glide_stiffness)
 
     @property
     def counts(self) -> dict:

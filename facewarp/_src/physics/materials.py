@@ -61,9 +61,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import InputError
-from .model import _TET_EDGES, _TET_FACES
+from ..geometry.tets import TET_EDGES as _TET_EDGES, TET_FACES as _TET_FACES
 
 __all__ = [
+    "CONTACT_MODULUS",
+    "CONTACT_MUSCLE_RATIO",
+    "EDGE_DAMPING",
     "MATERIALS",
     "linear_stiffness",
     "MaterialPhysical",
@@ -71,6 +74,17 @@ __all__ = [
     "isotropic_moduli",
     "material_profile",
 ]
+
+EDGE_DAMPING = 500.0
+"""Dashpot along every tet edge [N s/m] of the face's thesis profile (Eq. 6.4.5 on the relative
+velocity; :meth:`~facewarp._src.physics.model.ModelBuilder.add_face`). Table 6.3's per-substep damping alone leaves the stiff skin ringing for many periods when the jaw moves the
+held nodes; about a quarter of the edges' critical damping 2 sqrt(k0 / D0^2 m) calms it without
+slowing rigid motion (and stays far below the explicit limit 2 m / dt)."""
+
+CONTACT_MODULUS = 2.0e9
+"""Contact stiffness per unit sheet area [N/m^3] (:mod:`facewarp._src.physics.contact`)."""
+CONTACT_MUSCLE_RATIO = 50.0
+"""A node's contact spring is at least this many times the muscle springs on it (:mod:`facewarp._src.physics.contact`)."""
 
 #: Density of soft tissue [kg/m^3] (skin and subcutis ~1,050-1,150; ICRP 89 "soft tissue" 1,030).
 TISSUE_DENSITY = 1100.0
@@ -116,10 +130,10 @@ class MaterialThesis:
             (0.002); the model's rate is ``damping / dt`` with the reference substep dt.
         edge_damping: Dashpot along every edge on the relative velocity [N s/m] (Eq. 6.4.5 per
             spring). Table 6.3 has none (0); the face simulator's thesis profile adds
-            :data:`~facewarp._src.physics.face_rig.EDGE_DAMPING` (500), which keeps the stiff layer
+            :data:`EDGE_DAMPING` (500), which keeps the stiff layer
             from ringing when the jaw moves held nodes.
         muscle_stiffness: Muscle spring stiffness k_m of Eq. 6.4.1 [N/m] shared by the springs
-            on a node (None: the rig's own, :data:`~facewarp._src.physics.face_rig.MUSCLE_STIFFNESS`).
+            on a node (None: the rig's own, :data:`~facewarp._src.anatomy.rig.MUSCLE_STIFFNESS`).
     """
 
     name: str = "thesis"

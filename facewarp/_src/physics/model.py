@@ -1,6 +1,15 @@
-"""Builder -> Model / State / Control for the skin tissue (thesis Sec. 6.4, Table 6.3).
+"""Builder -> Model / State / Control: what is simulated, built once (thesis Sec. 6.4, Table 6.3).
 
-:class:`ModelBuilder` takes a generic tetrahedral mesh (numpy), validates it and derives the
+:class:`ModelBuilder` collects a head's parts, computes every material-dependent number and
+finalizes one :class:`Model`: :meth:`~ModelBuilder.add_tissue` (the tet mesh, below),
+:meth:`~ModelBuilder.add_muscles` (Eq. 6.4.1), :meth:`~ModelBuilder.add_supports`,
+:meth:`~ModelBuilder.add_jaw` (Eq. 6.4.9) and :meth:`~ModelBuilder.add_contacts`, or all of them
+from a face rig with :meth:`~ModelBuilder.add_face`. The Model carries per-head ranges
+(``head_*_start``), so more heads are an append. Every array a step changes is in :class:`State`
+(positions, previous positions, the muscle control points, the jaw carry); the inputs are in
+:class:`Control`.
+
+The tissue: a generic tetrahedral mesh (numpy), validated, gives the
 elements of the deformation model: unique tet edges (distance energy, Eq. 6.4.4 with the
 nonlinear stiffness of Eq. 6.4.6), unique tet faces (area energy, Eq. 6.4.7) and the tets
 themselves (volume energy, Eq. 6.4.8), with per-element stiffness, damping and per-node masses
@@ -41,13 +50,16 @@ any tet shape (:func:`~facewarp._src.physics.materials.linear_stiffness`); see
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..core.warp import get_warp
 from ..core.errors import InputError
-from ..geometry.tets import signed_tet_volumes
+from ..geometry.tets import TET_EDGES, TET_FACES, signed_tet_volumes
+from .materials import (CONTACT_MODULUS, CONTACT_MUSCLE_RATIO, EDGE_DAMPING, MaterialPhysical,
+                        material_profile)
 
 __all__ = [
     "EDGE_CROSS",
@@ -60,6 +72,10 @@ __all__ = [
     "Control",
     "Model",
     "ModelBuilder",
+    "ModelContact",
+    "ModelJaw",
+    "ModelMuscles",
+    "ModelSupports",
     "Springs",
     "State",
 ]
@@ -82,8 +98,7 @@ TABLE_6_3 = {
 }
 """Table 6.3 of the thesis in SI as it stands (the ``thesis`` material profile)."""
 
-_TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
-_TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+_TET_EDGES, _TET_FACES = TET_EDGES, TET_FACES
 
 
 
@@ -160,9 +175,13 @@ def sheet_areas(V, T, layer) -> np.ndarray:
 
 
 class ModelBuilder:
-    """Validates a tet mesh and derives the elements of the deformation model (Sec. 6.4).
+    """Collects what is simulated and finalizes the :class:`Model` (module doc).
 
-    Args:
+    ``ModelBuilder()`` starts empty (then :meth:`add_face`, or :meth:`add_tissue` and the other
+    ``add_*``); ``ModelBuilder(vertices, tets, **tissue)`` calls :meth:`add_tissue` at once. The
+    tissue validates a tet mesh and derives the elements of the deformation model (Sec. 6.4).
+
+    Args (of :meth:`add_tissue`; ``muscle_count`` of the constructor):
         vertices: Rest positions [m], shape (n, 3), float.
         tets: Tetrahedra, shape (k, 4), int; each must have positive signed volume
             ``(1/6) (x1 - x0) . ((x2 - x0) x (x3 - x0))`` (see :func:`facewarp.geometry.signed_tet_volumes`).
@@ -198,7 +217,8 @@ class ModelBuilder:
             ``4 k0 / D0^2`` (6e5 N/m for 1 cm outer edges), stiff against the tissue; a few very
             short edges (a crease of an adapted head) do not stiffen every hold. Physical:
             ``hold_modulus`` [N/m^3] times the node's sheet area (:func:`sheet_areas`).
-        muscle_count: Number of muscle activations in :class:`Control`. Default 0.
+        muscle_count: Number of muscle activations in :class:`Control` (default 0; :meth:`add_muscles`
+            sets it to the rig's muscles).
 
     Raises:
         InputError: on bad shapes, indices out of range, repeated vertices in a tet, an
@@ -216,10 +236,40 @@ class ModelBuilder:
         tet_damping_coef (k,) [J s]; tet_rest_inverse (k, 3, 3) [1/m]; tet_shear_k (k,) [J];
         tet_shear_damping (k,) [J s] (the shear term, module doc); tet_edge_index (k, 6), tet_face_index
         (k, 4): each tet's edges and faces as rows of ``edges`` / ``faces``; damping_rate [1/s]; stiffness_damping [s];
-        edge_damping [N s/m]; material (the profile); muscle_count.
+        edge_damping [N s/m]; material (the profile); muscle_count; head_count. The other
+        ``add_*`` set ``muscle_rig``, ``muscle_node_amount``; ``support_nodes``, ``support_normal``,
+        ``support_amount``, ``support_stiffness`` (s,) [N/m]; ``jaw``, ``jaw_nodes``, ``jaw_amount``,
+        ``carry_nodes``, ``carry_amount``; ``contact_geometry``, ``contact_stiffness`` and
+        ``glide_stiffness`` (n,) [N/m].
     """
 
-    def __init__(
+    def __init__(self, vertices=None, tets=None, *, muscle_count: int = 0, **tissue):
+        if isinstance(muscle_count, bool) or not isinstance(muscle_count, (int, np.integer)) or muscle_count < 0:
+            raise InputError(f"muscle_count must be a whole number >= 0, got {muscle_count}")
+        self.head_count = 0
+        self.muscle_count = int(muscle_count)
+        self.muscle_rig = None
+        self.muscle_node_amount = None
+        self.support_nodes = np.zeros(0, np.int64)
+        self.support_normal = np.zeros((0, 3))
+        self.support_amount = np.zeros(0)
+        self.support_stiffness = np.zeros(0)
+        self._support_k = 0.0
+        self._support_given = False
+        self.jaw = None
+        self.jaw_nodes = np.zeros(0, np.int64)
+        self.jaw_amount = np.zeros(0)
+        self.carry_nodes = np.zeros(0, np.int64)
+        self.carry_amount = np.zeros(0)
+        self.contact_geometry = None
+        self.contact_stiffness = None
+        self.glide_stiffness = None
+        if vertices is not None or tets is not None:
+            self.add_tissue(vertices, tets, **tissue)
+        elif tissue:
+            raise InputError(f"{', '.join(sorted(tissue))}: tissue keywords need the vertices and tets")
+
+    def add_tissue(
         self,
         vertices,
         tets,
@@ -239,10 +289,15 @@ class ModelBuilder:
         k_area: float | None = None,
         k_volume: float | None = None,
         hold_stiffness: float | None = None,
-        muscle_count: int = 0,
-    ):
-        from .materials import MaterialPhysical, material_profile
+    ) -> None:
+        """The skin tissue of one head: the tet mesh, its boundary conditions and its material
+        (the class doc lists the arguments and the attributes it sets).
 
+        Raises:
+            InputError: as the class doc, or a second head (one head per builder for now).
+        """
+        if self.head_count:
+            raise InputError("add_tissue: this builder has its head already (one head per builder)")
         mat = material_profile("thesis" if material is None else material)
         physical = isinstance(mat, MaterialPhysical)
         V = np.asarray(vertices, dtype=np.float64)
@@ -290,8 +345,6 @@ class ModelBuilder:
             raise InputError(f"layer must be 0 (outer) or 1 (inner), got values {np.unique(layer).tolist()}")
         fixed = np.zeros(n, bool) if fixed is None else _vertex_array(fixed, n, "fixed", bool)
         held = np.zeros(n, bool) if held is None else _vertex_array(held, n, "held", bool)
-        if int(muscle_count) < 0:
-            raise InputError(f"muscle_count must be >= 0, got {muscle_count}")
         for name, val in (("damping_rate", damping_rate), ("substep", substep),
                           ("stiffness_damping", stiffness_damping), ("edge_damping", edge_damping),
                           ("k0_outer", k0_outer), ("k0_inner", k0_inner), ("k0_cross", k0_cross),
@@ -399,7 +452,217 @@ class ModelBuilder:
         self.tet_shear_k = 2.0 * shear * vol
         self.tet_shear_damping = beta * self.tet_shear_k
         self.hold_stiffness = np.where(self.held, hold, 0.0)
-        self.muscle_count = int(muscle_count)
+        self.head_count = 1
+
+    def _need_tissue(self, what: str) -> None:
+        if not self.head_count:
+            raise InputError(f"{what}: add the tissue first (add_tissue or add_face)")
+
+    def _node_index(self, nodes, name: str) -> np.ndarray:
+        idx = np.asarray(nodes, dtype=np.int64).reshape(-1)
+        if len(idx) and (idx.min() < 0 or idx.max() >= self.vertex_count):
+            raise InputError(f"{name}: node indices must lie in 0..{self.vertex_count - 1}")
+        return idx
+
+    def add_muscles(self, rig, *, node_amount=None) -> None:
+        """The muscles of Eq. 6.4.1 (:class:`~facewarp._src.physics.muscle_stage.MuscleRig`), with
+        their spring stiffness from the material: physical ``muscle_modulus`` times the node's sheet
+        area, thesis its ``muscle_stiffness`` (when set; else the rig's own), shared equally by the
+        springs on a node (the stage then splits it by the area weights).
+
+        Args:
+            rig: The packed muscles (``att_node`` index this builder's nodes).
+            node_amount: Jaw amount (Eq. 6.4.9) of every node, shape (vertex_count,), float: each
+                spring's muscle end turns with the jaw by its node's amount (default: the muscle's).
+
+        Sets ``muscle_rig`` (the rig with the final ``att_stiffness`` [N/m]), ``muscle_node_amount``
+        and ``muscle_count`` (the activations in :class:`Control`: one per muscle).
+        """
+        from dataclasses import replace
+
+        self._need_tissue("add_muscles")
+        rig.validate()
+        n, mat = self.vertex_count, self.material
+        att = self._node_index(rig.att_node, "rig.att_node")
+        per_node = np.bincount(att, minlength=n)
+        if isinstance(mat, MaterialPhysical):
+            rig = replace(rig, att_stiffness=mat.muscle_modulus * self.vertex_area[att] / np.maximum(per_node[att], 1))
+        elif mat.muscle_stiffness is not None:
+            rig = replace(rig, att_stiffness=mat.muscle_stiffness / np.maximum(per_node[att], 1))
+        if node_amount is not None:
+            node_amount = _vertex_array(node_amount, n, "node_amount", np.float64)
+        self.muscle_rig = rig
+        self.muscle_node_amount = node_amount
+        self.muscle_count = len(rig.names)
+
+    def add_supports(self, nodes, normals, amounts, *, stiffness=None) -> None:
+        """Sliding supports of inner-sheet nodes along their rest normal, moved with the jaw
+        (:class:`~facewarp._src.physics.muscle_stage.SupportStage`).
+
+        Args:
+            nodes: Supported nodes, shape (s,), int.
+            normals: Their unit rest normals, shape (s, 3), float.
+            amounts: Their jaw amounts (Eq. 6.4.9), shape (s,), float.
+            stiffness: Spring stiffness [N/m], scalar or shape (s,) (default: physical
+                ``support_modulus`` times the node's sheet area; thesis the largest hold stiffness).
+        """
+        self._need_tissue("add_supports")
+        nodes = self._node_index(nodes, "support nodes")
+        if stiffness is None:
+            if isinstance(self.material, MaterialPhysical):
+                k = self.material.support_modulus * self.vertex_area[nodes]
+            else:
+                k = float(self.hold_stiffness.max()) if self.held.any() else 0.0
+        else:
+            k = stiffness
+        self.support_nodes = nodes
+        self.support_normal = np.asarray(normals, np.float64).reshape(-1, 3)
+        self.support_amount = np.asarray(amounts, np.float64).reshape(-1)
+        self._support_k = k
+        self._support_given = stiffness is not None
+        self.support_stiffness = np.broadcast_to(np.asarray(k, np.float64), (len(nodes),)).copy()
+        if not (np.isfinite(self.support_stiffness).all() and (self.support_stiffness >= 0).all()):
+            raise InputError(f"support stiffness must be finite and >= 0 [N/m], got {stiffness!r}")
+
+    def add_jaw(self, jaw, nodes, amounts, *, node_amount=None) -> None:
+        """The kinematic jaw (Eq. 6.4.9): the targets of the fixed / held nodes it carries, and the
+        carry of the free nodes with a jaw amount (``coupling.kinematic``).
+
+        Args:
+            jaw: Anything with ``pivot``, ``u_axis``, ``v_axis`` (:class:`~facewarp.JawKinematic`).
+            nodes: Fixed / held nodes whose targets turn with the jaw, shape (j,), int.
+            amounts: Their amounts, shape (j,), float.
+            node_amount: Amount of every node, shape (vertex_count,) (default: none carried).
+        """
+        self._need_tissue("add_jaw")
+        self.jaw = jaw
+        self.jaw_nodes = self._node_index(nodes, "jaw nodes")
+        self.jaw_amount = np.asarray(amounts, np.float64).reshape(-1)
+        if node_amount is not None:
+            a = _vertex_array(node_amount, self.vertex_count, "node_amount", np.float64)
+            self.carry_nodes = np.flatnonzero((a > 0) & ~self.fixed)
+            self.carry_amount = a[self.carry_nodes]
+
+    def add_contacts(self, geometry, *, modulus: float | None = None) -> None:
+        """Lip, teeth, eyeball and lid contact (:class:`~facewarp._src.physics.contact.ContactStage`)
+        with its stiffness; add the muscles and supports first.
+
+        A node's contact spring holds against the tissue (physical ``modulus`` times its sheet area,
+        default ``CONTACT_MODULUS``; thesis its hold stiffness) and against its own muscle springs
+        (``CONTACT_MUSCLE_RATIO`` times them). The inner lid sheet gliding on the eyeball and the
+        lid ties get the sliding support's stiffness.
+
+        Args:
+            geometry: The rig's :class:`~facewarp._src.physics.contact.ContactGeometry`.
+            modulus: Contact stiffness per unit sheet area [N/m^3], > 0 (physical profile).
+        """
+        self._need_tissue("add_contacts")
+        if modulus is not None and not (isinstance(modulus, (int, float)) and np.isfinite(modulus) and modulus > 0):
+            raise InputError(f"contact_modulus: expected a positive number [N/m^3], got {modulus!r}")
+        n, mat = self.vertex_count, self.material
+        physical = isinstance(mat, MaterialPhysical)
+        rig = self.muscle_rig
+        k_muscle = (np.bincount(rig.att_node, weights=rig.att_stiffness, minlength=n) if rig is not None
+                    else np.zeros(n))
+        if physical:
+            k_contact = float(modulus or CONTACT_MODULUS) * self.vertex_area
+        else:
+            k_contact = np.full(n, float(self.hold_stiffness.max()) if self.held.any() else 0.0)
+        self.contact_stiffness = k_contact + CONTACT_MUSCLE_RATIO * k_muscle
+        k_s = self._support_k
+        self.glide_stiffness = (mat.support_modulus * self.vertex_area if physical and not self._support_given
+                                else np.full(n, float(np.median(k_s)) if np.size(k_s) else 0.0))
+        self.contact_geometry = geometry
+
+    def add_face(self, fr, *, material=None, edge_damping: float | None = None, support_stiffness=None,
+                 contact: bool = True, contact_modulus: float | None = None, mass_scaling: bool = True) -> None:
+        """One face rig (:class:`~facewarp._src.physics.face_rig.FaceRig`): its tissue, muscles,
+        supports, jaw and contact, every stiffness from ``material``.
+
+        Args:
+            fr: The face rig (``facewarp build``, :func:`~facewarp.build_face`).
+            material: ``"physical"`` (default), ``"thesis"`` or a material object.
+            edge_damping: Edge dashpot [N s/m] (default: thesis :data:`EDGE_DAMPING`, physical 0).
+            support_stiffness: Sliding-support stiffness [N/m] (default: from the material).
+            contact: Add the contact (the rig's ``contact`` geometry, made at build time).
+            contact_modulus: As :meth:`add_contacts`.
+            mass_scaling: The thesis profile's damping rate is Table 6.3's 0.002 per substep of
+                the Verlet reference with (True) or without selective mass scaling
+                (:meth:`explicit_step` sets it from the step the explicit solver takes).
+
+        Raises:
+            InputError: bad values, or ``contact`` with a rig that has no contact geometry.
+        """
+        from .face_rig import node_jaw_amounts
+
+        mat = material_profile("physical" if material is None else material)
+        physical = isinstance(mat, MaterialPhysical)
+        if edge_damping is None:
+            edge_damping = 0.0 if physical else EDGE_DAMPING
+        if contact and getattr(fr, "contact", None) is None:
+            raise InputError("fr: the face rig has no contact geometry (make it with facewarp.build_face, or "
+                             "rebuild an older build with `facewarp build`); or pass contact=False")
+        self.add_tissue(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held, material=mat,
+                        edge_damping=edge_damping)
+        node_jaw = node_jaw_amounts(fr)
+        self.add_muscles(fr.rig, node_amount=node_jaw)
+        self.add_supports(fr.support_nodes, fr.support_normal, fr.support_amount, stiffness=support_stiffness)
+        self.add_jaw(fr.jaw, fr.jaw_nodes, fr.jaw_amount, node_amount=node_jaw)
+        if contact:
+            self.add_contacts(fr.contact, modulus=contact_modulus)
+        if not physical:  # Table 6.3's per-substep damping as a rate, at the reference's substep
+            from .solvers.verlet import MASS_SCALING_QUANTILE, scale_masses
+
+            ref = copy.copy(self)  # the tissue alone: no springs, the masses not scaled
+            ref.mass = self.mass.copy()
+            dt_ref, _ = scale_masses(ref, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0)
+            self.damping_rate = mat.damping / dt_ref
+
+    def node_spring_stiffness(self) -> np.ndarray:
+        """The springs the added stages put on each node [N/m], shape (vertex_count,), float64:
+        supports, muscles and contact candidates (the explicit step's stability bound)."""
+        extra = np.zeros(self.vertex_count)
+        np.add.at(extra, self.support_nodes, np.broadcast_to(self._support_k, (len(self.support_nodes),)))
+        if self.muscle_rig is not None:
+            np.add.at(extra, self.muscle_rig.att_node, self.muscle_rig.att_stiffness)
+        g = self.contact_geometry
+        if g is not None:
+            cand = np.unique(np.concatenate([*g.lip_nodes, *[t[4] for t in g.teeth], g.eye_nodes]).astype(np.int64))
+            extra[cand] += self.contact_stiffness[cand]
+        return extra
+
+    def explicit_step(self, frame_dt: float, *, dt: float | None = None, substeps: int | None = None,
+                      mass_scaling: bool = True) -> tuple[int, float, float]:
+        """The Verlet reference's substep: selective mass scaling (the 2 % of nodes with the
+        smallest own limit get the mass that lifts them to it; ``builder.mass`` changes) and, for
+        the thesis profile, Table 6.3's per-substep damping as the rate ``0.002 / dt``.
+
+        Args:
+            frame_dt: Frame length [s].
+            dt: Wanted substep [s] (default the stable one); substeps: per frame (overrides dt).
+            mass_scaling: Scale the masses (else the smallest node limit is the step).
+
+        Returns:
+            ``(substeps, dt [s], added mass fraction)``.
+
+        Raises:
+            InputError: a substep above twice the stable one.
+        """
+        from .solvers.verlet import MASS_SCALING_QUANTILE, scale_masses
+
+        self._need_tissue("explicit_step")
+        dt_safe, added = scale_masses(self, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0,
+                                      extra_stiffness=self.node_spring_stiffness())
+        if substeps is None:
+            substeps = int(np.ceil(frame_dt / (dt or dt_safe)))
+        step = frame_dt / int(substeps)
+        if step > 2.0 * dt_safe:
+            raise InputError(f"substeps {substeps}: dt {step:.2e} s is above twice the stable step "
+                             f"{dt_safe:.2e} s; use at least {int(np.ceil(frame_dt / (2 * dt_safe)))} substeps")
+        if not isinstance(self.material, MaterialPhysical):
+            self.damping_rate = self.material.damping / step
+        return int(substeps), step, added
+
 
     @property
     def vertex_count(self) -> int:
@@ -458,6 +721,32 @@ class ModelBuilder:
             node_slots=i32(order),
             damping_rate=self.damping_rate,
             material=self.material.name,
+            **self._finalize_stages(dev, f32),
+        )
+
+    def _finalize_stages(self, dev, f32) -> dict:
+        """The Model's stage fields and per-head ranges (one head; a batch appends rows)."""
+        wp = get_warp()
+        rig = self.muscle_rig
+        P = 0 if rig is None else len(rig.ctrl_rest)
+        K = 0 if rig is None else len(rig.att_node)
+        ranges = {name: np.array([0, count], np.int64) for name, count in (
+            ("head_node_start", self.vertex_count), ("head_edge_start", len(self.edges)),
+            ("head_face_start", len(self.faces)), ("head_tet_start", len(self.tets)),
+            ("head_muscle_start", self.muscle_count), ("head_ctrl_start", P), ("head_attachment_start", K),
+            ("head_support_start", len(self.support_nodes)), ("head_carry_start", len(self.carry_nodes)))}
+        g = self.contact_geometry
+        return dict(
+            head_count=self.head_count,
+            **ranges,
+            muscles=None if rig is None else ModelMuscles(rig, self.muscle_node_amount),
+            muscle_ctrl_rest=(f32(rig.ctrl_rest, wp.vec3) if P else wp.zeros(0, dtype=wp.vec3, device=dev)),
+            supports=ModelSupports(self.support_nodes, self.support_normal, self.support_amount,
+                                   self.support_stiffness),
+            jaw=None if self.jaw is None else ModelJaw(self.jaw, self.jaw_nodes, self.jaw_amount, self.carry_nodes,
+                                                       self.carry_amount),
+            contact=None if g is None else ModelContact(g, self.contact_stiffness, self.glide_stiffness,
+                                                        self.vertices, self.jaw),
         )
 
 
@@ -547,12 +836,42 @@ class Model:
     material: str
     """Name of the material profile the model was built with."""
 
+    head_count: int = 1
+    """Number of heads (one per :meth:`ModelBuilder.add_tissue`; a batch appends heads)."""
+    head_node_start: np.ndarray = None
+    """Each head's first node and the end, shape (head_count + 1,), int64 (host); alike the
+    ``head_edge_start``, ``head_face_start``, ``head_tet_start``, ``head_muscle_start`` (activations),
+    ``head_ctrl_start`` (muscle control points), ``head_attachment_start`` (muscle springs),
+    ``head_support_start`` and ``head_carry_start`` (jaw-carried nodes) ranges."""
+    head_edge_start: np.ndarray = None
+    head_face_start: np.ndarray = None
+    head_tet_start: np.ndarray = None
+    head_muscle_start: np.ndarray = None
+    head_ctrl_start: np.ndarray = None
+    head_attachment_start: np.ndarray = None
+    head_support_start: np.ndarray = None
+    head_carry_start: np.ndarray = None
+    muscles: ModelMuscles | None = None
+    """The muscles (:meth:`ModelBuilder.add_muscles`), or None."""
+    muscle_ctrl_rest: object = None
+    """Rest positions of the muscle control points [m], shape (P,), wp.vec3 (the State's start)."""
+    supports: ModelSupports | None = None
+    """The sliding supports (:meth:`ModelBuilder.add_supports`)."""
+    jaw: ModelJaw | None = None
+    """The kinematic jaw (:meth:`ModelBuilder.add_jaw`), or None."""
+    contact: ModelContact | None = None
+    """The contact (:meth:`ModelBuilder.add_contacts`), or None."""
+
     def state(self) -> State:
-        """A new :class:`State` at rest: positions = previous positions = rest positions."""
+        """A new :class:`State` at rest: positions = previous positions = rest positions, the
+        muscle control points at rest, the jaw carried to (0, 0)."""
         wp = get_warp()
+        ctrl = self.muscle_ctrl_rest
         return State(
             positions=wp.clone(self.rest_positions),
             prev_positions=wp.clone(self.rest_positions),
+            muscle_ctrl=wp.clone(ctrl) if ctrl is not None else wp.zeros(0, dtype=wp.vec3, device=self.device),
+            jaw_carry=wp.zeros(2, dtype=float, device=self.device),
         )
 
     def control(self) -> Control:
@@ -568,18 +887,96 @@ class Model:
 
 @dataclass(eq=False)
 class State:
-    """Positions of the mass points at two consecutive steps (the velocity is their difference)."""
+    """Everything a step changes: the mass points at two consecutive steps (the velocity is their
+    difference) and what the stages carry from step to step.
+
+    The stages write their fields in place in ``state_in`` at the step's start (the muscle
+    geometry of the step's controls, the jaw carry) and the solver hands them on to
+    ``state_out`` (:meth:`assign_stage_data`), so two States can be swapped step by step and a
+    copy of the rest State is a reset. What a stage recomputes from State and Control before
+    every use (springs, ellipsoids, contact points) is scratch of its kernel group, not state.
+    """
 
     positions: object
     """Positions x(t) [m], shape (vertex_count,), wp.vec3 (float32)."""
     prev_positions: object
     """Positions x(t - dt) [m], shape (vertex_count,), wp.vec3 (float32)."""
+    muscle_ctrl: object = None
+    """Muscle control points after the last step's controls [m] (Eq. 6.4.1's Bezier curves,
+    contracted and turned with the jaw), shape (P,), wp.vec3 (float32); None without muscles."""
+    jaw_carry: object = None
+    """Jaw angles [rad] the carried nodes' positions correspond to (the carry of Eq. 6.4.9 moves
+    them by the change to the next step's angles), shape (2,), float32; None without a jaw."""
 
     def assign(self, other: State) -> None:
         """Copy ``other``'s buffers into this state's (no allocation)."""
         wp = get_warp()
         wp.copy(self.positions, other.positions)
         wp.copy(self.prev_positions, other.prev_positions)
+        self.assign_stage_data(other)
+
+    def assign_stage_data(self, other: State) -> None:
+        """Copy ``other``'s stage fields (all but the positions) into this state's (no allocation)."""
+        wp = get_warp()
+        for a, b in ((self.muscle_ctrl, other.muscle_ctrl), (self.jaw_carry, other.jaw_carry)):
+            if a is not None and b is not None and a.shape[0]:
+                wp.copy(a, b)
+
+
+@dataclass(frozen=True, eq=False)
+class ModelMuscles:
+    """The muscles of a :class:`Model` (host, NumPy; the muscle stage copies them to the device)."""
+
+    rig: object
+    """The :class:`~facewarp._src.physics.muscle_stage.MuscleRig` with its final ``att_stiffness`` [N/m]."""
+    node_amount: np.ndarray | None
+    """Jaw amount (Eq. 6.4.9) of every node, shape (vertex_count,), float64, or None."""
+
+
+@dataclass(frozen=True, eq=False)
+class ModelSupports:
+    """The sliding supports of a :class:`Model` (host, NumPy)."""
+
+    nodes: np.ndarray
+    """Supported nodes, shape (s,), int64."""
+    normals: np.ndarray
+    """Their rest normals, shape (s, 3), float64."""
+    amounts: np.ndarray
+    """Their jaw amounts, shape (s,), float64."""
+    stiffness: np.ndarray
+    """Spring stiffness [N/m], shape (s,), float64."""
+
+
+@dataclass(frozen=True, eq=False)
+class ModelJaw:
+    """The kinematic jaw of a :class:`Model` (host, NumPy)."""
+
+    joint: object
+    """Pivot [m] and unit axes of the jaw (``pivot``, ``u_axis``, ``v_axis``; :class:`~facewarp.JawKinematic`)."""
+    nodes: np.ndarray
+    """Fixed / held nodes whose targets turn with the jaw, shape (j,), int64."""
+    amounts: np.ndarray
+    """Their amounts, shape (j,), float64."""
+    carry_nodes: np.ndarray
+    """Free nodes carried with the jaw, shape (c,), int64."""
+    carry_amounts: np.ndarray
+    """Their amounts, shape (c,), float64."""
+
+
+@dataclass(frozen=True, eq=False)
+class ModelContact:
+    """The contact of a :class:`Model` (host, NumPy)."""
+
+    geometry: object
+    """The :class:`~facewarp._src.physics.contact.ContactGeometry` (made at build time)."""
+    node_stiffness: np.ndarray
+    """Contact spring stiffness of every node [N/m], shape (vertex_count,), float64."""
+    glide_stiffness: np.ndarray
+    """Stiffness of the gliding lid sheet and the lid ties [N/m], shape (vertex_count,), float64."""
+    nodes: np.ndarray
+    """Rest positions [m], shape (vertex_count, 3), float64 (the contact stage's rest frame)."""
+    jaw: object
+    """The jaw joint (the lower teeth turn with it), or None."""
 
 
 @dataclass(eq=False)

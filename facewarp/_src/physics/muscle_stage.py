@@ -262,7 +262,7 @@ def contraction_curve(activation, contraction, saturation):
 def rig_reference(rig: MuscleRig, activations, jaw=None, jaw_angles=(0.0, 0.0)):
     """NumPy reference of the whole muscle stage: (control points (P, 3), attachment points
     (K, 3)). ``jaw`` is a :class:`facewarp._src.jaw.JawKinematic` or None."""
-    from ..anatomy.jaw import jaw_rotation
+    from ..geometry.jaw import jaw_rotation
 
     acts = np.asarray(activations, dtype=np.float64)
     if jaw is not None:
@@ -310,8 +310,11 @@ class MuscleStage:
     Control points contract along the saturating activation curve (:func:`contraction_curve`)
     and anchors tie their members two-way (``kernels_muscle._muscle_anchors``).
 
-    Attributes (device arrays, written every substep, readable between frames):
-        ctrl: Current control points [m], shape (P,), wp.vec3.
+    The control points of the step's controls are State (``State.muscle_ctrl``, written in place
+    in ``state_in`` at the step's start); the stage's own arrays are the model's muscles on the
+    device and scratch that every step recomputes from State and Control before use.
+
+    Attributes (device scratch, written every substep, readable between frames):
         seg_center, seg_frame, seg_radii: Current ellipsoids.
         att_point: Current attachment points on the ellipsoids [m], shape (K,), wp.vec3.
         springs: The springs of the current implicit step (:class:`~facewarp._src.physics.model.Springs`).
@@ -373,7 +376,6 @@ class MuscleStage:
         P, S, K = len(rig.ctrl_rest), len(rig.seg_curve), len(rig.att_node)
         self.ctrl_jawed = wp.zeros(P, dtype=wp.vec3, device=device)
         self.ctrl_contracted = wp.zeros(P, dtype=wp.vec3, device=device)
-        self.ctrl = wp.zeros(P, dtype=wp.vec3, device=device)
         self.seg_center = wp.zeros(S, dtype=wp.vec3, device=device)
         self.seg_frame = wp.zeros(S, dtype=wp.mat33, device=device)
         self.seg_radii = wp.zeros(S, dtype=wp.vec3, device=device)
@@ -386,13 +388,26 @@ class MuscleStage:
         else:
             self.jaw_pivot, self.jaw_u, self.jaw_v = wp.vec3(0.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0)
 
-    def update_geometry(self, control) -> None:
-        """Control points and ellipsoids for ``control`` (kernels 1-3 of the module doc)."""
+    @classmethod
+    def from_model(cls, model: Model) -> MuscleStage:
+        """The stage of ``model.muscles`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_muscles`)."""
+        m = model.muscles
+        joint = model.jaw.joint if model.jaw is not None else None
+        return cls(m.rig, joint, model.device, node_amount=m.node_amount)
+
+    def update_geometry(self, control, state) -> None:
+        """Control points for ``control`` into ``state.muscle_ctrl`` and the ellipsoids (kernels
+        1-3 of the module doc)."""
         wp = get_warp()
         km = self.km
         P = len(self.rig.ctrl_rest)
         if P == 0:
             return
+        ctrl = state.muscle_ctrl
+        if ctrl is None or ctrl.shape[0] != P:
+            raise InputError(f"state.muscle_ctrl: expected {P} control points, got "
+                             f"{0 if ctrl is None else ctrl.shape[0]} (make the State from a Model with these "
+                             "muscles: ModelBuilder.add_muscles)")
         wp.launch(km._muscle_controls, dim=P,
                   inputs=[self.ctrl_rest, self.ctrl_muscle, self.ctrl_pivot, self.ctrl_jaw, self.muscle_activation,
                           self.muscle_contraction, self.muscle_saturation, self.muscle_center, self.muscle_center_jaw,
@@ -400,21 +415,21 @@ class MuscleStage:
                           self.jaw_u, self.jaw_v,
                           control.activations, control.jaw_angles],
                   outputs=[self.ctrl_jawed, self.ctrl_contracted], device=self.device)
-        wp.copy(self.ctrl, self.ctrl_contracted)
+        wp.copy(ctrl, self.ctrl_contracted)
         if self.anchor_count:
             wp.launch(km._muscle_anchors, dim=self.anchor_count,
                       inputs=[self.anchor_start, self.anchor_ctrl, self.anchor_passive, self.ctrl_muscle,
                               self.muscle_activation, control.activations, self.ctrl_jawed, self.ctrl_contracted],
-                      outputs=[self.ctrl], device=self.device)
+                      outputs=[ctrl], device=self.device)
         if len(self.rig.seg_curve):
             wp.launch(km._muscle_segments, dim=len(self.rig.seg_curve),
                       inputs=[self.curve_ctrl, self.curve_weight, self.curve_normal, self.seg_curve, self.seg_t,
-                              self.seg_rest_radii, self.ctrl],
+                              self.seg_rest_radii, ctrl],
                       outputs=[self.seg_center, self.seg_frame, self.seg_radii], device=self.device)
 
     def apply(self, model: Model, state_in, control, dt, forces, targets) -> None:
         wp = get_warp()
-        self.update_geometry(control)
+        self.update_geometry(control, state_in)
         if len(self.rig.att_node):
             wp.launch(self.km._muscle_forces, dim=len(self.rig.att_node),
                       inputs=[self.att_node, self.att_seg, self.att_uv, self.att_rest_length, self.att_stiffness,
@@ -429,7 +444,7 @@ class MuscleStage:
 
     def prepare(self, model: Model, state_in, control, dt, targets) -> None:
         """Muscle geometry for ``control`` and the step's springs (attachment points, ``k_m w``)."""
-        self.update_geometry(control)
+        self.update_geometry(control, state_in)
         self.refresh(model, state_in.positions, control)
 
     def refresh(self, model: Model, positions, control) -> None:
@@ -456,6 +471,12 @@ class SupportStage:
     Eq. 6.4.9 amount: ``E = 1/2 k ((x - p0) . n)^2``. :meth:`apply` adds its forces (explicit
     solvers), :meth:`prepare` fills :attr:`springs` (implicit solvers).
     """
+
+    @classmethod
+    def from_model(cls, model: Model) -> SupportStage:
+        """The stage of ``model.supports`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_supports`)."""
+        s = model.supports
+        return cls(model.jaw.joint, s.nodes, s.normals, s.amounts, s.stiffness, model.rest_positions, model.device)
 
     def __init__(self, jaw, nodes, normals, amounts, stiffness, rest_positions, device):
         wp = get_warp()

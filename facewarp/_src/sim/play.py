@@ -23,28 +23,9 @@ import numpy as np
 from ..core.errors import InputError
 from ..expressions import Timeline
 from .frames import Frames
+from .readout import fdp_points
 
-__all__ = ["FrameRecorder", "PlayStats", "Sink", "check_seconds", "fdp_points_of", "play"]
-
-
-def fdp_points_of(fr, points: np.ndarray, parts: dict) -> np.ndarray:
-    """FDP positions [m] of ``fr`` on frames of its head and rigid parts, shape (f, 84, 3), float32.
-
-    Args:
-        fr: The face rig (its ``fdp_part``, ``fdp_face``, ``fdp_bary``).
-        points: Head vertices [m], shape (f, n, 3).
-        parts: Part name -> vertices [m], shape (f, k, 3).
-    """
-    out = np.zeros((len(points), len(fr.fdp_ids), 3), np.float32)
-    for i, (part, f, b) in enumerate(zip(fr.fdp_part, fr.fdp_face, fr.fdp_bary)):
-        if part == "head":
-            tri = fr.head_faces[f]
-            out[:, i] = np.einsum("k,fkd->fd", b, points[:, tri])
-        else:
-            V = parts[str(part)]
-            tri = fr.parts[str(part)][1][f]
-            out[:, i] = np.einsum("k,fkd->fd", b, V[:, tri])
-    return out
+__all__ = ["FrameRecorder", "PlayStats", "Sink", "check_seconds", "play"]
 
 
 # ------------------------------------------------------------------------------------- sinks
@@ -148,7 +129,7 @@ class FrameRecorder(Sink):
     def finish(self, sim, stats: PlayStats) -> None:
         fr = sim.fr
         self.frames = Frames(self.times, self.points, fr.head_faces, fr.fdp_ids,
-                             fdp_points_of(fr, self.points, self.parts),
+                             fdp_points(fr, self.points, self.parts),
                              {k: (v, fr.parts[k][1]) for k, v in self.parts.items()}, list(sim.muscle_names),
                              self.curves, self.activations, self.jaw, stats.steps_per_second, sim.substeps, sim.dt,
                              frames_per_second=stats.frames_per_second, realtime_factor=stats.realtime_factor,

@@ -583,6 +583,7 @@ class SolverImplicit(SolverBase):
         wp = get_warp()
         wp.copy(state_out.prev_positions, state_in.positions)
         wp.copy(state_out.positions, self.x)
+        state_out.assign_stage_data(state_in)  # what the stages carry (muscle geometry, jaw carry)
         wp.launch(ki._advance_counter, dim=1, inputs=[], outputs=[self.step_counter], device=self.device)
         self._launch_guard(state_out)
 
@@ -974,10 +975,14 @@ class SolverImplicit(SolverBase):
         return e, g, H
 
     def reset(self) -> None:
-        """Back to the rest pose (targets, counter, guard); the factorisation is kept."""
+        """Back to the rest pose (targets, counter, guard) and to a fresh solver's step history: the
+        curvature pairs and the factorisation go (a factorisation kept from a later state would
+        steer the next steps' iterations, up to the tolerance, away from a fresh solver's)."""
         super().reset()
         self.last_iterations = 0
         self._clear_history()
+        self._solve0 = self._h = self._contacts_factored = None
+        self._excess, self._last_step_size = 0, 0.0
 
     def _advice(self) -> str:
         return "lower the activation or jaw speed, or take smaller steps"

@@ -291,6 +291,7 @@ class SolverVerlet(SolverBase):
             outputs=[state_out.positions, state_out.prev_positions, self.step_counter],
             device=self.device,
         )
+        state_out.assign_stage_data(state_in)  # what the stages carry (muscle geometry, jaw carry)
         self._launch_guard(state_out)
 
 

@@ -1,0 +1,149 @@
+"""Frames of substeps with ramped controls: the host side of stepping a Model.
+
+:class:`FrameStepper` owns what a frame needs beyond the Model, the State and the solver: the
+pinned host buffer the controls go up through, the control ramp and the CUDA graphs it replays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.errors import InputError
+from ..core.warp import get_warp
+
+__all__ = ["SOLVERS", "FrameStepper", "check_timing", "face_stages", "frame_timing", "make_solver", "substep_count"]
+
+SOLVERS = ("implicit", "verlet")
+"""Solvers of :class:`FaceSimulator`: ``implicit`` (backward Euler, a few steps per frame; the
+default) and ``verlet`` (the explicit reference, hundreds of substeps per frame)."""
+
+
+def face_stages(model) -> dict:
+    """The kernel groups of a face Model, in step order: ``carry``, ``jaw``, ``support``,
+    ``muscles`` (Eq. 6.4.9, supports, Eq. 6.4.1) and ``contact`` (None without it)."""
+    from ..coupling.kinematic import CarryStage, JawStage
+    from ..physics.contact import ContactStage
+    from ..physics.muscle_stage import MuscleStage, SupportStage
+
+    return {"carry": CarryStage.from_model(model), "jaw": JawStage.from_model(model),
+            "support": SupportStage.from_model(model), "muscles": MuscleStage.from_model(model),
+            "contact": ContactStage.from_model(model) if model.contact is not None else None}
+
+
+def check_timing(solver: str, fps, dt, substeps) -> None:
+    """The simulator's solver name and frame timing, checked at the public edge.
+
+    Raises:
+        InputError: an unknown solver, a non-positive ``fps`` or ``dt``, ``substeps`` < 1.
+    """
+    if solver not in SOLVERS:
+        raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
+    if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
+        raise InputError(f"fps: expected a positive number, got {fps!r}")
+    if substeps is not None and not (isinstance(substeps, (int, np.integer)) and substeps >= 1):
+        raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
+    if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+        raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
+
+
+def frame_timing(builder, solver: str, fps: float, dt=None, substeps=None, *, mass_scaling: bool = True):
+    """Substeps per frame and the substep [s] of ``solver`` for a face builder: the implicit
+    solver one step per frame (or ``substeps``, or as many as ``dt`` needs), the Verlet reference
+    its stable step (:meth:`~facewarp._src.physics.model.ModelBuilder.explicit_step`, which may
+    scale masses). Returns ``(substeps, dt [s], added mass fraction)``."""
+    frame_dt = 1.0 / fps
+    if solver == "verlet":
+        return builder.explicit_step(frame_dt, dt=dt, substeps=substeps, mass_scaling=mass_scaling)
+    n = int(substeps if substeps is not None else 1 if dt is None else np.ceil(frame_dt / dt))
+    return n, frame_dt / n, 0.0
+
+
+def make_solver(model, stages, solver: str, *, method=None, iterations=None, tolerance=None, solver_options=None):
+    """The solver of a face Model: :class:`~facewarp._src.physics.solvers.verlet.SolverVerlet`, or
+    :class:`~facewarp._src.physics.solvers.implicit.SolverImplicit` (``tolerance`` default 3e-5 m,
+    ``solver_options`` its further keywords)."""
+    from ..physics.solvers.implicit import SolverImplicit
+    from ..physics.solvers.verlet import SolverVerlet
+
+    if solver == "verlet":
+        return SolverVerlet(model, stages=stages)
+    opts = {"tolerance": 3e-5 if tolerance is None else tolerance, **(solver_options or {})}
+    return SolverImplicit(model, stages=stages, method=method, iterations=iterations, **opts)
+
+
+def substep_count(dt, step: float) -> int:
+    """Whole substeps of ``step`` [s] in ``dt`` [s] (at least one).
+
+    Raises:
+        InputError: ``dt`` not a positive finite number.
+    """
+    if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+        raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
+    return max(1, int(round(float(dt) / step)))
+
+
+class FrameStepper:
+    """Runs substeps of a solver on a State, swapping it with a scratch State, with the controls
+    ramped linearly from their old to their new values in up to ``chunks`` pieces.
+
+    Each piece is a run of substeps with no host round trip inside: on CUDA a replayed graph
+    (one per substep count; the adaptive device solver's Newton loop is a conditional graph node,
+    CUDA 12.4+: without one, the frames run launch by launch). The controls go up through pinned
+    host memory, one row per piece, so no piece's values are overwritten before its copy has run.
+
+    Args:
+        solver: Anything with ``step(state_in, state_out, control, dt)``.
+        state, scratch: The State stepped and its partner (both stay where they are: graphs
+            captured on them stay valid).
+        control: The :class:`~facewarp._src.physics.model.Control` the solver reads.
+        dt: Substep [s].
+        chunks: Largest number of ramp pieces per frame.
+    """
+
+    def __init__(self, solver, state, scratch, control, dt: float, *, chunks: int = 16):
+        wp = get_warp()
+        self.solver, self.state, self.scratch, self.control, self.dt = solver, state, scratch, control, float(dt)
+        self.device = state.positions.device
+        self.chunks = int(chunks)
+        self.na = int(control.activations.shape[0])
+        self.host = wp.zeros(self.chunks * (self.na + 2), dtype=float, device="cpu", pinned=bool(self.device.is_cuda))
+        self.use_graph = bool(self.device.is_cuda) and (
+            not getattr(solver, "adaptive", False) or wp.is_conditional_graph_supported())
+        self.graphs: dict[int, object] = {}
+
+    def frame(self, n: int, a0, a1, j0, j1) -> None:
+        """``n`` substeps with activations ramping from ``a0`` to ``a1`` (M,) and jaw angles from
+        ``j0`` to ``j1`` (2,) [rad], float32."""
+        wp = get_warp()
+        chunks = max(1, min(n, self.chunks))
+        bounds = np.linspace(0, n, chunks + 1).round().astype(int)
+        host, na = self.host.numpy(), self.na
+        for c in range(chunks):
+            w, o = (c + 1) / chunks, c * (na + 2)
+            host[o:o + na] = (1 - w) * a0 + w * a1
+            host[o + na:o + na + 2] = (1 - w) * j0 + w * j1
+            if na:
+                wp.copy(self.control.activations, self.host, src_offset=o, count=na)
+            wp.copy(self.control.jaw_angles, self.host, src_offset=o + na, count=2)
+            self.substeps(int(bounds[c + 1] - bounds[c]))
+
+    def substeps(self, n: int) -> None:
+        """``n`` substeps with the current control (a replayed graph on CUDA)."""
+        wp = get_warp()
+        if n <= 0:
+            return
+        if self.use_graph and n not in self.graphs:
+            with wp.ScopedCapture(device=self.device) as cap:
+                self._substeps(n)
+            self.graphs[n] = cap.graph
+        if self.use_graph:
+            wp.capture_launch(self.graphs[n])
+        else:
+            self._substeps(n)
+
+    def _substeps(self, n: int) -> None:
+        for s in range(n):
+            src, dst = (self.state, self.scratch) if s % 2 == 0 else (self.scratch, self.state)
+            self.solver.step(src, dst, self.control, self.dt)
+        if n % 2 == 1:
+            self.state.assign(self.scratch)
