@@ -204,6 +204,18 @@ PRESETS: dict[str, Expression] = {
 
 
 def preset(name: str) -> Expression:
+    """A preset expression by name (:data:`PRESETS`: Table 6.4's smile, laugh, surprise, angry,
+    sad and the named activation sets).
+
+    Args:
+        name: The preset's name, e.g. ``"smile"``.
+
+    Returns:
+        The :class:`Expression` (activations per muscle in [0, 1], jaw angles [rad]).
+
+    Raises:
+        InputError: an unknown name (the message lists the known ones).
+    """
     try:
         return PRESETS[name]
     except KeyError:
