@@ -57,6 +57,21 @@ def attribute_doc(origin: str, name: str) -> str:
     return "\n".join(docs.get(("", name), [])).strip()
 
 
+def _defining_doc(name: str, obj) -> str:
+    """The attribute docstring of ``name`` in whichever loaded facewarp / usd_export module defines
+    it (a constant re-exported through several modules)."""
+    import sys
+
+    for modname, mod in sorted(sys.modules.items()):
+        if mod is None or not modname.startswith(("facewarp", "usd_export")):
+            continue
+        if getattr(mod, name, None) is obj:
+            doc = attribute_doc(modname, name)
+            if doc:
+                return doc
+    return ""
+
+
 def public_names() -> list[tuple[str, str, object, str, str]]:
     """Every public name: ``(module, name, object, kind, docstring)``; kind is ``class``,
     ``function`` or ``data``; the docstring is the object's own (classes, functions) or the
@@ -74,7 +89,7 @@ def public_names() -> list[tuple[str, str, object, str, str]]:
                 kind, doc = "function", inspect.getdoc(obj) or ""
             else:
                 kind = "data"
-                doc = attribute_doc(origins.get(n, modname), n) or attribute_doc(modname, n)
+                doc = attribute_doc(origins.get(n, modname), n) or _defining_doc(n, obj)
             rows.append((modname, n, obj, kind, doc))
     return rows
 
