@@ -201,9 +201,23 @@ PRESETS: dict[str, Expression] = {
     "smile_R": Expression("smile_R", {"zygomatic_major_R": 0.6, "zygomatic_minor_R": 0.1,
                                           "levator_anguli_oris_R": 0.2}),
 }
+"""The preset expressions by name: Table 6.4's smile, laugh, surprise, angry and sad, and blink,
+squint, pucker, jaw_open, smile_L and smile_R (activations calibrated to the ICT rig)."""
 
 
 def preset(name: str) -> Expression:
+    """A preset expression by name (:data:`PRESETS`: Table 6.4's smile, laugh, surprise, angry,
+    sad and the named activation sets).
+
+    Args:
+        name: The preset's name, e.g. ``"smile"``.
+
+    Returns:
+        The :class:`Expression` (activations per muscle in [0, 1], jaw angles [rad]).
+
+    Raises:
+        InputError: an unknown name (the message lists the known ones).
+    """
     try:
         return PRESETS[name]
     except KeyError:

@@ -268,6 +268,7 @@ REGION_GROUPS = {
     "mouth": ("upper_lip", "lower_lip", "lip_corner_L", "lip_corner_R"),
     "ears": ("ear_L", "ear_R"),
 }
+"""Report groups of template regions (group name -> region names) for the per-region errors."""
 
 
 def vertex_groups(template) -> np.ndarray:

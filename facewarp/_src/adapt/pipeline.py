@@ -57,8 +57,8 @@ class AdaptResult:
         quality: Figures that need no truth (:mod:`quality`): "surface" (folds, dihedral angles
             and mean-curvature difference to the scan per region) and "distortion" (edge
             stretch and angle change of the template per region, a correspondence measure).
-        vertex_curvature_diff: |H_adapted - H_scan| per vertex [1/m], shape (n,), NaN off the scan.
-        vertex_stretch: Mean |log(l / l0)| of each vertex's edges, shape (n,), dimensionless.
+        vertex_curvature_diff: ``|H_adapted - H_scan|`` per vertex [1/m], shape (n,), NaN off the scan.
+        vertex_stretch: Mean ``|log(l / l0)|`` of each vertex's edges, shape (n,), dimensionless.
         template_vertices: The template's vertices [m], shape (n, 3), float64.
         vertex_distance: Distance of each adapted vertex to the calibrated scan [m] (template
             frame), shape (n,), inf where no scan surface lies within 1/10 of the head width.

@@ -141,7 +141,7 @@ def surface_quality(V, V0, F, *, scan_V=None, scan_F=None, scan_query: MeshQuery
         template_dihedral_max_deg, dihedral_ok, curvature_rms_diff_per_m, vertices_on_scan}
         plus "all"; "folds", "dihedral_ok", "curvature_limit_per_m" (the smooth regions' RMS
         difference), "curvature_ok" (None without a smooth region or scan); per-vertex
-        |H_adapted - H_scan| [1/m], shape (n,), NaN off the scan).
+        ``|H_adapted - H_scan|`` [1/m], shape (n,), NaN off the scan).
     """
     from .fp_search import uniform_smooth
 

@@ -32,6 +32,9 @@ import numpy as np
 __all__ = ["JawKinematic", "JAW_REGIONS", "jaw_rotation", "rotate_about"]
 
 JAW_REGIONS = ("lip_corner_L", "lip_corner_R", "upper_lip", "lower_lip", "bottom_face", "chin")
+"""Template regions whose points follow the jaw rotation with a per-point amount in [0, 1]: the lip
+corners (1/3), the upper lip (its corners pulled down, its middle staying), the lower lip (1 in the
+middle, 1/3 at the corners), the bottom face and the chin (blended to rigid with the mandible)."""
 
 
 def rotate_about(P, pivot, axis, angle):

@@ -66,6 +66,9 @@ class Similarity:
 
 
 def point_spread(P: np.ndarray) -> np.ndarray:
+    """The spread of a point set about its centroid: the singular values of the centred points,
+    largest first, shape (3,) for P of shape (k, 3) [the points' unit]. A small last value means the
+    points are nearly coplanar (the calibration's check), a small second one nearly collinear."""
     return np.linalg.svd(P - P.mean(axis=0), compute_uv=False)
 
 

@@ -1020,7 +1020,7 @@ class Springs:
       not enter (the eyeball).
 
     Both are C1 (the force vanishes continuously at the surface); their Hessian is ``k a a^T``
-    (``k n n^T``, n = (x - p) / |x - p|) where the spring is compressed and 0 elsewhere.
+    (``k n n^T``, ``n = (x - p) / |x - p|``) where the spring is compressed and 0 elsewhere.
 
     A stage that has springs fills them in its ``prepare`` (once per implicit step); the arrays
     stay allocated, so a captured frame keeps reading the same buffers.

@@ -14,9 +14,13 @@ __all__ = ["CAVITY", "LIPS", "MOUTH", "SKIN", "TEETH", "TONGUE", "colored_scene"
 
 
 SKIN = np.array([0.87, 0.72, 0.62])
+"""Skin colour of the previews, linear RGB in [0, 1], shape (3,)."""
 LIPS = np.array([0.78, 0.47, 0.45])
+"""Lip colour of the previews, linear RGB in [0, 1], shape (3,)."""
 TEETH = np.array([0.97, 0.95, 0.85])
+"""Teeth colour of the previews, linear RGB in [0, 1], shape (3,)."""
 TONGUE = np.array([0.8, 0.42, 0.42])
+"""Tongue colour of the previews, linear RGB in [0, 1], shape (3,)."""
 
 
 def vermilion_weight(V, lm: dict, mask=None) -> np.ndarray:

@@ -24,6 +24,7 @@ ICT_FDP_VERTICES = {
     "2.1": 966, "3.7": 3721, "3.12": 1507, "3.8": 1528, "3.11": 3742, "8.3": 6213, "8.4": 5708,
     "9.3": 4857, "8.1": 0, "8.2": 5518, "2.2": 5533, "2.3": 5517,
 }
+"""FDP id -> vertex index on the ICT-FaceKit neutral head (its published topology)."""
 ICT_FACE_VERTICES = slice(0, 9409)
 LIKENESS_FDPS = ("2.1", "3.7", "3.12", "3.8", "3.11", "8.3", "8.4", "9.3")
 
