@@ -181,7 +181,9 @@ class ModelBuilder:
     ``add_*``); ``ModelBuilder(vertices, tets, **tissue)`` calls :meth:`add_tissue` at once. The
     tissue validates a tet mesh and derives the elements of the deformation model (Sec. 6.4).
 
-    Args (of :meth:`add_tissue`; ``muscle_count`` of the constructor):
+    The arguments are those of :meth:`add_tissue` (``muscle_count``: the constructor's).
+
+    Args:
         vertices: Rest positions [m], shape (n, 3), float.
         tets: Tetrahedra, shape (k, 4), int; each must have positive signed volume
             ``(1/6) (x1 - x0) . ((x2 - x0) x (x3 - x0))`` (see :func:`facewarp.geometry.signed_tet_volumes`).
