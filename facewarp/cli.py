@@ -304,7 +304,8 @@ def cmd_build(args):
     from ._src.jobs.face import build_files
 
     prog = _Progress(4, "build", not args.json)
-    q = build_files(args.head, args.out, layers=args.layers, device=args.device, progress=prog)
+    q = build_files(args.head, args.out, layers=args.layers, device=args.device, progress=prog, up=args.up,
+                    prefix=args.prefix)
     prog.close()
     _emit(args, q, [
         f"built anatomy of {args.head} into {args.out}: {q['tet_count']} tets, {q['inverted_count']} inverted, "
@@ -312,7 +313,7 @@ def cmd_build(args):
         f"  {q['muscle_count']} muscles, attached skin nodes per muscle: min {q.get('min_attached_nodes', 0)}",
         "  lips: {crossing_nodes_before} nodes crossing the other lip at rest, {moved_nodes} moved apart, "
         "{crossing_nodes_after} left".format(**q["lip_separation"]),
-        "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz",
+        "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz, head.xml, scene.xml",
     ])
 
 
@@ -537,6 +538,11 @@ def build_parser() -> argparse.ArgumentParser:
                                 f"(LEVEL 0..{MAX_TEMPLATE_LEVEL}, default 0)")
     b.add_argument("--out", required=True, type=Path, help="output folder")
     b.add_argument("--layers", type=_positive_int, metavar="N", default=1, help="tet layers through the skin (whole number >= 1, default 1)")
+    b.add_argument("--up", choices=["z", "y"], default="z",
+                   help="up axis of head.xml's world: z (MuJoCo's convention, the head looks along +x; default) or y "
+                        "(the head's own frame)")
+    b.add_argument("--prefix", default="", metavar="STR",
+                   help="put STR before every name in head.xml (two heads in one model; letters, digits, _ . : / -)")
     b.set_defaults(func=cmd_build)
 
     s = sub.add_parser("simulate", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
