@@ -81,7 +81,7 @@ _NAMES = {
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
     # MuJoCo coupling, moving head
     "MujocoJaw": "coupling.mujoco", "HeadPose": "coupling.head_pose", "head_mjcf": "coupling.mjcf",
-    "write_head_mjcf": "coupling.mjcf", "scene_mjcf": "coupling.mjcf",
+    "write_head_mjcf": "coupling.mjcf", "scene_mjcf": "coupling.mjcf", "MujocoSkin": "coupling.mujoco_skin",
     # pictures
     "colormap": "present.render", "render_mesh": "present.render", "save_png": "present.render",
     "render_strip": "present.strips", "render_anatomy": "present.anatomy", "render_previews": "present.template",
@@ -120,6 +120,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.coupling.kinematic import CarryStage, JawStage
     from ._src.coupling.mjcf import head_mjcf, scene_mjcf, write_head_mjcf
     from ._src.coupling.mujoco import MujocoJaw
+    from ._src.coupling.mujoco_skin import MujocoSkin
     from ._src.expressions import REFERENCE_JAW_LEVER, expression_from_activations, jaw_angle_for_drop, jaw_lever
     from ._src.expressions import (MUSCLES, PRESETS, Expression, Segment, Timeline, blend, load_sequence, preset,
                                    thesis_sequence, timeline_for, timeline_from_spec)

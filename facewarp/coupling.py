@@ -25,7 +25,8 @@ from ._src.coupling.mjcf import (  # noqa: F401
     write_head_mjcf,
 )
 from ._src.coupling.mujoco import MujocoJaw  # noqa: F401
+from ._src.coupling.mujoco_skin import MujocoSkin  # noqa: F401
 
 __all__ = ["BONE_DENSITY", "GRAVITY", "HEAD_MASS", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "MANDIBLE_PLATE", "SCENE_NAME",
-           "UPS", "Z_UP", "CarryStage", "HeadPose", "JawStage", "MandibleInertia", "MujocoJaw", "check_pose",
+           "UPS", "Z_UP", "CarryStage", "HeadPose", "JawStage", "MandibleInertia", "MujocoJaw", "MujocoSkin", "check_pose",
            "head_mjcf", "mandible_geometry", "mandible_inertia", "scene_mjcf", "up_rotation", "write_head_mjcf"]

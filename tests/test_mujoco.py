@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import os
+import sys
 
 import numpy as np
 import pytest
@@ -10,6 +12,9 @@ import pytest
 import facewarp as fw
 from facewarp.coupling import Z_UP, HeadPose, head_mjcf, mandible_geometry, mandible_inertia, scene_mjcf, write_head_mjcf
 
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+    # headless: MuJoCo's offscreen renderer through EGL (read when mujoco is first imported)
+    os.environ.setdefault("MUJOCO_GL", "egl")
 mujoco = pytest.importorskip("mujoco")
 
 
@@ -316,3 +321,80 @@ def test_bad_up_and_prefix_are_input_errors(head):
         head_mjcf(head, prefix='a"b')
     with pytest.raises(fw.InputError, match="up"):
         scene_mjcf(up="-z")
+
+
+# ------------------------------------------------------------------------ the skin inside MuJoCo
+def _skin_model(head, rig, **kw):
+    m = mujoco.MjModel.from_xml_string(head_mjcf(head, jaw=rig.jaw, skin=(rig.head_vertices, rig.head_faces), **kw))
+    return m, mujoco.MjData(m)
+
+
+def test_skin_mesh_follows_the_face(head, rig):
+    """After a jaw opening, a smile and a turn of the neck, the skin geom's vertices in MuJoCo's
+    world are the simulator's head-frame surface on the cranium's head frame (float32 storage)."""
+    m, d = _skin_model(head, rig, prefix="h_", neck=True)
+    sim = fw.FaceSimulator(rig)
+    jaw = fw.MujocoJaw(sim, m, d)
+    skin = fw.MujocoSkin(sim, m)
+    assert skin.prefix == "h_"
+    assert m.geom_group[m.geom("h_skull").id] == 3  # bones hidden under the skin by default
+    d.ctrl[m.actuator("h_jaw_open").id] = 0.2
+    d.ctrl[m.actuator("h_neck_pan").id] = 0.3
+    sim.set_activations({"zygomatic_major": 1.0})
+    for _ in range(6):
+        jaw.step()
+    skin.update()
+    mujoco.mj_kinematics(m, d)
+    g = m.geom("h_skin").id
+    i = skin.mesh_id
+    Vm = m.mesh_vert[m.mesh_vertadr[i]: m.mesh_vertadr[i] + m.mesh_vertnum[i]].astype(np.float64)
+    world = Vm @ d.geom_xmat[g].reshape(3, 3).T + d.geom_xpos[g]
+    site = m.site("h_head_origin").id  # the head frame now (the simulator's pose lags MuJoCo's by the frame's step)
+    expected = sim.surface(frame="head") @ d.site_xmat[site].reshape(3, 3).T + d.site_xpos[site]
+    moved = np.linalg.norm(sim.surface(frame="head") - rig.head_vertices, axis=1).max()
+    assert moved > 5e-3  # the face did move
+    np.testing.assert_allclose(world, expected, atol=2e-6)
+    np.testing.assert_allclose(skin.vertices(), sim.surface(frame="head"), atol=2e-6)
+
+
+def test_skin_errors(head, rig):
+    m, _ = mujoco.MjModel.from_xml_string(head_mjcf(head)), None
+    with pytest.raises(fw.InputError, match="skin"):
+        fw.MujocoSkin(fw.FaceSimulator(rig), m)  # no skin mesh in the model
+    other = fw.default_template(1)
+    m2 = mujoco.MjModel.from_xml_string(head_mjcf(other, skin=(other.vertices, other.faces)))
+    with pytest.raises(fw.InputError, match="vertices"):
+        fw.MujocoSkin(fw.FaceSimulator(rig), m2)
+    with pytest.raises(fw.InputError, match="skin"):
+        head_mjcf(head, skin=(rig.head_vertices, rig.head_faces + 10**6))
+
+
+def test_renderer_shows_the_updated_skin(head, rig):
+    """mjr_uploadMesh through MujocoSkin.update(renderer) draws what a renderer made after the
+    change draws (its context uploads the model's meshes as they are), and differs from the rest."""
+    m, d = _skin_model(head, rig)
+    try:
+        r = mujoco.Renderer(m, 96, 96)
+    except Exception as e:  # no GL here (MUJOCO_GL=egl or osmesa needs libEGL / libOSMesa)
+        pytest.skip(f"no offscreen OpenGL: {e}")
+    sim = fw.FaceSimulator(rig)
+    jaw = fw.MujocoJaw(sim, m, d)
+    skin = fw.MujocoSkin(sim, m)
+    cam = mujoco.MjvCamera()
+    cam.lookat[:] = [0.0, 0.0, -0.04]
+    cam.distance, cam.azimuth, cam.elevation = 0.3, 180.0, 0.0  # in front of the face (it looks along +x)
+    mujoco.mj_forward(m, d)
+    r.update_scene(d, camera=cam)
+    rest = r.render().copy()
+    d.ctrl[m.actuator("jaw_open").id] = 0.3
+    sim.set_activations({"zygomatic_major": 1.0})
+    for _ in range(6):
+        jaw.step()
+    skin.update(r)
+    r.update_scene(d, camera=cam)
+    moved = r.render().copy()
+    fresh = mujoco.Renderer(m, 96, 96)
+    fresh.update_scene(d, camera=cam)
+    np.testing.assert_array_equal(moved, fresh.render())
+    assert np.abs(moved.astype(int) - rest).max() > 50
+    assert skin.updates == 1 and skin.update_seconds["upload"] > 0

@@ -149,9 +149,9 @@ def _mesh_asset(name: str, V, F, extra: str = "") -> str:
     return f'    <mesh name={quoteattr(name)}{extra} vertex="{_fmt(V)}" face="{" ".join(map(str, np.asarray(F).ravel()))}"/>'
 
 
-def _visual(name: str, mesh: str, rgba: str) -> str:
+def _visual(name: str, mesh: str, rgba: str, group: int = 1) -> str:
     return (f'      <geom name={quoteattr(name)} type="mesh" mesh={quoteattr(mesh)} contype="0" conaffinity="0" '
-            f'density="0" group="1" rgba="{rgba}"/>')
+            f'density="0" group="{group}" rgba="{rgba}"/>')
 
 
 HEAD_SITE = "head_origin"
@@ -224,7 +224,9 @@ def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_he
             two heads fit in one model; letters, digits and ``_ . : / -``.
         skin: The skin as a mesh geom ``skin`` on the cranium: ``(V (n, 3) [m], F (m, 3) int)`` in
             the head frame (``FaceRig.head_vertices``, ``FaceRig.head_faces``), or None for none.
-            :class:`~facewarp.MujocoSkin` moves its vertices with the simulated face.
+            :class:`~facewarp.MujocoSkin` moves its vertices with the simulated face. With a skin
+            the skull and mandible geoms go to geom group 3 (hidden by default in MuJoCo's
+            renderer and viewer; the viewer's group toggles show them).
 
     Returns:
         The MJCF document as a string.
@@ -243,8 +245,11 @@ def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_he
     parts = dict(getattr(head, "parts", {}) or {})
     assets = [_mesh_asset(prefix + "skull", head.skull_vertices(), head.faces),
               _mesh_asset(prefix + "mandible", MV - pivot, MF)]
-    cranium_geoms = [_visual(prefix + "skull", prefix + "skull", "0.92 0.89 0.8 1")]
-    mandible_geoms = [_visual(prefix + "mandible", prefix + "mandible", "0.92 0.89 0.8 1")]
+    # under a skin the bones go to geom group 3: hidden by MuJoCo's renderer and viewer by default
+    # (the skin lies a few mm over them and they would show through where it is thin)
+    bone = 1 if skin is None else 3
+    cranium_geoms = [_visual(prefix + "skull", prefix + "skull", "0.92 0.89 0.8 1", bone)]
+    mandible_geoms = [_visual(prefix + "mandible", prefix + "mandible", "0.92 0.89 0.8 1", bone)]
     for pname, (V, F) in parts.items():
         lower = pname in ("teeth_lower", "tongue")
         assets.append(_mesh_asset(prefix + pname, (np.asarray(V) - pivot) if lower else V, F))
@@ -372,7 +377,7 @@ def scene_mjcf(head_file: str = "head.xml", *, up: str = "z", head=None, name: s
         '  </asset>',
         '  <worldbody>',
         f'    <light name="key" pos="{_fmt(light)}" dir="{_fmt(-light / np.linalg.norm(light))}" diffuse="0.8 0.8 0.8" '
-        'castshadow="true"/>',
+        'castshadow="false"/>',  # shadow maps speckle the face (acne at the chin)
         f'    <geom name="floor" type="plane" size="1 1 0.05" pos="{_fmt(floor_pos)}" quat="{floor_quat}" '
         'material="floor_grid" contype="1" conaffinity="1"/>',
         f'    <camera name="face" pos="{_fmt(cam)}" xyaxes="{_fmt(C[:, 0])} {_fmt(upv)}"/>',

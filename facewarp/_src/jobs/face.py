@@ -80,7 +80,7 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     step("writing")
     write_anatomy(anatomy, out)
     save_face_rig(out / "face_rig.npz", fr)
-    write_head_mjcf(out / "head.xml", head, jaw=fr.jaw, up=up, prefix=prefix)
+    write_head_mjcf(out / "head.xml", head, jaw=fr.jaw, up=up, prefix=prefix, skin=(fr.head_vertices, fr.head_faces))
     q = dict(anatomy.quality)
     q["boundary_conditions"] = {"fixed_nodes": int(fr.fixed.sum()), "held_nodes": int(fr.held.sum()),
                                 "supported_nodes": int(len(fr.support_nodes)), "jaw_nodes": int(len(fr.jaw_nodes))}
