@@ -135,6 +135,8 @@ class UsdAnimation:
     def __init__(self, path, sim, *, muscle_samples: int = MUSCLE_SAMPLES, tets: bool = False):
         from usd_export import AnimationWriter, UsdExportError
 
+        from ..present.looks import head_camera, head_looks
+
         self.path = check_usd_path(path)
         self.fr = fr = sim.fr
         self.samples = int(muscle_samples)
@@ -144,7 +146,8 @@ class UsdAnimation:
             self.writer = AnimationWriter(self.path, fps=sim.fps, faces=fr.head_faces, rest_points=fr.head_vertices,
                                           parts=dict(fr.parts), muscles=list(fr.rig.names),
                                           muscle_samples=self.samples, muscle_rest=muscle_curves(sim, self.samples),
-                                          tets=(fr.tets, fr.nodes) if self.tets else None)
+                                          tets=(fr.tets, fr.nodes) if self.tets else None,
+                                          **head_looks(fr), camera=head_camera(fr), lights=True)
         except UsdExportError as e:
             raise InputError(str(e)) from None
 
