@@ -317,6 +317,21 @@ def cmd_build(args):
     ])
 
 
+def cmd_rig(args):
+    from ._src.jobs.rig import rig_files
+
+    muscles = [m for m in args.muscles.split(",") if m] if args.muscles else None
+    prog = _Progress(1, "rig", not args.json)
+    rep = rig_files(args.build, args.out, shapes=args.shapes, inbetweens=args.inbetweens, muscles=muscles,
+                    device=args.device, progress=lambda k, n, name: (setattr(prog.bar, "total", n), prog(name)))
+    prog.close()
+    _emit(args, rep, [
+        f"baked {rep['muscles']} muscle shapes ({rep['inbetweens']} in-betweens each) and the jaw corrective of "
+        f"{args.build} ({rep['vertices']} skin vertices), the jaw as a joint",
+        f"  animation: the Fig. 6.16 sequence, {rep['frames']} frames; wrote {rep['file']}",
+    ])
+
+
 def cmd_simulate(args):
     from ._src.core.errors import InputError
     from ._src.jobs.face import simulate_files
@@ -544,6 +559,15 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--prefix", default="", metavar="STR",
                    help="put STR before every name in head.xml (two heads in one model; letters, digits, _ . : / -)")
     b.set_defaults(func=cmd_build)
+
+    rg = sub.add_parser("rig", help="a blendshape rig baked from the physics (USD UsdSkel or glTF), the jaw as a joint")
+    rg.add_argument("build", type=Path, help="a `facewarp build` output folder")
+    rg.add_argument("--out", required=True, type=Path, help="rig.usdc, rig.usda or rig.glb")
+    rg.add_argument("--shapes", choices=["muscles"], default="muscles", help="muscles: each muscle alone (default)")
+    rg.add_argument("--inbetweens", type=int, default=0, metavar="K",
+                    help="in-between shapes per muscle at k/(K+1) of full activation (0..8, default 0)")
+    rg.add_argument("--muscles", default=None, metavar="A,B,...", help="bake only these muscles (default all)")
+    rg.set_defaults(func=cmd_rig)
 
     s = sub.add_parser("simulate", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
                        epilog_factory=_simulate_epilog, formatter_class=_HelpFormatter)
