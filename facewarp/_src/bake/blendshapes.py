@@ -10,10 +10,11 @@ The jaw is a joint, not a shape: the joint ``jaw`` turns about the condyle axis 
 ``jaw_u`` through ``jaw_pivot``); the lower teeth and tongue ride it rigidly, the skin by linear
 blend skinning with the per-vertex jaw amount of Eq. 6.4.9 (``FaceRig.vertex_jaw``) as its
 weight, and what the soft tissue does beyond that rigid turn at the baked opening ``jaw_angle``
-is a corrective shape ``jaw_open`` driven by ``angle / jaw_angle``.
+is a corrective shape ``jaw_open`` driven by ``angle / jaw_angle`` (in the bind pose, solved
+through the per-vertex skinning matrix so that it lands the baked opening exactly).
 
-The linear rig (:func:`evaluate`) is ``rest + LBS(jaw) + sum_m shape_m(a_m) + (angle / jaw_angle)
-corrective``, with a muscle's shape piecewise linear in its weight through the in-betweens (USD's
+The linear rig (:func:`evaluate`) is ``LBS_jaw(rest + sum_m shape_m(a_m) + (angle / jaw_angle)
+corrective)``: shapes first, then skinning, as USD and glTF apply them; with a muscle's shape piecewise linear in its weight through the in-betweens (USD's
 in-between rule: from 0 to the first in-between, between consecutive ones, up to full).
 """
 
@@ -65,6 +66,10 @@ class BlendshapeRig:
     @property
     def muscle_names(self) -> list:
         return [n for n in self.names if n != "jaw_open"]
+
+    def evaluate(self, activations: dict, jaw: float = 0.0, *, inbetweens: bool = True) -> np.ndarray:
+        """The linear rig's skin (n, 3) [m] (:func:`evaluate`)."""
+        return evaluate(self, activations, jaw, inbetweens=inbetweens)
 
 
 def jaw_rotation(axis, angle: float) -> np.ndarray:
@@ -148,7 +153,11 @@ def bake_blendshapes(fr, *, muscles=None, inbetweens: int = 0, jaw_angle: float 
     weight = np.clip(np.asarray(fr.vertex_jaw, np.float64), 0.0, 1.0) if fr.vertex_jaw is not None \
         else np.zeros(len(rest))
     V, k = static_surface(sim, {}, jaw_angle, tol=tol, max_frames=max_frames)
-    shapes["jaw_open"] = [(1.0, V - _lbs(rest, weight, pivot, axis, jaw_angle))]
+    # the corrective lives before skinning (as USD and glTF apply shapes): LBS(rest + C) = V, and
+    # LBS is affine per vertex, p -> A_i p + b_i with A_i = w_i R + (1 - w_i) I (invertible here)
+    A = weight[:, None, None] * jaw_rotation(axis, jaw_angle)[None] + (1.0 - weight)[:, None, None] * np.eye(3)[None]
+    corrective = np.linalg.solve(A, (V - _lbs(rest, weight, pivot, axis, jaw_angle))[..., None])[..., 0]
+    shapes["jaw_open"] = [(1.0, corrective)]
     frames["jaw_open"] = [k]
     if progress:
         progress(total, total, "jaw_open")
@@ -181,14 +190,15 @@ def target_weights(shape: list, w: float) -> list:
 def evaluate(rig: BlendshapeRig, activations: dict, jaw: float = 0.0, *, inbetweens: bool = True) -> np.ndarray:
     """The linear rig's skin [m] (n, 3) at muscle weights ``activations`` (name -> 0..1) and
     opening ``jaw`` [rad]; ``inbetweens=False`` uses only each muscle's full shape (linear in w)."""
-    V = _lbs(rig.rest, rig.jaw_weight, rig.jaw_pivot, rig.jaw_axis, float(jaw)) if jaw else rig.rest.copy()
+    V = rig.rest.copy()
     for name, a in activations.items():
-        if name not in rig.shapes:
-            raise InputError(f"activations: {name!r} is not a target of this rig")
+        if name not in rig.shapes or name == "jaw_open":
+            raise InputError(f"activations: {name!r} is not a muscle target of this rig")
         shape = rig.shapes[name] if inbetweens else rig.shapes[name][-1:]
         for wt, (_, D) in zip(target_weights(shape, a), shape):
             if wt:
                 V = V + wt * D
-    if jaw:
+    if jaw:  # shapes first, then skinning (USD's and glTF's order)
         V = V + (float(jaw) / rig.jaw_angle) * rig.shapes["jaw_open"][0][1]
+        V = _lbs(V, rig.jaw_weight, rig.jaw_pivot, rig.jaw_axis, float(jaw))
     return V
