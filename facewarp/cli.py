@@ -396,7 +396,7 @@ def cmd_demo(args):
         f"  anatomy: {q['tet_count']} tets, {q['inverted_count']} inverted, {q['muscle_count']} muscles",
         f"  simulation: {s['frames']} frames ({s['seconds']:g} s), {s['frames_per_second']:.1f} frames/s "
         f"({s['jaw']} jaw)",
-        "  wrote animation.usdc, head.xml, report.json, adapted_head.png, expressions.png, sequence.gif",
+        "  wrote animation.usdc, head.xml, scene.xml, report.json, adapted_head.png, expressions.png, sequence.gif",
     ])
 
 
@@ -601,7 +601,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "
                                     "the Fig. 6.16 sequence -> USD, MuJoCo head, pictures",
-                       epilog="Writes DIR/animation.usdc, DIR/head.xml, DIR/report.json, DIR/adapted_head.png, "
+                       epilog="Writes DIR/animation.usdc, DIR/head.xml, DIR/scene.xml, DIR/report.json, DIR/adapted_head.png, "
                               "DIR/expressions.png, DIR/sequence.gif and the intermediate folders scan/, adapt/, "
                               "build/.")
     d.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
