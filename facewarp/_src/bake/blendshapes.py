@@ -14,8 +14,9 @@ is a corrective shape ``jaw_open`` driven by ``angle / jaw_angle`` (in the bind 
 through the per-vertex skinning matrix so that it lands the baked opening exactly).
 
 The linear rig (:func:`evaluate`) is ``LBS_jaw(rest + sum_m shape_m(a_m) + (angle / jaw_angle)
-corrective)``: shapes first, then skinning, as USD and glTF apply them; with a muscle's shape piecewise linear in its weight through the in-betweens (USD's
-in-between rule: from 0 to the first in-between, between consecutive ones, up to full).
+corrective)``: shapes first, then skinning, as USD and glTF apply them; a muscle's shape is
+piecewise linear in its weight through the in-betweens (USD's in-between rule: from 0 to the
+first in-between, between consecutive ones, up to full).
 """
 
 from __future__ import annotations

@@ -2,8 +2,9 @@
 
 Layout (metres, Y up, the face looking along +z, as glTF wants):
 
-- scene roots ``Rig`` (with the joint ``root``) and ``Skin`` (the skinned mesh); ``root`` has the child joint ``jaw`` at the condyle pivot; the eyes and upper teeth hang under
-  ``root``, the lower teeth and tongue under ``jaw`` (rigid, as in the head);
+- scene roots ``Rig`` (with the joint ``root``) and ``Skin`` (the skinned mesh); ``root`` has
+  the child joint ``jaw`` at the condyle pivot; the eyes and upper teeth hang under ``root``, the
+  lower teeth and tongue under ``jaw`` (rigid, as in the head);
 - mesh ``Skin``: POSITION, NORMAL, JOINTS_0 / WEIGHTS_0 (root, jaw: the Eq. 6.4.9 jaw amount),
   one primitive per material (skin, lips) sharing those attributes; one morph target per baked
   shape, named in ``mesh.extras.targetNames``: a muscle's full shape under its name, its
