@@ -30,7 +30,11 @@ import sys
 from pathlib import Path
 
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
-    os.environ.setdefault("MUJOCO_GL", "egl")  # read when mujoco is first imported
+    import ctypes.util
+
+    # offscreen through EGL, else OSMesa (MUJOCO_GL is read when mujoco is first imported)
+    os.environ.setdefault("MUJOCO_GL", "egl" if ctypes.util.find_library("EGL") or
+                          not ctypes.util.find_library("OSMesa") else "osmesa")
 
 import numpy as np  # noqa: E402
 

@@ -13,8 +13,14 @@ import facewarp as fw
 from facewarp.coupling import Z_UP, HeadPose, head_mjcf, mandible_geometry, mandible_inertia, scene_mjcf, write_head_mjcf
 
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
-    # headless: MuJoCo's offscreen renderer through EGL (read when mujoco is first imported)
-    os.environ.setdefault("MUJOCO_GL", "egl")
+    # headless: MuJoCo's offscreen renderer through EGL or OSMesa, where the library is there
+    # (MUJOCO_GL is read when mujoco is first imported)
+    import ctypes.util
+
+    for _gl, _lib in (("egl", "EGL"), ("osmesa", "OSMesa")):
+        if ctypes.util.find_library(_lib):
+            os.environ.setdefault("MUJOCO_GL", _gl)
+            break
 mujoco = pytest.importorskip("mujoco")
 
 
@@ -398,3 +404,15 @@ def test_renderer_shows_the_updated_skin(head, rig):
     np.testing.assert_array_equal(moved, fresh.render())
     assert np.abs(moved.astype(int) - rest).max() > 50
     assert skin.updates == 1 and skin.update_seconds["upload"] > 0
+
+
+@pytest.mark.parametrize("gravity, up", [((0, 0, -9.81), (0, 0, 1)), ((0, -9.81, 0), (0, 1, 0)),
+                                         ((-3.0, 0, -4.0), (0.6, 0, 0.8)), ((0, 0, 0), (0, 0, 1))])
+def test_world_rotation_puts_the_face_up_against_gravity(head, rig, gravity, up):
+    m = mujoco.MjModel.from_xml_string(head_mjcf(head))
+    m.opt.gravity[:] = gravity
+    cpl = fw.MujocoJaw(fw.FaceSimulator(rig), m, mujoco.MjData(m))
+    C = cpl.up_rotation
+    np.testing.assert_allclose(C.T @ C, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(C[:, 1], up, atol=1e-12)  # the face's up is the world's up
+    np.testing.assert_allclose(cpl.to_mujoco(np.eye(3)), C.T, atol=1e-12)
