@@ -26,7 +26,7 @@ import numpy as np
 
 from ._arrays import UsdExportError, extent, float_array, index_array, vertex_normals
 from ._pxr import Gf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
-from ._writer import _camera, _lights, _preview_material, check_path, part_prim_name, prim_name
+from ._writer import _camera, _lights, _material_subsets, _preview_material, check_path, part_prim_name, prim_name
 
 __all__ = ["write_skel_rig"]
 
@@ -148,22 +148,13 @@ def _author(stage, fps, V, F, w, pivot, shapes, names, parts, jaw_parts, times, 
         pb.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([1 if pname in jaw_parts else 0]))
         pb.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
         pb.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
-    # ---- face groups (lips, iris, pupil)
+    # ---- face groups (lips, iris, pupil), the rest on the mesh's own material
     for key, groups in subsets.items():
         mpath = mesh.GetPath() if key == "Skin" else part_paths.get(key)
         if mpath is None:
             raise UsdExportError(f"subsets: unknown mesh {key!r}")
-        mb = UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(mpath))
-        for sub, (faces_idx, rgb) in groups.items():
-            fi = np.asarray(faces_idx, np.int32)
-            if not len(fi):
-                continue
-            mat_path = f"/Rig/Looks/{sub}"
-            mat = UsdShade.Material(stage.GetPrimAtPath(mat_path)) if stage.GetPrimAtPath(mat_path) else \
-                _preview_material(stage, mat_path, rgb, roughness=0.4)
-            subset = mb.CreateMaterialBindSubset(sub, Vt.IntArray.FromNumpy(fi), UsdGeom.Tokens.face)
-            UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(mat)
-        mb.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.nonOverlapping)
+        rows = [(sub, np.sort(np.asarray(fi, np.int32)), rgb) for sub, (fi, rgb) in groups.items() if len(fi)]
+        _material_subsets(stage, mpath, rows, looks="/Rig/Looks")
     # ---- animation
     anim = UsdSkel.Animation.Define(stage, "/Rig/Skeleton/Anim")
     anim.CreateJointsAttr(Vt.TokenArray(["root/jaw"]))

@@ -118,9 +118,10 @@ class AnimationWriter:
             ``Looks/<PartPrimName>`` (a ``UsdPreviewSurface`` of that diffuse colour) instead of the
             default white (tongue: skin).
         subsets: Optional mesh -> {subset name: (face indices (k,) int, RGB (3,) float)}, the mesh
-            ``"Skin"`` or a part name: ``GeomSubset`` s (family ``materialBind``, non-overlapping)
-            of those faces bound to a material ``Looks/<subset name>`` of that colour (lips on the
-            skin, iris and pupil on an eye, gums on the teeth). One name, one colour.
+            ``"Skin"`` or a part name: ``GeomSubset`` s (family ``materialBind``) of those faces
+            bound to a material ``Looks/<subset name>`` of that colour (lips on the skin, iris and
+            pupil on an eye), and a subset ``Rest`` of the other faces bound to the mesh's own
+            material (a partition). One name, one colour.
         camera: Optional ``{"position": (3,), "target": (3,), "up": (3,)}`` [scene units] and
             optionally ``"focal_length_mm"`` (default 50): a ``Camera`` ``/Camera`` beside the head
             looking from ``position`` at ``target``, so the file opens framed.
@@ -604,7 +605,7 @@ def _check_looks(s: _Spec, part_colors, subsets, camera) -> _Looks:
             rgb = _rgb(f"subsets[{mesh!r}][{sub!r}] colour", value[1])
             if prim_name(sub) != sub:
                 raise UsdExportError(f"subsets[{mesh!r}]: {sub!r} is not a valid prim name")
-            if sub in ("Skin", "White") or sub in {p.name for p in s.part_paths.values()}:
+            if sub in ("Skin", "White", "Rest") or sub in {p.name for p in s.part_paths.values()}:
                 raise UsdExportError(f"subsets[{mesh!r}]: {sub!r} is the name of another material")
             if seen.setdefault(sub, rgb) != rgb:
                 raise UsdExportError(f"subsets: {sub!r} has two colours, {seen[sub]} and {rgb}")
@@ -644,19 +645,29 @@ def _dress_stage(layer, s: _Spec, looks: _Looks, *, lights: bool) -> None:
     layer.Save()
 
 
-def _material_subsets(stage, path, rows) -> None:
-    """Face subsets of the mesh at ``path`` bound to one material per subset name."""
+def _material_subsets(stage, path, rows, looks: str = f"{ROOT}/{LOOKS}") -> None:
+    """Face subsets of the mesh at ``path`` bound to one material per subset name, and a subset
+    ``Rest`` of the other faces bound to the mesh's own material: the subsets partition the mesh
+    (importers that give each subset a material slot, as Blender's, otherwise leave the rest bare)."""
     if not rows:
         return
-    mesh = UsdGeom.Mesh(stage.GetPrimAtPath(path))
-    binding = UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
+    prim = stage.GetPrimAtPath(path)
+    mesh = UsdGeom.Mesh(prim)
+    binding = UsdShade.MaterialBindingAPI.Apply(prim)
+    own = binding.GetDirectBinding().GetMaterial()
+    used = np.zeros(len(mesh.GetFaceVertexCountsAttr().Get()), bool)
     for sub, idx, rgb in rows:
-        mat_path = f"{ROOT}/{LOOKS}/{sub}"
+        mat_path = f"{looks}/{sub}"
         mat = UsdShade.Material(stage.GetPrimAtPath(mat_path)) if stage.GetPrimAtPath(mat_path) else \
             _preview_material(stage, mat_path, rgb, roughness=0.4)
         subset = binding.CreateMaterialBindSubset(sub, Vt.IntArray.FromNumpy(idx), UsdGeom.Tokens.face)
         UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(mat)
-    binding.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.nonOverlapping)
+        used[idx] = True
+    rest = np.flatnonzero(~used).astype(np.int32)
+    if len(rest) and own:
+        subset = binding.CreateMaterialBindSubset("Rest", Vt.IntArray.FromNumpy(rest), UsdGeom.Tokens.face)
+        UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(own)
+    binding.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.partition)
 
 
 def _camera(stage, cam: dict) -> None:
