@@ -4,7 +4,7 @@ Runs under Blender's Python (``bpy`` from PyPI: a separate environment, e.g. ``p
 bpyenv && bpyenv/bin/pip install bpy==4.2.0``; not a facewarp dependency). For each file it resets
 Blender, imports it (glTF: ``import_scene.gltf``; USD: ``wm.usd_import``) and reports the objects
 and their types, the shape keys of each mesh, the armatures' bones, the actions and their frame
-ranges, materials, cameras and lights, and playback: how far the skin's vertices move between the
+ranges, modifiers and constraints (mesh and transform caches), materials, cameras and lights, and playback: how far the skin's vertices move between the
 first frame and a later one (the evaluated mesh, shape keys and armature applied).
 
     python -m facewarp build default --out /tmp/b
@@ -61,6 +61,7 @@ def check(path: str) -> dict:
     actions = {a.name: {"frame_range": [float(v) for v in a.frame_range], "fcurves": len(a.fcurves)}
                for a in bpy.data.actions}
     modifiers = {o.name: [m.type for m in o.modifiers] for o in scene.objects if o.modifiers}
+    constraints = {o.name: [c.type for c in o.constraints] for o in scene.objects if o.constraints}
     skin = max((o for o in scene.objects if o.type == "MESH"), key=lambda o: len(o.data.vertices), default=None)
     motion = {}
     if skin is not None:
@@ -73,7 +74,7 @@ def check(path: str) -> dict:
         motion = {"object": skin.name, "vertices": len(skin.data.vertices), "frames": [start, end],
                   "max_vertex_motion_m": _skin_motion(scene, skin, frames)}
     return {"file": path, "objects": objects, "shape_keys": shape_keys, "armatures": armatures, "actions": actions,
-            "modifiers": modifiers, "materials": sorted(m.name for m in bpy.data.materials),
+            "modifiers": modifiers, "constraints": constraints, "materials": sorted(m.name for m in bpy.data.materials),
             "cameras": [o.name for o in scene.objects if o.type == "CAMERA"],
             "lights": [o.name for o in scene.objects if o.type == "LIGHT"],
             "fps": scene.render.fps, "playback": motion}
