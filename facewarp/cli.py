@@ -304,7 +304,8 @@ def cmd_build(args):
     from ._src.jobs.face import build_files
 
     prog = _Progress(4, "build", not args.json)
-    q = build_files(args.head, args.out, layers=args.layers, device=args.device, progress=prog)
+    q = build_files(args.head, args.out, layers=args.layers, device=args.device, progress=prog, up=args.up,
+                    prefix=args.prefix)
     prog.close()
     _emit(args, q, [
         f"built anatomy of {args.head} into {args.out}: {q['tet_count']} tets, {q['inverted_count']} inverted, "
@@ -312,7 +313,22 @@ def cmd_build(args):
         f"  {q['muscle_count']} muscles, attached skin nodes per muscle: min {q.get('min_attached_nodes', 0)}",
         "  lips: {crossing_nodes_before} nodes crossing the other lip at rest, {moved_nodes} moved apart, "
         "{crossing_nodes_after} left".format(**q["lip_separation"]),
-        "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz",
+        "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz, head.xml, scene.xml",
+    ])
+
+
+def cmd_rig(args):
+    from ._src.jobs.rig import rig_files
+
+    muscles = [m for m in args.muscles.split(",") if m] if args.muscles else None
+    prog = _Progress(1, "rig", not args.json)
+    rep = rig_files(args.build, args.out, shapes=args.shapes, inbetweens=args.inbetweens, muscles=muscles,
+                    device=args.device, progress=lambda k, n, name: (setattr(prog.bar, "total", n), prog(name)))
+    prog.close()
+    _emit(args, rep, [
+        f"baked {rep['muscles']} muscle shapes ({rep['inbetweens']} in-betweens each) and the jaw corrective of "
+        f"{args.build} ({rep['vertices']} skin vertices), the jaw as a joint",
+        f"  animation: the Fig. 6.16 sequence, {rep['frames']} frames; wrote {rep['file']}",
     ])
 
 
@@ -384,7 +400,7 @@ def cmd_demo(args):
         f"  anatomy: {q['tet_count']} tets, {q['inverted_count']} inverted, {q['muscle_count']} muscles",
         f"  simulation: {s['frames']} frames ({s['seconds']:g} s), {s['frames_per_second']:.1f} frames/s "
         f"({s['jaw']} jaw)",
-        "  wrote animation.usdc, head.xml, report.json, adapted_head.png, expressions.png, sequence.gif",
+        "  wrote animation.usdc, head.xml, scene.xml, report.json, adapted_head.png, expressions.png, sequence.gif",
     ])
 
 
@@ -541,7 +557,21 @@ def build_parser() -> argparse.ArgumentParser:
                                 f"(LEVEL 0..{MAX_TEMPLATE_LEVEL}, default 0)")
     b.add_argument("--out", required=True, type=Path, help="output folder")
     b.add_argument("--layers", type=_positive_int, metavar="N", default=1, help="tet layers through the skin (whole number >= 1, default 1)")
+    b.add_argument("--up", choices=["z", "y"], default="z",
+                   help="up axis of head.xml's world: z (MuJoCo's convention, the head looks along +x; default) or y "
+                        "(the head's own frame)")
+    b.add_argument("--prefix", default="", metavar="STR",
+                   help="put STR before every name in head.xml (two heads in one model; letters, digits, _ . : / -)")
     b.set_defaults(func=cmd_build)
+
+    rg = sub.add_parser("rig", help="a blendshape rig baked from the physics (USD UsdSkel or glTF), the jaw as a joint")
+    rg.add_argument("build", type=Path, help="a `facewarp build` output folder")
+    rg.add_argument("--out", required=True, type=Path, help="rig.usdc, rig.usda or rig.glb")
+    rg.add_argument("--shapes", choices=["muscles"], default="muscles", help="muscles: each muscle alone (default)")
+    rg.add_argument("--inbetweens", type=int, default=0, metavar="K",
+                    help="in-between shapes per muscle at k/(K+1) of full activation (0..8, default 0)")
+    rg.add_argument("--muscles", default=None, metavar="A,B,...", help="bake only these muscles (default all)")
+    rg.set_defaults(func=cmd_rig)
 
     s = sub.add_parser("simulate", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
                        epilog_factory=_simulate_epilog, formatter_class=_HelpFormatter)
@@ -575,7 +605,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "
                                     "the Fig. 6.16 sequence -> USD, MuJoCo head, pictures",
-                       epilog="Writes DIR/animation.usdc, DIR/head.xml, DIR/report.json, DIR/adapted_head.png, "
+                       epilog="Writes DIR/animation.usdc, DIR/head.xml, DIR/scene.xml, DIR/report.json, DIR/adapted_head.png, "
                               "DIR/expressions.png, DIR/sequence.gif and the intermediate folders scan/, adapt/, "
                               "build/.")
     d.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")

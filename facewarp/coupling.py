@@ -15,14 +15,21 @@ from ._src.coupling.mjcf import (  # noqa: F401
     JAW_OPEN_RANGE,
     JAW_SIDE_RANGE,
     MANDIBLE_PLATE,
+    SCENE_NAME,
+    UPS,
+    Z_UP,
     MandibleInertia,
     head_mjcf,
     mandible_geometry,
     mandible_inertia,
+    scene_mjcf,
+    up_rotation,
     write_head_mjcf,
 )
 from ._src.coupling.mujoco import MujocoJaw  # noqa: F401
+from ._src.coupling.mujoco_skin import MujocoSkin  # noqa: F401
 
 __all__ = ["BONE_DENSITY", "GRAVITY", "HEAD_MASS", "JAWS", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "MANDIBLE_PLATE",
-           "CarryStage", "HeadPose", "JawStage", "KinematicJawDriver", "MandibleInertia", "MujocoJaw", "MujocoJawDriver",
-           "check_pose", "head_mjcf", "jaw_driver", "mandible_geometry", "mandible_inertia", "write_head_mjcf"]
+           "SCENE_NAME", "UPS", "Z_UP", "CarryStage", "HeadPose", "JawStage", "KinematicJawDriver", "MandibleInertia",
+           "MujocoJaw", "MujocoJawDriver", "MujocoSkin", "check_pose", "head_mjcf", "jaw_driver", "mandible_geometry",
+           "mandible_inertia", "scene_mjcf", "up_rotation", "write_head_mjcf"]

@@ -20,7 +20,7 @@ def built(tmp_path_factory):
 
 
 def test_build_outputs(built):
-    for name in ("tets.npz", "muscles.json", "anatomy.json", "anatomy.png", "face_rig.npz"):
+    for name in ("tets.npz", "muscles.json", "anatomy.json", "anatomy.png", "face_rig.npz", "head.xml", "scene.xml"):
         assert (built / name).is_file(), name
     q = json.loads((built / "anatomy.json").read_text())
     assert q["inverted_count"] == 0 and q["conforming"] and q["muscle_count"] == 27
@@ -64,6 +64,7 @@ def test_errors(built, tmp_path, capsys):
     cases = [
         (["build", str(tmp_path / "nope"), "--out", o], "nope"),
         (["build", "default:7", "--out", o], "levels 0..4"),
+        (["build", "default", "--out", o, "--prefix", "a b"], "prefix"),
         (["simulate", str(built), "--expression", "grin", "--out", o], "grin"),
         (["simulate", str(built), "--expression", "smile", "--seconds", "-1", "--out", o], "--seconds"),
         (["simulate", str(built), "--expression", "smile", "--seconds", "nan", "--out", o], "--seconds"),

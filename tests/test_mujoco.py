@@ -3,13 +3,24 @@
 from __future__ import annotations
 
 import math
+import os
+import sys
 
 import numpy as np
 import pytest
 
 import facewarp as fw
-from facewarp.coupling import HeadPose, head_mjcf, mandible_geometry, mandible_inertia, write_head_mjcf
+from facewarp.coupling import Z_UP, HeadPose, head_mjcf, mandible_geometry, mandible_inertia, scene_mjcf, write_head_mjcf
 
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+    # headless: MuJoCo's offscreen renderer through EGL or OSMesa, where the library is there
+    # (MUJOCO_GL is read when mujoco is first imported)
+    import ctypes.util
+
+    for _gl, _lib in (("egl", "EGL"), ("osmesa", "OSMesa")):
+        if ctypes.util.find_library(_lib):
+            os.environ.setdefault("MUJOCO_GL", _gl)
+            break
 mujoco = pytest.importorskip("mujoco")
 
 
@@ -31,6 +42,10 @@ def test_head_xml_loads_from_file(head, tmp_path):
     assert {m.joint(i).name for i in range(m.njnt)} == {"jaw_open", "jaw_side"}
     assert m.nu == 2
     assert not [q for q in tmp_path.iterdir() if q.name.startswith(".")]
+    scene = mujoco.MjModel.from_xml_path(str(tmp_path / "scene.xml"))  # the standalone scene beside it
+    np.testing.assert_allclose(scene.opt.gravity, [0, 0, -9.81])
+    assert scene.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    assert "floor" in {scene.geom(i).name for i in range(scene.ngeom)}
 
 
 def test_mandible_mass_is_a_human_mandible(head, model):
@@ -52,8 +67,9 @@ def test_hinge_moves_the_chin_as_the_kinematic_jaw(head, model, angle):
     b = model.body("mandible").id
     jaw = fw.JawKinematic.from_landmarks(head.condyles, head.landmarks())
     chin = head.landmarks()["2.1"]
-    moved = d.xmat[b].reshape(3, 3) @ (chin - jaw.pivot) + d.xpos[b]
-    np.testing.assert_allclose(moved, jaw.apply(chin[None], np.ones(1), angle)[0], atol=1e-9)
+    moved = d.xmat[b].reshape(3, 3) @ (chin - jaw.pivot) + d.xpos[b]  # Z-up world: the head frame turned by Z_UP
+    np.testing.assert_allclose(moved, Z_UP @ jaw.apply(chin[None], np.ones(1), angle)[0], atol=1e-9)
+    moved = Z_UP.T @ moved
     assert moved[1] < chin[1] and moved[2] < chin[2]  # down and back
 
 
@@ -89,7 +105,7 @@ def test_head_frame_on_a_neck_is_the_template_frame(head, rig):
     d.qpos[m.joint("neck_tilt").qposadr[0]] = 0.3
     mujoco.mj_kinematics(m, d)
     R, t = coupler.head_pose()
-    pivot = d.xpos[m.body("cranium").id]  # the neck joint's position (fixed in the world)
+    pivot = Z_UP.T @ d.xpos[m.body("cranium").id]  # the neck joint's position (fixed in the world), sim frame
     np.testing.assert_allclose(R @ pivot + t, pivot, atol=1e-9)  # a rotation about the pivot
     assert math.isclose(math.degrees(math.acos((np.trace(R) - 1) / 2)), math.degrees(0.3), abs_tol=1e-6)
 
@@ -211,3 +227,192 @@ def test_accelerating_head_deforms_the_face(rig):
     assert np.abs(sim.positions() - rest).max() > 1e-5
     with pytest.raises(fw.InputError, match="rotation"):
         sim.set_head_pose(np.ones((3, 3)), np.zeros(3))
+
+
+# ------------------------------------------------------------------------ head.xml on a robot
+HOST = """<mujoco model="host">
+  <compiler angle="radian"/>
+  <option timestep="0.005" gravity="0 0 -3" integrator="RK4"/>
+  {assets}
+  <worldbody>
+    <body name="robot" pos="0 0 1">
+      <freejoint/>
+      <geom name="skull" type="box" size="0.1 0.1 0.1"/>
+      {mount}
+    </body>
+  </worldbody>
+</mujoco>"""
+
+
+def test_include_leaves_the_hosts_options(head, tmp_path):
+    """<include> at the host's top level: the host keeps its gravity, integrator, time step and
+    angle unit; a prefixed head beside a host geom named like one of its own compiles."""
+    write_head_mjcf(tmp_path / "head.xml", head, prefix="h_")
+    host = HOST.format(assets='<include file="head.xml"/>', mount="")
+    (tmp_path / "host.xml").write_text(host)
+    m = mujoco.MjModel.from_xml_path(str(tmp_path / "host.xml"))
+    np.testing.assert_allclose(m.opt.gravity, [0, 0, -3])
+    assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 and m.opt.timestep == 0.005
+    assert {"h_cranium", "h_mandible", "robot"} <= {m.body(i).name for i in range(m.nbody)}
+    assert m.body("h_cranium").parentid[0] == 0  # included at the top level: in the world
+    # with the host's angle="radian" an included head reads its degree ranges as radians: the
+    # file says so, and <attach> (below) keeps them right
+    assert m.jnt_range[m.joint("h_jaw_open").id][1] == pytest.approx(60.0)
+
+
+def test_attach_under_a_body_keeps_units_and_options(head, tmp_path):
+    write_head_mjcf(tmp_path / "head.xml", head, scene=False)
+    host = HOST.format(assets='<asset><model name="head" file="head.xml"/></asset>',
+                       mount='<attach model="head" body="cranium" prefix="a_"/>')
+    (tmp_path / "host.xml").write_text(host)
+    m = mujoco.MjModel.from_xml_path(str(tmp_path / "host.xml"))
+    np.testing.assert_allclose(m.opt.gravity, [0, 0, -3])
+    assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+    assert m.body("a_cranium").parentid[0] == m.body("robot").id  # mounted on the robot body
+    np.testing.assert_allclose(m.jnt_range[m.joint("a_jaw_open").id], [0.0, math.radians(60)], atol=1e-9)
+    np.testing.assert_allclose(m.jnt_range[m.joint("a_jaw_side").id], [-math.radians(5), math.radians(5)], atol=1e-9)
+
+
+def test_spec_attach_two_prefixed_heads(head, rig):
+    """MjSpec.attach of two heads (prefixes a_ and b_) onto two bodies of a host compiles, and
+    MujocoJaw finds each head by its prefix (and asks for one when there are two)."""
+    host = mujoco.MjSpec.from_string(HOST.format(assets="", mount=""))
+    for i, p in enumerate(("a_", "b_")):
+        body = host.body("robot").add_body(name=f"mount{i}", pos=[0.0, 0.3 * i, 0.2])
+        child = mujoco.MjSpec.from_string(head_mjcf(head, prefix=p))
+        body.add_frame().attach_body(child.body(p + "cranium"), "robot/", "")
+    m = host.compile()
+    d = mujoco.MjData(m)
+    np.testing.assert_allclose(m.opt.gravity, [0, 0, -3])
+    assert {"robot/a_mandible", "robot/b_mandible"} <= {m.body(i).name for i in range(m.nbody)}
+    assert m.nu == 4
+    sim = fw.FaceSimulator(rig)
+    with pytest.raises(fw.InputError, match="prefix"):
+        fw.MujocoJaw(sim, m, d)
+    cpl = fw.MujocoJaw(sim, m, d, prefix="robot/b_")
+    assert cpl.mandible == m.body("robot/b_mandible").id
+    np.testing.assert_allclose(cpl.up_rotation, Z_UP)
+
+
+def _chin_path(head, rig, tmp_path, **kw):
+    write_head_mjcf(tmp_path / "head.xml", head, **kw)
+    m = mujoco.MjModel.from_xml_path(str(tmp_path / "scene.xml"))
+    d = mujoco.MjData(m)
+    sim = fw.FaceSimulator(rig)
+    cpl = fw.MujocoJaw(sim, m, d)  # the prefix found, up from the scene's gravity
+    d.ctrl[m.actuator(kw.get("prefix", "") + "jaw_open").id] = 0.25
+    path = []
+    for _ in range(15):
+        cpl.step()
+        path.append(sim.fdp("2.1"))
+    return np.array(path), cpl
+
+
+def test_prefixed_z_up_head_opens_the_jaw_as_the_y_up_head(head, rig, tmp_path):
+    (tmp_path / "y").mkdir()
+    (tmp_path / "z").mkdir()
+    old, cy = _chin_path(head, rig, tmp_path / "y", up="y")
+    new, cz = _chin_path(head, rig, tmp_path / "z", prefix="robot1/")
+    np.testing.assert_allclose(cy.up_rotation, np.eye(3))
+    np.testing.assert_allclose(cz.up_rotation, Z_UP)
+    assert cz.prefix == "robot1/"
+    assert old[-1, 1] < old[0, 1] - 5e-3  # the chin went down
+    assert np.linalg.norm(new - old, axis=1).max() < 0.5e-3, np.linalg.norm(new - old, axis=1).max()
+
+
+def test_bad_up_and_prefix_are_input_errors(head):
+    with pytest.raises(fw.InputError, match="up"):
+        head_mjcf(head, up="x")
+    with pytest.raises(fw.InputError, match="prefix"):
+        head_mjcf(head, prefix='a"b')
+    with pytest.raises(fw.InputError, match="up"):
+        scene_mjcf(up="-z")
+
+
+# ------------------------------------------------------------------------ the skin inside MuJoCo
+def _skin_model(head, rig, **kw):
+    m = mujoco.MjModel.from_xml_string(head_mjcf(head, jaw=rig.jaw, skin=(rig.head_vertices, rig.head_faces), **kw))
+    return m, mujoco.MjData(m)
+
+
+def test_skin_mesh_follows_the_face(head, rig):
+    """After a jaw opening, a smile and a turn of the neck, the skin geom's vertices in MuJoCo's
+    world are the simulator's head-frame surface on the cranium's head frame (float32 storage)."""
+    m, d = _skin_model(head, rig, prefix="h_", neck=True)
+    sim = fw.FaceSimulator(rig)
+    jaw = fw.MujocoJaw(sim, m, d)
+    skin = fw.MujocoSkin(sim, m)
+    assert skin.prefix == "h_"
+    assert m.geom_group[m.geom("h_skull").id] == 3  # bones hidden under the skin by default
+    d.ctrl[m.actuator("h_jaw_open").id] = 0.2
+    d.ctrl[m.actuator("h_neck_pan").id] = 0.3
+    sim.set_activations({"zygomatic_major": 1.0})
+    for _ in range(6):
+        jaw.step()
+    skin.update()
+    mujoco.mj_kinematics(m, d)
+    g = m.geom("h_skin").id
+    i = skin.mesh_id
+    Vm = m.mesh_vert[m.mesh_vertadr[i]: m.mesh_vertadr[i] + m.mesh_vertnum[i]].astype(np.float64)
+    world = Vm @ d.geom_xmat[g].reshape(3, 3).T + d.geom_xpos[g]
+    site = m.site("h_head_origin").id  # the head frame now (the simulator's pose lags MuJoCo's by the frame's step)
+    expected = sim.surface(frame="head") @ d.site_xmat[site].reshape(3, 3).T + d.site_xpos[site]
+    moved = np.linalg.norm(sim.surface(frame="head") - rig.head_vertices, axis=1).max()
+    assert moved > 5e-3  # the face did move
+    np.testing.assert_allclose(world, expected, atol=2e-6)
+    np.testing.assert_allclose(skin.vertices(), sim.surface(frame="head"), atol=2e-6)
+
+
+def test_skin_errors(head, rig):
+    m, _ = mujoco.MjModel.from_xml_string(head_mjcf(head)), None
+    with pytest.raises(fw.InputError, match="skin"):
+        fw.MujocoSkin(fw.FaceSimulator(rig), m)  # no skin mesh in the model
+    other = fw.default_template(1)
+    m2 = mujoco.MjModel.from_xml_string(head_mjcf(other, skin=(other.vertices, other.faces)))
+    with pytest.raises(fw.InputError, match="vertices"):
+        fw.MujocoSkin(fw.FaceSimulator(rig), m2)
+    with pytest.raises(fw.InputError, match="skin"):
+        head_mjcf(head, skin=(rig.head_vertices, rig.head_faces + 10**6))
+
+
+def test_renderer_shows_the_updated_skin(head, rig):
+    """mjr_uploadMesh through MujocoSkin.update(renderer) draws what a renderer made after the
+    change draws (its context uploads the model's meshes as they are), and differs from the rest."""
+    m, d = _skin_model(head, rig)
+    try:
+        r = mujoco.Renderer(m, 96, 96)
+    except Exception as e:  # no GL here (MUJOCO_GL=egl or osmesa needs libEGL / libOSMesa)
+        pytest.skip(f"no offscreen OpenGL: {e}")
+    sim = fw.FaceSimulator(rig)
+    jaw = fw.MujocoJaw(sim, m, d)
+    skin = fw.MujocoSkin(sim, m)
+    cam = mujoco.MjvCamera()
+    cam.lookat[:] = [0.0, 0.0, -0.04]
+    cam.distance, cam.azimuth, cam.elevation = 0.3, 180.0, 0.0  # in front of the face (it looks along +x)
+    mujoco.mj_forward(m, d)
+    r.update_scene(d, camera=cam)
+    rest = r.render().copy()
+    d.ctrl[m.actuator("jaw_open").id] = 0.3
+    sim.set_activations({"zygomatic_major": 1.0})
+    for _ in range(6):
+        jaw.step()
+    skin.update(r)
+    r.update_scene(d, camera=cam)
+    moved = r.render().copy()
+    fresh = mujoco.Renderer(m, 96, 96)
+    fresh.update_scene(d, camera=cam)
+    np.testing.assert_array_equal(moved, fresh.render())
+    assert np.abs(moved.astype(int) - rest).max() > 50
+    assert skin.updates == 1 and skin.update_seconds["upload"] > 0
+
+
+@pytest.mark.parametrize("gravity, up", [((0, 0, -9.81), (0, 0, 1)), ((0, -9.81, 0), (0, 1, 0)),
+                                         ((-3.0, 0, -4.0), (0.6, 0, 0.8)), ((0, 0, 0), (0, 0, 1))])
+def test_world_rotation_puts_the_face_up_against_gravity(head, rig, gravity, up):
+    m = mujoco.MjModel.from_xml_string(head_mjcf(head))
+    m.opt.gravity[:] = gravity
+    cpl = fw.MujocoJaw(fw.FaceSimulator(rig), m, mujoco.MjData(m))
+    C = cpl.up_rotation
+    np.testing.assert_allclose(C.T @ C, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(C[:, 1], up, atol=1e-12)  # the face's up is the world's up
+    np.testing.assert_allclose(cpl.to_mujoco(np.eye(3)), C.T, atol=1e-12)

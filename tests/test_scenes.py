@@ -67,3 +67,33 @@ def test_robot_head_scene(tmp_path):
     world = np.array([r["chin_world_m"] for r in log])
     head = np.array([r["chin_head_m"] for r in log])
     assert np.ptp(world[:, 0]) > 5 * max(np.ptp(head[:, 0]), 1e-4)  # rides the neck, not dragged
+
+
+def _offscreen_gl() -> bool:
+    """Whether MuJoCo's offscreen renderer works here (EGL, as the scene uses headless)."""
+    code = "import mujoco; mujoco.Renderer(mujoco.MjModel.from_xml_string('<mujoco/>'), 8, 8)"
+    env = {**__import__("os").environ, "MUJOCO_GL": "egl"}
+    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, timeout=120).returncode == 0
+
+
+def test_robot_scene(tmp_path):
+    import pytest
+
+    pytest.importorskip("mujoco")
+    if not _offscreen_gl():
+        pytest.skip("no offscreen OpenGL (EGL) for MuJoCo's renderer")
+    out = tmp_path / "robot"
+    run_scene("robot", "--frames", 22, "--size", 64, "--out", out)  # the smile peaks at frame 21
+    assert {p.name for p in out.iterdir()} == {"robot.png", "robot_wide.png", "robot.json", "robot_head.xml"}
+    rep = json.loads((out / "robot.json").read_text())
+    log = rep["frames"]
+    assert len(log) == 22
+    smile = dict(rep["peaks"])["smile"]
+    assert log[smile - 1]["mouth_width_change_mm"] > 2.0  # the smile widens the mouth
+    assert max(abs(r["neck_pan"]) for r in log) > 0.05  # the neck turned
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(str(out / "robot_head.xml"))  # the viewer's file loads
+    assert {"head/mandible", "head/cranium", "torso"} <= {m.body(i).name for i in range(m.nbody)}
+    img = np.asarray(Image.open(out / "robot.png"))
+    assert img.std() > 10

@@ -111,7 +111,7 @@ def test_part_transform_moves_part_as_row_vectors(written):
 
     paths, setup, take = written
     stage = Usd.Stage.Open(str(paths["usdc"]))
-    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Head/Parts/jaw/Mesh"))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Head/Parts/Jaw"))
     M = np.array(UsdGeom.Xformable(mesh).ComputeLocalToWorldTransform(Usd.TimeCode(3)))
     p = np.append(setup["parts"]["jaw"][0][0], 1.0)
     np.testing.assert_allclose(p @ M, p @ take[3]["part_transforms"]["jaw"], atol=1e-7)
@@ -137,7 +137,7 @@ def test_stage_metadata_normals_extent_materials(written):
         assert (np.einsum("ij,ij->i", N, P - P.mean(0)) > 0).all(), "normals point outwards"
     mat, _ = UsdShade.MaterialBindingAPI(skin.GetPrim()).ComputeBoundMaterial()
     assert mat.GetPath() == "/Head/Looks/Skin"
-    eye = stage.GetPrimAtPath("/Head/Parts/eye_L/Mesh")
+    eye = stage.GetPrimAtPath("/Head/Parts/Eye_L")
     assert UsdShade.MaterialBindingAPI(eye).ComputeBoundMaterial()[0].GetPath() == "/Head/Looks/White"
     curves = UsdGeom.BasisCurves(stage.GetPrimAtPath("/Head/Muscles"))
     assert curves.GetTypeAttr().Get() == "linear"
@@ -249,7 +249,7 @@ def test_add_frame_checks(tmp_path, call, message):
     (dict(muscles=["a", "a", "b"]), r"muscles: duplicate name 'a'"),
     (dict(tets=(np.array([[0, 1, 2, 9]]), np.zeros((4, 3)))), r"tets T: expected indices in \[0, 4\)"),
     (dict(parts={"eye.L": (np.zeros((3, 3)), [[0, 1, 2]]), "eye_L": (np.zeros((3, 3)), [[0, 1, 2]])}),
-     r"parts: names 'eye.L' and 'eye_L' map to the same prim name 'eye_L'"),
+     r"parts: names 'eye.L' and 'eye_L' map to the same prim name 'Eye_L'"),
     (dict(up_axis="X"), r"up_axis: expected 'Y' or 'Z'"),
     (dict(tets=(np.array([[0, 2, 1, 3]]), single_tet()[1])), r"tets T: tet 0 \[0, 2, 1, 3\] is inverted at rest"),
 ])
@@ -261,6 +261,6 @@ def test_constructor_checks(tmp_path, change, message):
 
 
 def test_public_names():
-    assert set(usd_export.__all__) == {"AnimationWriter", "UsdExportError", "read_animation", "validate_usd",
-                                       "write_meshes_usd"}
+    assert set(usd_export.__all__) == {"AnimationWriter", "UsdExportError", "part_prim_name", "read_animation",
+                                       "validate_usd", "write_meshes_usd", "write_skel_rig"}
     assert issubclass(UsdExportError, ValueError)

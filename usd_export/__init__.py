@@ -48,6 +48,10 @@ Animation (:class:`AnimationWriter`, read back with :func:`read_animation`)
 Static meshes (:func:`write_meshes_usd`)
     Triangle meshes as ``/Head/<name>`` with optional time-sampled points, used by the CLI.
 
+Blendshape rigs (:func:`write_skel_rig`)
+    A rig baked from the physics as UsdSkel: Skeleton (root, jaw), SkelRoot, BlendShapes with
+    in-betweens, a SkelAnimation (see ``usd_export/_skel.py``).
+
 Checks (:func:`validate_usd`)
     USD's compliance checks (usdchecker's rules) on a file, returning the problems as lines.
 """
@@ -56,7 +60,9 @@ from __future__ import annotations
 
 from ._arrays import UsdExportError
 from ._reader import read_animation, validate_usd
-from ._writer import AnimationWriter
+from ._skel import write_skel_rig
+from ._writer import AnimationWriter, part_prim_name
 from .stage import write_meshes_usd
 
-__all__ = ["AnimationWriter", "UsdExportError", "read_animation", "validate_usd", "write_meshes_usd"]
+__all__ = ["AnimationWriter", "UsdExportError", "part_prim_name", "read_animation", "validate_usd",
+           "write_meshes_usd", "write_skel_rig"]

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 try:
-    from pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdShade, UsdUtils, Vt
+    from pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdSkel, UsdUtils, Vt
 except ImportError:  # pragma: no cover - depends on the environment
     raise ImportError("usd_export needs the package usd-core: pip install usd-core") from None
 
-__all__ = ["Gf", "Kind", "Sdf", "Usd", "UsdGeom", "UsdShade", "UsdUtils", "Vt", "usd_version"]
+__all__ = ["Gf", "Kind", "Sdf", "Usd", "UsdGeom", "UsdLux", "UsdShade", "UsdSkel", "UsdUtils", "Vt", "usd_version"]
 
 
 def usd_version() -> str:

@@ -89,7 +89,8 @@ def _read_skin(skin, codes) -> dict:
 def _read_parts(group, codes) -> dict:
     parts, transforms = {}, {}
     for xf_prim in (group.GetChildren() if group else []):
-        mesh = UsdGeom.Mesh(xf_prim.GetChild("Mesh"))
+        # the part's Mesh prim carries its transform (an Xform over a child "Mesh" in older files)
+        mesh = UsdGeom.Mesh(xf_prim) if xf_prim.IsA(UsdGeom.Mesh) else UsdGeom.Mesh(xf_prim.GetChild("Mesh"))
         if not mesh:
             continue
         name = xf_prim.GetDisplayName() or xf_prim.GetName()

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ._arrays import UsdExportError, VertexNormals, extent, float_array, index_array, row_vector_matrix, vertex_normals
-from ._pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdShade, UsdUtils, Vt
+from ._pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils, Vt
 
 FORMATS = (".usda", ".usdc", ".usdz")
 FLUSH_BYTES = 32 * 2**20  # default: append pending samples to the working file once this many bytes are pending
@@ -66,6 +66,13 @@ def prim_name(name: str) -> str:
     """A valid USD prim name from ``name`` (other characters become ``_``; a leading digit gets ``_``)."""
     s = "".join(c if (c.isascii() and c.isalnum()) or c == "_" else "_" for c in str(name))
     return s if s and not s[0].isdigit() else f"_{s}"
+
+
+def part_prim_name(name: str) -> str:
+    """The prim name of a rigid part: :func:`prim_name` with each ``_``-separated word capitalised
+    (``eye_L`` -> ``Eye_L``, ``teeth_upper`` -> ``Teeth_Upper``, ``tongue`` -> ``Tongue``), the
+    name DCC tools (Blender, Maya) give the object they import from the part's Mesh prim."""
+    return "_".join(w[:1].upper() + w[1:] for w in prim_name(name).split("_"))
 
 
 class AnimationWriter:
@@ -107,6 +114,19 @@ class AnimationWriter:
             appended to the working file and released (default 32 MiB, ~130 frames of a
             10k-vertex head). Smaller saves memory; larger writes less metadata (each flush
             re-appends the sample tables, ~100 bytes per frame written so far).
+        part_colors: Optional part name -> RGB (3,) float in 0..1: the part's own material
+            ``Looks/<PartPrimName>`` (a ``UsdPreviewSurface`` of that diffuse colour) instead of the
+            default white (tongue: skin).
+        subsets: Optional mesh -> {subset name: (face indices (k,) int, RGB (3,) float)}, the mesh
+            ``"Skin"`` or a part name: ``GeomSubset`` s (family ``materialBind``) of those faces
+            bound to a material ``Looks/<subset name>`` of that colour (lips on the skin, iris and
+            pupil on an eye), and a subset ``Rest`` of the other faces bound to the mesh's own
+            material (a partition). One name, one colour.
+        camera: Optional ``{"position": (3,), "target": (3,), "up": (3,)}`` [scene units] and
+            optionally ``"focal_length_mm"`` (default 50): a ``Camera`` ``/Camera`` beside the head
+            looking from ``position`` at ``target``, so the file opens framed.
+        lights: Add ``/Lights`` beside the head: a key ``DistantLight`` from the camera's side
+            (from +z without a camera) and a dim ``DomeLight``.
 
     Raises:
         UsdExportError: a bad path extension or argument (one-line message naming it).
@@ -114,7 +134,9 @@ class AnimationWriter:
 
     def __init__(self, path, *, fps: float, faces, rest_points, uv=None, uv_indices=None, parts: dict | None = None,
                  muscles=(), muscle_samples: int | None = None, muscle_rest=None, muscle_width: float | None = None,
-                 tets=None, up_axis: str = "Y", meters_per_unit: float = 1.0, flush_bytes: int = FLUSH_BYTES):
+                 tets=None, up_axis: str = "Y", meters_per_unit: float = 1.0, flush_bytes: int = FLUSH_BYTES,
+                 part_colors: dict | None = None, subsets: dict | None = None, camera: dict | None = None,
+                 lights: bool = False):
         self.path = check_path(path)
         if self.path.is_dir():
             raise UsdExportError(f"path: {str(self.path)!r} is a folder; expected a file name")
@@ -125,12 +147,14 @@ class AnimationWriter:
         spec = _check_spec(faces, rest_points, uv, uv_indices, parts, muscles, muscle_samples, muscle_rest,
                            muscle_width, tets, up_axis, _positive("meters_per_unit", meters_per_unit))
         self._spec = spec
+        looks = _check_looks(spec, part_colors, subsets, camera)
         self._frame_count, self._first_code, self._last_code = 0, 0.0, -math.inf
         self._pending_bytes = 0
         self._tmpdir = Path(tempfile.mkdtemp(dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".tmp"))
         self._cleanup = weakref.finalize(self, shutil.rmtree, str(self._tmpdir), True)
         try:
             self._layer = _build_stage(self._tmpdir / "work.usdc", spec, self.fps)
+            _dress_stage(self._layer, spec, looks, lights=bool(lights))
         except BaseException:
             self._cleanup()
             raise
@@ -350,7 +374,7 @@ def _check_parts(parts):
         F = index_array(f"parts[{name!r}] F", value[1], (None, 3), upper=len(V))
         if len(V) == 0 or len(F) == 0:
             raise UsdExportError(f"parts[{name!r}]: expected a non-empty mesh, got {len(V)} vertices, {len(F)} faces")
-        pname = prim_name(name)
+        pname = part_prim_name(name)
         clash = [k for k, p in paths.items() if p.name == pname]
         if clash:
             raise UsdExportError(f"parts: names {clash[0]!r} and {name!r} map to the same prim name {pname!r}")
@@ -491,15 +515,15 @@ def _mesh(stage, path, V: np.ndarray, F: np.ndarray, material):
 
 
 def _parts(stage, s: _Spec, skin_mat, white_mat) -> None:
-    """Each rigid part: an Xform with an identity ``xformOp:transform`` (animated per frame) over its rest Mesh."""
+    """Each rigid part: its rest Mesh, named after the part (:func:`part_prim_name`, so an importer
+    names the object so), with an identity ``xformOp:transform`` animated per frame."""
     UsdGeom.Scope.Define(stage, f"{ROOT}/{PARTS}")
     for name, (V, F) in s.parts.items():
-        xf = UsdGeom.Xform.Define(stage, s.part_paths[name])
-        xf.AddTransformOp().Set(Gf.Matrix4d(1.0))
-        if prim_name(name) != name:
-            xf.GetPrim().SetDisplayName(str(name))  # the prim name had to be sanitised: keep the original
         material = skin_mat if "tongue" in str(name).lower() else white_mat
-        _mesh(stage, s.part_paths[name].AppendChild("Mesh"), V, F, material)
+        mesh = _mesh(stage, s.part_paths[name], V, F, material)
+        mesh.AddTransformOp().Set(Gf.Matrix4d(1.0))
+        if s.part_paths[name].name != name:
+            mesh.GetPrim().SetDisplayName(str(name))  # the part's own name, read back by read_animation
 
 
 def _uv_primvar(mesh, uv: np.ndarray, uv_indices) -> None:
@@ -538,3 +562,138 @@ def _tet_mesh(stage, s: _Spec) -> None:
     tm.CreateSurfaceFaceVertexIndicesAttr(UsdGeom.TetMesh.ComputeSurfaceFaces(tm))
     tm.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(extent(s.tet_rest)))
     tm.CreatePurposeAttr(UsdGeom.Tokens.guide)
+
+
+# ============================================================================ names, colours, camera, lights
+@dataclass(frozen=True)
+class _Looks:
+    """Checked part colours, face subsets and camera of a stage."""
+
+    part_colors: dict  #: part name -> RGB (3,) float.
+    subsets: dict  #: mesh path -> [(subset name, face indices (k,) int32, RGB (3,))].
+    camera: dict | None  #: position, target, up (3,) float64 and focal_length_mm.
+
+
+def _rgb(name: str, value) -> tuple:
+    c = float_array(name, value, (3,))
+    if (c < 0).any() or (c > 1).any():
+        raise UsdExportError(f"{name}: expected an RGB colour in 0..1, got {c.tolist()}")
+    return tuple(float(v) for v in c)
+
+
+def _check_looks(s: _Spec, part_colors, subsets, camera) -> _Looks:
+    colors = {}
+    for name, rgb in (part_colors or {}).items():
+        if name not in s.parts:
+            raise UsdExportError(f"part_colors: unknown part {name!r}; parts are {sorted(s.parts)}")
+        colors[name] = _rgb(f"part_colors[{name!r}]", rgb)
+    out, seen = {}, {}
+    for mesh, groups in (subsets or {}).items():
+        if mesh == SKIN:
+            path, m = Sdf.Path(f"{ROOT}/{SKIN}"), len(s.faces)
+        elif mesh in s.parts:
+            path, m = s.part_paths[mesh], len(s.parts[mesh][1])
+        else:
+            raise UsdExportError(f"subsets: unknown mesh {mesh!r}; expected {SKIN!r} or a part ({sorted(s.parts)})")
+        used = np.zeros(m, bool)
+        rows = []
+        for sub, value in groups.items():
+            if not (isinstance(value, (tuple, list)) and len(value) == 2):
+                raise UsdExportError(f"subsets[{mesh!r}][{sub!r}]: expected (face indices, RGB)")
+            idx = index_array(f"subsets[{mesh!r}][{sub!r}] faces", np.asarray(value[0]).reshape(-1, 1), (None, 1),
+                              upper=m).ravel()
+            rgb = _rgb(f"subsets[{mesh!r}][{sub!r}] colour", value[1])
+            if prim_name(sub) != sub:
+                raise UsdExportError(f"subsets[{mesh!r}]: {sub!r} is not a valid prim name")
+            if sub in ("Skin", "White", "Rest") or sub in {p.name for p in s.part_paths.values()}:
+                raise UsdExportError(f"subsets[{mesh!r}]: {sub!r} is the name of another material")
+            if seen.setdefault(sub, rgb) != rgb:
+                raise UsdExportError(f"subsets: {sub!r} has two colours, {seen[sub]} and {rgb}")
+            if used[idx].any() or len(np.unique(idx)) != len(idx):
+                raise UsdExportError(f"subsets[{mesh!r}][{sub!r}]: faces overlap another subset's (or repeat)")
+            used[idx] = True
+            if len(idx):
+                rows.append((sub, np.sort(idx).astype(np.int32), rgb))
+        out[path] = rows
+    cam = None
+    if camera is not None:
+        try:
+            cam = {k: float_array(f"camera[{k!r}]", camera[k], (3,)).astype(np.float64) for k in ("position", "target",
+                                                                                                  "up")}
+        except (KeyError, TypeError):
+            raise UsdExportError("camera: expected a dict with position, target and up (3,) each") from None
+        cam["focal_length_mm"] = _positive("camera focal_length_mm", camera.get("focal_length_mm", 50.0))
+        if np.linalg.norm(np.cross(cam["target"] - cam["position"], cam["up"])) < 1e-12:
+            raise UsdExportError("camera: position == target, or up along the view direction")
+    return _Looks(part_colors=colors, subsets=out, camera=cam)
+
+
+def _dress_stage(layer, s: _Spec, looks: _Looks, *, lights: bool) -> None:
+    """Author the part colours, face subsets, camera and lights on the built stage; saves the layer."""
+    if not (looks.part_colors or looks.subsets or looks.camera or lights):
+        return
+    stage = Usd.Stage.Open(layer)
+    for name, rgb in looks.part_colors.items():
+        mat = _preview_material(stage, f"{ROOT}/{LOOKS}/{s.part_paths[name].name}", rgb, roughness=0.35)
+        UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(s.part_paths[name])).Bind(mat)
+    for path, rows in looks.subsets.items():
+        _material_subsets(stage, path, rows)
+    if looks.camera is not None:
+        _camera(stage, looks.camera)
+    if lights:
+        _lights(stage, looks.camera)
+    layer.Save()
+
+
+def _material_subsets(stage, path, rows, looks: str = f"{ROOT}/{LOOKS}") -> None:
+    """Face subsets of the mesh at ``path`` bound to one material per subset name, and a subset
+    ``Rest`` of the other faces bound to the mesh's own material: the subsets partition the mesh
+    (importers that give each subset a material slot, as Blender's, otherwise leave the rest bare)."""
+    if not rows:
+        return
+    prim = stage.GetPrimAtPath(path)
+    mesh = UsdGeom.Mesh(prim)
+    binding = UsdShade.MaterialBindingAPI.Apply(prim)
+    own = binding.GetDirectBinding().GetMaterial()
+    used = np.zeros(len(mesh.GetFaceVertexCountsAttr().Get()), bool)
+    for sub, idx, rgb in rows:
+        mat_path = f"{looks}/{sub}"
+        mat = UsdShade.Material(stage.GetPrimAtPath(mat_path)) if stage.GetPrimAtPath(mat_path) else \
+            _preview_material(stage, mat_path, rgb, roughness=0.4)
+        subset = binding.CreateMaterialBindSubset(sub, Vt.IntArray.FromNumpy(idx), UsdGeom.Tokens.face)
+        UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(mat)
+        used[idx] = True
+    rest = np.flatnonzero(~used).astype(np.int32)
+    if len(rest) and own:
+        subset = binding.CreateMaterialBindSubset("Rest", Vt.IntArray.FromNumpy(rest), UsdGeom.Tokens.face)
+        UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(own)
+    binding.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.partition)
+
+
+def _camera(stage, cam: dict) -> None:
+    """``/Camera`` at ``position`` looking at ``target`` (a USD camera looks along its -z, up +y)."""
+    c = UsdGeom.Camera.Define(stage, "/Camera")
+    view = Gf.Matrix4d().SetLookAt(Gf.Vec3d(*cam["position"]), Gf.Vec3d(*cam["target"]), Gf.Vec3d(*cam["up"]))
+    c.AddTransformOp().Set(view.GetInverse())
+    c.CreateFocalLengthAttr(float(cam["focal_length_mm"]))
+    dist = float(np.linalg.norm(cam["target"] - cam["position"]))
+    c.CreateClippingRangeAttr(Gf.Vec2f(0.01 * dist, 100.0 * dist))
+    c.CreateFocusDistanceAttr(dist)
+
+
+def _lights(stage, cam: dict | None) -> None:
+    """``/Lights``: a key DistantLight (shining along its -z) from above the camera's side, a dim dome."""
+    UsdGeom.Xform.Define(stage, "/Lights")
+    key = UsdLux.DistantLight.Define(stage, "/Lights/Key")
+    if cam is not None:
+        d = cam["position"] - cam["target"]
+        up = cam["up"] / np.linalg.norm(cam["up"])
+        side = np.cross(up, d)
+        src = cam["target"] + d + 0.6 * np.linalg.norm(d) * up + 0.4 * np.linalg.norm(d) * side / np.linalg.norm(side)
+        view = Gf.Matrix4d().SetLookAt(Gf.Vec3d(*src), Gf.Vec3d(*cam["target"]), Gf.Vec3d(*up))
+        key.AddTransformOp().Set(view.GetInverse())
+    key.CreateIntensityAttr(3.0)
+    key.CreateAngleAttr(1.0)
+    dome = UsdLux.DomeLight.Define(stage, "/Lights/Fill")
+    dome.CreateIntensityAttr(0.4)
+

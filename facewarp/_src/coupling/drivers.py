@@ -52,15 +52,18 @@ class MujocoJawDriver:
     name = "mujoco"
 
     def __init__(self, sim, mjcf):
+        from .mjcf import SCENE_NAME
         from .mujoco import MujocoJaw, _mujoco
 
         if mjcf is None or not Path(mjcf).is_file():
             raise InputError(f"jaw: the MuJoCo jaw needs the head's head.xml, not found at {mjcf}")
         mj = _mujoco()
-        self.model = mj.MjModel.from_xml_path(str(mjcf))
+        scene = Path(mjcf).with_name(SCENE_NAME)  # the head file's options (gravity, integrator) live there
+        self.model = mj.MjModel.from_xml_path(str(scene if scene.is_file() else mjcf))
         self.data = mj.MjData(self.model)
         self.coupler = MujocoJaw(sim, self.model, self.data)
-        self.act = [mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_ACTUATOR, n) for n in ("jaw_open", "jaw_side")]
+        p = self.coupler.prefix
+        self.act = [mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_ACTUATOR, p + n) for n in ("jaw_open", "jaw_side")]
 
     def step(self, expr) -> None:
         """Set the actuator targets to ``expr.jaw_u``, ``expr.jaw_v`` [rad] and step skin and body one frame."""

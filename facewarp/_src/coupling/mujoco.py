@@ -1,15 +1,24 @@
 """The jaw as a MuJoCo hinge body, two-way coupled to the simulated skin (Sec. 6.4.3).
 
+Hinge coupling and frames
+-------------------------
 :class:`MujocoJaw` attaches a :class:`~facewarp.FaceSimulator` to a user's ``MjModel`` /
 ``MjData`` by body and joint names (those of :func:`~facewarp._src.coupling.mjcf.head_mjcf`:
 bodies ``cranium`` and ``mandible``, hinges ``jaw_open`` about the condyle u-axis and
-``jaw_side`` about the v-axis). Data are exchanged once per frame, not per substep:
+``jaw_side`` about the v-axis, all after a name prefix that it finds itself when the model holds
+one head, or is told). The face is simulated in the head's own frame (y up), with gravity along
+its world's -y; a MuJoCo world has its own up (Z-up by convention). The coupler maps MuJoCo's
+world into the simulator's by a fixed rotation ``C`` (:attr:`MujocoJaw.up_rotation`,
+``x_mujoco = C x_sim``) with ``C e_y`` MuJoCo's up (from the model's gravity): for a Z-up world
+``C`` is :data:`~facewarp._src.coupling.mjcf.Z_UP`, the turn ``head_mjcf(up="z")`` gives the
+cranium, so an upright head at the origin has the identity pose in the simulator. Data are
+exchanged once per frame, not per substep:
 
 1. MuJoCo -> skin: the hinge angles become the skin's jaw angles (:meth:`FaceSimulator.set_jaw`):
    the held inner nodes of the jaw regions, the carried mass points, the muscle control points
    and anchors follow the mandible with their Eq. 6.4.9 amounts, through the stiff hold springs
-   of the held nodes (the skin can resist). The cranium body's pose becomes the head pose
-   (:meth:`FaceSimulator.set_head_pose`), so the face rides the body.
+   of the held nodes (the skin can resist). The cranium's head-frame pose, mapped by ``C^T``,
+   becomes the head pose (:meth:`FaceSimulator.set_head_pose`), so the face rides the body.
 2. skin -> MuJoCo: the hold springs' reaction on the mandible, ``k_i (x_i - T_i)`` at the targets
    ``T_i``, projected on each hinge's motion ``dT_i/dtheta = a_i (axis x (T_i - pivot))``, is the
    skin's generalised force on that hinge. It is passed with its linearisation about the current
@@ -35,7 +44,7 @@ import math
 import numpy as np
 
 from ..core.errors import InputError
-from .mjcf import HEAD_SITE
+from .mjcf import HEAD_SITE, Z_UP
 
 __all__ = ["MujocoJaw"]
 
@@ -48,6 +57,48 @@ def _mujoco():
     return mujoco
 
 
+def _world_rotation(model, up: str | None) -> np.ndarray:
+    """The rotation C (3, 3) from the simulator's world (y up) to the MuJoCo world (see the module doc)."""
+    if up is not None:
+        if up not in ("z", "y"):
+            raise InputError(f"up: expected 'z', 'y' or None (from the model's gravity), got {up!r}")
+        return Z_UP.copy() if up == "z" else np.eye(3)
+    g = np.asarray(model.opt.gravity, np.float64)
+    if np.linalg.norm(g) < 1e-9:  # no gravity: MuJoCo's convention
+        return Z_UP.copy()
+    u = -g / np.linalg.norm(g)
+    if u[1] > 1.0 - 1e-9:
+        return np.eye(3)
+    # the shortest turn from +z to this up, after Z_UP (exactly Z_UP for a Z-up world)
+    w = np.cross([0.0, 0.0, 1.0], u)
+    s, c = np.linalg.norm(w), u[2]
+    if s < 1e-12:
+        R = np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    else:
+        k = w / s
+        K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        R = np.eye(3) + s * K + (1 - c) * K @ K
+    return R @ Z_UP
+
+
+def _find_prefix(mj, model, mandible: str, open_joint: str) -> str:
+    """The one prefix p with a body ``p + mandible`` and a joint ``p + open_joint`` in the model."""
+    found = []
+    for b in range(model.nbody):
+        name = model.body(b).name
+        if name.endswith(mandible):
+            p = name[: len(name) - len(mandible)]
+            if mj.mj_name2id(model, mj.mjtObj.mjOBJ_JOINT, p + open_joint) >= 0:
+                found.append(p)
+    if not found:
+        raise InputError(f"mandible: no body named {mandible!r} (after any prefix) with a joint {open_joint!r} "
+                         "in the MuJoCo model")
+    if len(found) > 1:
+        raise InputError(f"prefix: the MuJoCo model holds {len(found)} heads (prefixes "
+                         f"{', '.join(repr(p) for p in found)}); pass prefix= to pick one")
+    return found[0]
+
+
 class MujocoJaw:
     """Couples a face simulator to a MuJoCo model's mandible (see the module docstring).
 
@@ -55,6 +106,9 @@ class MujocoJaw:
         sim: The :class:`~facewarp.FaceSimulator` of the head.
         model: The ``mujoco.MjModel``.
         data: Its ``mujoco.MjData``.
+        prefix: Put before every name below (``head_mjcf(prefix=...)``, or ``<attach prefix>``);
+            None (default): the one prefix under which the model has the mandible body and the
+            opening hinge ("" for a head without one); several heads need it given.
         mandible: Name of the mandible body.
         cranium: Name of the cranium body (the head pose); None keeps the head still. The head
             frame is the pose of the cranium's site ``head_site`` where the body has one (the
@@ -62,18 +116,32 @@ class MujocoJaw:
         head_site: Name of that site (default ``"head_origin"``).
         open_joint, side_joint: Names of the hinges (``side_joint`` may be None).
         two_way: Apply the skin's reaction to MuJoCo (False: MuJoCo drives the skin only).
+        up: The MuJoCo world's up axis, ``"z"`` or ``"y"``; None (default): opposite the
+            model's gravity (Z-up without gravity). Sets :attr:`up_rotation`.
+
+    Attributes:
+        up_rotation: C (3, 3): ``x_mujoco = C x_sim`` for points of the simulator's world frame
+            (:meth:`FaceSimulator.surface`, :meth:`FaceSimulator.fdp`).
+        prefix: The name prefix in use.
 
     Raises:
-        InputError: a body or joint name not in the model, or a joint that is not a hinge.
+        InputError: a body or joint name not in the model, a joint that is not a hinge, or
+            several heads and no prefix.
     """
 
-    def __init__(self, sim, model, data, *, mandible: str = "mandible", cranium: str | None = "cranium",
-                 open_joint: str = "jaw_open", side_joint: str | None = "jaw_side", two_way: bool = True,
-                 head_site: str = HEAD_SITE):
+    def __init__(self, sim, model, data, *, prefix: str | None = None, mandible: str = "mandible",
+                 cranium: str | None = "cranium", open_joint: str = "jaw_open", side_joint: str | None = "jaw_side",
+                 two_way: bool = True, head_site: str = HEAD_SITE, up: str | None = None):
         mj = _mujoco()
         self.mj = mj
         self.sim, self.model, self.data = sim, model, data
         self.two_way = bool(two_way)
+        if prefix is None:
+            prefix = _find_prefix(mj, model, mandible, open_joint)
+        elif not isinstance(prefix, str):
+            raise InputError(f"prefix: expected a string, got {prefix!r}")
+        self.prefix = prefix
+        self.up_rotation = _world_rotation(model, up)
 
         def body(name):
             i = mj.mj_name2id(model, mj.mjtObj.mjOBJ_BODY, name)
@@ -89,14 +157,14 @@ class MujocoJaw:
                 raise InputError(f"joint {name!r}: expected a hinge")
             return j
 
-        self.mandible = body(mandible)
-        self.cranium = body(cranium) if cranium is not None else None
+        self.mandible = body(prefix + mandible)
+        self.cranium = body(prefix + cranium) if cranium is not None else None
         self.site = -1  # the head frame's site on the cranium body, if it has one
         if self.cranium is not None:
-            site = mj.mj_name2id(model, mj.mjtObj.mjOBJ_SITE, head_site)
+            site = mj.mj_name2id(model, mj.mjtObj.mjOBJ_SITE, prefix + head_site)
             if site >= 0 and int(model.site_bodyid[site]) == self.cranium:
                 self.site = site
-        self.joints = [hinge(open_joint)] + ([hinge(side_joint)] if side_joint is not None else [])
+        self.joints = [hinge(prefix + open_joint)] + ([hinge(prefix + side_joint)] if side_joint is not None else [])
         self.qadr = [int(model.jnt_qposadr[j]) for j in self.joints]
         self.dadr = [int(model.jnt_dofadr[j]) for j in self.joints]
         self.frame_dt = 1.0 / sim.fps
@@ -140,13 +208,22 @@ class MujocoJaw:
         return np.array(tau), np.array(k)
 
     def head_pose(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The head frame's pose (R (3, 3), t (3,) [m]) in the MuJoCo world: x_world = R x_head + t;
-        None without a cranium."""
+        """The head frame's pose (R (3, 3), t (3,) [m]) in the simulator's world, as handed to
+        :meth:`FaceSimulator.set_head_pose`: ``x_sim = R x_head + t``, which is ``C^T`` of the
+        MuJoCo world pose (:attr:`up_rotation`); None without a cranium."""
         if self.cranium is None:
             return None
         if self.site >= 0:
-            return self.data.site_xmat[self.site].reshape(3, 3).copy(), self.data.site_xpos[self.site].copy()
-        return self.data.xmat[self.cranium].reshape(3, 3).copy(), self.data.xpos[self.cranium].copy()
+            R, t = self.data.site_xmat[self.site].reshape(3, 3), self.data.site_xpos[self.site]
+        else:
+            R, t = self.data.xmat[self.cranium].reshape(3, 3), self.data.xpos[self.cranium]
+        C = self.up_rotation
+        return C.T @ R, C.T @ t
+
+    def to_mujoco(self, X) -> np.ndarray:
+        """Points X (k, 3) [m] of the simulator's world (:meth:`FaceSimulator.surface`, ``fdp``)
+        in the MuJoCo world, ``C X``, shape (k, 3), float64."""
+        return np.asarray(X, np.float64) @ self.up_rotation.T
 
     def exchange(self) -> None:
         """Skin side of one frame: take the MuJoCo angles and head pose, step the skin, and hand

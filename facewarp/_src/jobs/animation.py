@@ -132,6 +132,8 @@ class UsdAnimation(Sink):
     def __init__(self, path, sim, *, muscle_samples: int = MUSCLE_SAMPLES, tets: bool = False):
         from usd_export import AnimationWriter, UsdExportError
 
+        from ..present.looks import head_camera, head_looks
+
         self.path = check_usd_path(path)
         self.fr = fr = sim.fr
         self.samples = int(muscle_samples)
@@ -141,7 +143,8 @@ class UsdAnimation(Sink):
             self.writer = AnimationWriter(self.path, fps=sim.fps, faces=fr.head_faces, rest_points=fr.head_vertices,
                                           parts=dict(fr.parts), muscles=list(fr.rig.names),
                                           muscle_samples=self.samples, muscle_rest=muscle_curves(sim, self.samples),
-                                          tets=(fr.tets, fr.nodes) if self.tets else None)
+                                          tets=(fr.tets, fr.nodes) if self.tets else None,
+                                          **head_looks(fr), camera=head_camera(fr), lights=True)
         except UsdExportError as e:
             raise InputError(str(e)) from None
 

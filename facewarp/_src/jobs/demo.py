@@ -236,8 +236,9 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
     head = load_head(adapt_dir)
     build_dir = out / "build"
     quality = build_head_files(head, build_dir, device=device)
-    with atomic_write(out / "head.xml", "w") as f:
-        f.write((build_dir / "head.xml").read_text())
+    for name in ("head.xml", "scene.xml"):  # the head body tree and its standalone scene
+        with atomic_write(out / name, "w") as f:
+            f.write((build_dir / name).read_text())
     t = lap("anatomy", t)
 
     step("simulate")

@@ -41,14 +41,22 @@ MAX_FRAMES = 100_000
 about 60 kB a frame)."""
 
 
-def build_files(head_path, out, *, layers: int = 1, device: str = "cpu", progress=None) -> dict:
+def build_files(head_path, out, *, layers: int = 1, device: str = "cpu", progress=None, up: str = "z",
+                prefix: str = "") -> dict:
     """Build anatomy and the face rig of a head folder into ``out``; returns the quality report."""
     step = progress or (lambda msg: None)
     out = check_out_dir(out)
     _check_layers(layers)
+    _check_mjcf_options(up, prefix)
     step("loading head")
     head = load_head(head_path)
-    return build_head_files(head, out, layers=layers, device=device, progress=progress)
+    return build_head_files(head, out, layers=layers, device=device, progress=progress, up=up, prefix=prefix)
+
+
+def _check_mjcf_options(up, prefix) -> None:
+    from ..coupling.mjcf import head_mjcf_options
+
+    head_mjcf_options(up, prefix)
 
 
 def _check_layers(layers) -> None:
@@ -56,16 +64,19 @@ def _check_layers(layers) -> None:
         raise InputError(f"layers: expected a whole number >= 1, got {layers!r}")
 
 
-def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progress=None) -> dict:
+def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progress=None, up: str = "z",
+                     prefix: str = "") -> dict:
     """Build anatomy and the face rig of ``head`` (a :class:`~facewarp.Template`) into ``out``.
 
     Writes ``tets.npz``, ``muscles.json``, ``anatomy.json``, ``face_rig.npz``, ``head.xml`` (the
-    MuJoCo cranium and mandible, :func:`~facewarp.write_head_mjcf`) and ``anatomy.png``; returns
-    the quality report.
+    MuJoCo cranium, mandible and skin for a world with ``up`` axis "z" or "y", names after
+    ``prefix``; :func:`~facewarp.write_head_mjcf`), ``scene.xml`` (the standalone scene that
+    includes it) and ``anatomy.png``; returns the quality report.
     """
     step = progress or (lambda msg: None)
     out = check_out_dir(out)
     _check_layers(layers)
+    _check_mjcf_options(up, prefix)
     make_out_dir(out)
     step("skin layer and muscles")
     anatomy = build_anatomy(head, layers=layers)
@@ -73,7 +84,7 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     step("writing")
     write_anatomy(anatomy, out)
     save_face_rig(out / "face_rig.npz", fr)
-    write_head_mjcf(out / "head.xml", head, jaw=fr.jaw)
+    write_head_mjcf(out / "head.xml", head, jaw=fr.jaw, up=up, prefix=prefix, skin=(fr.head_vertices, fr.head_faces))
     q = dict(anatomy.quality)
     q["boundary_conditions"] = {"fixed_nodes": int(fr.fixed.sum()), "held_nodes": int(fr.held.sum()),
                                 "supported_nodes": int(len(fr.support_nodes)), "jaw_nodes": int(len(fr.jaw_nodes))}

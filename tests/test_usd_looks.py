@@ -1,0 +1,115 @@
+"""The head's USD looks right in a DCC tool: parts named on their Mesh prims, lips / iris / pupil
+coloured by material subsets, a camera that frames the head and lights; USD's checks pass."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import facewarp as fw
+
+pxr = pytest.importorskip("pxr")
+import usd_export  # noqa: E402
+from usd_export import AnimationWriter, UsdExportError  # noqa: E402
+
+PART_PRIMS = {"eye_L": "Eye_L", "eye_R": "Eye_R", "teeth_upper": "Teeth_Upper", "teeth_lower": "Teeth_Lower",
+              "tongue": "Tongue"}
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory):
+    rig = fw.build_face(fw.default_template(0))
+    sim = fw.FaceSimulator(rig)
+    path = tmp_path_factory.mktemp("looks") / "take.usdc"
+    with fw.UsdAnimation(path, sim) as usd:
+        usd.add(sim, 0.0)
+        sim.set_jaw(0.2)
+        sim.step()
+        usd.add(sim, 1 / sim.fps)
+    return rig, path
+
+
+def test_parts_are_named_mesh_prims(take):
+    from pxr import Usd, UsdGeom
+
+    rig, path = take
+    stage = Usd.Stage.Open(str(path))
+    assert stage.GetPrimAtPath("/Head/Skin").IsA(UsdGeom.Mesh)
+    assert set(rig.parts) == set(PART_PRIMS)
+    for name, prim_name in PART_PRIMS.items():
+        prim = stage.GetPrimAtPath(f"/Head/Parts/{prim_name}")
+        assert prim.IsA(UsdGeom.Mesh), prim_name  # the Mesh itself carries the name (no child "Mesh")
+        assert not prim.GetChildren() or all(c.IsA(UsdGeom.Subset) for c in prim.GetChildren())
+    back = usd_export.read_animation(path)  # the parts' own names come back
+    assert set(back["parts"]) == set(rig.parts)
+    jaw_row = back["part_transforms"]["teeth_lower"][1]
+    assert not np.allclose(jaw_row, np.eye(4))  # the lower teeth moved with the jaw
+
+
+def test_colours_of_lips_eyes_teeth(take):
+    from pxr import Usd, UsdGeom, UsdShade
+
+    rig, path = take
+    stage = Usd.Stage.Open(str(path))
+
+    def colour(prim):
+        mat = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
+        shader = UsdShade.Shader(stage.GetPrimAtPath(mat.GetPath().AppendChild("PreviewSurface")))
+        return np.array(shader.GetInput("diffuseColor").Get())
+
+    skin = stage.GetPrimAtPath("/Head/Skin")
+    lips = UsdGeom.Subset(stage.GetPrimAtPath("/Head/Skin/Lips"))
+    faces = np.array(lips.GetIndicesAttr().Get())
+    assert 10 < len(faces) < 0.05 * len(rig.head_faces)
+    # the lip faces sit around the mouth: within 35 mm of the mouth corners' midpoint
+    V = np.asarray(rig.head_vertices)
+    C = V[np.asarray(rig.head_faces)[faces]].mean(1)
+    ids = [str(k) for k in rig.fdp_ids]
+    P = fw.FaceSimulator(rig).fdp_points()
+    mouth = 0.5 * (P[ids.index("8.3")] + P[ids.index("8.4")])
+    assert np.linalg.norm(C - mouth, axis=1).max() < 0.035
+    assert colour(lips.GetPrim())[0] < colour(skin)[0]  # redder / darker than the skin
+    for side in ("Eye_L", "Eye_R"):
+        iris = UsdGeom.Subset(stage.GetPrimAtPath(f"/Head/Parts/{side}/Iris"))
+        pupil = UsdGeom.Subset(stage.GetPrimAtPath(f"/Head/Parts/{side}/Pupil"))
+        assert len(iris.GetIndicesAttr().Get()) and len(pupil.GetIndicesAttr().Get())
+        assert colour(pupil.GetPrim()).max() < 0.1 and colour(stage.GetPrimAtPath(f"/Head/Parts/{side}")).min() > 0.8
+        assert colour(iris.GetPrim())[2] > colour(iris.GetPrim())[0]  # blue-grey iris
+    assert colour(stage.GetPrimAtPath("/Head/Parts/Tongue"))[0] > 0.6
+
+
+def test_camera_frames_the_head_and_checks_pass(take):
+    from pxr import Gf, Usd, UsdGeom
+
+    rig, path = take
+    stage = Usd.Stage.Open(str(path))
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/Camera"))
+    frustum = cam.GetCamera(Usd.TimeCode(0)).frustum
+    V = np.asarray(rig.head_vertices)
+    box = Gf.BBox3d(Gf.Range3d(Gf.Vec3d(*V.min(0)), Gf.Vec3d(*V.max(0))))
+    assert frustum.Intersects(box)
+    M = frustum.ComputeViewMatrix() * frustum.ComputeProjectionMatrix()
+    for corner in (V.min(0), V.max(0), V[np.argmax(V[:, 1])], V[np.argmin(V[:, 1])]):
+        p = M.Transform(Gf.Vec3d(*corner))
+        assert abs(p[0]) < 1 and abs(p[1]) < 1, corner  # inside the picture
+    assert stage.GetPrimAtPath("/Lights/Key") and stage.GetPrimAtPath("/Lights/Fill")
+    assert usd_export.validate_usd(path) == []
+
+
+def test_looks_arguments_are_checked(tmp_path):
+    V = 0.1 * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    base = dict(fps=30, faces=F, rest_points=V, parts={"eye": (V, F)})
+    for kw, needle in [
+        (dict(part_colors={"nose": (1, 0, 0)}), "unknown part"),
+        (dict(part_colors={"eye": (2, 0, 0)}), "0..1"),
+        (dict(subsets={"Skin": {"Lips": ([0, 99], (1, 0, 0))}}), "indices"),
+        (dict(subsets={"Skin": {"A": ([0], (1, 0, 0)), "B": ([0], (0, 1, 0))}}), "overlap"),
+        (dict(subsets={"Skin": {"A": ([0], (1, 0, 0))}, "eye": {"A": ([1], (0, 1, 0))}}), "two colours"),
+        (dict(subsets={"Nose": {"A": ([0], (1, 0, 0))}}), "unknown mesh"),
+        (dict(camera={"position": (0, 0, 1), "target": (0, 0, 1), "up": (0, 1, 0)}), "camera"),
+        (dict(camera={"position": (0, 0, 1)}), "camera"),
+    ]:
+        with pytest.raises(UsdExportError, match=needle):
+            AnimationWriter(tmp_path / "x.usda", **base, **kw)
+    assert not list(tmp_path.iterdir())  # nothing left behind
