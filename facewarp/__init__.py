@@ -47,6 +47,7 @@ _NAMES = {
     "Template": "template.head", "default_template": "template.head", "load_template_dir": "template.files",
     "save_template": "template.files", "export_template": "jobs.template", "import_ict": "importers.ict",
     "load_head": "adapt.transfer", "human_likeness": "template.likeness",
+    "UVLayout": "template.uv", "face_uv_layout": "template.uv", "uv_distortion": "template.uv",
     # a synthetic scan of another face (the demo's input)
     "FaceProportions": "template.synthetic", "SyntheticScan": "template.synthetic",
     "synthetic_scan": "template.synthetic",
@@ -146,3 +147,4 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.template.head import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, default_template
     from ._src.template.likeness import ICT_FDP_VERTICES, human_likeness
     from ._src.template.synthetic import FaceProportions, SyntheticScan, synthetic_scan
+    from ._src.template.uv import UVLayout, face_uv_layout, uv_distortion

@@ -194,8 +194,9 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     step("writing")
     if detected is not None:
         save_landmarks_json(out / "detected_landmarks.json", scan_lm, units=units)
-    save_obj(out / "adapted.obj", res.vertices, TF)
-    save_obj(out / "adapted_scan_frame.obj", res.vertices_scan_frame, TF, units=units)
+    uv = {} if tmpl is None or tmpl.uv is None else {"uv": tmpl.uv, "face_uv": tmpl.face_uv}
+    save_obj(out / "adapted.obj", res.vertices, TF, **uv)
+    save_obj(out / "adapted_scan_frame.obj", res.vertices_scan_frame, TF, units=units, **uv)
     # landmarks follow the adapted surface (face + barycentric on the template)
     from ..geometry.mesh import closest_surface_points
 

@@ -56,7 +56,8 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     """Build anatomy and the face rig of ``head`` (a :class:`~facewarp.Template`) into ``out``.
 
     Writes ``tets.npz``, ``muscles.json``, ``anatomy.json``, ``face_rig.npz``, ``head.xml`` (the
-    MuJoCo cranium and mandible, :func:`~facewarp.write_head_mjcf`) and ``anatomy.png``; returns
+    MuJoCo cranium and mandible, :func:`~facewarp.write_head_mjcf`), ``texture.png`` (the head's
+    skin texture, where it has one) and ``anatomy.png``; returns
     the quality report.
     """
     step = progress or (lambda msg: None)
@@ -70,6 +71,7 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     write_anatomy(anatomy, out)
     save_face_rig(out / "face_rig.npz", fr)
     write_head_mjcf(out / "head.xml", head, jaw=fr.jaw)
+    _copy_texture(head, out)
     q = dict(anatomy.quality)
     q["boundary_conditions"] = {"fixed_nodes": int(fr.fixed.sum()), "held_nodes": int(fr.held.sum()),
                                 "supported_nodes": int(len(fr.support_nodes)), "jaw_nodes": int(len(fr.jaw_nodes))}
@@ -80,6 +82,19 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
              title=f"{q['tet_count']} tets ({q['inverted_count']} inverted), {q['muscle_count']} muscles; "
                    "black: fixed border, grey: held on bone")
     return q
+
+
+def _copy_texture(head, out: Path) -> None:
+    """The head's skin texture beside its face rig (``texture.png``, read by :func:`load_face_rig`)."""
+    import shutil
+
+    src = getattr(head, "texture", None)
+    if src and Path(src).is_file() and getattr(head, "uv", None) is not None:
+        if Path(src).resolve() != (out / "texture.png").resolve():
+            shutil.copyfile(src, out / ".texture.png.tmp")
+            (out / ".texture.png.tmp").replace(out / "texture.png")
+    elif (out / "texture.png").is_file():
+        (out / "texture.png").unlink()  # a texture of an earlier build into this folder
 
 
 def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps: float = 30.0,
