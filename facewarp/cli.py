@@ -282,12 +282,24 @@ def cmd_adapt(args):
     rep = adapt_files(args.scan, args.landmarks, args.out, template_dir=args.template, template_mesh=args.template_mesh,
                       template_landmarks=args.template_landmarks, method=args.method, levels=args.levels,
                       markers=args.markers, units=args.units, template_units=args.template_units,
-                      device=args.device, progress=prog)
+                      device=args.device, progress=prog, texture_size=args.texture_size)
     prog.close()
     last = rep["levels"][-1] if rep["levels"] else {}
     d = rep["distance_to_scan_m"]
+    sc = rep["scale"]
+    if sc["units"] == "auto":
+        scale_line = (f"  scale: auto from the FDPs, 1 scan unit = {sc['metres_per_unit']:.4g} m (eye distance "
+                      f"{sc['measures_file_units']['eye_distance']:.4g} units; measures agree within "
+                      f"{(sc['spread'] - 1) * 100:.0f} %)")
+    else:
+        scale_line = f"  scale: units {sc['units']} (1 unit = {sc['metres_per_unit']:g} m)"
+    tex = rep.get("texture")
     _emit(args, rep, [
         f"adapted {rep['vertex_count']} template vertices to {args.scan} in {rep['seconds']:.2f} s ({rep['method']})",
+        scale_line,
+        *([f"  texture: the scan's colour baked into {args.out}/texture.png ({tex['size']} px; "
+           f"{tex['covered_fraction'] * 100:.0f} % of the head's texels from the scan, the rest filled)"]
+          if tex else []),
         f"  calibration FDPs: {', '.join(rep['calibration']['fdps_used'])}",
         f"  {_refinement_summary(rep['levels'], args.levels)}; final FPs {rep['fp_count']}, "
         f"E_d {last.get('E_d', float('nan')):.3g} m^2",
@@ -528,8 +540,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "template) and level 1 (the FDPs), then the final stages (field: a smooth field fitted to "
                         "point-to-plane pairs; land: onto the scan along the normals; relax)")
     a.add_argument("--markers", type=Path, help="FDPs held out of training, for the marker error E_m")
-    a.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan and its landmarks")
+    a.add_argument("--units", choices=["mm", "cm", "m", "auto"], default=None,
+                   help="units of the scan and its landmarks; auto: the scale from the FDPs against human proportions "
+                        "(eye distance, eye to mouth, nose length; README). Default: m when the scan's extent is a "
+                        "plausible head in metres, else auto. FDPs far outside human proportions in the given units "
+                        "stop the run")
     a.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
+    a.add_argument("--texture-size", type=_positive_int, default=2048, metavar="PX",
+                   help="side of texture.png, the scan's colour baked over the head's UVs (64..16384, default 2048; "
+                        "written when the scan has colour)")
     a.set_defaults(func=cmd_adapt)
 
     b = sub.add_parser("build", help="skin tetrahedra, muscles and boundary conditions of a head (Sec. 6.2-6.3)")
