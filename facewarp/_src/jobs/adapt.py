@@ -1,8 +1,9 @@
 """The adaptation job with its files: load scan + landmarks + template, adapt, write results.
 
 Writes into the output folder:
-``adapted.obj`` (template topology, template frame, metres), ``adapted_scan_frame.obj`` (scan
-frame and units), ``adapted_landmarks.json`` (metres, template frame), ``report.json`` (the
+``adapted.obj`` (template topology, template frame, metres, the template's UVs), ``adapted_scan_frame.obj`` (scan
+frame and units), with a coloured scan ``texture.png`` (the scan's colour baked over the UVs) and
+``adapted.mtl`` (its material, referenced by ``adapted.obj``), ``adapted_landmarks.json`` (metres, template frame), ``report.json`` (the
 levels, the calibration, the distance to the scan, and ``quality``: folds, dihedral angles,
 curvature difference to the scan and the template's edge stretch and angle change per region,
 figures that need no truth), ``error_heatmap.png`` (distance to the scan on the adapted head),
@@ -228,6 +229,11 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     if detected is not None:
         save_landmarks_json(out / "detected_landmarks.json", {k: v / scale for k, v in scan_lm.items()}, units="m")
     uv = {} if tmpl is None or tmpl.uv is None else {"uv": tmpl.uv, "face_uv": tmpl.face_uv}
+    baked = None
+    if uv and scan_mesh.has_color:
+        step("texture")
+        baked = _bake(out, res.vertices_scan_frame, TF, tmpl, scan_mesh, texture_size, device)
+        uv["mtl"] = "adapted.mtl"
     save_obj(out / "adapted.obj", res.vertices, TF, **uv)
     save_obj(out / "adapted_scan_frame.obj", res.vertices_scan_frame / scale, TF, **uv)  # the scan's units
     # landmarks follow the adapted surface (face + barycentric on the template)
@@ -253,10 +259,31 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     })
     if detected is not None:
         report["detected_landmarks"] = detected
+    if baked is not None:
+        report["texture"] = {"path": "texture.png", **baked.to_dict()}
     write_json(out / "report.json", report)
     step("pictures")
     _pictures(out, res, TF, d_show, device)
     return report
+
+
+def _bake(out: Path, V_scan_frame, TF, tmpl, scan_mesh, size: int, device):
+    """``texture.png`` (the scan's colour over the template's UVs, :mod:`~facewarp._src.adapt.bake`)
+    and ``adapted.mtl`` (material ``skin`` with it as ``map_Kd``)."""
+    from PIL import Image
+
+    from ..adapt.bake import bake_texture
+    from ..core.fileio import atomic_write
+
+    b = bake_texture(V_scan_frame, TF, tmpl.uv, tmpl.face_uv, scan_mesh.vertices, scan_mesh.faces,
+                     colors=scan_mesh.colors, texture=scan_mesh.texture, corner_uv=scan_mesh.corner_uv, size=size,
+                     device=device)
+    with atomic_write(out / "texture.png", "wb", encoding=None) as f:
+        Image.fromarray(b.image).save(f, format="PNG")
+    with atomic_write(out / "adapted.mtl", "w") as f:
+        f.write("# facewarp: the skin, its colour baked from the scan\nnewmtl skin\nKa 1 1 1\nKd 1 1 1\n"
+                "Ks 0 0 0\nmap_Kd texture.png\n")
+    return b
 
 
 def _pictures(out, res, TF, d_show, device) -> None:

@@ -93,7 +93,7 @@ def _stats_mm(e: np.ndarray) -> dict:
 
 def _write_scan(scan, folder: Path) -> dict:
     make_out_dir(folder)
-    save_obj(folder / "scan.obj", scan.vertices, scan.faces, units=scan.units)
+    save_obj(folder / "scan.obj", scan.vertices, scan.faces, units=scan.units, colors=scan.colors)
     save_landmarks_json(folder / "landmarks.json", scan.landmarks, units=scan.units)
     save_landmarks_json(folder / "markers.json", scan.markers, units=scan.units)
     return {"scan": folder / "scan.obj", "landmarks": folder / "landmarks.json", "markers": folder / "markers.json"}
