@@ -33,6 +33,9 @@ __all__ = ["FACE_DENSITY", "GUTTER", "UVLayout", "face_uv_layout", "uv_distortio
 FACE_DENSITY = 2.0
 """Texels per metre of the face chart over those of the other charts (per axis)."""
 
+UPRIGHT = ("face", "ear_L", "ear_R")
+"""Charts turned so the head's up is the texture's up (the others turn to their smallest box)."""
+
 GUTTER = 0.012
 """Empty margin around each chart, as a fraction of the texture side."""
 
@@ -90,6 +93,17 @@ def _areas2(U, F):
     e1 = U[F[:, 1]] - U[F[:, 0]]
     e2 = U[F[:, 2]] - U[F[:, 0]]
     return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def _upright(uv: np.ndarray, height: np.ndarray) -> np.ndarray:
+    """``uv`` (k, 2) turned so that the 3D height (world y of its vertices, (k,)) grows along +v,
+    moved to the origin: the face reads upright in the texture."""
+    A = np.column_stack([uv - uv.mean(0), np.ones(len(uv))])
+    g = np.linalg.lstsq(A, height, rcond=None)[0][:2]  # gradient of the height in the chart
+    ang = np.arctan2(g[0], g[1])  # rotate g onto +v
+    c, s = np.cos(ang), np.sin(ang)
+    r = uv @ np.array([[c, -s], [s, c]]).T
+    return r - r.min(0)
 
 
 def _min_box(uv: np.ndarray) -> np.ndarray:
@@ -216,7 +230,7 @@ def face_uv_layout(V, F, face_region, region_names, frontal) -> UVLayout:
         lf = np.searchsorted(ids, F[tri])
         a2 = abs(_areas2(uv, lf).sum())
         uv = uv * np.sqrt(a3 / max(a2, 1e-300)) * (FACE_DENSITY if name == "face" else 1.0)
-        uv_charts.append(_min_box(uv))
+        uv_charts.append(_upright(uv, V[ids, 1]) if name in UPRIGHT else _min_box(uv))
         vid_charts.append(ids)
     packed = _pack(uv_charts, GUTTER)
     uv_all, face_uv = [], np.zeros_like(F)
