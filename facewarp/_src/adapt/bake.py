@@ -4,11 +4,11 @@ For every texel of the head's UV layout (:mod:`~facewarp._src.template.uv`):
 
 1. **Where on the head**: the UV triangles are rasterised (texel centres, barycentric weights),
    giving the texel's point ``p`` on the adapted surface and its interpolated normal ``n``.
-2. **Where on the scan**: a ray along the line ``p + t n`` (both directions, ``|t| <=``
-   :data:`MAX_DISTANCE`) finds the nearest scan surface; the hit counts only where the scan's
-   face there turns the same way as the head (``n_scan . n >=`` :data:`MIN_NORMAL_COSINE`),
-   which keeps the lower lip's colour off the upper lip and the inside of a fold off its outside
-   (the guard against crossing to the wrong sheet). Where the ray misses (a scan border, a
+2. **Where on the scan**: rays along ``+n`` and ``-n`` from ``p`` (``|t| <=``
+   :data:`MAX_DISTANCE`) find the scan surface; a hit counts only where the scan's face there
+   turns the same way as the head (``n_scan . n >=`` :data:`MIN_NORMAL_COSINE`), and the nearer
+   of the two counting hits is taken. That keeps the lower lip's colour off the upper lip and
+   the inside of a fold off its outside (the guard against crossing to the wrong sheet). Where the ray misses (a scan border, a
    narrow crease) the closest scan point within half that distance is taken, with the same
    guard.
 3. **Its colour**: the scan's vertex colours interpolated with the hit's barycentric weights, or
@@ -152,11 +152,18 @@ def sample_scan_colors(P, N, scan_V, scan_F, *, colors=None, texture=None, corne
         raise InputError("scan: no colour to bake (neither vertex colours nor a texture with UVs)")
     q = query or MeshQuery(scan_V, scan_F, device=device)
     fn = face_normals(scan_V, scan_F)
-    hits = q.ray_cast(P, N, max_distance, both_directions=True)
-    face = np.where(hits.hit, hits.face, -1)
-    bary = hits.bary
+    # along +n and -n separately: the nearer hit whose face turns the head's way (the nearest
+    # hit may be a wrong sheet, e.g. the back of a fold, with the right one just beyond it)
+    face = np.full(len(P), -1, dtype=np.int64)
+    bary = np.zeros((len(P), 3))
+    best = np.full(len(P), np.inf)
+    for sign in (1.0, -1.0):
+        h = q.ray_cast(P, sign * N, max_distance)
+        good = h.hit.copy()
+        good[good] = np.einsum("kd,kd->k", fn[h.face[good]], N[good]) >= MIN_NORMAL_COSINE
+        good &= np.abs(h.t) < best
+        face[good], bary[good], best[good] = h.face[good], h.bary[good], np.abs(h.t[good])
     ok = face >= 0
-    ok[ok] = np.einsum("kd,kd->k", fn[face[ok]], N[ok]) >= MIN_NORMAL_COSINE
     miss = np.flatnonzero(~ok)
     if len(miss):
         cp = q.closest_point(P[miss], 0.5 * max_distance)

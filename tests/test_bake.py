@@ -1,0 +1,119 @@
+"""Baking a scan's colour into the head's texture, and the likeness of the textured head to its scan."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import facewarp as fw
+from facewarp.cli import main
+
+
+def _grid(n=21, size=0.1, z=0.0):
+    """A flat square [0, size]^2 at height z in the xy plane, normals +z, with per-vertex UV = xy / size."""
+    x, y = np.meshgrid(np.linspace(0, size, n), np.linspace(0, size, n))
+    V = np.column_stack([x.ravel(), y.ravel(), np.full(n * n, z)])
+    i = np.arange(n - 1)
+    a = (i[:, None] * n + i[None, :]).ravel()
+    F = np.concatenate([np.column_stack([a, a + 1, a + n + 1]), np.column_stack([a, a + n + 1, a + n])])
+    return V, F
+
+
+def test_rasterize_uv_covers_and_interpolates():
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    texel, face, bary = fw.adaptation.rasterize_uv(uv, np.array([[0, 1, 2]]), 64)
+    assert abs(len(texel) - 0.5 * 64 * 64) < 64 + 2
+    row, col = texel // 64, texel % 64
+    centre = np.column_stack([(col + 0.5) / 64, 1.0 - (row + 0.5) / 64])
+    np.testing.assert_allclose(bary @ uv, centre, atol=1e-9)
+
+
+def test_bake_gradient_and_fill():
+    """Scan 1 mm above a flat head, coloured by a gradient in x, with a hole: the texture reproduces
+    the gradient, and inside the hole the harmonic fill continues it."""
+    V, F = _grid()
+    SV, SF = _grid(n=41, z=0.001)
+    C = np.column_stack([SV[:, 0] / 0.1, np.full(len(SV), 0.5), 1.0 - SV[:, 0] / 0.1])
+    hole = np.linalg.norm(SV[SF].mean(1)[:, :2] - 0.05, axis=1) < 0.015
+    b = fw.adaptation.bake_texture(V, F, V[:, :2] / 0.1, F, SV, SF[~hole], colors=C, size=64)
+    img = b.image.astype(float) / 255
+    u = (np.arange(64) + 0.5) / 64
+    np.testing.assert_allclose(img[:, :, 0], np.broadcast_to(u, (64, 64)), atol=0.02)
+    np.testing.assert_allclose(img[:, :, 2], 1 - np.broadcast_to(u, (64, 64)), atol=0.02)
+    assert 0.0 < b.filled_fraction < 0.3
+
+
+def test_bake_keeps_off_the_wrong_sheet():
+    """A sheet turned the other way 0.5 mm below the head (nearer than the right one, 1 mm above)
+    lends no colour."""
+    V, F = _grid()
+    up, _ = _grid(n=11, z=0.001)
+    down, DF = _grid(n=11, z=-0.0005)
+    G = np.concatenate([DF[:, ::-1], DF + len(up)])  # the first sheet faces -z
+    SV = np.concatenate([down, up])
+    C = np.concatenate([np.tile([0.0, 0.0, 1.0], (len(down), 1)), np.tile([1.0, 0.0, 0.0], (len(up), 1))])
+    b = fw.adaptation.bake_texture(V, F, V[:, :2] / 0.1, F, SV, G, colors=C, size=32)
+    assert (b.image[..., 0] > 250).all() and (b.image[..., 2] < 5).all()
+
+
+def test_bake_from_texture():
+    """The scan's colour from its texture at its UVs: a texture of four quadrants."""
+    V, F = _grid()
+    SV, SF = _grid(n=11, z=0.0005)
+    tex = np.zeros((2, 2, 3))
+    tex[0, 0], tex[0, 1], tex[1, 0], tex[1, 1] = [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]  # row 0 = top
+    cuv = (SV[:, :2] / 0.1)[SF]
+    b = fw.adaptation.bake_texture(V, F, V[:, :2] / 0.1, F, SV, SF, texture=tex, corner_uv=cuv, size=32)
+    img = b.image
+    assert tuple(img[2, 2]) == (255, 0, 0) and tuple(img[2, 29]) == (0, 255, 0)
+    assert tuple(img[29, 2]) == (0, 0, 255) and tuple(img[29, 29]) == (255, 255, 255)
+
+
+def test_cielab_reference_values():
+    lab = fw.render.srgb_to_lab(np.array([[255, 255, 255], [0, 0, 0], [255, 0, 0]], np.uint8))
+    np.testing.assert_allclose(lab[0], [100, 0, 0], atol=0.01)
+    np.testing.assert_allclose(lab[1], [0, 0, 0], atol=0.01)
+    np.testing.assert_allclose(lab[2], [53.24, 80.09, 67.20], atol=0.05)  # sRGB red, D65
+
+
+def test_adapt_bakes_a_likeness(tmp_path, capsys):
+    """The synthetic scan with its colour: adapt writes texture.png and adapted.mtl, and the textured
+    head's renders match the scan's (front, three-quarter) within Delta E 4, L* correlation >= 0.6,
+    clearly ahead of one flat colour."""
+    scan = fw.synthetic_scan(3)
+    d = tmp_path / "scan"
+    d.mkdir()
+    fw.save_obj(d / "scan.obj", scan.vertices * 1e3, scan.faces, colors=scan.colors)
+    (d / "lm.json").write_text(json.dumps({k: (np.asarray(v) * 1e3).tolist() for k, v in scan.landmarks.items()}))
+    out = tmp_path / "ad"
+    code = main(["adapt", str(d / "scan.obj"), "--landmarks", str(d / "lm.json"), "--units", "mm", "--out", str(out),
+                 "--levels", "1", "--texture-size", "512"])
+    o, err = capsys.readouterr()
+    assert code == 0, err
+    assert "texture: the scan's colour baked" in o
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["texture"]["size"] == 512 and rep["texture"]["covered_fraction"] > 0.95
+    assert "map_Kd texture.png" in (out / "adapted.mtl").read_text()
+    from PIL import Image
+
+    tex = np.asarray(Image.open(out / "texture.png"))
+    assert tex.shape == (512, 512, 3)
+    m = fw.load_mesh(out / "adapted.obj")  # the texture follows the OBJ through its MTL
+    assert m.texture is not None and m.corner_uv is not None
+    t = fw.default_template(0)
+    a = fw.load_mesh(out / "adapted_scan_frame.obj", units="mm")
+
+    def to_template(X):
+        return (X - scan.translation) @ scan.rotation
+
+    res = fw.render.likeness_views(to_template(a.vertices), t.faces, tex, t.uv[t.face_uv], t.frontal,
+                                   to_template(scan.vertices), scan.faces, scan_colors=scan.colors, size=160)
+    mean = res["mean"]
+    assert mean["delta_e_mean"]["textured"] < 4.0, mean
+    assert mean["lightness_correlation"]["textured"] >= 0.6, mean
+    assert mean["delta_e_mean"]["textured"] < 0.5 * mean["delta_e_mean"]["flat"], mean
+    # the adapted head folder carries the texture into the build
+    head = fw.load_head(out)
+    assert head.texture is not None and head.texture.endswith("texture.png")
