@@ -30,9 +30,20 @@ def test_estimate_scale_recovers_units(seed, unit):
 
 
 def test_template_measures_are_human():
-    m = fw.adaptation.face_measures(fw.default_template(0).landmarks())
+    from facewarp._src.adapt.scale import REFERENCE_M
+
+    m = fw.adaptation.face_measures(fw.default_template(1).landmarks())
     for k, (lo, hi) in fw.adaptation.HUMAN_RANGES_M.items():
         assert lo <= m[k] <= hi, (k, m[k])
+        assert m[k] == pytest.approx(REFERENCE_M[k], abs=1e-4), k
+
+
+def test_one_bad_fdp_pair_takes_the_median():
+    scan = fw.synthetic_scan(2)
+    lm = {k: np.asarray(v) * 1e3 for k, v in scan.landmarks.items()}
+    lm["9.3"] = lm["9.3"] + (lm["9.3"] - 0.5 * (lm["3.7"] + lm["3.12"])) * 0.6  # the nose tip far off
+    est = fw.adaptation.estimate_scale(lm)
+    assert est.estimator == "median" and est.metres_per_unit == pytest.approx(1e-3, rel=0.05)
 
 
 def test_half_scale_scan_stops_with_one_line(tmp_path, capsys):
