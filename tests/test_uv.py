@@ -89,7 +89,7 @@ def test_usd_skin_texture(tmp_path):
     from PIL import Image
     from pxr import Usd, UsdShade
 
-    from usd_export import AnimationWriter
+    from usd_export import AnimationWriter, validate_usd
 
     t = fw.default_template(0)
     Image.fromarray(np.full((8, 8, 3), 200, np.uint8)).save(tmp_path / "texture.png")
@@ -98,6 +98,7 @@ def test_usd_skin_texture(tmp_path):
         with AnimationWriter(p, fps=30, faces=t.faces, rest_points=t.vertices, uv=t.uv, uv_indices=t.face_uv,
                              skin_texture=tmp_path / "texture.png") as w:
             w.add_frame(0.0, t.vertices)
+        assert validate_usd(p) == []
         stage = Usd.Stage.Open(str(p))
         skin = stage.GetPrimAtPath("/Head/Skin")
         mat = UsdShade.MaterialBindingAPI(skin).ComputeBoundMaterial()[0]
