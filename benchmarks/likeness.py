@@ -6,8 +6,7 @@ Per seed, the package's synthetic scan (:func:`facewarp.synthetic_scan`: another
 holes, a random pose, millimetres, with its procedural colour as vertex colours) is written as an
 OBJ with ``v x y z r g b`` and:
 
-1. **colour**: ``facewarp adapt`` (as :func:`adapt_files`, levels 2, ``--units mm``, the given
-   landmarks) bakes ``texture.png``; the adapted head (its baked texture) and the scan (its
+1. **colour**: ``facewarp adapt`` (levels 2, ``--units mm``, the given landmarks) bakes ``texture.png``; the adapted head (its baked texture) and the scan (its
    vertex colours) are rendered from the same cameras, front and three-quarter
    (:func:`facewarp.render.likeness_views`, unlit for the figures), and compared over the face
    region: mean CIELAB Delta E (CIE76) and the L* correlation, beside the same figures for the
@@ -48,9 +47,19 @@ def _write_scan(scan, folder: Path, metres_per_unit: float, *, landmarks: bool =
     return out
 
 
+def _adapt(argv: list[str], device: str) -> dict:
+    """``facewarp adapt ARGV`` in this process; its report.json."""
+    from facewarp.cli import main as cli
+
+    out = Path(argv[argv.index("--out") + 1])
+    code = cli(["--device", device, "--json", "adapt", *argv])
+    if code != 0:
+        raise RuntimeError(f"facewarp adapt {' '.join(argv)} failed with exit code {code}")
+    return json.loads((out / "report.json").read_text())
+
+
 def run_seed(seed: int, work: Path, *, texture_size: int, render_size: int, device: str, picture: bool) -> dict:
     import facewarp as fw
-    from facewarp._src.jobs.adapt import adapt_files
     from PIL import Image
 
     scan = fw.synthetic_scan(seed)
@@ -58,8 +67,8 @@ def run_seed(seed: int, work: Path, *, texture_size: int, render_size: int, devi
     files = _write_scan(scan, work / f"scan{seed}", 1e-3)
     out = work / f"adapt{seed}"
     t0 = time.perf_counter()
-    rep = adapt_files(files["scan"], files["landmarks"], out, units="mm", levels=2, device=device,
-                      texture_size=texture_size)
+    rep = _adapt([str(files["scan"]), "--landmarks", str(files["landmarks"]), "--out", str(out), "--units", "mm",
+                  "--levels", "2", "--texture-size", str(texture_size)], device)
     wall = time.perf_counter() - t0
     tex = np.asarray(Image.open(out / "texture.png").convert("RGB"))
     a = fw.load_mesh(out / "adapted_scan_frame.obj", units="mm")
@@ -80,7 +89,8 @@ def run_seed(seed: int, work: Path, *, texture_size: int, render_size: int, devi
     f = float(np.random.default_rng([seed, 5]).uniform(0.002, 0.05))
     any_files = _write_scan(scan, work / f"any{seed}", f, landmarks=False)
     t1 = time.perf_counter()
-    rep_any = adapt_files(any_files["scan"], None, work / f"adapt_any{seed}", levels=1, device=device, texture_size=256)
+    rep_any = _adapt([str(any_files["scan"]), "--out", str(work / f"adapt_any{seed}"), "--levels", "1",
+                      "--texture-size", "256"], device)
     wall_any = time.perf_counter() - t1
     given = {}
     for unit, m in (("mm", 1e-3), ("cm", 1e-2), ("m", 1.0)):

@@ -308,6 +308,7 @@ def cmd_adapt(args):
         f"{rep['quality']['distortion']['all']['stretch_rms'] * 100:.1f} % RMS (report.json: per region)",
         f"  wrote {args.out}/adapted.obj, adapted_scan_frame.obj, adapted_landmarks.json, report.json, "
         "error_heatmap.png, quality_heatmap.png, distortion_heatmap.png, error_curve.png"
+        + (", adapted.glb" if rep.get("uv") else "") + (", texture.png, adapted.mtl" if tex else "")
         + (", detected_landmarks.json" if "detected_landmarks" in rep else ""),
     ])
 

@@ -114,6 +114,9 @@ def test_adapt_bakes_a_likeness(tmp_path, capsys):
     assert mean["delta_e_mean"]["textured"] < 4.0, mean
     assert mean["lightness_correlation"]["textured"] >= 0.6, mean
     assert mean["delta_e_mean"]["textured"] < 0.5 * mean["delta_e_mean"]["flat"], mean
+    g = fw.load_mesh(out / "adapted.glb")  # glTF: the same head, split at the seams, with its texture
+    assert g.texture is not None and g.texture.shape == (512, 512, 3) and g.corner_uv is not None
+    assert g.face_count == t.face_count and abs(len(g.vertices) - len(t.uv)) < 0.05 * len(t.uv)
     # the adapted head folder carries the texture into the build
     head = fw.load_head(out)
     assert head.texture is not None and head.texture.endswith("texture.png")

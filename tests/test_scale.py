@@ -30,8 +30,7 @@ def test_estimate_scale_recovers_units(seed, unit):
 
 
 def test_template_measures_are_human():
-    from facewarp._src.adapt.scale import REFERENCE_M
-
+    REFERENCE_M = fw.adaptation.SCALE_REFERENCE_M
     m = fw.adaptation.face_measures(fw.default_template(1).landmarks())
     for k, (lo, hi) in fw.adaptation.HUMAN_RANGES_M.items():
         assert lo <= m[k] <= hi, (k, m[k])

@@ -27,6 +27,7 @@ __all__ = [
     "closest_surface_points",
     "load_mesh",
     "mesh_report",
+    "save_glb",
     "save_obj",
     "unit_scale",
 ]
@@ -520,6 +521,45 @@ def save_obj(path: str | os.PathLike, V, F, *, uv=None, face_uv=None, units: str
             T = F if face_uv is None else face_uv
             G = np.stack([F + 1, T + 1], axis=2).reshape(len(F), 6)
             np.savetxt(f, G, fmt="f %d/%d %d/%d %d/%d")
+
+
+def save_glb(path: str | os.PathLike, V, F, uv, face_uv, *, texture=None) -> None:
+    """Write a textured triangle mesh as binary glTF (``.glb``, metres, +y up), atomically.
+
+    glTF has one UV per vertex, so every vertex is split into one copy per distinct UV it takes
+    (the seams of a per-corner layout).
+
+    Args:
+        path: Destination ``.glb`` file; its folder must exist.
+        V: Vertex positions [m], shape (n, 3), float64.
+        F: Triangles, shape (m, 3), int64.
+        uv: Texture coordinates, shape (k, 2), float64 (v up).
+        face_uv: Per triangle corner an index into ``uv``, shape (m, 3), int64.
+        texture: Optional base-colour image, shape (h, w, 3), uint8 (row 0 at v = 1), or a
+            path of an image file; without it the material is a plain skin colour.
+    """
+    import trimesh
+    from PIL import Image
+
+    from .surface import _check_VF
+
+    V, F = _check_VF(V, F)
+    uv = np.asarray(uv, dtype=np.float64)
+    face_uv = np.asarray(face_uv, dtype=np.int64)
+    if face_uv.shape != F.shape or uv.ndim != 2 or uv.shape[1] != 2 or face_uv.min() < 0 or face_uv.max() >= len(uv):
+        raise ValueError(f"uv (k, 2) and face_uv {F.shape} with indices into uv expected, got {uv.shape}, {face_uv.shape}")
+    pairs, inverse = np.unique(np.stack([F.ravel(), face_uv.ravel()], 1), axis=0, return_inverse=True)
+    if texture is None:
+        material = trimesh.visual.material.PBRMaterial(baseColorFactor=[204, 158, 133, 255])
+    else:
+        img = Image.open(texture).convert("RGB") if isinstance(texture, (str, os.PathLike)) else \
+            Image.fromarray(np.asarray(texture, dtype=np.uint8))
+        material = trimesh.visual.material.PBRMaterial(baseColorTexture=img, metallicFactor=0.0, roughnessFactor=0.6)
+    mesh = trimesh.Trimesh(vertices=V[pairs[:, 0]], faces=inverse.reshape(-1, 3), process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=uv[pairs[:, 1]], material=material))
+    data = mesh.export(file_type="glb")
+    with atomic_write(path, "wb", encoding=None) as f:
+        f.write(data)
 
 
 # ----------------------------------------------------------------------------------------

@@ -2,7 +2,8 @@
 
 Writes into the output folder:
 ``adapted.obj`` (template topology, template frame, metres, the template's UVs), ``adapted_scan_frame.obj`` (scan
-frame and units), with a coloured scan ``texture.png`` (the scan's colour baked over the UVs) and
+frame and units), ``adapted.glb`` (the same head as binary glTF with its UVs and, from a coloured scan, its texture),
+with a coloured scan ``texture.png`` (the scan's colour baked over the UVs) and
 ``adapted.mtl`` (its material, referenced by ``adapted.obj``), ``adapted_landmarks.json`` (metres, template frame), ``report.json`` (the
 levels, the calibration, the distance to the scan, and ``quality``: folds, dihedral angles,
 curvature difference to the scan and the template's edge stretch and angle change per region,
@@ -235,6 +236,11 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
         baked = _bake(out, res.vertices_scan_frame, TF, tmpl, scan_mesh, texture_size, device)
         uv["mtl"] = "adapted.mtl"
     save_obj(out / "adapted.obj", res.vertices, TF, **uv)
+    if uv:
+        from ..geometry.mesh import save_glb
+
+        save_glb(out / "adapted.glb", res.vertices, TF, uv["uv"], uv["face_uv"],
+                 texture=out / "texture.png" if baked is not None else None)
     save_obj(out / "adapted_scan_frame.obj", res.vertices_scan_frame / scale, TF, **uv)  # the scan's units
     # landmarks follow the adapted surface (face + barycentric on the template)
     from ..geometry.mesh import closest_surface_points
@@ -259,6 +265,12 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     })
     if detected is not None:
         report["detected_landmarks"] = detected
+    if uv:
+        from ..template.uv import uv_distortion
+
+        # the template's UVs on this head's shape: the face chart's stretch here
+        report["uv"] = {"face_chart_distortion": uv_distortion(res.vertices, TF, uv["uv"], uv["face_uv"],
+                                                               tmpl.frontal)}
     if baked is not None:
         report["texture"] = {"path": "texture.png", **baked.to_dict()}
     write_json(out / "report.json", report)
