@@ -33,8 +33,8 @@ def test_face_chart_is_low_stretch():
     t = fw.default_template(0)
     d = fw.uv_distortion(t.vertices, t.faces, t.uv, t.face_uv, t.frontal)
     assert d["flipped"] == 0
-    assert d["angle"]["mean"] < 1.1, d  # near conformal
-    assert d["area"]["mean_abs_log"] < 0.5, d
+    assert d["angle"]["mean"] < 1.15, d  # near conformal
+    assert d["area"]["mean_abs_log"] < 0.12, d  # and near equal-area (ARAP)
 
 
 def test_uv_distortion_analytic():
