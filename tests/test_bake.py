@@ -120,3 +120,14 @@ def test_adapt_bakes_a_likeness(tmp_path, capsys):
     # the adapted head folder carries the texture into the build
     head = fw.load_head(out)
     assert head.texture is not None and head.texture.endswith("texture.png")
+    # ... and the build into the simulation's USD: the skin bound to its texture, beside the file
+    assert main(["build", str(out), "--out", str(tmp_path / "b")]) == 0
+    assert (tmp_path / "b" / "texture.png").is_file()
+    assert fw.load_face_rig(tmp_path / "b").skin_texture.endswith("texture.png")
+    usd = tmp_path / "smile.usda"
+    assert main(["simulate", str(tmp_path / "b"), "--expression", "smile", "--seconds", "0.1", "--fps", "10",
+                 "--out", str(usd), "--jaw", "kinematic"]) == 0
+    capsys.readouterr()
+    text = usd.read_text()
+    assert "UsdUVTexture" in text and "@./smile_skin.png@" in text
+    assert (tmp_path / "smile_skin.png").read_bytes() == (out / "texture.png").read_bytes()

@@ -114,3 +114,14 @@ def test_usd_skin_texture(tmp_path):
             assert "head_skin.png" in zipfile.ZipFile(p).namelist()
         st = skin.GetAttribute("primvars:st")
         assert st.GetMetadata("interpolation") == "faceVarying"
+
+
+def test_ply_vertex_colours_read(tmp_path):
+    import trimesh
+
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    C = np.array([[255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255]], np.uint8)
+    trimesh.Trimesh(V, [[0, 1, 2]], vertex_colors=C, process=False).export(tmp_path / "c.ply")
+    m = fw.load_mesh(tmp_path / "c.ply")
+    np.testing.assert_allclose(m.colors, C[:, :3] / 255.0)
+    assert m.has_color
