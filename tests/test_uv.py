@@ -29,6 +29,30 @@ def test_template_uv_layout(level):
     assert len(t.uv) < 1.3 * t.vertex_count
 
 
+def _overlapping_texels(uv, face_uv, size=512):
+    U = uv[face_uv]
+    X, Y = U[..., 0] * size - 0.5, (1 - U[..., 1]) * size - 0.5
+    count = np.zeros(size * size, int)
+    for f in range(len(U)):
+        cc, rr = np.meshgrid(np.arange(int(X[f].min()), int(np.ceil(X[f].max())) + 1),
+                             np.arange(int(Y[f].min()), int(np.ceil(Y[f].max())) + 1))
+        px, py = cc.ravel(), rr.ravel()
+        (ax, bx, cx), (ay, by, cy) = X[f], Y[f]
+        det = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy)
+        l0 = ((by - cy) * (px - cx) + (cx - bx) * (py - cy)) / det
+        l1 = ((cy - ay) * (px - cx) + (ax - cx) * (py - cy)) / det
+        inside = (l0 > 1e-6) & (l1 > 1e-6) & (1 - l0 - l1 > 1e-6)
+        np.add.at(count, py[inside] * size + px[inside], 1)
+    return int((count > 1).sum())
+
+
+@pytest.mark.parametrize("level", [0, 1])
+def test_charts_do_not_overlap(level):
+    """No texel lies in two UV triangles (the two sides of the mouth slit stay apart)."""
+    t = fw.default_template(level)
+    assert _overlapping_texels(t.uv, t.face_uv) == 0
+
+
 def test_face_chart_is_low_stretch():
     t = fw.default_template(0)
     d = fw.uv_distortion(t.vertices, t.faces, t.uv, t.face_uv, t.frontal)

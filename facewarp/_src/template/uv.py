@@ -6,7 +6,9 @@ Charts (by the template's regions, so every level gets the same charts):
   eye and mouth openings as holes; a least-squares conformal map (LSCM, Levy et al. 2002,
   libigl ``lscm``) with two pins on the outer boundary at the chart's widest points, refined
   by an as-rigid-as-possible parametrisation (ARAP, Liu et al. 2008, libigl ``arap_solve``),
-  which trades a little angle distortion for much less area distortion. It gets
+  which trades a little angle distortion for much less area distortion. ARAP runs with the
+  chart's holes filled by fans (so the sides of the mouth slit cannot slide over each other)
+  and is kept only if no triangle flips and the chart's boundary does not cross itself. It gets
   :data:`FACE_DENSITY` x the texel density of the other charts, because that is where the
   person is recognised.
 - ``ear_L``, ``ear_R``: each ear (LSCM + ARAP).
@@ -73,6 +75,8 @@ def _chart_lscm(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ids, inv = np.unique(F, return_inverse=True)
     lf = inv.reshape(-1, 3).astype(np.int64)
     lv = np.ascontiguousarray(V[ids], dtype=np.float64)
+    n_real = len(ids)
+    lf_real = lf
     loop = igl.boundary_loop(lf)
     # pins: the two boundary vertices farthest apart, at their 3D distance along the u axis
     B = lv[loop]
@@ -84,26 +88,97 @@ def _chart_lscm(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     uv = np.asarray(res[0] if isinstance(res, tuple) else res, dtype=np.float64)
     # ARAP (Liu et al. 2008, libigl arap_solve) from the conformal start: trades a little angle
     # distortion for much less area distortion (the nose and lids are no longer squeezed);
-    # kept only where it flips no triangle
+    # kept only where it flips no triangle and its boundary does not cross itself (no overlap)
     a3 = _areas3(lv, lf).sum()
-    start = uv * np.sqrt(a3 / max(abs(_areas2(uv, lf).sum()), 1e-300))
+    uv = uv * np.sqrt(a3 / max(abs(_areas2(uv, lf).sum()), 1e-300))
+    # ARAP runs on the chart with its holes filled (the fill's centre starts at its loop's mean UV)
+    lv, lf = _fill_holes(lv, lf)
+    start = np.concatenate([uv, np.zeros((len(lv) - n_real, 2))])
+    for c in range(n_real, len(lv)):
+        ring = np.unique(lf[(lf == c).any(1)])
+        ring = ring[ring != c]
+        start[c] = start[ring].mean(0)
     try:
         data = igl.ARAPData()
         data.max_iter = ARAP_ITERATIONS
         pin = np.array([0], dtype=np.int32)
         igl.arap_precomputation(lv, lf, 2, pin, data)
         refined = np.asarray(igl.arap_solve(start[pin].copy(), data, start.copy()), dtype=np.float64)
-        s0 = np.sign(_areas2(start, lf))
-        if refined.shape == start.shape and np.isfinite(refined).all() and (np.sign(_areas2(refined, lf)) == s0).all():
+        s0 = np.sign(_areas2(start, lf_real))
+        if (refined.shape == start.shape and np.isfinite(refined).all()
+                and (np.sign(_areas2(refined, lf_real)) == s0).all() and not _boundary_crosses(refined, lf_real)):
             uv = refined
     except RuntimeError:  # a chart libigl cannot factor keeps its conformal map
         pass
     # one orientation for every chart: UV triangles counter-clockwise like the outward faces
+    uv, lf = uv[:n_real].copy(), lf_real
     e1 = uv[lf[:, 1]] - uv[lf[:, 0]]
     e2 = uv[lf[:, 2]] - uv[lf[:, 0]]
     if np.sum(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) < 0:
         uv[:, 1] = -uv[:, 1]
     return ids, uv
+
+
+def _boundary_crosses(uv: np.ndarray, F: np.ndarray) -> bool:
+    """Whether two boundary edges of the chart (triangles F) cross in UV: with no flipped
+    triangle, the only way a chart can overlap itself."""
+    d = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    key = np.sort(d, axis=1)
+    _, inv, cnt = np.unique(key[:, 0] * (F.max() + 1) + key[:, 1], return_inverse=True, return_counts=True)
+    e = d[cnt[inv.ravel()] == 1]
+    if len(e) < 4:
+        return False
+    A, B = uv[e[:, 0]], uv[e[:, 1]]
+    lo, hi = np.minimum(A, B), np.maximum(A, B)
+    for i in range(len(e)):
+        cand = np.flatnonzero((lo[:, 0] <= hi[i, 0]) & (hi[:, 0] >= lo[i, 0]) & (lo[:, 1] <= hi[i, 1])
+                              & (hi[:, 1] >= lo[i, 1]))
+        cand = cand[(cand > i) & ~np.isin(e[cand], e[i]).any(1)]  # not itself, not sharing a vertex
+        if not len(cand):
+            continue
+        p, r = A[i], B[i] - A[i]
+        q, sv = A[cand], B[cand] - A[cand]
+        den = r[0] * sv[:, 1] - r[1] * sv[:, 0]
+        ok = np.abs(den) > 1e-300
+        t = ((q[:, 0] - p[0]) * sv[:, 1] - (q[:, 1] - p[1]) * sv[:, 0]) / np.where(ok, den, 1.0)
+        u = ((q[:, 0] - p[0]) * r[1] - (q[:, 1] - p[1]) * r[0]) / np.where(ok, den, 1.0)
+        if (ok & (t > 0) & (t < 1) & (u > 0) & (u < 1)).any():
+            return True
+    return False
+
+
+def _fill_holes(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """V, F with every boundary loop but the longest closed by a fan to a new centre vertex.
+
+    The chart is parametrised with its holes (eyes, the mouth slit) filled, so the two sides of
+    a narrow opening cannot slide over each other in UV (ARAP keeps the fill triangles unflipped
+    as it does the others); the fill is dropped afterwards (the new vertices come last)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    d = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    key = np.sort(d, axis=1)
+    _, inv, cnt = np.unique(key[:, 0] * len(V) + key[:, 1], return_inverse=True, return_counts=True)
+    b = d[cnt[inv.ravel()] == 1]  # directed boundary edges, as their faces list them
+    if not len(b):
+        return V, F
+    verts, local = np.unique(b, return_inverse=True)
+    local = local.reshape(-1, 2)
+    g = coo_matrix((np.ones(len(b)), (local[:, 0], local[:, 1])), shape=(len(verts), len(verts)))
+    nc, lab = connected_components(g, directed=False)
+    edge_loop = lab[local[:, 0]]
+    length = np.bincount(edge_loop, weights=np.linalg.norm(V[b[:, 0]] - V[b[:, 1]], axis=1), minlength=nc)
+    outer = int(np.argmax(length))
+    newV, newF = [V], [F]
+    n = len(V)
+    for k in range(nc):
+        if k == outer:
+            continue
+        e = b[edge_loop == k]
+        c = n + len(newV) - 1
+        newV.append(V[np.unique(e)].mean(0, keepdims=True))
+        newF.append(np.column_stack([e[:, 1], e[:, 0], np.full(len(e), c)]))
+    return np.concatenate(newV), np.concatenate(newF)
 
 
 def _areas3(V, F):
