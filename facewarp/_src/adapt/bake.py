@@ -101,12 +101,12 @@ def rasterize_uv(uv, face_uv, size: int) -> tuple[np.ndarray, np.ndarray, np.nda
         if not inside.any():
             continue
         texels.append(rr.ravel()[inside] * size + cc.ravel()[inside])
-        faces.append(np.full(int(inside.sum()), f))
+        faces.append((f, int(inside.sum())))
         barys.append(np.stack([l0[inside], l1[inside], l2[inside]], 1))
     if not texels:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
     t = np.concatenate(texels)
-    f = np.concatenate(faces)
+    f = np.repeat(np.array([a for a, _ in faces], dtype=np.int64), [n for _, n in faces])
     b = np.clip(np.concatenate(barys), 0.0, 1.0)
     b /= b.sum(1, keepdims=True)
     t, first = np.unique(t, return_index=True)
@@ -260,15 +260,14 @@ def bake_texture(V, F, uv, face_uv, scan_V, scan_F, *, colors=None, texture=None
     tc, tok = sample_scan_colors(P, N, scan_V, scan_F, query=q, device=device, **look)
     fill = np.einsum("kc,kcd->kd", bary, vc[F[face]])
     tc = np.where(tok[:, None], tc, fill)
-    img = np.zeros((size * size, 3))
+    img = np.zeros((size * size, 3), dtype=np.uint8)
     inside = np.zeros(size * size, bool)
-    img[texel] = tc
+    img[texel] = np.clip(np.rint(tc * 255.0), 0, 255).astype(np.uint8)
     inside[texel] = True
-    inside = inside.reshape(size, size)
-    img = img.reshape(size, size, 3)
     if not inside.all():
-        _, (ri, ci) = distance_transform_edt(~inside, return_indices=True)
-        img = img[ri, ci]
-    image = np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
+        _, (ri, ci) = distance_transform_edt(~inside.reshape(size, size), return_indices=True)
+        out = np.flatnonzero(~inside)
+        img[out] = img[ri.ravel()[out] * size + ci.ravel()[out]]
+    image = img.reshape(size, size, 3)
     n_in = max(len(texel), 1)
     return BakeResult(image, tok.sum() / n_in, 1.0 - tok.sum() / n_in, vc)
