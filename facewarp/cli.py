@@ -393,7 +393,7 @@ def cmd_demo(args):
         f"  anatomy: {q['tet_count']} tets, {q['inverted_count']} inverted, {q['muscle_count']} muscles",
         f"  simulation: {s['frames']} frames ({s['seconds']:g} s), {s['frames_per_second']:.1f} frames/s "
         f"({s['jaw']} jaw)",
-        "  wrote animation.usdc, head.xml, report.json, adapted_head.png, expressions.png, sequence.gif",
+        "  wrote animation.usdc, head.xml, report.json, adapted_head.png, likeness.png, expressions.png, sequence.gif",
     ])
 
 
