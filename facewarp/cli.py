@@ -325,7 +325,8 @@ def cmd_build(args):
         f"  {q['muscle_count']} muscles, attached skin nodes per muscle: min {q.get('min_attached_nodes', 0)}",
         "  lips: {crossing_nodes_before} nodes crossing the other lip at rest, {moved_nodes} moved apart, "
         "{crossing_nodes_after} left".format(**q["lip_separation"]),
-        "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz",
+        "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz, head.xml"
+        + (", texture.png" if (Path(args.out) / "texture.png").is_file() else ""),
     ])
 
 

@@ -31,7 +31,8 @@ import numpy as np
 
 from ..core.errors import InputError
 
-__all__ = ["MAX_DISTANCE", "MIN_NORMAL_COSINE", "BakeResult", "bake_texture", "rasterize_uv", "sample_scan_colors"]
+__all__ = ["MAX_DISTANCE", "MIN_NORMAL_COSINE", "BakeResult", "bake_texture", "rasterize_uv", "sample_scan_colors",
+           "vertex_color_texture"]
 
 MAX_DISTANCE = 0.005
 """Farthest a scan point may lie from the head along the normal [m] to lend it its colour."""
@@ -271,3 +272,32 @@ def bake_texture(V, F, uv, face_uv, scan_V, scan_F, *, colors=None, texture=None
     image = img.reshape(size, size, 3)
     n_in = max(len(texel), 1)
     return BakeResult(image, tok.sum() / n_in, 1.0 - tok.sum() / n_in, vc)
+
+
+def vertex_color_texture(F, uv, face_uv, vertex_colors, *, size: int = 1024) -> np.ndarray:
+    """A texture painted from per-vertex colours over a UV layout (a head without a scan colour:
+    its preview skin and lip colours), seams dilated as in :func:`bake_texture`.
+
+    Args:
+        F: Triangles, shape (m, 3), int64.
+        uv, face_uv: The UV layout: (k, 2) float64 and per-corner indices (m, 3) int64.
+        vertex_colors: sRGB per vertex, shape (n, 3), float in [0, 1].
+        size: Texture side [texels].
+
+    Returns:
+        The texture, shape (size, size, 3), uint8, row 0 at v = 1.
+    """
+    from scipy.ndimage import distance_transform_edt
+
+    F = np.asarray(F, dtype=np.int64)
+    C = np.asarray(vertex_colors, dtype=np.float64)
+    texel, face, bary = rasterize_uv(uv, face_uv, size)
+    img = np.zeros((size * size, 3), dtype=np.uint8)
+    inside = np.zeros(size * size, bool)
+    img[texel] = np.clip(np.rint(np.einsum("kc,kcd->kd", bary, C[F[face]]) * 255.0), 0, 255).astype(np.uint8)
+    inside[texel] = True
+    if not inside.all():
+        _, (ri, ci) = distance_transform_edt(~inside.reshape(size, size), return_indices=True)
+        out = np.flatnonzero(~inside)
+        img[out] = img[ri.ravel()[out] * size + ci.ravel()[out]]
+    return img.reshape(size, size, 3)

@@ -57,7 +57,7 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
 
     Writes ``tets.npz``, ``muscles.json``, ``anatomy.json``, ``face_rig.npz``, ``head.xml`` (the
     MuJoCo cranium and mandible, :func:`~facewarp.write_head_mjcf`), ``texture.png`` (the head's
-    skin texture, where it has one) and ``anatomy.png``; returns
+    skin texture: baked from its scan, else its preview colours with the lips) and ``anatomy.png``; returns
     the quality report.
     """
     step = progress or (lambda msg: None)
@@ -85,7 +85,9 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
 
 
 def _copy_texture(head, out: Path) -> None:
-    """The head's skin texture beside its face rig (``texture.png``, read by :func:`load_face_rig`)."""
+    """The head's skin texture beside its face rig (``texture.png``, read by :func:`load_face_rig`):
+    its own (baked from the scan) or, for a head with UVs but no texture, its preview colours
+    (skin, lips, the inside of the mouth) painted over the UVs."""
     import shutil
 
     src = getattr(head, "texture", None)
@@ -93,6 +95,17 @@ def _copy_texture(head, out: Path) -> None:
         if Path(src).resolve() != (out / "texture.png").resolve():
             shutil.copyfile(src, out / ".texture.png.tmp")
             (out / ".texture.png.tmp").replace(out / "texture.png")
+    elif getattr(head, "uv", None) is not None:
+        # no scan colour: the preview skin with tinted lips and a dark mouth inside, as a texture
+        from PIL import Image
+
+        from ..adapt.bake import vertex_color_texture
+        from ..core.fileio import atomic_write
+        from ..present.template import head_colors
+
+        img = vertex_color_texture(head.faces, head.uv, head.face_uv, head_colors(head.vertices, head.landmarks()))
+        with atomic_write(out / "texture.png", "wb", encoding=None) as f:
+            Image.fromarray(img).save(f, format="PNG")
     elif (out / "texture.png").is_file():
         (out / "texture.png").unlink()  # a texture of an earlier build into this folder
 
