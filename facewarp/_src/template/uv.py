@@ -108,7 +108,7 @@ def _chart_lscm(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if (refined.shape == start.shape and np.isfinite(refined).all()
                 and (np.sign(_areas2(refined, lf_real)) == s0).all() and not _boundary_crosses(refined, lf_real)):
             uv = refined
-    except RuntimeError:  # a chart libigl cannot factor keeps its conformal map
+    except (RuntimeError, AttributeError, TypeError):  # libigl cannot (or this libigl has no ARAP): conformal map
         pass
     # one orientation for every chart: UV triangles counter-clockwise like the outward faces
     uv, lf = uv[:n_real].copy(), lf_real
