@@ -34,7 +34,7 @@ from ..expressions import Timeline, thesis_sequence
 from ..geometry.landmarks import save_landmarks_json
 from ..geometry.mesh import load_mesh, save_obj
 from ..physics.face_rig import load_face_rig
-from ..present.animation import FaceView, label_grid, save_gif
+from ..present.animation import FaceView, label_grid, save_gif, skin_texture
 from ..present.render import colormap, render_mesh, save_png
 from ..present.strips import expression_sheet, sheet_font_size
 from ..present.template import colored_scene
@@ -127,16 +127,6 @@ def _adapted_picture(head, error: np.ndarray, path: Path, *, device: str, size: 
     grid = label_grid([views], column_labels=["front", "three-quarter"])
     save_png(path, grid, title=f"adapted head: error E_v, median {np.median(error) * 1e3:.2f} mm",
              colorbar=(0.0, top, "distance to the true point [mm]"))
-
-
-def skin_texture(fr):
-    """``(image, corner_uv)`` of a face rig's skin texture, or None (no texture or no UVs)."""
-    if getattr(fr, "skin_texture", None) is None or getattr(fr, "head_uv", None) is None:
-        return None
-    from PIL import Image
-
-    with Image.open(fr.skin_texture) as img:
-        return np.asarray(img.convert("RGB")), np.asarray(fr.head_uv)[np.asarray(fr.head_face_uv)]
 
 
 def _likeness_picture(scan, adapt_dir: Path, template, path: Path, *, device: str, size: int) -> dict:

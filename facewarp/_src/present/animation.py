@@ -21,7 +21,7 @@ from ..core.fileio import atomic_write
 from .render import colormap, render_mesh, view_axes
 from .template import CAVITY, head_colors, part_colors
 
-__all__ = ["FACE_HEIGHT", "FaceView", "label_grid", "save_gif"]
+__all__ = ["FACE_HEIGHT", "FaceView", "label_grid", "save_gif", "skin_texture"]
 
 _BACKGROUND = (1.0, 1.0, 1.0)
 _MARGIN = 0.02  # empty border of a render, a fraction of the framed extent (render_mesh's margin)
@@ -80,6 +80,16 @@ def _rigid_map(A: np.ndarray, B: np.ndarray):
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
     R = Vt.T @ D @ U.T
     return lambda X: (X - ca) @ R.T + cb
+
+
+def skin_texture(fr):
+    """``(image, corner_uv)`` of a face rig's skin texture, or None (no texture or no UVs)."""
+    if getattr(fr, "skin_texture", None) is None or getattr(fr, "head_uv", None) is None:
+        return None
+    from PIL import Image
+
+    with Image.open(fr.skin_texture) as img:
+        return np.asarray(img.convert("RGB")), np.asarray(fr.head_uv)[np.asarray(fr.head_face_uv)]
 
 
 class FaceView:
