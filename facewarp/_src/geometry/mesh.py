@@ -118,7 +118,9 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m") -> Mesh:
     resolved; ``vt`` kept as per-vertex UV when every vertex uses a single UV value, else
     ``uv=None`` (vertices in no face then get UV (0, 0)). Lines other than ``v``, ``vt`` and
     ``f`` are ignored. PLY, STL, OFF, GLB, GLTF: ``trimesh.load(..., process=False,
-    force="mesh")``; a scene with several geometries is concatenated (transforms applied).
+    force="mesh")``; a scene with several geometries is concatenated (transforms applied); a
+    textured mesh (glTF splits its vertices along UV seams) has equal positions welded into one
+    vertex, its UVs kept per corner (``corner_uv``).
 
     Args:
         path: Mesh file; the format is chosen by its suffix (:data:`MESH_SUFFIXES`).
@@ -379,6 +381,11 @@ def _read_trimesh(path: Path, look: dict | None = None) -> tuple[np.ndarray, np.
                     mat = getattr(visual, "material", None)
                     img = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
                     look["texture"] = _image_rgb(img)
+                    # glTF keeps one UV per vertex, so its vertices are split along the UV seams:
+                    # weld equal positions back into one surface (the UVs stay per corner)
+                    V, inverse = np.unique(V, axis=0, return_inverse=True)
+                    F = inverse.reshape(-1)[F]
+                    uv = None
     elif visual is not None and getattr(visual, "kind", None) == "vertex" and look is not None:
         vc = np.asarray(visual.vertex_colors)
         if vc.shape[0] == len(V) and vc.shape[1] >= 3:
