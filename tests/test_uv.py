@@ -149,3 +149,13 @@ def test_ply_vertex_colours_read(tmp_path):
     m = fw.load_mesh(tmp_path / "c.ply")
     np.testing.assert_allclose(m.colors, C[:, :3] / 255.0)
     assert m.has_color
+
+
+def test_stl_is_welded(tmp_path):
+    """An STL (three vertices per triangle) reads as one connected surface."""
+    import trimesh
+
+    t = fw.default_template(0)
+    trimesh.Trimesh(t.vertices, t.faces, process=False).export(tmp_path / "h.stl")
+    m = fw.load_mesh(tmp_path / "h.stl")
+    assert m.vertex_count == t.vertex_count and fw.mesh_report(m.vertices, m.faces)["boundary_loop_count"] == 4

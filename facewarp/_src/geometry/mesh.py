@@ -119,8 +119,8 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m") -> Mesh:
     ``uv=None`` (vertices in no face then get UV (0, 0)). Lines other than ``v``, ``vt`` and
     ``f`` are ignored. PLY, STL, OFF, GLB, GLTF: ``trimesh.load(..., process=False,
     force="mesh")``; a scene with several geometries is concatenated (transforms applied); a
-    textured mesh (glTF splits its vertices along UV seams) has equal positions welded into one
-    vertex, its UVs kept per corner (``corner_uv``).
+    textured mesh (glTF splits its vertices along UV seams) and an STL (a triangle soup) have
+    equal positions welded into one vertex (a textured mesh's UVs kept per corner, ``corner_uv``).
 
     Args:
         path: Mesh file; the format is chosen by its suffix (:data:`MESH_SUFFIXES`).
@@ -386,6 +386,10 @@ def _read_trimesh(path: Path, look: dict | None = None) -> tuple[np.ndarray, np.
                     V, inverse = np.unique(V, axis=0, return_inverse=True)
                     F = inverse.reshape(-1)[F]
                     uv = None
+    elif path.suffix.lower() == ".stl":
+        # STL is a triangle soup (three vertices of its own per triangle): weld equal positions
+        V, inverse = np.unique(V, axis=0, return_inverse=True)
+        F = inverse.reshape(-1)[F]
     elif visual is not None and getattr(visual, "kind", None) == "vertex" and look is not None:
         vc = np.asarray(visual.vertex_colors)
         if vc.shape[0] == len(V) and vc.shape[1] >= 3:
