@@ -184,3 +184,19 @@ def test_adapt_bakes_from_a_textured_scan(tmp_path, capsys, fmt):
                                    to_template(scan.vertices), scan.faces, scan_colors=scan.colors, size=160)
     mean = res["mean"]
     assert mean["delta_e_mean"]["textured"] < 4.0 and mean["lightness_correlation"]["textured"] >= 0.6, mean
+
+
+def test_render_samples_the_texture():
+    """A square facing the camera with a texture red on the left (u < 0.5), green on the right:
+    the unlit render shows the two halves."""
+    V = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float) * 0.05
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    uv = (V[:, :2] / 0.1 + 0.5)
+    tex = np.zeros((8, 8, 3), np.uint8)
+    tex[:, :4] = [255, 0, 0]
+    tex[:, 4:] = [0, 255, 0]
+    img = fw.render_mesh(V, F, view="front", width=64, height=64, texture=(tex, uv[F]), unlit=True, margin=0.0,
+                         supersample=1)
+    assert tuple(img[32, 5]) == (255, 0, 0) and tuple(img[32, 58]) == (0, 255, 0)
+    with pytest.raises(fw.InputError, match="corner_uv"):
+        fw.render_mesh(V, F, texture=(tex, uv))
