@@ -294,11 +294,15 @@ def cmd_adapt(args):
     else:
         scale_line = f"  scale: units {sc['units']} (1 unit = {sc['metres_per_unit']:g} m)"
     tex = rep.get("texture")
+    lk = rep.get("likeness", {}).get("mean")
     _emit(args, rep, [
         f"adapted {rep['vertex_count']} template vertices to {args.scan} in {rep['seconds']:.2f} s ({rep['method']})",
         scale_line,
         *([f"  texture: the scan's colour baked into {args.out}/texture.png ({tex['size']} px; "
-           f"{tex['covered_fraction'] * 100:.0f} % of the head's texels from the scan, the rest filled)"]
+           f"{tex['covered_fraction'] * 100:.0f} % of the head's texels from the scan, the rest filled)",
+           f"  likeness: head vs scan from the same cameras, Delta E {lk['delta_e_mean']['textured']:.2f} "
+           f"(one flat colour {lk['delta_e_mean']['flat']:.2f}), L* correlation "
+           f"{lk['lightness_correlation']['textured']:.2f} (likeness.png)"]
           if tex else []),
         f"  calibration FDPs: {', '.join(rep['calibration']['fdps_used'])}",
         f"  {_refinement_summary(rep['levels'], args.levels)}; final FPs {rep['fp_count']}, "
@@ -308,7 +312,7 @@ def cmd_adapt(args):
         f"{rep['quality']['distortion']['all']['stretch_rms'] * 100:.1f} % RMS (report.json: per region)",
         f"  wrote {args.out}/adapted.obj, adapted_scan_frame.obj, adapted_landmarks.json, report.json, "
         "error_heatmap.png, quality_heatmap.png, distortion_heatmap.png, error_curve.png"
-        + (", adapted.glb" if rep.get("uv") else "") + (", texture.png, adapted.mtl" if tex else "")
+        + (", adapted.glb" if rep.get("uv") else "") + (", texture.png, adapted.mtl, likeness.png" if tex else "")
         + (", detected_landmarks.json" if "detected_landmarks" in rep else ""),
     ])
 

@@ -95,6 +95,10 @@ def test_adapt_bakes_a_likeness(tmp_path, capsys):
     assert "texture: the scan's colour baked" in o
     rep = json.loads((out / "report.json").read_text())
     assert rep["texture"]["size"] == 512 and rep["texture"]["covered_fraction"] > 0.95
+    # adapt's own likeness check (no truth: the scan moved into the template frame by the calibration)
+    own = rep["likeness"]["mean"]
+    assert own["delta_e_mean"]["textured"] < 4.0 and own["lightness_correlation"]["textured"] >= 0.6, own
+    assert (out / "likeness.png").is_file() and "likeness: head vs scan" in o
     assert "map_Kd texture.png" in (out / "adapted.mtl").read_text()
     from PIL import Image
 

@@ -4,7 +4,8 @@ Writes into the output folder:
 ``adapted.obj`` (template topology, template frame, metres, the template's UVs), ``adapted_scan_frame.obj`` (scan
 frame and units), ``adapted.glb`` (the same head as binary glTF with its UVs and, from a coloured scan, its texture),
 with a coloured scan ``texture.png`` (the scan's colour baked over the UVs) and
-``adapted.mtl`` (its material, referenced by ``adapted.obj``), ``adapted_landmarks.json`` (metres, template frame), ``report.json`` (the
+``adapted.mtl`` (its material, referenced by ``adapted.obj``) and ``likeness.png`` (the textured
+head beside the scan from the same cameras; the CIELAB figures in the report's ``likeness``), ``adapted_landmarks.json`` (metres, template frame), ``report.json`` (the
 levels, the calibration, the distance to the scan, and ``quality``: folds, dihedral angles,
 curvature difference to the scan and the template's edge stretch and angle change per region,
 figures that need no truth), ``error_heatmap.png`` (distance to the scan on the adapted head),
@@ -273,6 +274,8 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
                                                                tmpl.frontal)}
     if baked is not None:
         report["texture"] = {"path": "texture.png", **baked.to_dict()}
+        step("likeness")
+        report["likeness"] = _likeness(out, res, TF, tmpl, scan_mesh, baked.image, device)
     write_json(out / "report.json", report)
     step("pictures")
     _pictures(out, res, TF, d_show, device)
@@ -296,6 +299,29 @@ def _bake(out: Path, V_scan_frame, TF, tmpl, scan_mesh, size: int, device):
         f.write("# facewarp: the skin, its colour baked from the scan\nnewmtl skin\nKa 1 1 1\nKd 1 1 1\n"
                 "Ks 0 0 0\nmap_Kd texture.png\n")
     return b
+
+
+def _likeness(out: Path, res, TF, tmpl, scan_mesh, texture, device) -> dict:
+    """``likeness.png``: the adapted head in its baked texture beside the scan in its own colour,
+    both in the template's frame (the scan moved by the calibration), from the same cameras
+    (front, three-quarter); returns the CIELAB figures of
+    :func:`~facewarp._src.present.compare.likeness_views` (face region, unlit)."""
+    from ..present.animation import label_grid
+    from ..present.compare import likeness_views
+    from ..present.render import save_png
+
+    SV = res.calibration.transform.apply(scan_mesh.vertices)
+    look = ({"scan_colors": scan_mesh.colors} if scan_mesh.colors is not None
+            else {"scan_texture": scan_mesh.texture, "scan_corner_uv": scan_mesh.corner_uv})
+    r = likeness_views(res.vertices, TF, texture, tmpl.uv[tmpl.face_uv], tmpl.frontal, SV, scan_mesh.faces,
+                       size=300, device=device, **look)
+    mean = r["mean"]
+    grid = label_grid([[head, sc] for head, sc, _ in r["images"].values()],
+                      column_labels=["adapted head, baked texture", "scan"])
+    save_png(out / "likeness.png", grid, title=f"Delta E {mean['delta_e_mean']['textured']:.2f} (one flat colour "
+                                               f"{mean['delta_e_mean']['flat']:.2f}), L* r "
+                                               f"{mean['lightness_correlation']['textured']:.2f}")
+    return {"views": r["views"], "mean": mean, "flat_color": r["flat_color"], "picture": "likeness.png"}
 
 
 def _pictures(out, res, TF, d_show, device) -> None:
