@@ -40,7 +40,7 @@ import numpy as np
 from ..core.errors import InputError
 
 __all__ = ["FAR_FACTOR", "HUMAN_RANGES_M", "PLAUSIBLE_EXTENT_M", "REFERENCE_M", "SPREAD_LIMIT", "ScaleEstimate", "check_human_scale",
-           "estimate_scale", "face_measures", "plausible_extent", "reference_measures"]
+           "estimate_scale", "face_measures", "plausible_extent", "prescale", "reference_measures"]
 
 HUMAN_RANGES_M: dict[str, tuple[float, float]] = {
     "eye_distance": (0.052, 0.075),
