@@ -39,6 +39,7 @@ _NAMES = {
     # meshes, geometry, landmarks
     "Mesh": "geometry.mesh", "SurfacePoints": "geometry.mesh", "closest_surface_points": "geometry.mesh",
     "load_mesh": "geometry.mesh", "mesh_report": "geometry.mesh", "save_obj": "geometry.mesh",
+    "save_glb": "geometry.mesh",
     "MeshQuery": "geometry.surface", "mean_curvature": "geometry.surface", "vertex_normals": "geometry.surface",
     "FDP_CATALOGUE": "geometry.landmarks", "FDP_IDS": "geometry.landmarks", "fapu": "geometry.landmarks",
     "load_landmarks": "geometry.landmarks", "save_landmarks_json": "geometry.landmarks",
@@ -48,6 +49,7 @@ _NAMES = {
     "Template": "template.head", "default_template": "template.head", "load_template_dir": "template.files",
     "save_template": "template.files", "export_template": "jobs.template", "import_ict": "importers.ict",
     "load_head": "adapt.transfer", "human_likeness": "template.likeness",
+    "UVLayout": "template.uv", "face_uv_layout": "template.uv", "uv_distortion": "template.uv",
     # a synthetic scan of another face (the demo's input)
     "FaceProportions": "template.synthetic", "SyntheticScan": "template.synthetic",
     "synthetic_scan": "template.synthetic",
@@ -131,7 +133,8 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.expressions import (MUSCLES, PRESETS, Expression, Segment, Timeline, blend, load_sequence, preset,
                                    thesis_sequence, timeline_for, timeline_from_spec)
     from ._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
-    from ._src.geometry.mesh import Mesh, SurfacePoints, closest_surface_points, load_mesh, mesh_report, save_obj
+    from ._src.geometry.mesh import (Mesh, SurfacePoints, closest_surface_points, load_mesh, mesh_report, save_glb,
+                                     save_obj)
     from ._src.geometry.similarity import Similarity, fit_similarity
     from ._src.geometry.surface import MeshQuery, mean_curvature, vertex_normals
     from ._src.importers.ict import ICT_INNER_LIP_VERTICES, ICT_PART_RANGES, ICT_SKIN_VERTICES, import_ict
@@ -155,3 +158,4 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.template.head import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, default_template
     from ._src.template.likeness import ICT_FDP_VERTICES, human_likeness
     from ._src.template.synthetic import FaceProportions, SyntheticScan, synthetic_scan
+    from ._src.template.uv import UVLayout, face_uv_layout, uv_distortion

@@ -50,6 +50,20 @@ from ._src.adapt.metrics import (  # noqa: F401
     marker_error,
     vertex_error,
 )
+from ._src.adapt.bake import (  # noqa: F401
+    BakeResult,
+    bake_texture,
+    rasterize_uv,
+    sample_scan_colors,
+    vertex_color_texture,
+)
+from ._src.adapt.scale import (  # noqa: F401
+    REFERENCE_M as SCALE_REFERENCE_M,
+    HUMAN_RANGES_M,
+    ScaleEstimate,
+    estimate_scale,
+    face_measures,
+)
 from ._src.adapt.transfer import (  # noqa: F401
     EYE_FDPS,
     apply_part,
@@ -59,4 +73,4 @@ from ._src.adapt.transfer import (  # noqa: F401
     transfer_uv,
 )
 
-__all__ = ["AdaptOptions", "AdaptResult", "DIHEDRAL_MARGIN_DEG", "DetectionResult", "FOLD_DEG", "detect_landmarks", "distortion", "surface_quality", "symmetry_plane", "CALIBRATION_FDPS", "CSRBFField", "Calibration", "DEFAULT_REGION_WEIGHTS", "DistanceError", "EYE_FDPS", "LevelRecord", "METHODS", "Quadrics", "RBFField", "REGION_GROUPS", "Similarity", "VertexError", "adapt", "apply_part", "calibrate", "combined_error", "distance_error", "eye_transform", "fit_csrbf", "fit_local_quadrics", "fit_part_transform", "fit_rbf", "fit_similarity", "head_width", "load_head", "marker_error", "transfer_uv", "vertex_error", "vertex_groups", "wendland"]
+__all__ = ["vertex_color_texture", "SCALE_REFERENCE_M", "BakeResult", "bake_texture", "rasterize_uv", "sample_scan_colors", "HUMAN_RANGES_M", "ScaleEstimate", "estimate_scale", "face_measures", "AdaptOptions", "AdaptResult", "DIHEDRAL_MARGIN_DEG", "DetectionResult", "FOLD_DEG", "detect_landmarks", "distortion", "surface_quality", "symmetry_plane", "CALIBRATION_FDPS", "CSRBFField", "Calibration", "DEFAULT_REGION_WEIGHTS", "DistanceError", "EYE_FDPS", "LevelRecord", "METHODS", "Quadrics", "RBFField", "REGION_GROUPS", "Similarity", "VertexError", "adapt", "apply_part", "calibrate", "combined_error", "distance_error", "eye_transform", "fit_csrbf", "fit_local_quadrics", "fit_part_transform", "fit_rbf", "fit_similarity", "head_width", "load_head", "marker_error", "transfer_uv", "vertex_error", "vertex_groups", "wendland"]

@@ -282,12 +282,28 @@ def cmd_adapt(args):
     rep = adapt_files(args.scan, args.landmarks, args.out, template_dir=args.template, template_mesh=args.template_mesh,
                       template_landmarks=args.template_landmarks, method=args.method, levels=args.levels,
                       markers=args.markers, units=args.units, template_units=args.template_units,
-                      device=args.device, progress=prog)
+                      device=args.device, progress=prog, texture_size=args.texture_size)
     prog.close()
     last = rep["levels"][-1] if rep["levels"] else {}
     d = rep["distance_to_scan_m"]
+    sc = rep["scale"]
+    if sc["units"] == "auto":
+        scale_line = (f"  scale: auto from the FDPs, 1 scan unit = {sc['metres_per_unit']:.4g} m (eye distance "
+                      f"{sc['measures_file_units']['eye_distance']:.4g} units; measures agree within "
+                      f"{(sc['spread'] - 1) * 100:.0f} %)")
+    else:
+        scale_line = f"  scale: units {sc['units']} (1 unit = {sc['metres_per_unit']:g} m)"
+    tex = rep.get("texture")
+    lk = rep.get("likeness", {}).get("mean")
     _emit(args, rep, [
         f"adapted {rep['vertex_count']} template vertices to {args.scan} in {rep['seconds']:.2f} s ({rep['method']})",
+        scale_line,
+        *([f"  texture: the scan's colour baked into {args.out}/texture.png ({tex['size']} px; "
+           f"{tex['covered_fraction'] * 100:.0f} % of the head's texels from the scan, the rest filled)",
+           f"  likeness: head vs scan from the same cameras, Delta E {lk['delta_e_mean']['textured']:.2f} "
+           f"(one flat colour {lk['delta_e_mean']['flat']:.2f}), L* correlation "
+           f"{lk['lightness_correlation']['textured']:.2f} (likeness.png)"]
+          if tex else []),
         f"  calibration FDPs: {', '.join(rep['calibration']['fdps_used'])}",
         f"  {_refinement_summary(rep['levels'], args.levels)}; final FPs {rep['fp_count']}, "
         f"E_d {last.get('E_d', float('nan')):.3g} m^2",
@@ -296,6 +312,7 @@ def cmd_adapt(args):
         f"{rep['quality']['distortion']['all']['stretch_rms'] * 100:.1f} % RMS (report.json: per region)",
         f"  wrote {args.out}/adapted.obj, adapted_scan_frame.obj, adapted_landmarks.json, report.json, "
         "error_heatmap.png, quality_heatmap.png, distortion_heatmap.png, error_curve.png"
+        + (", adapted.glb" if rep.get("uv") else "") + (", texture.png, adapted.mtl, likeness.png" if tex else "")
         + (", detected_landmarks.json" if "detected_landmarks" in rep else ""),
     ])
 
@@ -313,7 +330,8 @@ def cmd_build(args):
         f"  {q['muscle_count']} muscles, attached skin nodes per muscle: min {q.get('min_attached_nodes', 0)}",
         "  lips: {crossing_nodes_before} nodes crossing the other lip at rest, {moved_nodes} moved apart, "
         "{crossing_nodes_after} left".format(**q["lip_separation"]),
-        "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz, head.xml, scene.xml",
+        "  wrote tets.npz, muscles.json, anatomy.json, anatomy.png, face_rig.npz, head.xml, scene.xml"
+        + (", texture.png" if (Path(args.out) / "texture.png").is_file() else ""),
     ])
 
 
@@ -400,7 +418,7 @@ def cmd_demo(args):
         f"  anatomy: {q['tet_count']} tets, {q['inverted_count']} inverted, {q['muscle_count']} muscles",
         f"  simulation: {s['frames']} frames ({s['seconds']:g} s), {s['frames_per_second']:.1f} frames/s "
         f"({s['jaw']} jaw)",
-        "  wrote animation.usdc, head.xml, scene.xml, report.json, adapted_head.png, expressions.png, sequence.gif",
+        "  wrote animation.usdc, head.xml, scene.xml, report.json, adapted_head.png, likeness.png, expressions.png, sequence.gif",
     ])
 
 
@@ -548,8 +566,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "template) and level 1 (the FDPs), then the final stages (field: a smooth field fitted to "
                         "point-to-plane pairs; land: onto the scan along the normals; relax)")
     a.add_argument("--markers", type=Path, help="FDPs held out of training, for the marker error E_m")
-    a.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan and its landmarks")
+    a.add_argument("--units", choices=["mm", "cm", "m", "auto"], default=None,
+                   help="units of the scan and its landmarks; auto: the scale from the FDPs against human proportions "
+                        "(eye distance, eye to mouth, nose length; README). Default: m when the scan's extent is a "
+                        "plausible head in metres, else auto. FDPs far outside human proportions in the given units "
+                        "stop the run")
     a.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
+    a.add_argument("--texture-size", type=_positive_int, default=2048, metavar="PX",
+                   help="side of texture.png, the scan's colour baked over the head's UVs (64..16384, default 2048; "
+                        "written when the scan has colour)")
     a.set_defaults(func=cmd_adapt)
 
     b = sub.add_parser("build", help="skin tetrahedra, muscles and boundary conditions of a head (Sec. 6.2-6.3)")

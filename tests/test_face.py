@@ -38,6 +38,7 @@ def test_face_rig_roundtrip(rig, tmp_path):
     np.testing.assert_array_equal(r2.tets, rig.tets)
     np.testing.assert_allclose(r2.rig.ctrl_rest, rig.rig.ctrl_rest)
     assert r2.rig.names == rig.rig.names and set(r2.parts) == set(rig.parts)
+    np.testing.assert_array_equal(r2.head_face_uv, rig.head_face_uv)  # the skin's UVs ride along
     assert rig.fixed.any() and rig.held.any() and len(rig.support_nodes) and len(rig.jaw_nodes)
     # the contact geometry is built once and saved with the rig
     g, g2 = rig.contact, r2.contact

@@ -28,6 +28,9 @@ Animation (:class:`AnimationWriter`, read back with :func:`read_animation`)
                                    string[] muscleNames
           Tissue                   TetMesh (purpose "guide"), time-sampled points and extent
           Looks/Skin, Looks/White  Material with a UsdPreviewSurface
+          Looks/SkinTexture        with ``skin_texture``: UsdPreviewSurface whose diffuseColor is a
+                                   UsdUVTexture (sRGB, ``./<stem>_skin.png``) read at primvars:st;
+                                   bound to the skin instead of Looks/Skin
 
     Stage metadata: ``upAxis``, ``metersPerUnit``, ``timeCodesPerSecond`` = ``framesPerSecond`` =
     ``fps``, ``startTimeCode``/``endTimeCode`` = first/last frame's time code, ``defaultPrim``.

@@ -127,6 +127,10 @@ class AnimationWriter:
             looking from ``position`` at ``target``, so the file opens framed.
         lights: Add ``/Lights`` beside the head: a key ``DistantLight`` from the camera's side
             (from +z without a camera) and a dim ``DomeLight``.
+        skin_texture: Optional colour texture of the skin (a ``.png`` / ``.jpg`` file; needs
+            ``uv``): copied beside the file as ``<stem>_skin.png`` (inside a ``.usdz``) and bound
+            to the skin as ``Looks/SkinTexture`` (UsdPreviewSurface <- UsdUVTexture <-
+            UsdPrimvarReader_float2 of ``st``).
 
     Raises:
         UsdExportError: a bad path extension or argument (one-line message naming it).
@@ -136,7 +140,7 @@ class AnimationWriter:
                  muscles=(), muscle_samples: int | None = None, muscle_rest=None, muscle_width: float | None = None,
                  tets=None, up_axis: str = "Y", meters_per_unit: float = 1.0, flush_bytes: int = FLUSH_BYTES,
                  part_colors: dict | None = None, subsets: dict | None = None, camera: dict | None = None,
-                 lights: bool = False):
+                 lights: bool = False, skin_texture=None):
         self.path = check_path(path)
         if self.path.is_dir():
             raise UsdExportError(f"path: {str(self.path)!r} is a folder; expected a file name")
@@ -146,6 +150,7 @@ class AnimationWriter:
         self._flush_bytes = _positive("flush_bytes", flush_bytes)
         spec = _check_spec(faces, rest_points, uv, uv_indices, parts, muscles, muscle_samples, muscle_rest,
                            muscle_width, tets, up_axis, _positive("meters_per_unit", meters_per_unit))
+        self._texture = _check_texture(skin_texture, spec, self.path)
         self._spec = spec
         looks = _check_looks(spec, part_colors, subsets, camera)
         self._frame_count, self._first_code, self._last_code = 0, 0.0, -math.inf
@@ -153,7 +158,8 @@ class AnimationWriter:
         self._tmpdir = Path(tempfile.mkdtemp(dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".tmp"))
         self._cleanup = weakref.finalize(self, shutil.rmtree, str(self._tmpdir), True)
         try:
-            self._layer = _build_stage(self._tmpdir / "work.usdc", spec, self.fps)
+            self._layer = _build_stage(self._tmpdir / "work.usdc", spec, self.fps,
+                                       None if self._texture is None else self._texture[1])
             _dress_stage(self._layer, spec, looks, lights=bool(lights))
         except BaseException:
             self._cleanup()
@@ -213,6 +219,10 @@ class AnimationWriter:
             return self.path
         try:
             out = self._finish()
+            if self._texture is not None and self.path.suffix.lower() != ".usdz":
+                # the texture beside the file, under the name the material's asset path gives
+                shutil.copyfile(self._texture[0], self._tmpdir / "texture.tmp")
+                os.replace(self._tmpdir / "texture.tmp", self.path.parent / self._texture[1])
             os.replace(out, self.path)
         finally:
             self._layer = None
@@ -281,6 +291,8 @@ class AnimationWriter:
         else:
             inner = self._tmpdir / f"{prim_name(self.path.stem)}.usdc"  # the layer's name inside the package
             os.replace(work, inner)
+            if self._texture is not None:  # packaged beside the layer, as its asset path says
+                shutil.copyfile(self._texture[0], self._tmpdir / self._texture[1])
             if not UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(inner)), str(out), inner.name):
                 raise UsdExportError(f"path: could not package {str(self.path)!r} as usdz")
         return out
@@ -460,7 +472,7 @@ def _heat(a: np.ndarray) -> np.ndarray:
 
 
 # ============================================================================ static stage
-def _build_stage(work: Path, s: _Spec, fps: float):
+def _build_stage(work: Path, s: _Spec, fps: float, texture_name: str | None = None):
     """Author everything but the time samples into a new crate layer at ``work``; returns the layer."""
     layer = Sdf.Layer.CreateNew(str(work))
     if layer is None:  # pragma: no cover - USD reports the reason as a warning
@@ -479,6 +491,8 @@ def _build_stage(work: Path, s: _Spec, fps: float):
     skin = _mesh(stage, f"{ROOT}/{SKIN}", s.rest, s.faces, skin_mat)
     if s.uv is not None:
         _uv_primvar(skin, s.uv, s.uv_indices)
+    if texture_name is not None:
+        _bind_skin_texture(stage, skin, texture_name)
     if s.parts:
         _parts(stage, s, skin_mat, white_mat)
     if s.muscle_names:
@@ -524,6 +538,46 @@ def _parts(stage, s: _Spec, skin_mat, white_mat) -> None:
         mesh.AddTransformOp().Set(Gf.Matrix4d(1.0))
         if s.part_paths[name].name != name:
             mesh.GetPrim().SetDisplayName(str(name))  # the part's own name, read back by read_animation
+
+
+def _check_texture(skin_texture, s: _Spec, path: Path):
+    """(source PNG/JPEG path, file name beside the USD) of the skin texture, or None."""
+    if skin_texture is None:
+        return None
+    src = Path(skin_texture)
+    if src.suffix.lower() not in (".png", ".jpg", ".jpeg") or not src.is_file():
+        raise UsdExportError(f"skin_texture: expected an existing .png or .jpg file, got {str(src)!r}")
+    if s.uv is None:
+        raise UsdExportError("skin_texture: given without uv (the skin needs texture coordinates)")
+    return src, f"{path.stem}_skin{src.suffix.lower()}"
+
+
+def _bind_skin_texture(stage, skin, texture_name: str) -> None:
+    """The skin's own material ``Looks/SkinTexture``: a UsdPreviewSurface whose diffuse colour
+    is a UsdUVTexture (sRGB) of ``./texture_name`` read at ``primvars:st``
+    (UsdPrimvarReader_float2), bound to the skin mesh."""
+    path = f"{ROOT}/{LOOKS}/SkinTexture"
+    mat = UsdShade.Material.Define(stage, path)
+    surf = UsdShade.Shader.Define(stage, f"{path}/PreviewSurface")
+    surf.CreateIdAttr("UsdPreviewSurface")
+    surf.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.55)
+    surf.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+    reader = UsdShade.Shader.Define(stage, f"{path}/StReader")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    st_name = mat.CreateInput("frame:stPrimvarName", Sdf.ValueTypeNames.String)
+    st_name.Set("st")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).ConnectToSource(st_name)
+    tex = UsdShade.Shader.Define(stage, f"{path}/DiffuseTexture")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"./{texture_name}"))
+    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+    tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("clamp")
+    tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("clamp")
+    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+    rgb = tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(rgb)
+    mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(skin.GetPrim()).Bind(mat)
 
 
 def _uv_primvar(mesh, uv: np.ndarray, uv_indices) -> None:

@@ -157,7 +157,9 @@ def _head_from_adapt_dir(path: Path):
         parts[name] = (sim.apply(V), F)
     ids = [k for k in ("2.1", "3.7", "3.12", "8.3", "8.4", "10.9", "10.10", "9.3", "11.1") if k in al]
     condyles = fit_part_transform(tl, al, ids).apply(t.condyles)
-    return replace(adapted, parts=parts, condyles=condyles, level=t.level)
+    texture = path / "texture.png"
+    return replace(adapted, parts=parts, condyles=condyles, level=t.level,
+                   texture=str(texture) if texture.is_file() and t.uv is not None else None)
 
 
 def load_head(path) -> "Template":

@@ -205,6 +205,7 @@ def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS
         vertex_jaw=v_amount,
         level=int(getattr(head, "level", -1)),
         opening_vertex=o_vertex, opening_node=o_node, opening_weight=o_weight,
+        head_uv=getattr(head, "uv", None), head_face_uv=getattr(head, "face_uv", None),
     )
     fr.contact = contact_geometry(fr)  # build-time work, saved with the rig
     return fr

@@ -27,6 +27,7 @@ __all__ = [
     "closest_surface_points",
     "load_mesh",
     "mesh_report",
+    "save_glb",
     "save_obj",
     "unit_scale",
 ]
@@ -63,12 +64,25 @@ class Mesh:
         uv: Per-vertex texture coordinates, shape (n, 2), float64 (dimensionless), or None
             when the file has none or a vertex carries several (UV seams).
         name: A label, by default the file's stem.
+        corner_uv: Texture coordinates of every triangle corner, shape (m, 3, 2), float64, or
+            None (kept at UV seams too).
+        colors: Per-vertex colour, shape (n, 3), float64 in [0, 1] (sRGB values as stored), or None.
+        texture: The base-colour image, shape (h, w, 3), float64 in [0, 1] (row 0 at the top,
+            so v = 1 is row 0), or None: OBJ ``map_Kd`` of its MTL, glTF ``baseColorTexture``.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     uv: np.ndarray | None = None
     name: str = ""
+    corner_uv: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    texture: np.ndarray | None = None
+
+    @property
+    def has_color(self) -> bool:
+        """Whether the mesh carries colour: vertex colours, or a texture with corner UVs."""
+        return self.colors is not None or (self.texture is not None and self.corner_uv is not None)
 
     @property
     def vertex_count(self) -> int:
@@ -104,7 +118,9 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m") -> Mesh:
     resolved; ``vt`` kept as per-vertex UV when every vertex uses a single UV value, else
     ``uv=None`` (vertices in no face then get UV (0, 0)). Lines other than ``v``, ``vt`` and
     ``f`` are ignored. PLY, STL, OFF, GLB, GLTF: ``trimesh.load(..., process=False,
-    force="mesh")``; a scene with several geometries is concatenated (transforms applied).
+    force="mesh")``; a scene with several geometries is concatenated (transforms applied); a
+    textured mesh (glTF splits its vertices along UV seams) and an STL (a triangle soup) have
+    equal positions welded into one vertex (a textured mesh's UVs kept per corner, ``corner_uv``).
 
     Args:
         path: Mesh file; the format is chosen by its suffix (:data:`MESH_SUFFIXES`).
@@ -125,14 +141,71 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m") -> Mesh:
     if suffix not in MESH_SUFFIXES:
         expected = ", ".join(MESH_SUFFIXES)
         raise InputError(f"{path}: unsupported mesh format {suffix or '(no suffix)'!r}, expected one of {expected}")
+    look: dict = {}
     if suffix == ".obj":
-        V, F, uv = _read_obj(path)
+        V, F, uv = _read_obj(path, look)
     else:
-        V, F, uv = _read_trimesh(path)
+        V, F, uv = _read_trimesh(path, look)
     _validate(path, V, F)
     if uv is not None and (uv.shape != (len(V), 2) or not np.isfinite(uv).all()):
         uv = None
-    return Mesh(vertices=V * scale, faces=F, uv=uv, name=path.stem)
+    cuv = look.get("corner_uv")
+    if cuv is not None and (cuv.shape != (len(F), 3, 2) or not np.isfinite(cuv).all()):
+        cuv = None
+    col = look.get("colors")
+    if col is not None and (col.shape != (len(V), 3) or not np.isfinite(col).all()):
+        col = None
+    return Mesh(vertices=V * scale, faces=F, uv=uv, name=path.stem, corner_uv=cuv, colors=col,
+                texture=look.get("texture"))
+
+
+def _as_unit_colors(C) -> np.ndarray:
+    """Colours as float64 in [0, 1]: 0-255 values (integers, or any value above 1) divided by 255."""
+    C = np.asarray(C)
+    if np.issubdtype(C.dtype, np.integer) or (C.size and float(np.nanmax(C)) > 1.0):
+        return np.clip(C.astype(np.float64) / 255.0, 0.0, 1.0)
+    return np.clip(C.astype(np.float64), 0.0, 1.0)
+
+
+def _image_rgb(img) -> np.ndarray | None:
+    """A PIL image or array as (h, w, 3) float64 in [0, 1], or None."""
+    if img is None:
+        return None
+    a = np.asarray(img.convert("RGB") if hasattr(img, "convert") else img)
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=2)
+    if a.ndim != 3 or a.shape[2] < 3 or a.shape[0] < 1 or a.shape[1] < 1:
+        return None
+    return _as_unit_colors(a[..., :3])
+
+
+def _read_mtl_texture(path: Path, mtllibs: list[str], material: str | None) -> np.ndarray | None:
+    """The ``map_Kd`` image of ``material`` (else the first material with one) in the OBJ's MTL files."""
+    from PIL import Image
+
+    maps: dict[str, str] = {}
+    for lib in mtllibs:
+        mp = path.parent / lib
+        if not mp.is_file():
+            continue
+        current = None
+        for line in mp.read_text(encoding="utf-8", errors="replace").splitlines():
+            parts = line.strip().split()
+            if not parts:
+                continue
+            if parts[0] == "newmtl" and len(parts) > 1:
+                current = parts[1]
+            elif parts[0] == "map_Kd" and len(parts) > 1 and current is not None:
+                maps.setdefault(current, parts[-1])  # options (-s ...) come before the file name
+    name = maps.get(material) if material in maps else next(iter(maps.values()), None)
+    if name is None:
+        return None
+    ip = path.parent / name
+    try:
+        with Image.open(ip) as img:
+            return _image_rgb(img)
+    except OSError as e:
+        raise InputError(f"{path}: cannot read its texture {ip} ({e})") from None
 
 
 def _validate(path: Path, V: np.ndarray, F: np.ndarray) -> None:
@@ -170,7 +243,7 @@ def _parse_floats(path: Path, lines: list[str], what: str, width: int) -> np.nda
         raise InputError(f"{path}: could not parse a {what} line ({e})") from None
 
 
-def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _read_obj(path: Path, look: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError as e:
@@ -181,7 +254,15 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     f_lines: list[str] = []
     f_v_seen: list[int] = []  # vertices declared before each face (for negative indices)
     f_vt_seen: list[int] = []
+    mtllibs: list[str] = []
+    material = None
     for line in text.splitlines():
+        if line.startswith("mtllib "):
+            mtllibs.append(line[7:].strip())
+            continue
+        if line.startswith("usemtl ") and material is None:
+            material = line[7:].strip()
+            continue
         if not line or line[0] not in "vf \t":
             continue
         parts = line.split(None, 1)
@@ -200,6 +281,9 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
 
     V = _parse_floats(path, v_lines, "v", 3)
     VT = _parse_floats(path, vt_lines, "vt", 2)
+    if look is not None and v_lines and all(len(r.split()) == 6 for r in v_lines[:1000]) and all(
+            len(r.split()) == 6 for r in v_lines):
+        look["colors"] = _as_unit_colors(_parse_floats(path, [r.split(None, 3)[3] for r in v_lines], "v colour", 3))
     if len(V) == 0:
         raise InputError(f"{path}: no vertices (not an OBJ file?)")
     if not f_lines:
@@ -241,6 +325,10 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     F = vi[corners]
 
     uv = None
+    if ti is not None and len(VT) and look is not None:
+        look["corner_uv"] = VT[ti][corners]
+        if mtllibs:
+            look["texture"] = _read_mtl_texture(path, mtllibs, material)
     if ti is not None and len(VT):
         uv_v = np.zeros((len(V), 2))
         uv_v[vi] = VT[ti]
@@ -261,7 +349,7 @@ def _resolve(path: Path, idx: np.ndarray, seen: np.ndarray, total: int, what: st
     return out
 
 
-def _read_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _read_trimesh(path: Path, look: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     import trimesh
 
     try:
@@ -288,6 +376,24 @@ def _read_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None
             tuv = np.asarray(tuv, dtype=np.float64)
             if tuv.shape == (len(V), 2):
                 uv = tuv.copy()
+                if look is not None:
+                    look["corner_uv"] = uv[F]
+                    mat = getattr(visual, "material", None)
+                    img = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
+                    look["texture"] = _image_rgb(img)
+                    # glTF keeps one UV per vertex, so its vertices are split along the UV seams:
+                    # weld equal positions back into one surface (the UVs stay per corner)
+                    V, inverse = np.unique(V, axis=0, return_inverse=True)
+                    F = inverse.reshape(-1)[F]
+                    uv = None
+    elif path.suffix.lower() == ".stl":
+        # STL is a triangle soup (three vertices of its own per triangle): weld equal positions
+        V, inverse = np.unique(V, axis=0, return_inverse=True)
+        F = inverse.reshape(-1)[F]
+    elif visual is not None and getattr(visual, "kind", None) == "vertex" and look is not None:
+        vc = np.asarray(visual.vertex_colors)
+        if vc.shape[0] == len(V) and vc.shape[1] >= 3:
+            look["colors"] = _as_unit_colors(vc[:, :3])
     return V, F, uv
 
 
@@ -373,16 +479,22 @@ def mesh_report(V, F) -> dict:
 # writing
 
 
-def save_obj(path: str | os.PathLike, V, F, *, uv=None, units: str = "m") -> None:
+def save_obj(path: str | os.PathLike, V, F, *, uv=None, face_uv=None, units: str = "m", mtl: str | None = None,
+             colors=None) -> None:
     """Write a triangle mesh as OBJ, atomically (temporary file, then rename).
 
     Args:
         path: Destination ``.obj`` file; its folder must exist.
         V: Vertex positions [m], shape (n, 3), float64; written divided by the unit.
         F: Triangles, shape (m, 3), int64 (0-based; written 1-based).
-        uv: Optional per-vertex texture coordinates, shape (n, 2), float64; written as
-            one ``vt`` per vertex, faces as ``f a/a b/b c/c``.
+        uv: Optional texture coordinates, float64: per vertex, shape (n, 2), written as one
+            ``vt`` per vertex, faces as ``f a/a b/b c/c``; or per corner with ``face_uv``.
+        face_uv: Optional per triangle corner an index into ``uv``, shape (m, 3), int64 (UV
+            seams: a vertex may take a different UV in each triangle); faces ``f a/i b/j c/k``.
         units: Unit of the written coordinates: "mm", "cm" or "m".
+        mtl: Optional material library file name (beside the OBJ) with a material ``skin``:
+            written as ``mtllib`` / ``usemtl`` lines.
+        colors: Optional per-vertex colour, shape (n, 3), float in [0, 1]: ``v x y z r g b``.
     """
     from .surface import _check_VF
 
@@ -390,17 +502,75 @@ def save_obj(path: str | os.PathLike, V, F, *, uv=None, units: str = "m") -> Non
     V, F = _check_VF(V, F)
     if uv is not None:
         uv = np.asarray(uv, dtype=np.float64)
-        if uv.shape != (len(V), 2):
+        if face_uv is None and uv.shape != (len(V), 2):
             raise ValueError(f"uv must have shape ({len(V)}, 2), got {uv.shape}")
+        if uv.ndim != 2 or uv.shape[1] != 2:
+            raise ValueError(f"uv must have shape (k, 2), got {uv.shape}")
+    if face_uv is not None:
+        if uv is None:
+            raise ValueError("face_uv needs uv")
+        face_uv = np.asarray(face_uv, dtype=np.int64)
+        if face_uv.shape != F.shape or face_uv.min() < 0 or face_uv.max() >= len(uv):
+            raise ValueError(f"face_uv must have shape {F.shape} with indices into uv ({len(uv)}), got {face_uv.shape}")
     with atomic_write(path, "w") as f:
         f.write(f"# facewarp OBJ: {len(V)} vertices, {len(F)} triangles, units {units}\n")
-        np.savetxt(f, V / scale, fmt="v %.10g %.10g %.10g")
+        if mtl is not None:
+            f.write(f"mtllib {mtl}\n")
+        if colors is None:
+            np.savetxt(f, V / scale, fmt="v %.10g %.10g %.10g")
+        else:
+            C = np.asarray(colors, dtype=np.float64)
+            if C.shape != V.shape or not np.isfinite(C).all():
+                raise ValueError(f"colors must have shape {V.shape} and be finite, got {C.shape}")
+            np.savetxt(f, np.hstack([V / scale, np.clip(C, 0.0, 1.0)]), fmt="v %.10g %.10g %.10g %.5g %.5g %.5g")
         if uv is None:
             np.savetxt(f, F + 1, fmt="f %d %d %d")
         else:
             np.savetxt(f, uv, fmt="vt %.10g %.10g")
-            G = F + 1
-            np.savetxt(f, np.repeat(G, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+            if mtl is not None:
+                f.write("usemtl skin\n")
+            T = F if face_uv is None else face_uv
+            G = np.stack([F + 1, T + 1], axis=2).reshape(len(F), 6)
+            np.savetxt(f, G, fmt="f %d/%d %d/%d %d/%d")
+
+
+def save_glb(path: str | os.PathLike, V, F, uv, face_uv, *, texture=None) -> None:
+    """Write a textured triangle mesh as binary glTF (``.glb``, metres, +y up), atomically.
+
+    glTF has one UV per vertex, so every vertex is split into one copy per distinct UV it takes
+    (the seams of a per-corner layout).
+
+    Args:
+        path: Destination ``.glb`` file; its folder must exist.
+        V: Vertex positions [m], shape (n, 3), float64.
+        F: Triangles, shape (m, 3), int64.
+        uv: Texture coordinates, shape (k, 2), float64 (v up).
+        face_uv: Per triangle corner an index into ``uv``, shape (m, 3), int64.
+        texture: Optional base-colour image, shape (h, w, 3), uint8 (row 0 at v = 1), or a
+            path of an image file; without it the material is a plain skin colour.
+    """
+    import trimesh
+    from PIL import Image
+
+    from .surface import _check_VF
+
+    V, F = _check_VF(V, F)
+    uv = np.asarray(uv, dtype=np.float64)
+    face_uv = np.asarray(face_uv, dtype=np.int64)
+    if face_uv.shape != F.shape or uv.ndim != 2 or uv.shape[1] != 2 or face_uv.min() < 0 or face_uv.max() >= len(uv):
+        raise ValueError(f"uv (k, 2) and face_uv {F.shape} with indices into uv expected, got {uv.shape}, {face_uv.shape}")
+    pairs, inverse = np.unique(np.stack([F.ravel(), face_uv.ravel()], 1), axis=0, return_inverse=True)
+    if texture is None:
+        material = trimesh.visual.material.PBRMaterial(baseColorFactor=[204, 158, 133, 255])
+    else:
+        img = Image.open(texture).convert("RGB") if isinstance(texture, (str, os.PathLike)) else \
+            Image.fromarray(np.asarray(texture, dtype=np.uint8))
+        material = trimesh.visual.material.PBRMaterial(baseColorTexture=img, metallicFactor=0.0, roughnessFactor=0.6)
+    mesh = trimesh.Trimesh(vertices=V[pairs[:, 0]], faces=inverse.reshape(-1, 3), process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=uv[pairs[:, 1]], material=material))
+    data = mesh.export(file_type="glb")
+    with atomic_write(path, "wb", encoding=None) as f:
+        f.write(data)
 
 
 # ----------------------------------------------------------------------------------------

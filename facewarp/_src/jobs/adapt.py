@@ -1,8 +1,11 @@
 """The adaptation job with its files: load scan + landmarks + template, adapt, write results.
 
 Writes into the output folder:
-``adapted.obj`` (template topology, template frame, metres), ``adapted_scan_frame.obj`` (scan
-frame and units), ``adapted_landmarks.json`` (metres, template frame), ``report.json`` (the
+``adapted.obj`` (template topology, template frame, metres, the template's UVs), ``adapted_scan_frame.obj`` (scan
+frame and units), ``adapted.glb`` (the same head as binary glTF with its UVs and, from a coloured scan, its texture),
+with a coloured scan ``texture.png`` (the scan's colour baked over the UVs) and
+``adapted.mtl`` (its material, referenced by ``adapted.obj``) and ``likeness.png`` (the textured
+head beside the scan from the same cameras; the CIELAB figures in the report's ``likeness``), ``adapted_landmarks.json`` (metres, template frame), ``report.json`` (the
 levels, the calibration, the distance to the scan, and ``quality``: folds, dihedral angles,
 curvature difference to the scan and the template's edge stretch and angle change per region,
 figures that need no truth), ``error_heatmap.png`` (distance to the scan on the adapted head),
@@ -146,8 +149,8 @@ def detect_landmarks_files(scan, out_json, *, units="m", template_dir=None, temp
 
 
 def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, template_landmarks=None,
-                method="multilevel", levels=None, markers=None, units="m", template_units="m", device="cpu",
-                progress=None) -> dict:
+                method="multilevel", levels=None, markers=None, units=None, template_units="m", device="cpu",
+                progress=None, texture_size: int = 2048) -> dict:
     """Run the adaptation on files and write the outputs; returns the report dict.
 
     ``levels`` is :func:`~facewarp.adapt`'s: refinement levels after the FDP level (None: its
@@ -156,30 +159,63 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     units) with their confidences in the report. Inputs are checked first (units of scan and
     landmarks, FDPs shared with the template, landmarks on the scan, the output folder), so a bad
     input fails in seconds.
+
+    ``units``: the unit of the scan and its landmarks, ``"mm"``, ``"cm"``, ``"m"`` or ``"auto"``:
+    the scale from the FDPs against human proportions (:mod:`~facewarp._src.adapt.scale`),
+    written to the report's ``scale``. None (default): ``"m"`` when the scan's extent is a
+    plausible head in metres, else ``"auto"``. In given units, FDPs far outside human
+    proportions stop the run (:func:`~facewarp._src.adapt.scale.check_human_scale`).
+
+    A scan with colour (vertex colours, or a texture over UVs) is baked into ``texture.png``
+    (``texture_size`` px square) over the template's UVs (:mod:`~facewarp._src.adapt.bake`).
     """
+    from ..adapt.scale import check_human_scale, estimate_scale, plausible_extent, prescale
+
     step = progress or (lambda msg: None)
     out = check_out_dir(out)
-    scale = unit_scale(units)
+    if units is not None and units != "auto":
+        unit_scale(units)  # names a bad unit
+    if not (isinstance(texture_size, (int, np.integer)) and not isinstance(texture_size, bool)
+            and 64 <= texture_size <= 16384):
+        raise InputError(f"texture_size: expected a whole number of pixels in 64..16384, got {texture_size!r}")
     step("loading")
-    scan_mesh = load_mesh(scan, units=units)
+    raw = load_mesh(scan, units="m")  # the file's numbers
+    units_given = units
+    if units is None:
+        units = "m" if plausible_extent(raw.vertices) else "auto"
+    auto = units == "auto"
     detected = None
     if landmarks is not None:
-        scan_lm = load_landmarks(landmarks, units=units)
-        _check_units(scan_mesh.vertices, scan_lm, landmarks, f"the scan {scan}")
+        raw_lm = load_landmarks(landmarks, units="m")
+        _check_units(raw.vertices, raw_lm, landmarks, f"the scan {scan}")
     TV, TF, tlm, groups, tmpl = _load_template(template_dir, template_mesh, template_landmarks, template_units)
     if landmarks is None:
         from ..adapt.detect import detect_landmarks
 
         step("detecting landmarks")
-        scan_lm, conf = detect_landmarks(scan_mesh.vertices, scan_mesh.faces, template=(TV, TF, tlm), device=device)
-        detected = {"confidence": conf, "info": getattr(scan_lm, "info", {})}
-        scan_lm = dict(scan_lm)
+        s0 = prescale(raw.vertices) if auto else unit_scale(units)
+        found, conf = detect_landmarks(raw.vertices * s0, raw.faces, template=(TV, TF, tlm), device=device)
+        detected = {"confidence": conf, "info": getattr(found, "info", {})}
+        raw_lm = {k: np.asarray(v) / s0 for k, v in dict(found).items()}
         landmarks = "detected_landmarks.json"
+    if auto:
+        est = estimate_scale(raw_lm, what=str(landmarks))
+        scale = est.metres_per_unit
+        scale_report = {"units": "auto", "given": units_given, **est.to_dict()}
+    else:
+        scale = unit_scale(units)
+        est = check_human_scale({k: v * scale for k, v in raw_lm.items()}, units, f"{scan}")
+        scale_report = {"units": units, "given": units_given, "metres_per_unit": scale,
+                        **({} if est is None else {"factor_from_fdps": est.metres_per_unit,
+                                                   "measures_m": est.measures})}
+    scan_mesh = raw
+    scan_mesh.vertices = raw.vertices * scale
+    scan_lm = {k: np.asarray(v) * scale for k, v in raw_lm.items()}
     if template_mesh is not None:
         _check_units(TV, tlm, template_landmarks, f"the template mesh {template_mesh}")
     mk = None
     if markers is not None:
-        scan_markers = load_landmarks(markers, units=units)
+        scan_markers = {k: v * scale for k, v in load_landmarks(markers, units="m").items()}
         unknown = sorted(set(scan_markers) - set(tlm))
         if unknown:
             raise InputError(f"{markers}: markers {', '.join(unknown)} are not FDPs of the template")
@@ -193,9 +229,20 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
                 device=device, **settings)
     step("writing")
     if detected is not None:
-        save_landmarks_json(out / "detected_landmarks.json", scan_lm, units=units)
-    save_obj(out / "adapted.obj", res.vertices, TF)
-    save_obj(out / "adapted_scan_frame.obj", res.vertices_scan_frame, TF, units=units)
+        save_landmarks_json(out / "detected_landmarks.json", {k: v / scale for k, v in scan_lm.items()}, units="m")
+    uv = {} if tmpl is None or tmpl.uv is None else {"uv": tmpl.uv, "face_uv": tmpl.face_uv}
+    baked = None
+    if uv and scan_mesh.has_color:
+        step("texture")
+        baked = _bake(out, res.vertices_scan_frame, TF, tmpl, scan_mesh, texture_size, device)
+        uv["mtl"] = "adapted.mtl"
+    save_obj(out / "adapted.obj", res.vertices, TF, **uv)
+    if uv:
+        from ..geometry.mesh import save_glb
+
+        save_glb(out / "adapted.glb", res.vertices, TF, uv["uv"], uv["face_uv"],
+                 texture=out / "texture.png" if baked is not None else None)
+    save_obj(out / "adapted_scan_frame.obj", res.vertices_scan_frame / scale, TF, **uv)  # the scan's units
     # landmarks follow the adapted surface (face + barycentric on the template)
     from ..geometry.mesh import closest_surface_points
 
@@ -210,6 +257,7 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     report = res.to_dict()
     report.update({
         "scan": str(scan), "landmarks": str(landmarks), "units": units, "scale_to_metres": scale,
+        "scale": scale_report,
         "template": str(template_mesh or template_dir or "default template (level 0)"),
         "vertex_count": int(len(TV)), "scan_vertex_count": int(len(scan_mesh.vertices)),
         "levels_requested": int(res.options.levels),
@@ -218,10 +266,62 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     })
     if detected is not None:
         report["detected_landmarks"] = detected
+    if uv:
+        from ..template.uv import uv_distortion
+
+        # the template's UVs on this head's shape: the face chart's stretch here
+        report["uv"] = {"face_chart_distortion": uv_distortion(res.vertices, TF, uv["uv"], uv["face_uv"],
+                                                               tmpl.frontal)}
+    if baked is not None:
+        report["texture"] = {"path": "texture.png", **baked.to_dict()}
+        step("likeness")
+        report["likeness"] = _likeness(out, res, TF, tmpl, scan_mesh, baked.image, device)
     write_json(out / "report.json", report)
     step("pictures")
     _pictures(out, res, TF, d_show, device)
     return report
+
+
+def _bake(out: Path, V_scan_frame, TF, tmpl, scan_mesh, size: int, device):
+    """``texture.png`` (the scan's colour over the template's UVs, :mod:`~facewarp._src.adapt.bake`)
+    and ``adapted.mtl`` (material ``skin`` with it as ``map_Kd``)."""
+    from PIL import Image
+
+    from ..adapt.bake import bake_texture
+    from ..core.fileio import atomic_write
+
+    b = bake_texture(V_scan_frame, TF, tmpl.uv, tmpl.face_uv, scan_mesh.vertices, scan_mesh.faces,
+                     colors=scan_mesh.colors, texture=scan_mesh.texture, corner_uv=scan_mesh.corner_uv, size=size,
+                     device=device)
+    with atomic_write(out / "texture.png", "wb", encoding=None) as f:
+        Image.fromarray(b.image).save(f, format="PNG")
+    with atomic_write(out / "adapted.mtl", "w") as f:
+        f.write("# facewarp: the skin, its colour baked from the scan\nnewmtl skin\nKa 1 1 1\nKd 1 1 1\n"
+                "Ks 0 0 0\nmap_Kd texture.png\n")
+    return b
+
+
+def _likeness(out: Path, res, TF, tmpl, scan_mesh, texture, device) -> dict:
+    """``likeness.png``: the adapted head in its baked texture beside the scan in its own colour,
+    both in the template's frame (the scan moved by the calibration), from the same cameras
+    (front, three-quarter); returns the CIELAB figures of
+    :func:`~facewarp._src.present.compare.likeness_views` (face region, unlit)."""
+    from ..present.animation import label_grid
+    from ..present.compare import likeness_views
+    from ..present.render import save_png
+
+    SV = res.calibration.transform.apply(scan_mesh.vertices)
+    look = ({"scan_colors": scan_mesh.colors} if scan_mesh.colors is not None
+            else {"scan_texture": scan_mesh.texture, "scan_corner_uv": scan_mesh.corner_uv})
+    r = likeness_views(res.vertices, TF, texture, tmpl.uv[tmpl.face_uv], tmpl.frontal, SV, scan_mesh.faces,
+                       size=300, device=device, **look)
+    mean = r["mean"]
+    grid = label_grid([[head, sc] for head, sc, _ in r["images"].values()],
+                      column_labels=["adapted head, baked texture", "scan"])
+    save_png(out / "likeness.png", grid, title=f"Delta E {mean['delta_e_mean']['textured']:.2f} (one flat colour "
+                                               f"{mean['delta_e_mean']['flat']:.2f}), L* r "
+                                               f"{mean['lightness_correlation']['textured']:.2f}")
+    return {"views": r["views"], "mean": mean, "flat_color": r["flat_color"], "picture": "likeness.png"}
 
 
 def _pictures(out, res, TF, d_show, device) -> None:

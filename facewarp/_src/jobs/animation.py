@@ -144,7 +144,8 @@ class UsdAnimation(Sink):
                                           parts=dict(fr.parts), muscles=list(fr.rig.names),
                                           muscle_samples=self.samples, muscle_rest=muscle_curves(sim, self.samples),
                                           tets=(fr.tets, fr.nodes) if self.tets else None,
-                                          **head_looks(fr), camera=head_camera(fr), lights=True)
+                                          **head_looks(fr), camera=head_camera(fr), lights=True,
+                                          **_skin_look(fr))
         except UsdExportError as e:
             raise InputError(str(e)) from None
 
@@ -177,6 +178,16 @@ class UsdAnimation(Sink):
 
     def __exit__(self, exc_type, exc, tb) -> None:
         self.writer.__exit__(exc_type, exc, tb)
+
+
+def _skin_look(fr) -> dict:
+    """The skin's texture coordinates and colour texture for the USD writer, where the rig has them."""
+    if getattr(fr, "head_uv", None) is None:
+        return {}
+    out = {"uv": fr.head_uv, "uv_indices": fr.head_face_uv}
+    if getattr(fr, "skin_texture", None):
+        out["skin_texture"] = fr.skin_texture
+    return out
 
 
 class FdpMotion(Sink):

@@ -35,7 +35,7 @@ from ..expressions import Timeline, thesis_sequence
 from ..geometry.landmarks import save_landmarks_json
 from ..geometry.mesh import load_mesh, save_obj
 from ..physics.face_rig import load_face_rig
-from ..present.animation import FaceView, label_grid, save_gif
+from ..present.animation import FaceView, label_grid, save_gif, skin_texture
 from ..present.render import colormap, render_mesh, save_png
 from ..present.strips import expression_sheet, sheet_font_size
 from ..present.template import colored_scene
@@ -95,7 +95,7 @@ def _stats_mm(e: np.ndarray) -> dict:
 
 def _write_scan(scan, folder: Path) -> dict:
     make_out_dir(folder)
-    save_obj(folder / "scan.obj", scan.vertices, scan.faces, units=scan.units)
+    save_obj(folder / "scan.obj", scan.vertices, scan.faces, units=scan.units, colors=scan.colors)
     save_landmarks_json(folder / "landmarks.json", scan.landmarks, units=scan.units)
     save_landmarks_json(folder / "markers.json", scan.markers, units=scan.units)
     return {"scan": folder / "scan.obj", "landmarks": folder / "landmarks.json", "markers": folder / "markers.json"}
@@ -129,6 +129,33 @@ def _adapted_picture(head, error: np.ndarray, path: Path, *, device: str, size: 
     grid = label_grid([views], column_labels=["front", "three-quarter"])
     save_png(path, grid, title=f"adapted head: error E_v, median {np.median(error) * 1e3:.2f} mm",
              colorbar=(0.0, top, "distance to the true point [mm]"))
+
+
+def _likeness_picture(scan, adapt_dir: Path, template, path: Path, *, device: str, size: int) -> dict:
+    """``likeness.png``: the adapted head with its baked texture beside the scan with its own colour,
+    from the same cameras (front, three-quarter), and the CIELAB figures of
+    :func:`~facewarp._src.present.compare.likeness_views` in the title; returns the figures."""
+    from PIL import Image
+
+    from ..present.compare import likeness_views
+
+    m = load_mesh(adapt_dir / "adapted_scan_frame.obj", units=scan.units)
+    with Image.open(adapt_dir / "texture.png") as img:
+        tex = np.asarray(img.convert("RGB"))
+
+    def to_template(X):  # undo the scan's pose: both seen from the template's front
+        return (np.asarray(X) - scan.translation) @ scan.rotation
+
+    res = likeness_views(to_template(m.vertices), template.faces, tex, template.uv[template.face_uv],
+                         template.frontal, to_template(scan.vertices), scan.faces, scan_colors=scan.colors,
+                         size=size, device=device)
+    rows = [[head, sc] for head, sc, _ in res["images"].values()]
+    grid = label_grid(rows, column_labels=["adapted head, baked texture", "scan"])
+    mean = res["mean"]
+    save_png(path, grid, title=f"likeness: Delta E {mean['delta_e_mean']['textured']:.2f} (flat colour "
+                               f"{mean['delta_e_mean']['flat']:.2f}), L* correlation "
+                               f"{mean['lightness_correlation']['textured']:.2f}")
+    return {k: v for k, v in res.items() if k != "images"}
 
 
 class _KeyFrames(Sink):
@@ -169,12 +196,12 @@ def _jaw_bounds(fr, timeline: Timeline, seconds: float, fps: float) -> list:
 
 
 def _expression_sheet(fr, landmarks, keys: _KeyFrames, labels: list, path: Path, *, device: str,
-                      face_height: int, fps: float) -> float:
+                      face_height: int, fps: float, texture=None) -> float:
     """``expressions.png``: per expression rest | peak, front and three-quarter over the displacement
     heat map (:func:`~facewarp.render.expression_sheet`); returns the heat top [m]."""
     shots = [(name, keys.points[k], keys.parts[k], f"peak, {k / fps:.2f} s") for name, k in labels]
     sheet, top = expression_sheet(fr.head_vertices, fr.head_faces, landmarks, dict(fr.parts), shots,
-                                  face_height=face_height, columns=3, device=device)
+                                  face_height=face_height, columns=3, device=device, texture=texture)
     save_png(path, sheet, title="Fig. 6.16 sequence: rest and peak of each expression",
              colorbar=(0.0, top * 1e3, "displacement from rest [mm]"), font_size=sheet_font_size(sheet))
     return top
@@ -228,7 +255,8 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
     step("adapt")
     adapt_dir = out / "adapt"
     adapt_report = adapt_files(files["scan"], files["landmarks"], adapt_dir, markers=files["markers"],
-                               units=scan.units, levels=2 if quick else 5, device=device)
+                               units=scan.units, levels=2 if quick else 5, device=device,
+                               texture_size=1024 if quick else 2048)
     errors, e_v = _adaptation_errors(scan, adapt_dir, template)
     t = lap("adapt", t)
 
@@ -248,9 +276,10 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
     landmarks = dict(zip((str(k) for k in fr.fdp_ids), sim.fdp_points()))
     labels = peak_frames(timeline, seconds, fps)
     keys = _KeyFrames(fr, dict(labels))
+    skin = skin_texture(fr)
     gif_view = FaceView(fr.head_vertices, fr.head_faces, landmarks, fr.parts,
                         face_height=100 if quick else GIF_FACE_HEIGHT, bounds=_jaw_bounds(fr, timeline, seconds, fps),
-                        supersample=1, device=device)
+                        supersample=1, device=device, texture=skin)
     gif = _GifFrames(gif_view, fr, int(round(fps / GIF_FPS)))
     driver = jaw_driver(sim, jaw, mjcf=out / "head.xml")
     with UsdAnimation(out / "animation.usdc", sim) as usd:
@@ -259,9 +288,12 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
 
     step("pictures")
     _adapted_picture(head, e_v, out / "adapted_head.png", device=device, size=size)
+    likeness = None
+    if skin is not None:
+        likeness = _likeness_picture(scan, adapt_dir, template, out / "likeness.png", device=device, size=size)
     labels = [(name, k) for name, k in labels if k in keys.points]
     heat_top = _expression_sheet(fr, landmarks, keys, labels, out / "expressions.png", device=device,
-                                 face_height=face_height, fps=fps)
+                                 face_height=face_height, fps=fps, texture=skin)
     save_gif(out / "sequence.gif", gif.images, fps=fps / gif.every)
     t = lap("pictures", t)
 
@@ -285,6 +317,8 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
                        "head_vertices": int(len(fr.head_vertices)), "usd_frames": usd.frame_count,
                        "realtime_factor": sim_stats["frames_per_second"] / float(fps),
                        "max_displacement_mm": heat_top * 1e3},
+        "likeness": likeness and {"views": likeness["views"], "mean": likeness["mean"],
+                                  "texture": adapt_report.get("texture")},
         "timings_s": timings,
         "files": sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and not p.name.startswith(".")),
     }

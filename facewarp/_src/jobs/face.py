@@ -71,7 +71,8 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     Writes ``tets.npz``, ``muscles.json``, ``anatomy.json``, ``face_rig.npz``, ``head.xml`` (the
     MuJoCo cranium, mandible and skin for a world with ``up`` axis "z" or "y", names after
     ``prefix``; :func:`~facewarp.write_head_mjcf`), ``scene.xml`` (the standalone scene that
-    includes it) and ``anatomy.png``; returns the quality report.
+    includes it), ``texture.png`` (the head's skin texture: baked from its scan, else its preview
+    colours with the lips) and ``anatomy.png``; returns the quality report.
     """
     step = progress or (lambda msg: None)
     out = check_out_dir(out)
@@ -85,6 +86,7 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     write_anatomy(anatomy, out)
     save_face_rig(out / "face_rig.npz", fr)
     write_head_mjcf(out / "head.xml", head, jaw=fr.jaw, up=up, prefix=prefix, skin=(fr.head_vertices, fr.head_faces))
+    _copy_texture(head, out)
     q = dict(anatomy.quality)
     q["boundary_conditions"] = {"fixed_nodes": int(fr.fixed.sum()), "held_nodes": int(fr.held.sum()),
                                 "supported_nodes": int(len(fr.support_nodes)), "jaw_nodes": int(len(fr.jaw_nodes))}
@@ -95,6 +97,32 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
              title=f"{q['tet_count']} tets ({q['inverted_count']} inverted), {q['muscle_count']} muscles; "
                    "black: fixed border, grey: held on bone")
     return q
+
+
+def _copy_texture(head, out: Path) -> None:
+    """The head's skin texture beside its face rig (``texture.png``, read by :func:`load_face_rig`):
+    its own (baked from the scan) or, for a head with UVs but no texture, its preview colours
+    (skin, lips, the inside of the mouth) painted over the UVs."""
+    import shutil
+
+    src = getattr(head, "texture", None)
+    if src and Path(src).is_file() and getattr(head, "uv", None) is not None:
+        if Path(src).resolve() != (out / "texture.png").resolve():
+            shutil.copyfile(src, out / ".texture.png.tmp")
+            (out / ".texture.png.tmp").replace(out / "texture.png")
+    elif getattr(head, "uv", None) is not None:
+        # no scan colour: the preview skin with tinted lips and a dark mouth inside, as a texture
+        from PIL import Image
+
+        from ..adapt.bake import vertex_color_texture
+        from ..core.fileio import atomic_write
+        from ..present.template import head_colors
+
+        img = vertex_color_texture(head.faces, head.uv, head.face_uv, head_colors(head.vertices, head.landmarks()))
+        with atomic_write(out / "texture.png", "wb", encoding=None) as f:
+            Image.fromarray(img).save(f, format="PNG")
+    elif (out / "texture.png").is_file():
+        (out / "texture.png").unlink()  # a texture of an earlier build into this folder
 
 
 def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: float = 30.0,

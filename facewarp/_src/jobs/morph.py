@@ -184,7 +184,8 @@ def morph_files(head_a, head_b, out, *, steps: int = 8, fps: float = 30.0, build
     heads = [blend_heads(a, b, s, motions) for s in weights]
     step("writing USD")
     try:
-        with AnimationWriter(path, fps=fps, faces=a.faces, rest_points=a.vertices, parts=dict(a.parts)) as w:
+        look = {} if a.uv is None else {"uv": a.uv, "uv_indices": a.face_uv}
+        with AnimationWriter(path, fps=fps, faces=a.faces, rest_points=a.vertices, parts=dict(a.parts), **look) as w:
             for k, (s, h) in enumerate(zip(weights, heads)):
                 w.add_frame(k / fps, h.vertices, part_transforms={n: m.matrix(s) for n, m in motions.items()})
     except UsdExportError as e:

@@ -26,7 +26,7 @@ from ..core.fileio import write_json
 from ..expressions import PRESETS, load_sequence, timeline_from_spec
 from ..anatomy.rig import build_face
 from ..physics.face_rig import load_face_rig
-from ..present.animation import FaceView, label_grid
+from ..present.animation import FaceView, label_grid, skin_texture
 from ..present.render import save_png
 from ..sim.play import _play
 from ..sim.simulator import FaceSimulator
@@ -138,7 +138,7 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
         view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, device=device)
         used = np.concatenate([P[view.used] for P, _ in track.frames.values()])
         view = FaceView(fr.head_vertices, fr.head_faces, lm, fr.parts, size=size, aspect=0.6, device=device,
-                        bounds=np.stack([used.min(0) - 0.004, used.max(0) + 0.004]))
+                        bounds=np.stack([used.min(0) - 0.004, used.max(0) + 0.004]), texture=skin_texture(fr))
         rows.append([view.render(*track.frames[k]) for _, k in labels if k in track.frames])
         per_head.append({
             "head": str(head), "name": name, "usd": str(out / f"{name}.usdc"), "vertex_count": int(len(fr.head_vertices)),

@@ -49,6 +49,10 @@ class FaceRig:
         contact: The contact geometry (:class:`~facewarp._src.physics.contact.ContactGeometry`,
             computed at build time by :func:`~facewarp._src.anatomy.contact.contact_geometry`); None
             for a rig made by hand.
+        head_uv (k, 2), head_face_uv (m, 3): the skin's texture coordinates per corner (the
+            template's UV layout), or None.
+        skin_texture: path of the skin's colour texture (``texture.png`` beside the rig file,
+            set by :func:`load_face_rig`), or None.
     """
 
     head_vertices: np.ndarray
@@ -82,6 +86,9 @@ class FaceRig:
     opening_node: np.ndarray | None = None
     opening_weight: np.ndarray | None = None
     contact: ContactGeometry | None = None
+    head_uv: np.ndarray | None = None
+    head_face_uv: np.ndarray | None = None
+    skin_texture: str | None = None
 
     @property
     def jaw(self) -> JawKinematic:
@@ -120,6 +127,8 @@ def save_face_rig(path, fr: FaceRig) -> Path:
     arrays["level"] = np.array(fr.level)
     if fr.opening_vertex is not None:
         arrays.update(opening_vertex=fr.opening_vertex, opening_node=fr.opening_node, opening_weight=fr.opening_weight)
+    if fr.head_uv is not None:
+        arrays.update(head_uv=fr.head_uv, head_face_uv=fr.head_face_uv)
     arrays["part_names"] = np.array(list(fr.parts))
     for k, (V, F) in fr.parts.items():
         arrays[f"part_{k}_V"], arrays[f"part_{k}_F"] = V, F
@@ -150,8 +159,11 @@ def load_face_rig(path) -> FaceRig:
         rig = MuscleRig(names=[str(n) for n in z["rig_names"]], **{k: z[f"rig_{k}"] for k in _RIG_FIELDS})
         parts = {str(k): (z[f"part_{k}_V"], z[f"part_{k}_F"]) for k in z["part_names"]}
         part_jaw = {str(k): float(z[f"part_{k}_jaw"]) for k in z["part_names"]}
-        opening = {k: z[k] for k in ("opening_vertex", "opening_node", "opening_weight") if k in z}
+        opening = {k: z[k] for k in ("opening_vertex", "opening_node", "opening_weight", "head_uv", "head_face_uv")
+                   if k in z}
+        texture = path.parent / "texture.png"
         return FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]),
+                       skin_texture=str(texture) if texture.is_file() else None,
                        **{k: z[k] for k in _FACE_FIELDS}, **opening, contact=contact_from_arrays(z))
     except (KeyError, ValueError, OSError) as e:
         raise InputError(f"{path}: not a facewarp face rig ({e})") from None

@@ -21,7 +21,7 @@ from ..core.fileio import atomic_write
 from .render import colormap, render_mesh, view_axes
 from .template import CAVITY, head_colors, part_colors
 
-__all__ = ["FACE_HEIGHT", "FaceView", "label_grid", "save_gif"]
+__all__ = ["FACE_HEIGHT", "FaceView", "label_grid", "save_gif", "skin_texture"]
 
 _BACKGROUND = (1.0, 1.0, 1.0)
 _MARGIN = 0.02  # empty border of a render, a fraction of the framed extent (render_mesh's margin)
@@ -82,6 +82,16 @@ def _rigid_map(A: np.ndarray, B: np.ndarray):
     return lambda X: (X - ca) @ R.T + cb
 
 
+def skin_texture(fr):
+    """``(image, corner_uv)`` of a face rig's skin texture, or None (no texture or no UVs)."""
+    if getattr(fr, "skin_texture", None) is None or getattr(fr, "head_uv", None) is None:
+        return None
+    from PIL import Image
+
+    with Image.open(fr.skin_texture) as img:
+        return np.asarray(img.convert("RGB")), np.asarray(fr.head_uv)[np.asarray(fr.head_face_uv)]
+
+
 class FaceView:
     """A fixed camera on the whole head of one topology (see the module docstring).
 
@@ -103,6 +113,8 @@ class FaceView:
         supersample: Rays per pixel along each axis (:func:`~facewarp.render_mesh`; 1 for the
             frames of a GIF, four times faster).
         device: Warp device to render on.
+        texture: Optional skin texture ``(image (h, w, 3) uint8, corner_uv (m, 3, 2))`` drawn instead
+            of the skin colours (:func:`~facewarp.render_mesh`'s ``texture``).
 
     Attributes:
         size, width: Image height and width [px].
@@ -112,7 +124,7 @@ class FaceView:
 
     def __init__(self, rest_points, faces, landmarks: dict, parts: dict | None = None, *, view="front",
                  size: int | None = None, face_height: int | None = None, aspect: float | None = None,
-                 reach: float = 0.004, bounds=None, supersample: int = 2, device: str = "cpu"):
+                 reach: float = 0.004, bounds=None, supersample: int = 2, device: str = "cpu", texture=None):
         P0 = np.asarray(rest_points, dtype=np.float64)
         if P0.ndim != 2 or P0.shape[1] != 3:
             raise InputError(f"rest_points: expected shape (n, 3), got {P0.shape}")
@@ -129,6 +141,13 @@ class FaceView:
         c = P0[self.used].mean(0)
         volume = np.einsum("ij,ij->i", P0[F[:, 0]] - c, np.cross(P0[F[:, 1]] - c, P0[F[:, 2]] - c)).sum()
         self.faces = F if volume >= 0 else F[:, ::-1].copy()
+        self.texture = None
+        if texture is not None:
+            img, cuv = texture
+            cuv = np.asarray(cuv, dtype=np.float64)
+            if cuv.shape != (len(F), 3, 2):
+                raise InputError(f"texture: corner_uv must have shape ({len(F)}, 3, 2), got {cuv.shape}")
+            self.texture = (np.asarray(img), cuv if volume >= 0 else cuv[:, ::-1].copy())
         self.rest = P0
         self.colors = head_colors(P0, lm)
         self.parts = {k: (np.asarray(V, np.float64), np.asarray(Fp, np.int64)) for k, (V, Fp) in (parts or {}).items()}
@@ -191,12 +210,14 @@ class FaceView:
                 Vd = Vd @ np.asarray(M)[:3, :3] + np.asarray(M)[3, :3]
             extra.append((Vd, Fd, self.part_colors[name]))
         colors = self.colors
+        texture = self.texture
         if heat is not None:
             h = np.asarray(heat, dtype=np.float64)
             top = float(np.nanmax(h)) if heat_max is None else float(heat_max)
             colors = colormap(h, 0.0, max(top, 1e-12))
+            texture = None
         return render_mesh(points, self.faces, view=self.view, width=self.width, height=self.size,
-                           vertex_colors=colors, extra_meshes=extra, points=self.frame_points,
+                           vertex_colors=colors, texture=texture, extra_meshes=extra, points=self.frame_points,
                            point_color=_BACKGROUND, point_radius=1e-3, background=_BACKGROUND, margin=_MARGIN,
                            inside_color=CAVITY, supersample=self.supersample, device=self.device)
 

@@ -1,7 +1,9 @@
 """Warp kernels of the preview renderer (:mod:`facewarp._src.render`).
 
 One kernel: an orthographic ray cast, one ray per (supersampled) pixel, against a
-``wp.Mesh`` BVH, shaded with two-sided Lambert plus ambient light.
+``wp.Mesh`` BVH, shaded with two-sided Lambert plus ambient light; the albedo is the corner
+colours interpolated, or for the first ``textured_count`` triangles a bilinear texture sample
+at the interpolated corner UVs.
 """
 
 from __future__ import annotations
@@ -18,6 +20,27 @@ import warp as wp
 # normal may point slightly away from the viewer and must stay unlit rather than flip.
 # Inside: the back of one of the first ``inside_count`` triangles (a closed-ish surface seen
 # from within, e.g. the head through an open mouth) is drawn flat in ``inside_color``.
+# Texture lookup: st in [0, 1]^2 with v up; row 0 of the texture is v = 1. Bilinear between the
+# four texel centres around (x, y) = (s w - 1/2, (1 - t) h - 1/2), clamped at the borders.
+@wp.func
+def _bilinear(texture: wp.array2d(dtype=wp.vec3), st: wp.vec2):
+    h = texture.shape[0]
+    w = texture.shape[1]
+    x = wp.clamp(st[0], 0.0, 1.0) * float(w) - 0.5
+    y = (1.0 - wp.clamp(st[1], 0.0, 1.0)) * float(h) - 0.5
+    x0 = int(wp.floor(x))
+    y0 = int(wp.floor(y))
+    fx = x - float(x0)
+    fy = y - float(y0)
+    xa = wp.clamp(x0, 0, w - 1)
+    xb = wp.clamp(x0 + 1, 0, w - 1)
+    ya = wp.clamp(y0, 0, h - 1)
+    yb = wp.clamp(y0 + 1, 0, h - 1)
+    top = texture[ya, xa] * (1.0 - fx) + texture[ya, xb] * fx
+    bottom = texture[yb, xa] * (1.0 - fx) + texture[yb, xb] * fx
+    return top * (1.0 - fy) + bottom * fy
+
+
 @wp.kernel
 def _cast_rays(
     # Scene:
@@ -25,6 +48,9 @@ def _cast_rays(
     indices: wp.array(dtype=wp.int32),
     vertex_normals: wp.array(dtype=wp.vec3),
     corner_colors: wp.array(dtype=wp.vec3),
+    corner_uvs: wp.array(dtype=wp.vec2),
+    texture: wp.array2d(dtype=wp.vec3),
+    textured_count: int,
     inside_count: int,
     inside_color: wp.vec3,
     # Camera:
@@ -72,6 +98,9 @@ def _cast_rays(
         n = -n
 
     albedo = u * corner_colors[3 * f + 0] + v * corner_colors[3 * f + 1] + w * corner_colors[3 * f + 2]
+    if f < textured_count:
+        st = u * corner_uvs[3 * f + 0] + v * corner_uvs[3 * f + 1] + w * corner_uvs[3 * f + 2]
+        albedo = _bilinear(texture, st)
     shade = ambient + diffuse * wp.max(wp.dot(n, light_dir), 0.0)
     color_out[i, j] = albedo * shade
     depth_out[i, j] = hit.t

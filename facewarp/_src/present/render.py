@@ -224,6 +224,25 @@ def _polyline_samples(Q: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 
 
+def _as_texture(texture, face_count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(image (h, w, 3) float32 in [0, 1], corner UVs (m, 3, 2) float32) of ``texture``; a 1x1
+    placeholder and one zero UV when None."""
+    if texture is None:
+        return np.zeros((1, 1, 3), np.float32), np.zeros((1, 2), np.float32)
+    try:
+        img, cuv = texture
+    except (TypeError, ValueError):
+        raise InputError("texture must be an (image, corner_uv) pair") from None
+    img = np.asarray(img)
+    if img.ndim != 3 or img.shape[2] < 3 or img.shape[0] < 1 or img.shape[1] < 1:
+        raise InputError(f"texture image must have shape (h, w, 3), got {img.shape}")
+    img = img[..., :3].astype(np.float32) / (255.0 if np.issubdtype(img.dtype, np.integer) else 1.0)
+    cuv = np.asarray(cuv, dtype=np.float32)
+    if cuv.shape != (face_count, 3, 2) or not np.isfinite(cuv).all():
+        raise InputError(f"texture corner_uv must have shape ({face_count}, 3, 2) and be finite, got {cuv.shape}")
+    return np.ascontiguousarray(img), cuv
+
+
 def render_mesh(
     V,
     F,
@@ -247,6 +266,9 @@ def render_mesh(
     inside_color=None,
     supersample: int = _SUPERSAMPLE,
     device="cpu",
+    texture=None,
+    frame_points=None,
+    unlit: bool = False,
 ) -> np.ndarray:
     """Ray cast a triangle mesh (plus extras) into an RGB image.
 
@@ -286,6 +308,14 @@ def render_mesh(
         supersample: Rays per pixel along each axis (1-4), box-filtered down: 2 (default)
             smooths the edges; 1 is four times faster (e.g. the frames of a GIF).
         device: Warp device to ray cast on, e.g. ``"cpu"`` or ``"cuda:0"``.
+        texture: Optional ``(image, corner_uv)`` colouring ``F``: the image (h, w, 3), uint8 or
+            float in [0, 1] (row 0 at v = 1), and each triangle corner's UV, shape (m, 3, 2)
+            (e.g. ``uv[face_uv]`` of a :class:`~facewarp.Template`); sampled bilinearly, it
+            replaces the colour arrays on ``F``.
+        frame_points: Optional points [m], shape (k, 3), that the camera frames instead of the
+            scene's geometry (the same camera for two renders of different meshes).
+        unlit: Draw the albedo alone (ambient 1, no key light): colours as stored, for comparing
+            surface colour without shading.
 
     Returns:
         The image, shape (height, width, 3), uint8.
@@ -345,6 +375,9 @@ def render_mesh(
             lines.append((P, _as_color(c, f"polylines[{index}] color")))
             framed.append(P)
 
+    if frame_points is not None:
+        framed = [_as_points(frame_points, "frame_points")]
+    tex_img, tex_uv = _as_texture(texture, F.shape[0])
     all_V = np.concatenate(scene_V)
     if supersample not in (1, 2, 3, 4):
         raise InputError(f"supersample must be 1, 2, 3 or 4, got {supersample!r}")
@@ -367,6 +400,8 @@ def render_mesh(
     mesh = wp.Mesh(points=wp_points, indices=wp_indices)
     normals = wp.array(np.concatenate(scene_N), dtype=wp.vec3, device=device)
     corner_colors = wp.array(np.concatenate(scene_C).reshape(-1, 3), dtype=wp.vec3, device=device)
+    corner_uvs = wp.array(tex_uv.reshape(-1, 2), dtype=wp.vec2, device=device)
+    tex = wp.array(tex_img, dtype=wp.vec3, device=device)
     color_out = wp.empty((camera.rows, camera.cols), dtype=wp.vec3, device=device)
     depth_out = wp.empty((camera.rows, camera.cols), dtype=float, device=device)
     wp.launch(
@@ -377,6 +412,9 @@ def render_mesh(
             wp_indices,
             normals,
             corner_colors,
+            corner_uvs,
+            tex,
+            F.shape[0] if texture is not None else 0,
             F.shape[0] if inside_color is not None else 0,
             wp.vec3(*inside),
             wp.vec3(*camera.origin),
@@ -385,8 +423,8 @@ def render_mesh(
             wp.vec3(*camera.forward),
             camera.max_depth,
             wp.vec3(*light),
-            _AMBIENT,
-            _DIFFUSE,
+            1.0 if unlit else _AMBIENT,
+            0.0 if unlit else _DIFFUSE,
             wp.vec3(*background),
         ],
         outputs=[color_out, depth_out],

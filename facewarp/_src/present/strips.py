@@ -78,7 +78,7 @@ def sheet_font_size(sheet) -> int:
     return int(min(56, max(16, np.asarray(sheet).shape[1] // 40)))
 
 
-def _views(rest, faces, landmarks, parts, sets, face_height: int, device) -> list[FaceView]:
+def _views(rest, faces, landmarks, parts, sets, face_height: int, device, texture=None) -> list[FaceView]:
     """One FaceView per sheet view, all of one image size, each face >= ``face_height`` px."""
     probe = [FaceView(rest, faces, landmarks, parts, view=v, bounds=sets, face_height=face_height, device=device)
              for v in SHEET_VIEWS]
@@ -86,12 +86,13 @@ def _views(rest, faces, landmarks, parts, sets, face_height: int, device) -> lis
     sized = [FaceView(rest, faces, landmarks, parts, view=v, bounds=sets, face_height=face_height, aspect=aspect,
                       device=device) for v in SHEET_VIEWS]
     size = max(p.size for p in sized)
-    return [FaceView(rest, faces, landmarks, parts, view=v, bounds=sets, size=size, aspect=aspect, device=device)
-            for v in SHEET_VIEWS]
+    return [FaceView(rest, faces, landmarks, parts, view=v, bounds=sets, size=size, aspect=aspect, device=device,
+                     texture=texture) for v in SHEET_VIEWS]
 
 
 def expression_sheet(rest, faces, landmarks: dict, parts: dict, shots, *, face_height: int = FACE_HEIGHT,
-                     columns: int = 3, heat_max: float | None = None, device: str = "cpu") -> tuple[np.ndarray, float]:
+                     columns: int = 3, heat_max: float | None = None, device: str = "cpu",
+                     texture=None) -> tuple[np.ndarray, float]:
     """Per expression a pair rest | peak of the whole head, front and three-quarter rows over a
     heat-map row (see the module docstring).
 
@@ -109,6 +110,8 @@ def expression_sheet(rest, faces, landmarks: dict, parts: dict, shots, *, face_h
         heat_max: Top of the heat colour map [m]; default the largest displacement of any shot,
             rounded up to a whole millimetre.
         device: Warp device to render on.
+        texture: Optional skin texture ``(image, corner_uv)`` for the rest and peak renders
+            (:class:`~facewarp.render.FaceView`).
 
     Returns:
         The sheet, RGB (H, W, 3) uint8, and the heat map's top [m].
@@ -135,7 +138,7 @@ def expression_sheet(rest, faces, landmarks: dict, parts: dict, shots, *, face_h
     top = _ceil_mm(max(float(d.max()) for d in disp)) if heat_max is None else float(heat_max)
     if not (np.isfinite(top) and top > 0):
         raise InputError(f"heat_max: expected a positive distance [m], got {heat_max!r}")
-    views = _views(rest, faces, landmarks, parts, [rest] + [P for _, P, _, _ in peaks], face_height, device)
+    views = _views(rest, faces, landmarks, parts, [rest] + [P for _, P, _, _ in peaks], face_height, device, texture)
     rest_tiles = [v.render(rest) for v in views]
     blocks = []
     for (label, P, pp, caption), d in zip(peaks, disp):

@@ -2,7 +2,7 @@
 
 A template folder holds:
 
-- ``template.obj``: the skin mesh [m];
+- ``template.obj``: the skin mesh [m] with its texture coordinates (``vt``, ``f v/vt``);
 - ``landmarks.json``: FDP id -> [x, y, z] [m];
 - ``regions.json``: the region names, the region of every face and the frontal-face flag;
 - ``template.json``: counts, level, units, thickness factor, bounding box;
@@ -65,7 +65,7 @@ def save_template(t: Template, out: str | os.PathLike, *, progress=None) -> list
     step = progress or (lambda msg: None)
     written = []
     step("mesh")
-    save_obj(out / "template.obj", t.vertices, t.faces)
+    save_obj(out / "template.obj", t.vertices, t.faces, uv=t.uv, face_uv=t.face_uv)
     save_obj(out / "skull.obj", t.skull_vertices(), t.faces)
     written += [out / "template.obj", out / "skull.obj"]
     for name, (V, F) in t.parts.items():
@@ -94,6 +94,8 @@ def save_template(t: Template, out: str | os.PathLike, *, progress=None) -> list
         "thickness_factor": np.array(t.thickness_factor),
         "part_names": np.array(list(t.parts)),
     }
+    if t.uv is not None:
+        arrays["uv"], arrays["face_uv"] = t.uv, t.face_uv
     for name, (V, F) in t.parts.items():
         arrays[f"part_{name}_V"] = V
         arrays[f"part_{name}_F"] = F
@@ -123,11 +125,16 @@ def load_template_dir(path: str | os.PathLike) -> Template:
         for fid, part, face, bary in zip(z["fdp_ids"], z["fdp_part"], z["fdp_face"], z["fdp_bary"]):
             fdp[str(fid)] = (str(part), SurfacePoints(np.array([int(face)]), np.asarray(bary, float)[None]))
         parts = {str(k): (z[f"part_{k}_V"], z[f"part_{k}_F"]) for k in z["part_names"]}
+        uv = face_uv = None
+        if "uv" in z.files:
+            uv, face_uv = z["uv"].astype(np.float64), z["face_uv"].astype(np.int64)
+            if face_uv.shape != mesh.faces.shape or face_uv.min() < 0 or face_uv.max() >= len(uv):
+                raise InputError(f"{path}: template.npz's face_uv does not match template.obj's faces")
         return Template(
             vertices=mesh.vertices, faces=mesh.faces, face_region=z["face_region"].astype(np.int16),
             frontal=z["frontal"].astype(bool), thickness=z["thickness"], skull_depth=z["skull_depth"],
             condyles=z["condyles"], fdp=fdp, parts=parts, level=int(z["level"]),
-            thickness_factor=float(z["thickness_factor"]),
+            thickness_factor=float(z["thickness_factor"]), uv=uv, face_uv=face_uv,
         )
     except (KeyError, ValueError, OSError) as e:
         raise InputError(f"{path}: template.npz is unreadable ({e})") from None

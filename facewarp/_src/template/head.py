@@ -18,6 +18,7 @@ from ..geometry.landmarks import FDP_IDS
 from ..geometry.mesh import SurfacePoints, closest_surface_points
 from . import shape as S
 from .build import CUTS, build_raw_head
+from .uv import face_uv_layout
 
 __all__ = [
     "REGIONS",
@@ -114,6 +115,11 @@ class Template:
         parts: Rigid parts, name -> (V (k, 3) [m], F (l, 3) int): eyeballs, teeth, tongue.
         level: Resolution level (0 = about 3,400 skin vertices).
         thickness_factor: Skin thickness magnification applied to Table 6.1.
+        uv: Texture coordinates of the skin in [0, 1]^2, shape (k, 2), float64, or None
+            (:mod:`.uv`: one low-stretch chart for the face front, a few for the rest).
+        face_uv: Per skin triangle corner an index into ``uv``, shape (m, 3), int64, or None.
+        texture: Path of the skin's colour texture (a PNG over ``uv``; an ``adapt`` output's
+            ``texture.png`` baked from the scan), or None.
     """
 
     vertices: np.ndarray
@@ -127,6 +133,9 @@ class Template:
     parts: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     level: int = 0
     thickness_factor: float = THICKNESS_FACTOR
+    uv: np.ndarray | None = None
+    face_uv: np.ndarray | None = None
+    texture: str | None = None
 
     @property
     def vertex_count(self) -> int:
@@ -452,6 +461,7 @@ def _build(level: int) -> Template:
     fdp = {k: fdp[k] for k in FDP_IDS}
     # Condyles: 10-13 mm in front of the tragion, intercondylar distance about 100 mm.
     condyles = np.array([[50.0, -8.0, 12.0], [-50.0, -8.0, 12.0]]) * MM
+    layout = face_uv_layout(V, F, region, REGIONS, frontal)
     return Template(
         vertices=V,
         faces=F,
@@ -463,6 +473,8 @@ def _build(level: int) -> Template:
         fdp=fdp,
         parts=parts,
         level=level,
+        uv=layout.uv,
+        face_uv=layout.face_uv,
     )
 
 

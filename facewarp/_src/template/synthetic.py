@@ -19,6 +19,13 @@ FDPs are the template's, moved by ``D`` and the pose; a few of them are kept apa
 (the marker error E_m of Sec. 5.2). Because ``D`` is known, the true position of every template
 vertex on the scan is known too (:attr:`SyntheticScan.truth`), so the adaptation's vertex error
 E_v can be measured exactly.
+
+The scan has colour, as a photogrammetry or structured-light scan with a colour camera does:
+per-vertex sRGB values (:func:`skin_color`) of a procedural face drawn from the seed: one of
+four skin tones with a little low-frequency variation and a blush on the cheeks, darker
+eyebrows along the brow FDPs, lips between the mouth's FDPs, and hair above a hairline. The
+colour is a function of the point on the *template* (before ``D``), so it sits on the features
+wherever ``D`` moves them.
 """
 
 from __future__ import annotations
@@ -32,7 +39,96 @@ from ..core.errors import InputError
 from ..geometry.surface import vertex_normals
 from .head import FRONTAL_REGIONS, REGIONS, Template, default_template
 
-__all__ = ["FaceProportions", "SCAN_LANDMARKS", "SCAN_MARKERS", "SyntheticScan", "synthetic_scan"]
+__all__ = ["FaceProportions", "SCAN_LANDMARKS", "SCAN_MARKERS", "SKIN_TONES", "SyntheticScan", "skin_color",
+           "synthetic_scan"]
+
+SKIN_TONES = ((0.88, 0.71, 0.60), (0.80, 0.60, 0.47), (0.64, 0.45, 0.33), (0.45, 0.31, 0.22))
+"""sRGB skin tones of the synthetic faces, light to dark (one is drawn per seed)."""
+
+_BROW = (0.23, 0.16, 0.11)  # sRGB of brows and hair (dark brown)
+_LIP = (0.92, 0.66, 0.66)  # lip colour: a factor on the skin tone
+_BLUSH = (1.0, 0.92, 0.92)  # cheek blush: a factor on the skin colour
+
+
+def _smoothstep(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def _polyline_distance(P2, Q2):
+    """Distance of 2D points P2 (k, 2) to the polyline Q2 (q, 2) and the arc parameter in [0, 1]."""
+    best = np.full(len(P2), np.inf)
+    s_best = np.zeros(len(P2))
+    seg = np.linalg.norm(np.diff(Q2, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)]) / seg.sum()
+    for i in range(len(Q2) - 1):
+        a, b = Q2[i], Q2[i + 1]
+        t = np.clip(((P2 - a) @ (b - a)) / max(float((b - a) @ (b - a)), 1e-30), 0.0, 1.0)
+        d = np.linalg.norm(P2 - (a + t[:, None] * (b - a)), axis=1)
+        better = d < best
+        best[better] = d[better]
+        s_best[better] = (cum[i] + t * (cum[i + 1] - cum[i]))[better]
+    return best, s_best
+
+
+def skin_color(P, landmarks: dict, seed: int = 0) -> np.ndarray:
+    """The synthetic face's colour at points of the default template's head (see the module docstring).
+
+    Args:
+        P: Points on (or near) the template's skin, template frame [m], shape (k, 3), float.
+        landmarks: The template's FDP id -> position [m] (brows 4.1-4.6, lips 8.1-8.4, eyes 3.7/3.12).
+        seed: Picks the skin tone and the variation.
+
+    Returns:
+        sRGB colours in [0, 1], shape (k, 3), float64.
+    """
+    P = np.asarray(P, dtype=np.float64)
+    lm = {k: np.asarray(v, dtype=np.float64) for k, v in landmarks.items()}
+    rng = np.random.default_rng([int(seed), 7])
+    tone = np.array(SKIN_TONES[int(rng.integers(len(SKIN_TONES)))])
+    x, y, z = P[:, 0], P[:, 1], P[:, 2]
+    # low-frequency variation: three plane waves of 4-9 cm wavelength, +-4 % lightness, a little redness
+    var = np.zeros(len(P))
+    for _ in range(3):
+        k = rng.normal(size=3)
+        k *= 2 * np.pi / rng.uniform(0.04, 0.09) / np.linalg.norm(k)
+        var += np.sin(P @ k + rng.uniform(0, 2 * np.pi)) / 3.0
+    C = tone[None, :] * (1.0 + 0.04 * var[:, None])
+    C[:, 0] *= 1.0 + 0.015 * var
+    front = _smoothstep((z - (lm["3.7"][2] - 0.03)) / 0.01)  # the face front, not the back of the head
+    # blush on the cheeks
+    for c in ("5.3", "5.4"):
+        if c in lm:
+            w = np.exp(-np.sum((P - lm[c] + [0, 0.008, 0]) ** 2, axis=1) / (2 * 0.016**2)) * front
+            C = C * (1.0 - w[:, None] * (1.0 - np.array(_BLUSH)))
+    # brows: 4.1 (inner), 4.3 (top), 4.5 (outer) per side, 3.5 mm half width tapering outward
+    brow = np.zeros(len(P))
+    for ids in (("4.1", "4.3", "4.5"), ("4.2", "4.4", "4.6")):
+        Q = np.array([lm[k] for k in ids])
+        d, s = _polyline_distance(P[:, :2], Q[:, :2])
+        half = 0.0042 * (1.0 - 0.45 * s)
+        brow = np.maximum(brow, _smoothstep((half - d) / 0.0015 + 0.5))
+    brow *= front
+    C = C * (1 - 0.85 * brow[:, None]) + np.array(_BROW) * 0.85 * brow[:, None]
+    # lips: between the outer lip contours through 8.1 (top), 8.2 (bottom) and the corners 8.3 / 8.4
+    xc = 0.5 * abs(lm["8.3"][0] - lm["8.4"][0])
+    y_st = 0.5 * (lm["8.3"][1] + lm["8.4"][1])
+    r = np.clip(1.0 - (x / xc) ** 2, 0.0, None) ** 0.6
+    y_up = y_st + (lm["8.1"][1] - y_st) * r
+    y_dn = y_st - (y_st - lm["8.2"][1]) * r
+    inside = np.minimum(y_up - y, y - y_dn)
+    lip = _smoothstep(inside / 0.0012 + 0.5) * (np.abs(x) < xc) * front
+    lip_col = np.array(_LIP) * tone
+    C = C * (1 - lip[:, None]) + lip_col * lip[:, None]
+    # hair: above a hairline at the trichion (62 mm above the nasion) in front, lower toward the back
+    c = 0.5 * (lm["3.7"] + lm["3.12"])
+    az = np.arctan2(x - c[0], z - (c[2] - 0.09))  # azimuth about a vertical axis in the head
+    y_tr = c[1] + 0.072
+    y_hair = y_tr - 0.11 * ((1 - np.cos(az)) / 2) ** 1.2
+    hair = _smoothstep((y - y_hair) / 0.008 + 0.5)
+    C = C * (1 - hair[:, None]) + np.array(_BROW) * (1.0 + 0.15 * var[:, None]) * hair[:, None]
+    return np.clip(C, 0.0, 1.0)
+
 
 SCAN_LANDMARKS = (
     "2.1", "2.2", "2.3", "2.10", "2.13", "2.14", "3.7", "3.8", "3.11", "3.12", "4.1", "4.2", "4.5", "4.6",
@@ -140,6 +236,8 @@ class SyntheticScan:
         units: Unit of the scan's files ("mm").
         seed: The seed it was made from.
         level: Template level of :attr:`truth`.
+        colors: Per-vertex colour of the scan, shape (k, 3), float64 sRGB in [0, 1]
+            (:func:`skin_color`), or None.
     """
 
     vertices: np.ndarray
@@ -153,6 +251,7 @@ class SyntheticScan:
     units: str = "mm"
     seed: int = 0
     level: int = 0
+    colors: np.ndarray | None = None
 
 
 def _random_rotation(rng, max_angle: float) -> np.ndarray:
@@ -250,7 +349,13 @@ def synthetic_scan(seed: int = 0, *, level: int = 0, proportions: FaceProportion
         return np.asarray(X) @ R.T + t
 
     truth = pose(deform(target.vertices, props, lm, center))
-    return SyntheticScan(vertices=pose(SV), faces=SF,
+    # colour: each scan vertex's point on the deformed surface, taken back to the template
+    from ..geometry.surface import closest_point
+
+    cp = closest_point(V, F, SV)
+    on_template = np.einsum("kc,kcd->kd", cp.bary, fine.vertices[F[cp.face]])
+    colors = skin_color(on_template, fine.landmarks(), int(seed))
+    return SyntheticScan(vertices=pose(SV), faces=SF, colors=colors,
                          landmarks={k: pose(moved[k]) for k in SCAN_LANDMARKS},
                          markers={k: pose(moved[k]) for k in SCAN_MARKERS},
                          truth=truth, rotation=R, translation=t, proportions=props, seed=int(seed),
