@@ -394,7 +394,36 @@ def measured(r: Results) -> str:
                  f"E_v median {ad['E_v_mm']['median']:.2f} mm, RMS {ad['E_v_mm']['rms']:.2f} mm; held-out markers "
                  f"median {ad['marker_error_mm']['median']:.2f} mm; {rep['anatomy']['inverted_count']} inverted tets",
                  "`demo/report.json`"])
+    rows += _likeness_rows(r["likeness"])
     return _rows_md(["what", "result", "file"], rows)
+
+
+def _likeness_rows(fig: dict) -> list[list[str]]:
+    """The likeness (baked colour vs the scan) and ``--units auto`` rows, from ``likeness.json``."""
+    cases, summ, t = fig["cases"], fig["summary"], fig["summary"]["targets"]
+    seeds = [c["seed"] for c in cases]
+    de = [c["mean"]["delta_e_mean"]["textured"] for c in cases]
+    flat = [c["mean"]["delta_e_mean"]["flat"] for c in cases]
+    lc = [c["mean"]["lightness_correlation"]["textured"] for c in cases]
+    cov = [100 * c["texture"]["covered_fraction"] for c in cases]
+    auto = [abs(c["scale"]["auto_relative_error"]) * 100 for c in cases]
+    g = summ["scale_given_fdps"]
+    size = fig["settings"]["texture_size"]
+    return [
+        [f"the person's likeness: synthetic coloured scans (seeds {min(seeds)}-{max(seeds)}, noise, holes, pose, mm) "
+         f"adapted, `texture.png` {size} px baked, head vs scan rendered from the same cameras (front, three-quarter; "
+         "unlit, face region)",
+         f"mean CIELAB Delta E {_span(de)} (target < {t['delta_e_below']:g}; the scan's median flat colour "
+         f"{_span(flat, '{:.1f}')}), L* correlation {_span(lc, '{:.3f}')} (target >= {t['lightness_correlation_at_least']:g}; "
+         f"flat 0); {_span(cov, '{:.1f}')} % of texels from the scan; pictures `likeness/seed{seeds[0]}.png` "
+         "(head, scan, flat)", "`likeness.json`"],
+        ["`--units auto` (scale from the FDPs)",
+         f"scan in a random unit, no landmarks (detected), default units: within {_span(auto, '{:.1f}')} % (seeds "
+         f"{min(seeds)}-{max(seeds)}); from the given FDPs of {g['seeds']} faces whose proportions are two standard "
+         f"deviations off the norms: mean {100 * g['mean_abs_relative_error']:.1f} %, worst "
+         f"{100 * g['worst_abs_relative_error']:.1f} %, {g['within_5_percent']} of {g['seeds']} within 5 % (tests: mm, "
+         "cm, m and a random unit within 5 % on seeds 0-3)", "`likeness.json`"],
+    ]
 
 
 def _expression_heads_row(fig: dict) -> list[str]:
