@@ -152,7 +152,7 @@ class FaceSimulator:
         from ..physics.model import ModelBuilder
         from ..physics.muscle_stage import MuscleStage, SupportStage
         from ..physics.solvers.implicit import SolverImplicit
-        from ..physics.solvers.verlet import MASS_SCALING_QUANTILE, SolverVerlet, scale_masses
+        from ..physics.solvers.verlet import MASS_SCALING_QUANTILE, SolverVerlet, contact_stiffness_bound, scale_masses
 
         if solver not in SOLVERS:
             raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
@@ -204,12 +204,14 @@ class FaceSimulator:
                 k_contact = np.full(len(fr.nodes), float(builder.hold_stiffness.max()) if fr.held.any() else 0.0)
             k_contact = k_contact + CONTACT_MUSCLE_RATIO * k_muscle
             self.contact_geometry = contact_geometry(fr)
-            g = self.contact_geometry
-            cand = np.unique(np.concatenate([*g.lip_nodes, *[t[4] for t in g.teeth], g.eye_nodes]).astype(np.int64))
-            extra[cand] += k_contact[cand]
+            # the inner lid sheet gliding on the eyeball has the sliding support's stiffness
+            k_glide = (mat.support_modulus * builder.vertex_area if physical and support_stiffness is None
+                       else np.full(len(fr.nodes), float(np.median(k_support)) if np.size(k_support) else 0.0))
+            # every contact spring a node can carry at once (the lids' too) bounds the explicit step
+            extra += contact_stiffness_bound(self.contact_geometry, k_contact, k_glide)
         # the Verlet reference substep (selective mass scaling: the 2 % of nodes with the smallest
         # own limit, short edges and flat tets in creases of adapted heads, get the mass that lifts
-        # them to it); the thesis profile's per-substep damping is a rate of 0.002 / that step
+        # them to it), from the tissue and every spring a stage may switch on (muscles, supports, contacts)
         frame_dt = 1.0 / self.fps
         self.added_mass_fraction = 0.0
         if solver == "verlet":
@@ -222,17 +224,15 @@ class FaceSimulator:
             if self.dt > 2.0 * dt_safe:
                 raise InputError(f"substeps {substeps}: dt {self.dt:.2e} s is above twice the stable step "
                                  f"{dt_safe:.2e} s; use at least {int(np.ceil(frame_dt / (2 * dt_safe)))} substeps")
-            if not physical:
-                builder.damping_rate = mat.damping / self.dt
         else:
             if substeps is None:
                 substeps = 1 if dt is None else int(np.ceil(frame_dt / dt))
             self.substeps = int(substeps)
             self.dt = frame_dt / self.substeps
-            if not physical:
-                ref = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held, material=mat)
-                dt_ref, _ = scale_masses(ref, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0)
-                builder.damping_rate = mat.damping / dt_ref
+        if not physical:  # the thesis damping: a rate of 0.002 per reference substep, whatever the solver's step
+            ref = ModelBuilder(fr.nodes, fr.tets, layer=fr.layer, fixed=fr.fixed, held=fr.held, material=mat)
+            dt_ref, _ = scale_masses(ref, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0)
+            builder.damping_rate = mat.damping / dt_ref
         self.builder = builder
         self.model = builder.finalize(device)
         self.device = self.model.device
@@ -247,9 +247,6 @@ class FaceSimulator:
         stages = [self.carry, self.jaw_stage, self.support, self.muscles]
         self.contact = None
         if contact:
-            # the inner lid sheet gliding on the eyeball has the sliding support's stiffness
-            k_glide = (mat.support_modulus * builder.vertex_area if physical and support_stiffness is None
-                       else np.full(len(fr.nodes), float(np.median(k_support)) if np.size(k_support) else 0.0))
             self.contact = ContactStage(fr, k_contact, self.device, geometry=self.contact_geometry,
                                         glide_stiffness=k_glide)
             stages.append(self.contact)
