@@ -101,8 +101,8 @@ def main(argv=None) -> dict:
     import facewarp
 
     result["machine"]["facewarp"] = getattr(facewarp, "__version__", "")
-    # the longest first (the sequence, the physical profile: the smaller substep)
-    todo = sorted(((c, m) for m in materials for c in cases), key=lambda cm: (cm[0] != "sequence", cm[1] != "physical"))
+    # profile by profile in the order given, the sequence (the longest) first
+    todo = sorted(((c, m) for m in materials for c in cases), key=lambda cm: (materials.index(cm[1]), cm[0] != "sequence"))
     t0 = time.perf_counter()
 
     def done(row):

@@ -561,7 +561,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="put the skin's tet layer into the USD too (a TetMesh of purpose guide, hidden by default)")
     s.add_argument("--solver", choices=["implicit", "verlet"], default="implicit",
                    help="implicit (default: backward Euler, one step per frame) or verlet (the thesis's explicit "
-                        "reference, ~1,000 substeps per frame)")
+                        "reference, ~2,000-5,500 substeps per frame)")
     s.add_argument("--material", choices=["physical", "thesis"], default="physical",
                    help="physical (default: tissue density and moduli in SI) or thesis (Table 6.3 as printed)")
     s.add_argument("--jaw", choices=["mujoco", "kinematic"], default=None,
