@@ -58,8 +58,9 @@ def part_frames(fr, material, presets, device) -> list:
     seconds = START + ATTACK + HOLD + RELEASE + 0.2
     for name in presets:
         tl = facewarp.timeline_for(name, attack=ATTACK, hold=HOLD, release=RELEASE, start=START)
-        conv, _ = run_timeline(fr, tl, seconds, device=device, material=material, tolerance=1e-7,
-                       solver_options=dict(spring_tolerance=1e-4, max_iterations=500))
+        # spring_tolerance is an option of the host solver (the CPU default), not of the device one
+        opts = dict(max_iterations=500, **(dict(spring_tolerance=1e-4) if str(device) == "cpu" else {}))
+        conv, _ = run_timeline(fr, tl, seconds, device=device, material=material, tolerance=1e-7, solver_options=opts)
         t = conv.times
         phase = np.where(t < START + ATTACK, "attack", np.where(t < START + ATTACK + HOLD, "hold", "release"))
         disp = np.linalg.norm(conv.fdp_points - conv.fdp_points[:1], axis=2)

@@ -14,8 +14,9 @@ The pipeline, in the order data flows (thesis chapters 4-6):
    the ``usd_export`` package.
 
 Lower level, after Newton's layout: :class:`ModelBuilder` -> :class:`Model` / :class:`State` /
-:class:`Control` -> :class:`SolverImplicit` (backward Euler, the default) or :class:`SolverVerlet` (the
-explicit reference) with their stages; material profiles :class:`MaterialPhysical` (default) and
+:class:`Control` -> :class:`SolverImplicit` (backward Euler, the default: :class:`SolverHostImplicit`'s
+factorised L-BFGS / Newton or :class:`SolverDeviceNewtonPCG`, sharing one :class:`IncrementalPotential`)
+or :class:`SolverVerlet` (the explicit reference) with their stages; material profiles :class:`MaterialPhysical` (default) and
 :class:`MaterialThesis` (Table 6.3). Detailed free functions live in the
 public submodules :mod:`facewarp.geometry`, :mod:`facewarp.adaptation`, :mod:`facewarp.anatomy`,
 :mod:`facewarp.physics`, :mod:`facewarp.coupling` and :mod:`facewarp.render`. Everything under ``facewarp._src`` is
@@ -80,7 +81,9 @@ _NAMES = {
     # lower level
     "ModelBuilder": "physics.model", "Model": "physics.model", "State": "physics.model", "Control": "physics.model",
     "SolverVerlet": "physics.solvers.verlet", "SolverStage": "physics.solvers.base",
-    "SolverImplicit": "physics.solvers.implicit", "MaterialPhysical": "physics.materials",
+    "SolverImplicit": "physics.solvers.implicit", "SolverHostImplicit": "physics.solvers.host_implicit",
+    "SolverDeviceNewtonPCG": "physics.solvers.newton_pcg", "IncrementalPotential": "physics.solvers.incremental",
+    "MaterialPhysical": "physics.materials",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_stage", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
@@ -146,7 +149,10 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.physics.muscle_stage import MuscleRig, MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
     from ._src.physics.solvers.base import SolverStage
+    from ._src.physics.solvers.host_implicit import SolverHostImplicit
     from ._src.physics.solvers.implicit import SolverImplicit
+    from ._src.physics.solvers.incremental import IncrementalPotential
+    from ._src.physics.solvers.newton_pcg import SolverDeviceNewtonPCG
     from ._src.physics.solvers.verlet import SolverVerlet
     from ._src.present.anatomy import render_anatomy
     from ._src.present.render import colormap, render_mesh, save_png

@@ -620,12 +620,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="put the skin's tet layer into the USD too (a TetMesh of purpose guide, hidden by default)")
     s.add_argument("--solver", choices=["implicit", "verlet"], default="implicit",
                    help="implicit (default: backward Euler, one step per frame) or verlet (the thesis's explicit "
-                        "reference, ~1,000 substeps per frame)")
+                        "reference, ~2,000-5,500 substeps per frame)")
     s.add_argument("--material", choices=["physical", "thesis"], default="physical",
                    help="physical (default: tissue density and moduli in SI) or thesis (Table 6.3 as printed)")
-    s.add_argument("--jaw", choices=["mujoco", "kinematic"], default="mujoco",
-                   help="mujoco (default: the mandible is the hinge body of the build's head.xml, two-way coupled "
-                        "to the skin) or kinematic (Eq. 6.4.9 angles imposed)")
+    s.add_argument("--jaw", choices=["mujoco", "kinematic"], default=None,
+                   help="mujoco (default with --material physical: the mandible is the hinge body of the build's "
+                        "head.xml, two-way coupled to the skin) or kinematic (Eq. 6.4.9 angles imposed; default "
+                        "with --material thesis, which the MuJoCo jaw refuses)")
     s.set_defaults(func=cmd_simulate)
 
     d = sub.add_parser("demo", help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "

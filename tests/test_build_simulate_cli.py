@@ -72,6 +72,8 @@ def test_errors(built, tmp_path, capsys):
         (["simulate", str(tmp_path), "--expression", "smile", "--out", o], "face_rig"),
         (["simulate", str(built), "--expression", "smile", "--solver", "verlet", "--substeps", "1", "--out", o],
          "substeps"),
+        (["simulate", str(built), "--expression", "smile", "--material", "thesis", "--jaw", "mujoco", "--out", o],
+         "kinematic jaw"),
         (["simulate", str(built), "--expression", str(seq), "--out", o], "blend"),
         (["simulate", str(built), "--expression", str(seq2), "--out", o], "muscles"),
         (["simulate", str(built), "--expression", "smile", "--out", str(afile)], "not a folder"),

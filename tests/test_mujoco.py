@@ -158,6 +158,18 @@ def _coupled(head, rig, **kw):
     return sim, m, d, fw.MujocoJaw(sim, m, d)
 
 
+def test_thesis_material_with_the_two_way_jaw_is_refused(head, rig):
+    """The thesis profile's skin (0.5 kg nodes, 6e6 N/m holds) threw the mandible off in two
+    frames (a 240 N m torque): refused in one line; one-way coupling stays allowed."""
+    sim = fw.FaceSimulator(rig, material="thesis")
+    m = mujoco.MjModel.from_xml_string(head_mjcf(head))
+    d = mujoco.MjData(m)
+    with pytest.raises(fw.InputError, match="kinematic jaw") as e:
+        fw.MujocoJaw(sim, m, d)
+    assert "\n" not in str(e.value)
+    fw.MujocoJaw(sim, m, d, two_way=False)
+
+
 def test_skin_resists_a_constant_torque(head, rig):
     """Under the same constant torque the jaw opens less with the skin attached."""
     torque = 0.5  # N m about the opening hinge

@@ -557,3 +557,51 @@ def test_node_stable_dt_and_selective_mass_scaling():
     b2 = ModelBuilder(V, T)
     dt0, added0 = scale_masses(b2, quantile=0.0)
     assert added0 == 0.0 and dt0 == pytest.approx(dtn.min())
+
+
+@wp.kernel
+def _spring_to_rest(k: wp.array(dtype=float), rest: wp.array(dtype=wp.vec3), x: wp.array(dtype=wp.vec3),
+                    forces_out: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    forces_out[i] = forces_out[i] - k[i] * (x[i] - rest[i])
+
+
+class SpringStage:
+    """A stand-in for a stiff stage spring (a contact, a muscle): each node pulled to its rest position."""
+
+    def __init__(self, k, rest, device):
+        self.k = wp.array(np.asarray(k, np.float32), dtype=float, device=device)
+        self.rest = wp.array(np.asarray(rest, np.float32), dtype=wp.vec3, device=device)
+
+    def apply(self, model, state_in, control, dt, forces, targets):
+        wp.launch(_spring_to_rest, dim=model.vertex_count, inputs=[self.k, self.rest, state_in.positions],
+                  outputs=[forces], device=model.device)
+
+
+def test_thesis_stable_step_counts_the_stage_springs():
+    """A stage spring four times past the tissue rule's step (omega dt = 4 > 2) blows Verlet up at
+    the tissue step; with it in ``extra_stiffness`` the thesis rule gives the damped-spring step
+    ``safety * 2 / sqrt((2 safety / dt_t)^2 + k / m)`` and the run stays at rest."""
+    V, T = grid_tets(2, 2, 1)
+    bottom = np.isclose(V[:, 2], 0.0)
+    b = ModelBuilder(V, T, fixed=bottom, material="thesis")
+    dt_t = node_stable_dt(b)
+    k = np.where(bottom, 0.0, 16.0 * b.mass / dt_t.min() ** 2)
+    dt_k = node_stable_dt(b, extra_stiffness=k)
+    expect = np.where(k > 0, 1.0 / np.sqrt((1.0 / dt_t) ** 2 + k / b.mass), dt_t)  # safety 0.5
+    np.testing.assert_allclose(dt_k, expect, rtol=1e-12)
+    assert dt_k[~bottom].max() < 0.5 * dt_t.min()
+    model = b.finalize("cpu")
+    stage = SpringStage(k, V, "cpu")
+    X = perturbed(V, 0.01, seed=3)
+    X[bottom] = V[bottom]
+    out = {}
+    for label, dt in (("tissue", dt_t.min()), ("with springs", dt_k.min())):
+        state = model.state()
+        set_state(state, X, X)
+        try:
+            simulate(model, state, model.control(), float(dt), 200, solver=SolverVerlet(model, stages=[stage]))
+            out[label] = float(np.abs(state.positions.numpy() - V).max())
+        except SimulationError:
+            out[label] = np.inf
+    assert out["tissue"] > 1e-2 and out["with springs"] < 1e-3, out

@@ -164,6 +164,31 @@ def test_bad_step_arguments_are_input_errors():
         SolverImplicit(model, method="newton-pcg", linear_iterations=0)
 
 
+def test_solver_implicit_makes_the_class_of_its_method_and_refuses_foreign_options():
+    from facewarp.physics import SolverDeviceNewtonPCG, SolverHostImplicit
+
+    V, T = grid_tets(1, 1, 1)
+    model = ModelBuilder(V, T, material="physical").finalize("cpu")
+    host, device = SolverImplicit(model), SolverImplicit(model, method="newton-pcg")
+    assert type(host) is SolverHostImplicit and host.method == "lbfgs" and isinstance(host, SolverImplicit)
+    assert type(device) is SolverDeviceNewtonPCG and device.method == "newton-pcg" and isinstance(device, SolverImplicit)
+    assert SolverImplicit(model, method="newton").method == "newton"
+    # each class takes its own options only, and says whose an option is
+    for cls, kw, name in ((SolverImplicit, dict(method="newton-pcg", history=4), "history"),
+                          (SolverImplicit, dict(method="newton-pcg", spring_tolerance=1e-3), "spring_tolerance"),
+                          (SolverImplicit, dict(linear_iterations=3), "linear_iterations"),
+                          (SolverHostImplicit, dict(rounds=2), "rounds"),
+                          (SolverDeviceNewtonPCG, dict(backend="splu"), "backend"),
+                          (SolverImplicit, dict(tolerances=1e-3), "tolerances")):
+        with pytest.raises(InputError, match=f"^{name}: not an option of") as e:
+            cls(model, **kw)
+        assert "\n" not in str(e.value)
+    with pytest.raises(InputError, match="method"):
+        SolverDeviceNewtonPCG(model, method="lbfgs")
+    with pytest.raises(InputError, match="method"):
+        SolverHostImplicit(model, method="newton-pcg")
+
+
 def test_cg_iterations_grow_with_the_square_root_of_the_node_count():
     from facewarp.physics import default_linear_iterations
 

@@ -127,7 +127,7 @@ def _copy_texture(head, out: Path) -> None:
 
 def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: float = 30.0,
                    substeps: int | None = None, device: str = "cpu", usd: bool = False, tets: bool = False,
-                   progress=None, solver: str = "implicit", material: str = "physical", jaw: str = "mujoco",
+                   progress=None, solver: str = "implicit", material: str = "physical", jaw: str | None = None,
                    name: str | None = None) -> dict:
     """Simulate ``expression`` on a ``build`` output and write its frames.
 
@@ -142,9 +142,10 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
     ``solver`` (``"implicit"``, default, or ``"verlet"``) and ``material`` (``"physical"``, default,
     or ``"thesis"``) choose the :class:`~facewarp.FaceSimulator`'s solver and material profile;
     ``--solver verlet --material thesis`` is the simulator before issue 10. ``jaw``: ``"mujoco"``
-    (default: the mandible is the hinge body of the build's ``head.xml``, two-way coupled to the
-    skin, the expressions' jaw angles its actuator targets) or ``"kinematic"`` (Eq. 6.4.9 angles
-    imposed directly).
+    (the default with the physical material: the mandible is the hinge body of the build's
+    ``head.xml``, two-way coupled to the skin, the expressions' jaw angles its actuator targets) or
+    ``"kinematic"`` (Eq. 6.4.9 angles imposed directly; the default with the thesis material, whose
+    Table 6.3 masses and hold springs are not physical: the MuJoCo jaw refuses it).
 
     ``out`` is a folder (``frames.npz``, ``frames.png``: per expression the whole head at rest and
     at its peak, front and three-quarter, over its displacement heat map; and with ``usd`` the USD animation
@@ -167,8 +168,14 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
     if not usd_out and not seconds * fps < MAX_FRAMES:  # a FrameRecorder keeps round(seconds * fps) + 1 frames
         raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
                          f"more than {MAX_FRAMES} per run")
+    if jaw is None:
+        jaw = "kinematic" if material == "thesis" else "mujoco"
     if jaw not in JAWS:
         raise InputError(f"jaw: expected one of {', '.join(JAWS)}, got {jaw!r}")
+    if jaw == "mujoco" and material == "thesis":
+        raise InputError("the MuJoCo jaw is coupled two-way and needs the physical material: the thesis profile's "
+                             "Table 6.3 nodes (0.5 kg each) and hold springs (6e6 N/m) throw the mandible off within "
+                             "two frames; use the kinematic jaw (Eq. 6.4.9) or the physical material")
     fr = load_face_rig(head_path)
     mjcf = (Path(head_path) if Path(head_path).is_dir() else Path(head_path).parent) / "head.xml"
     if jaw == "mujoco" and not mjcf.is_file():

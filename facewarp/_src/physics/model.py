@@ -627,17 +627,19 @@ class ModelBuilder:
         np.add.at(extra, self.support_nodes, np.broadcast_to(self._support_k, (len(self.support_nodes),)))
         if self.muscle_rig is not None:
             np.add.at(extra, self.muscle_rig.att_node, self.muscle_rig.att_stiffness)
-        g = self.contact_geometry
-        if g is not None:
-            cand = np.unique(np.concatenate([*g.lip_nodes, *[t[4] for t in g.teeth], g.eye_nodes]).astype(np.int64))
-            extra[cand] += self.contact_stiffness[cand]
+        if self.contact_geometry is not None:  # every contact spring a node can carry at once (the lids' too)
+            from .solvers.verlet import contact_stiffness_bound
+
+            extra += contact_stiffness_bound(self.contact_geometry, self.contact_stiffness, self.glide_stiffness)
         return extra
 
     def explicit_step(self, frame_dt: float, *, dt: float | None = None, substeps: int | None = None,
                       mass_scaling: bool = True) -> tuple[int, float, float]:
         """The Verlet reference's substep: selective mass scaling (the 2 % of nodes with the
-        smallest own limit get the mass that lifts them to it; ``builder.mass`` changes) and, for
-        the thesis profile, Table 6.3's per-substep damping as the rate ``0.002 / dt``.
+        smallest own limit get the mass that lifts them to it; ``builder.mass`` changes), from the
+        tissue and every spring a stage may switch on (:meth:`node_spring_stiffness`). The thesis
+        profile's damping rate is set by :meth:`add_face` at the reference substep of the tissue,
+        whatever the solver's step.
 
         Args:
             frame_dt: Frame length [s].
@@ -661,8 +663,6 @@ class ModelBuilder:
         if step > 2.0 * dt_safe:
             raise InputError(f"substeps {substeps}: dt {step:.2e} s is above twice the stable step "
                              f"{dt_safe:.2e} s; use at least {int(np.ceil(frame_dt / (2 * dt_safe)))} substeps")
-        if not isinstance(self.material, MaterialPhysical):
-            self.damping_rate = self.material.damping / step
         return int(substeps), step, added
 
 

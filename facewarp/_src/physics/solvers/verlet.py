@@ -39,8 +39,8 @@ from ...geometry.tets import tet_heights
 from ..model import DT_STABLE_1CM, Control, Model, State, thesis_substep
 from .base import SolverBase, SolverStage, check_step_args  # noqa: F401 (re-exported)
 
-__all__ = ["DT_STABLE_1CM", "MASS_SCALING_QUANTILE", "SolverStage", "SolverVerlet", "check_step_args", "node_stable_dt", "scale_masses",
-           "simulate", "stable_dt"]
+__all__ = ["DT_STABLE_1CM", "MASS_SCALING_QUANTILE", "SolverStage", "SolverVerlet", "check_step_args",
+           "contact_stiffness_bound", "node_stable_dt", "scale_masses", "simulate", "stable_dt"]
 
 def stable_dt(model_or_builder, *, safety: float = 0.5) -> float:
     """A safe Verlet substep [s] for a mesh.
@@ -126,7 +126,10 @@ def node_stable_dt(builder, *, safety: float = 0.5, extra_stiffness=None) -> np.
     * flat tets: the volume and area energies of Eq. 6.4.7-6.4.8 have a stiffness of about
       (k_volume + k_area) / h^2 on a tet of height h (its volume over its largest face), so
       ``dt <= 0.5 h sqrt(m / (k_volume + k_area))`` (half the explicit limit 1 / omega) over the
-      node's tets.
+      node's tets;
+
+    and ``extra_stiffness`` k, the stages' springs on the node, adds k / m to the omega^2 of that
+    limit (``dt / safety = 2 / omega``).
 
     Other profiles: ``safety`` times the damped explicit limit with Gershgorin bounds of the
     node's rest stiffness and damping rows (module doc), the hold spring and ``extra_stiffness``
@@ -135,8 +138,8 @@ def node_stable_dt(builder, *, safety: float = 0.5, extra_stiffness=None) -> np.
     Args:
         builder: a :class:`~facewarp._src.physics.model.ModelBuilder`.
         safety: fraction of the limit (as :func:`stable_dt`).
-        extra_stiffness: Further springs on each node [N/m] (support, muscles), shape (n,);
-            counted by the non-thesis rule only.
+        extra_stiffness: Further springs on each node [N/m] (supports, muscles, contacts: all
+            that can act at once, :func:`contact_stiffness_bound`), shape (n,).
     """
     V, T, m = builder.vertices, builder.tets, builder.mass
     n = len(V)
@@ -157,7 +160,66 @@ def node_stable_dt(builder, *, safety: float = 0.5, extra_stiffness=None) -> np.
     for i in range(4):
         np.minimum.at(hmin, T[:, i], h)
     kf = max(float(builder.tet_k.max() + builder.face_k.max()), 1e-30)
-    return np.minimum(dt, 0.5 * hmin * np.sqrt(m / kf))
+    dt = np.minimum(dt, 0.5 * hmin * np.sqrt(m / kf))
+    if extra_stiffness is None:
+        return dt
+    # the stages' springs on the node add to its omega^2: the tissue rule's limit dt / safety is
+    # 2 / omega_t, so omega^2 = (2 safety / dt)^2 + k / m and the step is safety * 2 / omega
+    k = np.broadcast_to(np.asarray(extra_stiffness, dtype=np.float64), (n,))
+    with np.errstate(divide="ignore"):
+        dts = 2.0 * safety / np.sqrt((2.0 * safety / dt) ** 2 + k / m)
+    return np.where(k > 0, dts, dt)
+
+
+def contact_stiffness_bound(geometry, node_stiffness, glide_stiffness=None) -> np.ndarray:
+    """The stiffest contact springs each node can carry at once [N/m], shape (n,), float64: what
+    the explicit stable step must include (:func:`node_stable_dt` ``extra_stiffness``).
+
+    Per node of :class:`~facewarp._src.physics.contact.ContactStage`'s sets (a node in several
+    sums them): a lip node's spring toward the other lip counts twice (its point is on the
+    other lip, detected again every substep, whose node the mirror spring pushes back: the two
+    sides' relative motion has twice the stiffness), a dental arch's and an eyeball's once, a
+    gliding inner lid node's glide spring and its floor once each, a lid margin's spring to the
+    fissure plane once (``LID_STIFFNESS_RATIO`` times the node's; the plane does not move) and its
+    tie to the partner margin twice (both margins move).
+
+    Args:
+        geometry: the :class:`~facewarp._src.physics.contact.ContactGeometry`.
+        node_stiffness: each node's contact stiffness [N/m], shape (n,) (a node of a set with 0
+            gets its set's median, as the stage does).
+        glide_stiffness: the glide springs' stiffness [N/m], shape (n,) (default node_stiffness).
+    """
+    from ..contact import LID_STIFFNESS_RATIO
+
+    g = geometry
+    kn = np.asarray(node_stiffness, dtype=np.float64)
+    kg = kn if glide_stiffness is None else np.asarray(glide_stiffness, dtype=np.float64)
+    out = np.zeros(len(kn))
+
+    def stiff(nodes):
+        k = kn[nodes]
+        pos = k[k > 0]
+        return np.where(k > 0, k, np.median(pos) if len(pos) else 0.0)
+
+    def add(nodes, k):
+        nodes = np.asarray(nodes, dtype=np.int64)
+        if len(nodes):
+            np.add.at(out, nodes, k)
+
+    for nodes in g.lip_nodes:
+        add(nodes, 2.0 * stiff(np.asarray(nodes, dtype=np.int64)))
+    for t in g.teeth:
+        add(t[4], stiff(np.asarray(t[4], dtype=np.int64)))
+    eye = np.asarray(g.eye_nodes, dtype=np.int64)
+    if len(eye):
+        add(eye, stiff(eye))
+        glide = np.asarray(g.eye_glide, bool)
+        if len(glide) == len(eye) and glide.any():
+            add(eye[glide], kg[eye[glide]] + stiff(eye)[glide])
+    lid = np.asarray(g.lid_nodes, dtype=np.int64)
+    if len(lid):
+        add(lid, LID_STIFFNESS_RATIO * stiff(lid) + 2.0 * kg[lid])
+    return out
 
 
 def scale_masses(builder, *, quantile: float = MASS_SCALING_QUANTILE, safety: float = 0.5,
