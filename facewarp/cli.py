@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import io
 import json
 import math
 import os
@@ -21,6 +22,8 @@ import time
 from pathlib import Path
 
 from ._src.core.errors import FacewarpError
+from ._src.core.limits import (MAX_ADAPT_LEVELS, MAX_FPS, MAX_LAYERS, MAX_MORPH_STEPS, MAX_SECONDS, MAX_SEED,
+                               MAX_SUBSTEPS)
 
 EXIT_USAGE = 2
 EXIT_INTERNAL = 1
@@ -68,9 +71,16 @@ def _number(parse, ok, expected: str):
     return check
 
 
-_finite_positive = _number(float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
-_positive_int = _number(int, lambda v: v >= 1, "a whole number >= 1")
-_non_negative_int = _number(int, lambda v: v >= 0, "a whole number >= 0")
+def _whole_in(low: int, high: int):
+    return _number(int, lambda v: low <= v <= high, f"a whole number {low}..{high}")
+
+
+def _amount_up_to(high: float):
+    return _number(float, lambda v: math.isfinite(v) and 0 < v <= high, f"a finite number > 0 and <= {high:g}")
+
+
+_seconds = _amount_up_to(MAX_SECONDS)
+_fps = _amount_up_to(MAX_FPS)
 _level = _number(int, lambda v: 0 <= v <= MAX_TEMPLATE_LEVEL, f"a level 0..{MAX_TEMPLATE_LEVEL}")
 
 
@@ -82,6 +92,13 @@ def _device(text: str) -> str:
 
 
 # ----------------------------------------------------------------------------- output
+def _raise_if_interrupted() -> None:
+    """Raise again at a progress callback when a signal came and a library swallowed its exception."""
+    from ._src.core.outputs import raise_if_interrupted
+
+    raise_if_interrupted()
+
+
 class _Progress:
     """A tqdm bar on stderr over named steps (hidden when stderr is not a terminal or --json)."""
 
@@ -91,6 +108,7 @@ class _Progress:
         self.bar = tqdm(total=total, desc=desc, disable=None if enabled else True, file=sys.stderr, leave=False)
 
     def __call__(self, msg: str):
+        _raise_if_interrupted()
         self.bar.set_postfix_str(msg)
         self.bar.update(1)
 
@@ -106,6 +124,7 @@ class _FrameBar:
         self.bar = None
 
     def __call__(self, k: int, n: int):
+        _raise_if_interrupted()
         if not self.enabled:
             return
         if self.bar is None:
@@ -521,9 +540,9 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--method", choices=["rbf", "csrbf", "multilevel"], default="multilevel",
                    help="multilevel (default: global RBF while the feature points are few, then compactly "
                         "supported RBF), rbf or csrbf at every level")
-    a.add_argument("--levels", type=_positive_int, metavar="N", default=2,
+    a.add_argument("--levels", type=_whole_in(1, MAX_ADAPT_LEVELS), metavar="N", default=2,
                    help="refinement levels after the FDP level, each adding feature points from the feature mesh "
-                        "and the curvature search (Sec. 4.5); whole number >= 1, default 2; stops early when the "
+                        f"and the curvature search (Sec. 4.5); whole number 1..{MAX_ADAPT_LEVELS}, default 2; stops early when the "
                         "error E (Eq. 5.2.3) rises. report.json numbers them 2..N+1 after level 0 (the calibrated "
                         "template) and level 1 (the FDPs), then the final stages (field: a smooth field fitted to "
                         "point-to-plane pairs; land: onto the scan along the normals; relax)")
@@ -536,7 +555,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("head", help="a `template export` folder, an `adapt` output folder, or 'default[:LEVEL]' "
                                 f"(LEVEL 0..{MAX_TEMPLATE_LEVEL}, default 0)")
     b.add_argument("--out", required=True, type=Path, help="output folder")
-    b.add_argument("--layers", type=_positive_int, metavar="N", default=1, help="tet layers through the skin (whole number >= 1, default 1)")
+    b.add_argument("--layers", type=_whole_in(1, MAX_LAYERS), metavar="N", default=1,
+                   help=f"tet layers through the skin (whole number 1..{MAX_LAYERS}, default 1)")
     b.set_defaults(func=cmd_build)
 
     s = sub.add_parser("simulate", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
@@ -547,10 +567,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--activations", metavar="MUSCLE=V,...",
                    help="your own expression instead of --expression: muscle=activation (0..1) items, "
                         "e.g. zygomatic_major=0.6,corrugator_L=0.3,jaw_drop_mm=10")
-    s.add_argument("--seconds", type=_finite_positive, metavar="S", default=2.0, help="simulated time [s], > 0 (default 2)")
-    s.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0, help="frames per second, > 0 (default 30)")
-    s.add_argument("--substeps", type=_positive_int, metavar="N",
-                   help="substeps per frame, >= 1 (default: enough for the stable time step)")
+    s.add_argument("--seconds", type=_seconds, metavar="S", default=2.0,
+                   help=f"simulated time [s], > 0 and <= {MAX_SECONDS:g} (default 2)")
+    s.add_argument("--fps", type=_fps, metavar="F", default=30.0,
+                   help=f"frames per second, > 0 and <= {MAX_FPS:g} (default 30)")
+    s.add_argument("--substeps", type=_whole_in(1, MAX_SUBSTEPS), metavar="N",
+                   help=f"substeps per frame, 1..{MAX_SUBSTEPS} (default: enough for the stable time step)")
     s.add_argument("--out", required=True, type=Path, metavar="DIR|FILE.usd[a|c|z]",
                    help="output folder (frames.npz, frames.png), or a .usda/.usdc/.usdz file: only the USD "
                         "animation, streamed while simulating, no frame cap")
@@ -575,11 +597,12 @@ def build_parser() -> argparse.ArgumentParser:
                               "DIR/expressions.png, DIR/sequence.gif and the intermediate folders scan/, adapt/, "
                               "build/.")
     d.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
-    d.add_argument("--seconds", type=_finite_positive, metavar="S",
-                   help="length of the sequence [s], > 0 (default: the full sequence, 8 s; shorter squeezes it)")
+    d.add_argument("--seconds", type=_seconds, metavar="S",
+                   help=f"length of the sequence [s], > 0 and <= {MAX_SECONDS:g} (default: the full sequence, 8 s; "
+                        "shorter squeezes it)")
     d.add_argument("--quick", action="store_true", help="a smoke run: 0.2 s of sequence, small pictures")
-    d.add_argument("--seed", type=_non_negative_int, metavar="N", default=0,
-                   help="seed of the synthetic scan (face proportions, noise, holes, pose), default 0")
+    d.add_argument("--seed", type=_whole_in(0, MAX_SEED), metavar="N", default=0,
+                   help=f"seed of the synthetic scan (face proportions, noise, holes, pose), 0..{MAX_SEED}, default 0")
     d.add_argument("--jaw", choices=["mujoco", "kinematic"], default="mujoco",
                    help="the jaw: the MuJoCo hinge body of head.xml, two-way coupled (default), or kinematic (Eq. 6.4.9)")
     d.set_defaults(func=cmd_demo)
@@ -590,10 +613,11 @@ def build_parser() -> argparse.ArgumentParser:
                                "FILE.png is written beside it.")
     mo.add_argument("a", metavar="A", help="first head (s = 0)")
     mo.add_argument("b", metavar="B", help="second head (s = 1)")
-    mo.add_argument("--steps", type=_positive_int, metavar="N", default=8, help="in-between heads, >= 1 (default 8)")
+    mo.add_argument("--steps", type=_whole_in(1, MAX_MORPH_STEPS), metavar="N", default=8,
+                    help=f"in-between heads, 1..{MAX_MORPH_STEPS} (default 8)")
     mo.add_argument("--out", required=True, type=Path, metavar="FILE.usd[a|c|z]", help="the USD file")
-    mo.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0,
-                    help="time codes per second of the file, > 0 (default 30)")
+    mo.add_argument("--fps", type=_fps, metavar="F", default=30.0,
+                    help=f"time codes per second of the file, > 0 and <= {MAX_FPS:g} (default 30)")
     mo.add_argument("--build", type=Path, metavar="DIR",
                     help="also write every head as a template folder DIR/head_KK with its anatomy in "
                          "DIR/head_KK/build (simulate it with `facewarp simulate DIR/head_KK/build`)")
@@ -606,9 +630,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("expression", metavar="SEQUENCE", help="sequence .json, preset or 'sequence'")
     r.add_argument("heads", nargs="+", metavar="HEAD", help="heads to play it on")
     r.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
-    r.add_argument("--seconds", type=_finite_positive, metavar="S",
-                   help="length [s], > 0 (default: the file's length + 0.5 s; 2 s for a preset, 8 s for 'sequence')")
-    r.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0, help="frames per second, > 0 (default 30)")
+    r.add_argument("--seconds", type=_seconds, metavar="S",
+                   help=f"length [s], > 0 and <= {MAX_SECONDS:g} (default: the file's length + 0.5 s; 2 s for a "
+                        "preset, 8 s for 'sequence')")
+    r.add_argument("--fps", type=_fps, metavar="F", default=30.0,
+                   help=f"frames per second, > 0 and <= {MAX_FPS:g} (default 30)")
     r.set_defaults(func=cmd_retarget)
     return p
 
@@ -662,32 +688,73 @@ def _verbose_env(on: bool):
                 os.environ["FACEWARP_VERBOSE"] = old
 
 
+def _output_targets(args) -> list[tuple[str, Path, str]]:
+    """The outputs of the parsed command: (argument, path, "dir" | "file"), staged by _run."""
+    func = args.func
+    if func in (cmd_template_export, cmd_template_import_ict, cmd_adapt, cmd_build, cmd_demo, cmd_retarget):
+        return [("out", args.out, "dir")]
+    if func is cmd_landmarks_detect:
+        return [("out", args.out, "file")]
+    if func is cmd_simulate:
+        usd = Path(args.out).suffix.lower() in (".usda", ".usdc", ".usdz")  # jobs.animation.USD_SUFFIXES
+        return [("out", args.out, "file" if usd else "dir")]
+    if func is cmd_morph:
+        return [("out", args.out, "file")] + ([("build", args.build, "dir")] if args.build is not None else [])
+    return []
+
+
 def _run(args) -> int:
-    """Run the parsed command; every error becomes one line on stderr and an exit code."""
+    """Run the parsed command; every error becomes one line on stderr and an exit code.
+
+    Outputs are staged (:mod:`facewarp._src.core.outputs`): the command writes into hidden
+    siblings of its ``--out`` (and ``--build``), moved into place only when it finished, under a
+    lock that refuses a second run on the same output. SIGINT and SIGTERM stop it with exit
+    130 / 143 and nothing written. The result is held back until the outputs are in place.
+    """
+    from ._src.core.outputs import Interrupted, interrupted_by, signals_as_exceptions, staged_outputs
+
+    stdout, args.stdout = args.stdout, io.StringIO()
+    staging = None
     try:
-        # anything printed on the way (Warp with --verbose, libraries) goes to stderr: stdout is
-        # for the result alone, written by _emit
-        with contextlib.redirect_stdout(sys.stderr):
-            _check_device(args.device)
-            args.func(args)
+        with signals_as_exceptions():
+            # anything printed on the way (Warp with --verbose, libraries) goes to stderr: stdout is
+            # for the result alone, written by _emit
+            with contextlib.redirect_stdout(sys.stderr):
+                _check_device(args.device)
+                targets = _output_targets(args)
+                with staged_outputs(targets) as staging:
+                    for name, _, _ in targets:
+                        setattr(args, name, staging.path(name))
+                    args.func(args)
+                    if interrupted_by() is not None:  # a library swallowed the KeyboardInterrupt
+                        raise Interrupted(interrupted_by())
+        text = args.stdout.getvalue()
+        stdout.write(staging.unstage(text) if staging is not None else text)
+        stdout.flush()
     except FacewarpError as e:
-        return _error(str(e))
-    except KeyboardInterrupt:
+        return _error(_unstaged(staging, str(e)))
+    except KeyboardInterrupt as e:
         print("facewarp: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return 128 + e.signum if isinstance(e, Interrupted) else EXIT_INTERRUPTED
     except BrokenPipeError:
         _quiet_broken_pipe()
         return EXIT_BROKEN_PIPE
     except OSError as e:
-        return _error(_os_error_text(e))
+        return _error(_unstaged(staging, _os_error_text(e)))
     except MemoryError:
         return _error("out of memory (try a lower level, fewer frames or a smaller mesh)", EXIT_INTERNAL)
     except Exception as e:  # a bug, or a broken installation (ImportError): one line unless --verbose
         if args.verbose:
             raise
         hint = "" if isinstance(e, ImportError) else "; --verbose shows the traceback, please report it"
-        return _error(f"{type(e).__name__}: {e}{hint}", EXIT_INTERNAL)
+        return _error(_unstaged(staging, f"{type(e).__name__}: {e}{hint}"), EXIT_INTERNAL)
     return 0
+
+
+def _unstaged(staging, text: str) -> str:
+    """``text`` (an error message) naming the user's output paths, not the staged ones, on one line."""
+    text = staging.unstage(text) if staging is not None else text
+    return " ".join(text.split("\n")).strip() if "\n" in text else text
 
 
 if __name__ == "__main__":
