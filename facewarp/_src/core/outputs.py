@@ -210,9 +210,11 @@ class Staging:
                     t.stage_root.rmdir()
 
     def discard(self) -> None:
-        """Delete everything staged and the folders made for it."""
+        """Delete everything staged, the locks and the folders made for it."""
         for t in self.targets:
             shutil.rmtree(t.stage_root, ignore_errors=True)
+        self.release()
+        for t in self.targets:
             for p in reversed(t.created_parents):
                 with contextlib.suppress(OSError):
                     p.rmdir()
