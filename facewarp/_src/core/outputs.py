@@ -285,6 +285,8 @@ def _prepare(t: _Target) -> None:
         while not q.exists() and q != q.parent:
             missing.append(q)
             q = q.parent
+        if not q.is_dir():
+            raise InputError(f"{arg} {t.path}: cannot create the folder ({q} is not a folder)")
         for m in reversed(missing):
             try:
                 m.mkdir()
