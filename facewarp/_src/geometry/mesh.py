@@ -104,7 +104,9 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m") -> Mesh:
     resolved; ``vt`` kept as per-vertex UV when every vertex uses a single UV value, else
     ``uv=None`` (vertices in no face then get UV (0, 0)). Lines other than ``v``, ``vt`` and
     ``f`` are ignored. PLY, STL, OFF, GLB, GLTF: ``trimesh.load(..., process=False,
-    force="mesh")``; a scene with several geometries is concatenated (transforms applied).
+    force="mesh")``; a scene with several geometries is concatenated (transforms applied);
+    vertices at exactly the same position are merged into one (STL never shares vertices between
+    triangles; such a mesh loses its UV). An ASCII PLY must hold the lines its header promises.
 
     Args:
         path: Mesh file; the format is chosen by its suffix (:data:`MESH_SUFFIXES`).
@@ -268,6 +270,8 @@ def _read_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None
         loaded = trimesh.load(str(path), process=False, force="mesh")
     except Exception as e:  # trimesh raises many types for bad files
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        if isinstance(e, ImportError):  # trimesh fell back to a text decoder it cannot import: not this format
+            msg = f"the file is damaged or not a {path.suffix.lower()[1:].upper()} file"
         raise InputError(f"{path}: cannot read as {path.suffix.lower()[1:].upper()} ({msg})") from None
     if isinstance(loaded, trimesh.Scene):  # force="mesh" on an empty scene
         geoms = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
@@ -280,15 +284,61 @@ def _read_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None
     F = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
     if len(F) == 0:
         raise InputError(f"{path}: no faces")
+    if path.suffix.lower() == ".ply":
+        _check_ply_counts(path, len(V), len(F))
+    merged = False
+    if np.isfinite(V).all() and len(V) <= 3 * len(F) and ((F >= 0) & (F < len(V))).all():
+        # STL stores three corners per triangle, never shared, and other exporters (trimesh's
+        # own, GLB at UV seams) may write copies too: merge the copies of each vertex (kept in
+        # order of first appearance), or triangles are islands (no normals, no curvature)
+        _, first, inv = np.unique(V, axis=0, return_index=True, return_inverse=True)
+        if len(first) < len(V):
+            order = np.argsort(first)
+            rank = np.empty_like(order)
+            rank[order] = np.arange(len(order))
+            V, F, merged = V[np.sort(first)], rank[inv.reshape(-1)][F], True
     uv = None
     visual = getattr(loaded, "visual", None)
     if visual is not None and getattr(visual, "kind", None) == "texture":
         tuv = getattr(visual, "uv", None)
         if tuv is not None:
             tuv = np.asarray(tuv, dtype=np.float64)
-            if tuv.shape == (len(V), 2):
+            if tuv.shape == (len(V), 2) and not merged:
                 uv = tuv.copy()
     return V, F, uv
+
+
+def _check_ply_counts(path: Path, vertex_count: int, face_count: int) -> None:
+    """An ASCII PLY must hold as many data lines as its header's elements promise (trimesh reads
+    face lines as vertices when the header promises too many)."""
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    end = head.find(b"end_header")
+    if end < 0:
+        raise InputError(f"{path}: PLY header has no end_header line")
+    header = head[:end].decode("ascii", "replace").splitlines()
+    if not any(line.strip().startswith("format ascii") for line in header):
+        return  # binary: trimesh checks the length itself
+    counts = {}
+    for line in header:
+        w = line.split()
+        if len(w) == 3 and w[0] == "element":
+            try:
+                counts[w[1]] = int(w[2])
+            except ValueError:
+                raise InputError(f"{path}: PLY header line {line.strip()!r} has no element count") from None
+    with open(path, "rb") as f:
+        data = f.read()
+    body = data[data.find(b"end_header") + len(b"end_header"):].split(b"\n", 1)[-1]
+    lines = sum(1 for line in body.splitlines() if line.strip())
+    promised = sum(counts.values())
+    if lines != promised:
+        what = ", ".join(f"{n} {k}" for k, n in counts.items())
+        raise InputError(f"{path}: the PLY header promises {what} ({promised} lines) but the file holds {lines} "
+                         "data lines (truncated or a wrong header)")
+    if counts.get("vertex", vertex_count) != vertex_count or counts.get("face", face_count) < face_count:
+        raise InputError(f"{path}: the PLY header promises {counts.get('vertex')} vertices and {counts.get('face')} "
+                         f"faces, read {vertex_count} and {face_count}")
 
 
 # ----------------------------------------------------------------------------------------

@@ -196,7 +196,10 @@ class _MujocoJawDriver:
         mj = _mujoco()
         if mjcf is None or not Path(mjcf).is_file():
             raise InputError(f"jaw: the MuJoCo jaw needs the head's head.xml, not found at {mjcf}")
-        self.model = mj.MjModel.from_xml_path(str(mjcf))
+        try:
+            self.model = mj.MjModel.from_xml_path(str(mjcf))
+        except Exception as e:  # MuJoCo's parse errors are multi-line ValueErrors
+            raise InputError(f"{mjcf}: not a valid MuJoCo model ({' '.join(str(e).split())})") from None
         self.data = mj.MjData(self.model)
         self.coupler = MujocoJaw(sim, self.model, self.data)
         self.act = [mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_ACTUATOR, n) for n in ("jaw_open", "jaw_side")]

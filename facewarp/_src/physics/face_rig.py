@@ -18,11 +18,14 @@ is free.
 from __future__ import annotations
 
 import io
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..core.checks import check_face_rig
 from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..anatomy.jaw import JawKinematic
@@ -428,10 +431,19 @@ def load_face_rig(path) -> FaceRig:
         parts = {str(k): (z[f"part_{k}_V"], z[f"part_{k}_F"]) for k in z["part_names"]}
         part_jaw = {str(k): float(z[f"part_{k}_jaw"]) for k in z["part_names"]}
         opening = {k: z[k] for k in ("opening_vertex", "opening_node", "opening_weight") if k in z}
-        return FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]),
-                       **{k: z[k] for k in _FACE_FIELDS}, **opening)
-    except (KeyError, ValueError, OSError) as e:
-        raise InputError(f"{path}: not a facewarp face rig ({e})") from None
+        fr = FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]),
+                     **{k: z[k] for k in _FACE_FIELDS}, **opening)
+    except InputError:
+        raise
+    except (KeyError, ValueError, TypeError, IndexError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        raise InputError(f"{path}: not a facewarp face rig ({_first_line(e)})") from None
+    check_face_rig(fr, str(path))
+    return fr
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(e).strip()
+    return text.splitlines()[0] if text else type(e).__name__
 
 
 def node_jaw_amounts(fr: FaceRig) -> np.ndarray:

@@ -18,6 +18,8 @@ from __future__ import annotations
 import io
 import json
 import os
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -129,5 +131,9 @@ def load_template_dir(path: str | os.PathLike) -> Template:
             condyles=z["condyles"], fdp=fdp, parts=parts, level=int(z["level"]),
             thickness_factor=float(z["thickness_factor"]),
         )
-    except (KeyError, ValueError, OSError) as e:
-        raise InputError(f"{path}: template.npz is unreadable ({e})") from None
+    except InputError:
+        raise
+    except (KeyError, ValueError, TypeError, IndexError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        text = str(e).strip()
+        raise InputError(f"{path / 'template.npz'}: unreadable ({text.splitlines()[0] if text else type(e).__name__})"
+                         ) from None
