@@ -100,7 +100,7 @@ def check_array(name: str, value, *, shape: tuple, kind: str = "f", finite: bool
     out = a.astype(dtype or {"f": np.float64, "i": np.int64, "b": bool}[kind], copy=False)
     if finite and kind == "f" and out.size and not np.isfinite(out).all():
         bad = np.argwhere(~np.isfinite(out))[0]
-        raise InputError(f"{name}: non-finite value {out[tuple(bad)]!r} at index {tuple(int(i) for i in bad)}")
+        raise InputError(f"{name}: non-finite value {float(out[tuple(bad)])!r} at index {tuple(int(i) for i in bad)}")
     return out
 
 

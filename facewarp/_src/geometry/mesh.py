@@ -70,6 +70,18 @@ class Mesh:
     uv: np.ndarray | None = None
     name: str = ""
 
+    def __post_init__(self):
+        """Checks the arrays: finite (n, 3) vertices, (m, 3) whole-number faces indexing them,
+        (n, 2) finite UVs or None (an :class:`InputError` naming the field otherwise)."""
+        from ..core.checks import check_array, check_indices
+
+        self.vertices = check_array("Mesh vertices", self.vertices, shape=(None, 3))
+        self.faces = check_indices("Mesh faces", self.faces, len(self.vertices), shape=(None, 3))
+        if self.uv is not None:
+            self.uv = check_array("Mesh uv", self.uv, shape=(len(self.vertices), 2))
+        if not isinstance(self.name, str):
+            raise InputError(f"Mesh name: expected a string, got {type(self.name).__name__}")
+
     @property
     def vertex_count(self) -> int:
         return len(self.vertices)
@@ -436,12 +448,13 @@ def save_obj(path: str | os.PathLike, V, F, *, uv=None, units: str = "m") -> Non
     """
     from .surface import _check_VF
 
+    from ..core.checks import check_array
+
     scale = unit_scale(units)
     V, F = _check_VF(V, F)
+    check_array("V", V, shape=(None, 3))  # finite: an OBJ has no NaN
     if uv is not None:
-        uv = np.asarray(uv, dtype=np.float64)
-        if uv.shape != (len(V), 2):
-            raise ValueError(f"uv must have shape ({len(V)}, 2), got {uv.shape}")
+        uv = check_array("uv", uv, shape=(len(V), 2))
     with atomic_write(path, "w") as f:
         f.write(f"# facewarp OBJ: {len(V)} vertices, {len(F)} triangles, units {units}\n")
         np.savetxt(f, V / scale, fmt="v %.10g %.10g %.10g")
