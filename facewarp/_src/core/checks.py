@@ -148,10 +148,10 @@ def check_step_count(dt, substep: float, name: str = "dt") -> int:
     v = check_number(name, dt, low=0.0, low_open=True)
     n = round(v / substep)
     if n < 1 or abs(n * substep - v) > 1e-6 * max(v, substep):
-        below, above = max(1, math.floor(v / substep)), max(1, math.ceil(v / substep))
+        near = sorted({max(1, math.floor(v / substep)), max(1, math.ceil(v / substep))})
+        give = " or ".join(f"{k * substep:.6g}" for k in near)
         raise InputError(f"{name}: {v:g} s is not a whole number of the solver's steps of {substep:.6g} s "
-                         f"(give {below * substep:.6g} or {above * substep:.6g} s, or make the simulator with "
-                         "dt= or substeps= to suit)")
+                         f"(give {give} s, or make the simulator with dt= or substeps= to suit)")
     return int(n)
 
 
@@ -199,3 +199,82 @@ def check_mapping(name: str, value) -> Mapping:
     if not isinstance(value, Mapping):
         raise InputError(f"{name}: expected a dict, got {describe(value)}")
     return value
+
+
+# ----------------------------------------------------------------------------- FaceSimulator
+def check_simulator_args(fr, *, device, solver, solvers, dt, substeps, fps, iterations, tolerance, method,
+                         solver_options, support_stiffness, edge_damping, mass_scaling, contact,
+                         contact_modulus) -> str:
+    """The arguments of :class:`~facewarp.FaceSimulator` (see its docstring); returns the device
+    name. Sizes are bounded by :mod:`facewarp._src.core.limits`."""
+    from .limits import MAX_FPS, MAX_SUBSTEPS
+
+    if not all(hasattr(fr, k) for k in ("nodes", "tets", "rig", "head_vertices")):
+        raise InputError(f"fr: expected a FaceRig (build_face or load_face_rig), got {describe(fr)}")
+    device = check_device(device)
+    check_choice("solver", solver, solvers)
+    check_number("dt", dt, low=0.0, low_open=True, high=1.0, allow_none=True)
+    check_int("substeps", substeps, low=1, high=MAX_SUBSTEPS, allow_none=True)
+    check_number("fps", fps, low=0.0, low_open=True, high=MAX_FPS)
+    check_int("iterations", iterations, low=1, high=100_000, allow_none=True)
+    check_number("tolerance", tolerance, low=0.0, low_open=True, allow_none=True)
+    if method is not None and not isinstance(method, str):
+        raise InputError(f"method: expected a method name or None, got {describe(method)}")
+    if solver_options is not None:
+        opts = check_mapping("solver_options", solver_options)
+        bad = [k for k in opts if not isinstance(k, str)]
+        if bad:
+            raise InputError(f"solver_options: keys must be option names, got {bad[0]!r}")
+    check_number("support_stiffness", support_stiffness, low=0.0, allow_none=True)
+    check_number("edge_damping", edge_damping, low=0.0, allow_none=True)
+    check_bool("mass_scaling", mass_scaling)
+    check_bool("contact", contact)
+    check_number("contact_modulus", contact_modulus, low=0.0, low_open=True, allow_none=True)
+    return device
+
+
+def check_activations(activations, count: int):
+    """What :meth:`~facewarp.FaceSimulator.set_activations` takes: an Expression (passed on), a
+    dict name -> number (names strings, values real numbers) or a sequence/array of ``count``
+    numbers (returned as float64)."""
+    if hasattr(activations, "activation") and hasattr(activations, "jaw_u"):
+        return activations
+    if isinstance(activations, Mapping):
+        for k, v in activations.items():
+            if not isinstance(k, str):
+                raise InputError(f"activations: muscle names must be strings, got {k!r}")
+            check_number(f"activations[{k!r}]", v)
+        return activations
+    if isinstance(activations, (str, bytes)) or activations is None:
+        raise InputError(f"activations: expected an Expression, a dict or {count} numbers, got {describe(activations)}")
+    return check_array("activations", activations, shape=(count,), finite=False)
+
+
+def check_jaw_angles(opening, side) -> tuple[float, float]:
+    """The two jaw angles of :meth:`~facewarp.FaceSimulator.set_jaw` as floats (the range is
+    checked there)."""
+    return check_number("jaw opening", opening), check_number("jaw side", side)
+
+
+def check_positions(name: str, X, count: int, *, allow_none: bool = True):
+    """Node positions (count, 3) [m], finite, or None."""
+    if X is None and allow_none:
+        return None
+    return check_array(name, X, shape=(count, 3))
+
+
+def check_run_args(timeline, seconds, progress, curve_samples, *, fps: float, vertex_count: int) -> float:
+    """The arguments of :meth:`~facewarp.FaceSimulator.run`; the memory of the kept frames is
+    checked against the machine's. Returns ``seconds`` as a float."""
+    from .limits import MAX_SECONDS, check_memory, estimate_frames_bytes
+
+    if not (hasattr(timeline, "sample") and hasattr(timeline, "for_head")):
+        raise InputError(f"timeline: expected a Timeline (preset(...), load_sequence(...)), got {describe(timeline)}")
+    seconds = check_number("seconds", seconds, low=0.0, low_open=True, high=MAX_SECONDS)
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a function progress(k, frame_count) or None, got {describe(progress)}")
+    check_int("curve_samples", curve_samples, low=2, high=10_000)
+    frames = round(seconds * fps) + 1
+    check_memory(estimate_frames_bytes(frames, vertex_count) + frames * curve_samples * 12 * 64,
+                 f"seconds: {frames} frames of {vertex_count} vertices")
+    return seconds

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.checks import (check_activations, check_array, check_choice, check_int, check_jaw_angles,
+                           check_positions, check_run_args, check_simulator_args, check_step_count, describe)
 from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..core.warp import get_warp
@@ -143,6 +145,11 @@ class FaceSimulator:
                  iterations: int | None = None, tolerance: float | None = None, method: str | None = None,
                  solver_options: dict | None = None, support_stiffness: float | None = None, edge_damping: float | None = None,
                  mass_scaling: bool = True, contact: bool = True, contact_modulus: float | None = None):
+        device = check_simulator_args(fr, device=device, solver=solver, solvers=SOLVERS, dt=dt, substeps=substeps,
+                                      fps=fps, iterations=iterations, tolerance=tolerance, method=method,
+                                      solver_options=solver_options, support_stiffness=support_stiffness,
+                                      edge_damping=edge_damping, mass_scaling=mass_scaling, contact=contact,
+                                      contact_modulus=contact_modulus)
         wp = get_warp()
         from dataclasses import replace
 
@@ -304,6 +311,7 @@ class FaceSimulator:
             InputError: unknown muscle, wrong length, or a value outside [0, 1] (NaN included).
         """
         names = self.fr.rig.names
+        activations = check_activations(activations, len(names))
         if hasattr(activations, "activation") and hasattr(activations, "jaw_u"):
             return _activation_vector(names, activations)
         if isinstance(activations, dict):
@@ -340,7 +348,7 @@ class FaceSimulator:
         """
         from ..expressions import JAW_U_MAX, JAW_V_MAX
 
-        u, v = float(opening), float(side)
+        u, v = check_jaw_angles(opening, side)
         if not (np.isfinite(u) and -1e-9 <= u <= JAW_U_MAX + 1e-9):
             raise InputError(f"jaw opening: expected 0..{JAW_U_MAX:.4f} rad (0..60 deg), got {opening!r}")
         if not (np.isfinite(v) and abs(v) <= JAW_V_MAX + 1e-9):
@@ -366,21 +374,21 @@ class FaceSimulator:
 
     # ------------------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
-        """Advance by ``dt`` [s] (default one frame, ``1 / fps``), in whole substeps.
+        """Advance by exactly ``dt`` [s] (default one frame, ``1 / fps``), in whole substeps.
+
+        ``dt`` must be a whole number of the solver's steps (:attr:`dt`, ``1 / (fps *
+        substeps)``): ``step(0.001)`` on a 30 fps, one-substep simulator is refused rather than
+        rounded to a frame, so that :attr:`time` always advances by what was asked. Make the
+        simulator with ``substeps=`` or ``dt=`` for finer steps.
 
         The controls set since the last step ramp linearly from their old to their new
         values across the step (a jump would jolt the held nodes). Raises
         :class:`~facewarp.SimulationError` if a substep produced a NaN or an inverted tet.
 
         Raises:
-            InputError: ``dt`` not positive and finite.
+            InputError: ``dt`` not a positive finite number, or not a whole number of solver steps.
         """
-        if dt is None:
-            n = self.substeps
-        else:
-            if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-                raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
-            n = max(1, int(round(float(dt) / self.dt)))
+        n = self.substeps if dt is None else check_step_count(dt, self.dt)
         t0 = time.perf_counter()
         if not self._pose.identity:  # the head rides a moving body: loads of the accelerating frame
             f = self._pose.node_forces(self.positions(), self.builder.mass, n * self.dt)
@@ -445,13 +453,13 @@ class FaceSimulator:
     def muscle_curves(self, samples: int = 24) -> np.ndarray:
         """Muscle fibre polylines at the current state [m], shape (M, samples, 3), float64, in
         the world frame."""
+        check_int("samples", samples, low=2, high=10_000)
         C = self._curves(samples)
         return self._pose.to_world(C.reshape(-1, 3)).reshape(C.shape)
 
     def advance(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``1 / fps`` with the current controls."""
-        if not (isinstance(frames, (int, np.integer)) and frames >= 0):
-            raise InputError(f"frames: expected a whole number >= 0, got {frames!r}")
+        check_int("frames", frames, low=0)
         for _ in range(int(frames)):
             self.step()
 
@@ -498,8 +506,9 @@ class FaceSimulator:
             frame: ``"world"`` (the head pose of :meth:`set_head_pose` applied; the same as
                 ``"head"`` while the head has not moved) or ``"head"``.
         """
-        if frame not in ("world", "head"):
-            raise InputError(f"frame: expected 'world' or 'head', got {frame!r}")
+        check_choice("frame", frame, ("world", "head"))
+        X = check_positions("X", X, len(self.fr.nodes))
+        jaw_angles = None if jaw_angles is None else check_array("jaw_angles", jaw_angles, shape=(2,))
         fr = self.fr
         X = self.positions() if X is None else X
         ja = self._j if jaw_angles is None else jaw_angles
@@ -523,11 +532,14 @@ class FaceSimulator:
 
         if self.contact_geometry is None:
             self.contact_geometry = contact_geometry(self.fr)
+        X = check_positions("X", X, len(self.fr.nodes))
         return contact_crossings(self.fr, self.positions() if X is None else X, self._j,
                                  geometry=self.contact_geometry)
 
     def fdp(self, fdp_id: str) -> np.ndarray:
         """Current position [m] of one FDP (e.g. ``"2.1"``, the chin), shape (3,), float64."""
+        if not isinstance(fdp_id, str):
+            raise InputError(f"fdp_id: expected an FDP id such as '2.1', got {describe(fdp_id)}")
         ids = [str(k) for k in self.fr.fdp_ids]
         if str(fdp_id) not in ids:
             raise InputError(f"fdp_id: {fdp_id!r} is not an FDP of this head")
@@ -558,8 +570,8 @@ class FaceSimulator:
                 ``step(expression)`` that sets the jaw and steps this simulator one frame (the MuJoCo
                 jaw of ``facewarp simulate --jaw mujoco``).
         """
-        if not (isinstance(seconds, (int, float)) and np.isfinite(seconds) and seconds > 0):
-            raise InputError(f"seconds: expected a positive number, got {seconds!r}")
+        seconds = check_run_args(timeline, seconds, progress, curve_samples, fps=self.fps,
+                                 vertex_count=len(self.fr.head_vertices))
         fr = self.fr
         timeline = timeline.for_head(fr)  # chin drops -> this head's jaw angles (idempotent)
         self.reset()
