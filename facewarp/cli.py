@@ -485,7 +485,7 @@ def build_parser() -> argparse.ArgumentParser:
     level_help = (f"resolution level 0..{MAX_TEMPLATE_LEVEL} (default 0: 3,415 vertices; each level has about 4x the "
                   "vertices of the one before)")
     e = tsub.add_parser("export", help="write the template (mesh, FDPs, regions, anatomy refs, previews) to a folder")
-    e.add_argument("--out", required=True, type=Path, help="output folder (created if needed)")
+    e.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if needed)")
     e.add_argument("--level", type=_level, metavar="N", default=0, help=level_help)
     e.add_argument("--no-preview", action="store_true", help="skip preview_front.png / preview_side.png")
     e.add_argument("--usd", action="store_true", help="also write template.usda (skin and rigid parts)")
@@ -495,7 +495,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.set_defaults(func=cmd_template_info)
     ic = tsub.add_parser("import-ict", help="make the ICT-FaceKit neutral head a full template (FDPs, regions, parts)")
     ic.add_argument("ict_dir", type=Path, metavar="ICT_DIR", help="ICT-FaceKit folder with generic_neutral_mesh.obj")
-    ic.add_argument("--out", required=True, type=Path, help="output folder (created if needed)")
+    ic.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if needed)")
     ic.add_argument("--no-preview", action="store_true", help="skip preview_front.png / preview_side.png")
     ic.set_defaults(func=cmd_template_import_ict)
 
@@ -503,7 +503,7 @@ def build_parser() -> argparse.ArgumentParser:
     msub = m.add_subparsers(dest="mesh_command", metavar="ACTION", parser_class=_Parser)
     msub.required = True
     c = msub.add_parser("check", help="load and validate a mesh; report degenerate faces, non-manifold edges, holes")
-    c.add_argument("mesh", type=Path, help="OBJ, PLY, STL, OFF, GLB or GLTF file")
+    c.add_argument("mesh", type=Path, metavar="MESH", help="OBJ, PLY, STL, OFF, GLB or GLTF file")
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=cmd_mesh_check)
 
@@ -511,18 +511,18 @@ def build_parser() -> argparse.ArgumentParser:
     lsub = lmp.add_subparsers(dest="landmarks_command", metavar="ACTION", parser_class=_Parser)
     lsub.required = True
     c = lsub.add_parser("check", help="load and validate a landmark file (JSON or MeshLab .pp)")
-    c.add_argument("landmarks", type=Path, help='JSON {"3.7": [x, y, z], ...} or MeshLab picked points .pp')
+    c.add_argument("landmarks", type=Path, metavar="LANDMARKS.json|.pp", help='JSON {"3.7": [x, y, z], ...} or MeshLab picked points .pp')
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=cmd_landmarks_check)
     dt = lsub.add_parser("detect", help="find the FDPs on a scan in any pose, without a person (symmetry plane, "
                          "coarse fit of the template, non-rigid fit); writes a landmarks JSON and confidences")
     dt.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
-    dt.add_argument("--out", required=True, type=Path, help="landmarks JSON to write (confidences go beside it, "
+    dt.add_argument("--out", required=True, type=Path, metavar="LM.json", help="landmarks JSON to write (confidences go beside it, "
                     "NAME_confidence.json)")
     dt.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan (and of the written landmarks)")
-    dt.add_argument("--template", type=Path, help="template folder whose FDPs to find (default: the built-in level 0)")
-    dt.add_argument("--template-mesh", type=Path, help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
-    dt.add_argument("--template-landmarks", type=Path, help="FDPs of --template-mesh (JSON or .pp)")
+    dt.add_argument("--template", type=Path, metavar="DIR", help="template folder whose FDPs to find (default: the built-in level 0)")
+    dt.add_argument("--template-mesh", type=Path, metavar="MESH", help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
+    dt.add_argument("--template-landmarks", type=Path, metavar="LM.json", help="FDPs of --template-mesh (JSON or .pp)")
     dt.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
     dt.set_defaults(func=cmd_landmarks_detect)
 
@@ -531,12 +531,12 @@ def build_parser() -> argparse.ArgumentParser:
                               "least 4 FDPs shared with the template and not coplanar, every landmark near the scan "
                               "surface.")
     a.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
-    a.add_argument("--landmarks", type=Path, help="FDPs on the scan (JSON or .pp), in --units (default: found on the "
+    a.add_argument("--landmarks", type=Path, metavar="LM.json", help="FDPs on the scan (JSON or .pp), in --units (default: found on the "
                    "scan as by `facewarp landmarks detect`, written to detected_landmarks.json)")
-    a.add_argument("--out", required=True, type=Path, help="output folder")
-    a.add_argument("--template", type=Path, help="template folder from `facewarp template export` (default: the built-in level 0)")
-    a.add_argument("--template-mesh", type=Path, help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
-    a.add_argument("--template-landmarks", type=Path, help="FDPs of --template-mesh (JSON or .pp)")
+    a.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    a.add_argument("--template", type=Path, metavar="DIR", help="template folder from `facewarp template export` (default: the built-in level 0)")
+    a.add_argument("--template-mesh", type=Path, metavar="MESH", help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
+    a.add_argument("--template-landmarks", type=Path, metavar="LM.json", help="FDPs of --template-mesh (JSON or .pp)")
     a.add_argument("--method", choices=["rbf", "csrbf", "multilevel"], default="multilevel",
                    help="multilevel (default: global RBF while the feature points are few, then compactly "
                         "supported RBF), rbf or csrbf at every level")
@@ -546,7 +546,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "error E (Eq. 5.2.3) rises. report.json numbers them 2..N+1 after level 0 (the calibrated "
                         "template) and level 1 (the FDPs), then the final stages (field: a smooth field fitted to "
                         "point-to-plane pairs; land: onto the scan along the normals; relax)")
-    a.add_argument("--markers", type=Path, help="FDPs held out of training, for the marker error E_m")
+    a.add_argument("--markers", type=Path, metavar="MARKERS.json", help="FDPs held out of training, for the marker error E_m")
     a.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan and its landmarks")
     a.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
     a.set_defaults(func=cmd_adapt)
@@ -554,7 +554,7 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("build", help="skin tetrahedra, muscles and boundary conditions of a head (Sec. 6.2-6.3)")
     b.add_argument("head", help="a `template export` folder, an `adapt` output folder, or 'default[:LEVEL]' "
                                 f"(LEVEL 0..{MAX_TEMPLATE_LEVEL}, default 0)")
-    b.add_argument("--out", required=True, type=Path, help="output folder")
+    b.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     b.add_argument("--layers", type=_whole_in(1, MAX_LAYERS), metavar="N", default=1,
                    help=f"tet layers through the skin (whole number 1..{MAX_LAYERS}, default 1)")
     b.set_defaults(func=cmd_build)

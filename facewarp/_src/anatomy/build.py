@@ -108,8 +108,9 @@ def build_anatomy(head, *, layers: int = 1, defs=None, placements=None, check_in
     Returns:
         :class:`Anatomy`.
     """
-    if not (isinstance(layers, (int, np.integer)) and not isinstance(layers, bool) and layers >= 1):
-        raise InputError(f"layers: expected a whole number >= 1, got {layers!r}")
+    from ..core.limits import MAX_LAYERS, check_count
+
+    check_count("layers", layers, high=MAX_LAYERS)
     check_head(head)
     skin = build_skin_layer(head, layers=layers)
     lips = separate_skin_lips(head, skin)  # lips that cross at rest moved apart (anatomy/lips.py)

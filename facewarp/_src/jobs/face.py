@@ -17,6 +17,8 @@ from ..adapt.transfer import load_head
 from ..anatomy.build import build_anatomy, write_anatomy
 from ..core.errors import InputError
 from ..core.fileio import write_json
+from ..core.limits import (MAX_FPS, MAX_LAYERS, MAX_SECONDS, MAX_SUBSTEPS, check_amount, check_count,
+                           check_memory, check_steps, estimate_build_bytes, estimate_sim_bytes)
 from ..coupling.mjcf import write_head_mjcf
 from ..expressions import timeline_from_spec
 from ..physics.face_rig import face_rig_from_anatomy, load_face_rig, save_face_rig
@@ -48,8 +50,7 @@ def build_files(head_path, out, *, layers: int = 1, device: str = "cpu", progres
 
 
 def _check_layers(layers) -> None:
-    if not (isinstance(layers, (int, np.integer)) and not isinstance(layers, bool) and layers >= 1):
-        raise InputError(f"layers: expected a whole number >= 1, got {layers!r}")
+    check_count("layers", layers, high=MAX_LAYERS)
 
 
 def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progress=None) -> dict:
@@ -62,6 +63,8 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     step = progress or (lambda msg: None)
     out = check_out_dir(out)
     _check_layers(layers)
+    check_memory(estimate_build_bytes(len(head.vertices), len(head.faces), layers),
+                 f"layers: {layers} tet layers under {len(head.faces)} skin triangles")
     make_out_dir(out)
     step("skin layer and muscles")
     anatomy = build_anatomy(head, layers=layers)
@@ -119,7 +122,15 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
                          f"more than {MAX_FRAMES} per run")
     if jaw not in JAWS:
         raise InputError(f"jaw: expected one of {', '.join(JAWS)}, got {jaw!r}")
+    check_amount("seconds", seconds, high=MAX_SECONDS)
+    check_amount("fps", fps, high=MAX_FPS)
+    if substeps is not None:
+        check_count("substeps", substeps, high=MAX_SUBSTEPS)
+    check_steps(seconds, fps, substeps)
     fr = load_face_rig(head_path)
+    frames = round(seconds * fps) + 1  # kept in memory (a folder) or as USD time samples (a USD file)
+    check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), frames, len(fr.head_vertices)),
+                 f"seconds, fps: {frames} frames of a head of {len(fr.nodes)} nodes and {len(fr.tets)} tets")
     mjcf = (Path(head_path) if Path(head_path).is_dir() else Path(head_path).parent) / "head.xml"
     if jaw == "mujoco" and not mjcf.is_file():
         raise InputError(f"{head_path}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, "
