@@ -386,7 +386,7 @@ def sim(built):
 
 def _junk(rng: random.Random, m: int) -> list:
     return [None, "a", ["a"] * m, [0.1] * (m + 1), np.full(m, np.nan), np.zeros((m, 2)), {"a": 1}, object(), b"x",
-            np.array([0.1, 0.2]), float("nan"), float("inf"), -1.0, 10**9, True, [[0.1]], rng.random() * 1e6,
+            np.array([0.1, 0.2]), float("nan"), float("inf"), -1.0, 10**9, True, [[0.1]], rng.uniform(1e4, 1e6),
             np.array(["x"] * m)]
 
 

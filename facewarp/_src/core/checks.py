@@ -145,7 +145,9 @@ def check_step_count(dt, substep: float, name: str = "dt") -> int:
     """The number of solver steps of length ``substep`` [s] that make ``dt`` [s]; refuses a
     ``dt`` that is not a whole number of them (to 1e-6 relative), so that ``step(dt)`` always
     advances exactly ``dt``."""
-    v = check_number(name, dt, low=0.0, low_open=True)
+    from .limits import MAX_SECONDS
+
+    v = check_number(name, dt, low=0.0, low_open=True, high=MAX_SECONDS)
     n = round(v / substep)
     if n < 1 or abs(n * substep - v) > 1e-6 * max(v, substep):
         near = sorted({max(1, math.floor(v / substep)), max(1, math.ceil(v / substep))})

@@ -23,7 +23,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..expressions import Timeline
 
-__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "UsdAnimation", "check_usd_path", "part_points",
+__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "UsdAnimation", "check_usd_path", "load_mjcf", "part_points",
            "part_transforms", "peak_frames", "play_timeline", "sim_controls"]
 
 USD_SUFFIXES = (".usda", ".usdc", ".usdz")
@@ -186,6 +186,20 @@ class _KinematicJaw:
         self.sim.step()
 
 
+def load_mjcf(mjcf):
+    """The ``mujoco.MjModel`` of a head's ``head.xml``; a missing or broken file is one
+    :class:`InputError` line naming it (MuJoCo's parse errors span several lines)."""
+    from ..coupling.mujoco import _mujoco
+
+    mj = _mujoco()
+    if mjcf is None or not Path(mjcf).is_file():
+        raise InputError(f"jaw: the MuJoCo jaw needs the head's head.xml, not found at {mjcf}")
+    try:
+        return mj.MjModel.from_xml_path(str(mjcf))
+    except Exception as e:  # MuJoCo's parse errors are multi-line ValueErrors
+        raise InputError(f"{mjcf}: not a valid MuJoCo model ({' '.join(str(e).split())})") from None
+
+
 class _MujocoJawDriver:
     """The jaw as the MuJoCo hinge body of ``head.xml``: the expression's angles are the actuator
     targets, :class:`~facewarp.coupling.MujocoJaw` steps skin and body together."""
@@ -194,12 +208,7 @@ class _MujocoJawDriver:
         from ..coupling.mujoco import MujocoJaw, _mujoco
 
         mj = _mujoco()
-        if mjcf is None or not Path(mjcf).is_file():
-            raise InputError(f"jaw: the MuJoCo jaw needs the head's head.xml, not found at {mjcf}")
-        try:
-            self.model = mj.MjModel.from_xml_path(str(mjcf))
-        except Exception as e:  # MuJoCo's parse errors are multi-line ValueErrors
-            raise InputError(f"{mjcf}: not a valid MuJoCo model ({' '.join(str(e).split())})") from None
+        self.model = load_mjcf(mjcf)
         self.data = mj.MjData(self.model)
         self.coupler = MujocoJaw(sim, self.model, self.data)
         self.act = [mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_ACTUATOR, n) for n in ("jaw_open", "jaw_side")]

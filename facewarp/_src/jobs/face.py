@@ -26,7 +26,8 @@ from ..present.anatomy import render_anatomy
 from ..present.render import save_png
 from ..present.strips import frames_sheet, sheet_font_size
 from ..sim.simulator import FaceSimulator, save_frames_npz
-from .animation import JAWS, USD_SUFFIXES, UsdAnimation, check_usd_path, jaw_driver, peak_frames, play_timeline
+from .animation import (JAWS, USD_SUFFIXES, UsdAnimation, check_usd_path, jaw_driver, load_mjcf, peak_frames,
+                        play_timeline)
 from .checks import check_out_dir, make_out_dir
 
 __all__ = ["MAX_FRAMES", "USD_NAME", "build_files", "build_head_files", "simulate_files"]
@@ -135,6 +136,8 @@ def simulate_files(head_path, expression: str, out, *, seconds: float = 2.0, fps
     if jaw == "mujoco" and not mjcf.is_file():
         raise InputError(f"{head_path}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, "
                          "or simulate with the kinematic jaw)")
+    if jaw == "mujoco":
+        load_mjcf(mjcf)  # a broken head.xml fails before the simulator is made
     timeline = timeline_from_spec(expression, seconds).for_head(fr)  # chin drops -> this head's angles
     sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps, solver=solver, material=material)
     if usd_out:

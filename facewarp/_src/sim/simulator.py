@@ -18,6 +18,7 @@ import numpy as np
 from ..core.checks import (check_activations, check_array, check_choice, check_int, check_jaw_angles,
                            check_positions, check_run_args, check_simulator_args, check_step_count, describe)
 from ..core.errors import InputError
+from ..core.limits import MAX_FPS, MAX_SECONDS
 from ..core.fileio import atomic_write
 from ..core.warp import get_warp
 from ..expressions import MUSCLES, Timeline
@@ -88,6 +89,9 @@ def _activation_vector(names: list[str], expr) -> np.ndarray:
         out[i] = expr.activation(base, side) if base in MUSCLES else 0.0
     return out
 
+
+MAX_ADVANCE_FRAMES = int(MAX_SECONDS * MAX_FPS)
+"""Most frames one :meth:`FaceSimulator.advance` takes (an hour at the highest frame rate)."""
 
 SOLVERS = ("implicit", "verlet")
 """Solvers of :class:`FaceSimulator`: ``implicit`` (backward Euler, a few steps per frame; the
@@ -459,7 +463,7 @@ class FaceSimulator:
 
     def advance(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``1 / fps`` with the current controls."""
-        check_int("frames", frames, low=0)
+        check_int("frames", frames, low=0, high=MAX_ADVANCE_FRAMES)
         for _ in range(int(frames)):
             self.step()
 
