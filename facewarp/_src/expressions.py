@@ -204,6 +204,9 @@ PRESETS: dict[str, Expression] = {
 
 
 def preset(name: str) -> Expression:
+    from .core.checks import check_name
+
+    check_name("name", name)
     try:
         return PRESETS[name]
     except KeyError:
@@ -212,6 +215,9 @@ def preset(name: str) -> Expression:
 
 def blend(weights: dict[str, float], *, name: str | None = None) -> Expression:
     """Weighted sum of presets (name -> weight), activations clamped to [0, 1]."""
+    from .core.checks import check_mapping
+
+    check_mapping("weights", weights)
     acts: dict[str, float] = {}
     ju = jv = drop = 0.0
     for pname, w in weights.items():
@@ -292,6 +298,9 @@ class Timeline:
 
 def timeline_for(name: str, *, attack: float = 0.3, hold: float = 1.0, release: float = 0.3, start: float = 0.2) -> Timeline:
     """A single preset with the given envelope."""
+    from .core.checks import check_name
+
+    check_name("name", name)
     return Timeline([Segment(preset(name), start, attack, hold, release)])
 
 
@@ -328,6 +337,9 @@ def load_sequence(path: str | os.PathLike) -> Timeline:
     head) and ``jaw_side_deg``. Unknown keys are refused; every error names the file and the
     segment.
     """
+    from .core.checks import check_path
+
+    check_path("path", path)
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such sequence file")
@@ -437,6 +449,10 @@ def timeline_from_spec(expression: str, seconds: float) -> Timeline:
             of a sequence ``.json`` file (:func:`load_sequence`).
         seconds: Length of the animation [s], > 0.
     """
+    if not isinstance(expression, (str, os.PathLike)):
+        raise InputError(f"expression: expected a preset name, 'sequence', a sequence file or 'muscle=value,...', "
+                         f"got {type(expression).__name__}")
+    expression = os.fspath(expression)
     if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
         raise InputError(f"seconds: expected a positive finite number, got {seconds!r}")
     if expression in PRESETS:

@@ -109,6 +109,9 @@ def build_anatomy(head, *, layers: int = 1, defs=None, placements=None, check_in
     Returns:
         :class:`Anatomy`.
     """
+    from ..core.checks import check_head
+
+    check_head("head", head)
     from ..core.limits import MAX_LAYERS, check_count, check_memory, estimate_build_bytes
 
     check_count("layers", layers, high=MAX_LAYERS)
@@ -189,6 +192,10 @@ def write_anatomy(anatomy: Anatomy, out_dir: str | os.PathLike) -> list[Path]:
     Returns:
         The written paths.
     """
+    from ..core.checks import check_has, check_path
+
+    check_has("anatomy", anatomy, ("head", "skin", "muscles"), "an Anatomy (build_anatomy)")
+    check_path("out_dir", out_dir)
     from ..core.fileio import atomic_write, write_json
 
     out = Path(out_dir)

@@ -280,3 +280,47 @@ def check_run_args(timeline, seconds, progress, curve_samples, *, fps: float, ve
     check_memory(estimate_frames_bytes(frames, vertex_count) + frames * curve_samples * 12 * 64,
                  f"seconds: {frames} frames of {vertex_count} vertices")
     return seconds
+
+
+# ----------------------------------------------------------------------------- common public arguments
+def check_path(name: str, value):
+    """``value`` as a :class:`~pathlib.Path` when it is a ``str`` or ``os.PathLike``."""
+    import os
+    from pathlib import Path
+
+    if isinstance(value, bytes) or not isinstance(value, (str, os.PathLike)):
+        raise InputError(f"{name}: expected a file or folder path, got {describe(value)}")
+    if isinstance(value, str) and not value.strip():
+        raise InputError(f"{name}: expected a file or folder path, got an empty string")
+    return Path(value)
+
+
+def check_head(name: str, value):
+    """A head (:class:`~facewarp.Template`, or an object with its ``vertices``, ``faces`` and
+    ``fdp``)."""
+    if not all(hasattr(value, k) for k in ("vertices", "faces", "fdp")):
+        raise InputError(f"{name}: expected a head (default_template, load_head, a Template), got {describe(value)}")
+    return value
+
+
+def check_landmark_dict(name: str, value) -> Mapping:
+    """FDP id -> position (3,): a mapping with string keys (positions are checked where used)."""
+    check_mapping(name, value)
+    for k in value:
+        if not isinstance(k, str):
+            raise InputError(f"{name}: FDP ids must be strings such as '2.1', got {k!r}")
+    return value
+
+
+def check_has(name: str, value, fields: tuple, what: str):
+    """``value`` when it has every attribute of ``fields`` (a duck-typed object), else InputError."""
+    if not all(hasattr(value, k) for k in fields):
+        raise InputError(f"{name}: expected {what}, got {describe(value)}")
+    return value
+
+
+def check_name(name: str, value) -> str:
+    """A name (a preset, an FDP id): a string."""
+    if not isinstance(value, str):
+        raise InputError(f"{name}: expected a name (a string), got {describe(value)}")
+    return value

@@ -132,6 +132,9 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m") -> Mesh:
             file, a non-finite coordinate, no faces, or a face index out of range. The
             one-line message starts with the path.
     """
+    from ..core.checks import check_path
+
+    check_path("path", path)
     scale = unit_scale(units)
     path = Path(path)
     _check_file(path)
@@ -487,10 +490,14 @@ class SurfacePoints:
     bary: np.ndarray
 
     def __post_init__(self):
-        self.face = np.asarray(self.face, dtype=np.int64).reshape(-1)
-        self.bary = np.asarray(self.bary, dtype=np.float64).reshape(-1, 3)
+        from ..core.checks import check_array
+
+        self.face = check_array("face", np.reshape(self.face, -1) if np.ndim(self.face) == 0 else self.face,
+                                shape=(None,), kind="i")
+        self.bary = check_array("bary", self.bary, shape=(None, 3) if np.ndim(self.bary) == 2 else (3,))
+        self.bary = self.bary.reshape(-1, 3)
         if len(self.face) != len(self.bary):
-            raise ValueError(f"face and bary must have the same length, got {len(self.face)} and {len(self.bary)}")
+            raise InputError(f"face and bary must have the same length, got {len(self.face)} and {len(self.bary)}")
 
     def __len__(self) -> int:
         return len(self.face)

@@ -216,6 +216,9 @@ def _vertex_region_amounts(head, jaw: JawKinematic) -> np.ndarray:
 
 def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS) -> FaceRig:
     """Pack an :class:`~facewarp._src.anatomy.Anatomy` for the solver."""
+    from ..core.checks import check_has
+
+    check_has("anatomy", anatomy, ("head", "skin", "muscles"), "an Anatomy (build_anatomy)")
     head, skin, ms = anatomy.head, anatomy.skin, anatomy.muscles
     lm = head.landmarks()
     jaw = JawKinematic.from_landmarks(head.condyles, lm)
@@ -399,6 +402,10 @@ _FACE_FIELDS = ("head_vertices", "head_faces", "nodes", "tets", "layer", "surfac
 
 def save_face_rig(path, fr: FaceRig) -> Path:
     """Write ``fr`` to one ``.npz`` file atomically."""
+    from ..core.checks import check_has, check_path
+
+    check_path("path", path)
+    check_has("fr", fr, ("nodes", "tets", "rig"), "a FaceRig")
     arrays = {k: getattr(fr, k) for k in _FACE_FIELDS}
     arrays.update({f"rig_{k}": getattr(fr.rig, k) for k in _RIG_FIELDS})
     arrays["rig_names"] = np.array(fr.rig.names)
@@ -418,6 +425,9 @@ def save_face_rig(path, fr: FaceRig) -> Path:
 
 def load_face_rig(path) -> FaceRig:
     """Read a file written by :func:`save_face_rig` (a ``facewarp build`` output)."""
+    from ..core.checks import check_path
+
+    check_path("path", path)
     path = Path(path)
     if path.is_dir():
         path = path / "face_rig.npz"
@@ -592,6 +602,9 @@ def build_face(head, *, layers: int = 1, muscle_stiffness: float = MUSCLE_STIFFN
     Returns:
         The :class:`FaceRig`, ready for :class:`~facewarp.FaceSimulator`.
     """
+    from ..core.checks import check_head
+
+    check_head("head", head)
     from ..anatomy.build import build_anatomy
 
     if not (isinstance(muscle_stiffness, (int, float)) and np.isfinite(muscle_stiffness) and muscle_stiffness > 0):

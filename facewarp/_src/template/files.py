@@ -59,6 +59,10 @@ def save_template(t: Template, out: str | os.PathLike, *, progress=None) -> list
     Returns:
         The written paths.
     """
+    from ..core.checks import check_head, check_path
+
+    check_head("t", t)
+    check_path("out", out)
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(f"out {out}: exists and is not a folder")
@@ -109,6 +113,9 @@ def save_template(t: Template, out: str | os.PathLike, *, progress=None) -> list
 
 def load_template_dir(path: str | os.PathLike) -> Template:
     """Read a folder written by :func:`save_template` back into a :class:`Template`."""
+    from ..core.checks import check_path
+
+    check_path("path", path)
     path = Path(path)
     if not path.is_dir():
         raise InputError(f"{path}: not a template folder (no such directory)")
