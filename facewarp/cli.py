@@ -757,5 +757,13 @@ def _unstaged(staging, text: str) -> str:
     return " ".join(text.split("\n")).strip() if "\n" in text else text
 
 
+def readme_reference() -> tuple[str, str, str]:
+    """The README's command reference generated from :func:`build_parser`: (begin marker, block,
+    end marker); ``python -m facewarp._src.cli_reference README.md`` rewrites it in place."""
+    from ._src.cli_reference import BEGIN, END, reference
+
+    return BEGIN, reference(), END
+
+
 if __name__ == "__main__":
     sys.exit(main())

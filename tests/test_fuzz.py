@@ -347,11 +347,12 @@ SIZES = [
 def test_size_arguments_are_bounded(command, argv, flag, tmp_path, capsys):
     """Huge, non-finite, negative and malformed sizes are refused while parsing (before any
     file is looked at: the paths here do not exist); 1e9 is out of every size's range."""
-    from facewarp._src.cli_reference import commands
     from facewarp.cli import build_parser
 
-    action = next(a for name, p in commands(build_parser()) if name == command for a in p._actions
-                  if flag in a.option_strings)
+    p = build_parser()
+    for word in command.split():
+        p = next(a for a in p._actions if hasattr(a, "choices") and isinstance(a.choices, dict)).choices[word]
+    action = next(a for a in p._actions if flag in a.option_strings)
     with pytest.raises(Exception):
         action.type("1e9")
     rng = _rng(f"size {command} {flag}")

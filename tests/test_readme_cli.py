@@ -4,14 +4,36 @@
 
 from __future__ import annotations
 
+import argparse
 import re
 import shlex
 from pathlib import Path
 
 import pytest
 
-from facewarp._src.cli_reference import BEGIN, END, commands, reference
-from facewarp.cli import build_parser
+from facewarp.cli import build_parser, readme_reference
+
+BEGIN, _, END = readme_reference()
+
+
+def reference() -> str:
+    return readme_reference()[1]
+
+
+def commands(parser):
+    """(command name, its parser) of every leaf command."""
+    out = []
+
+    def walk(prefix, p):
+        subs = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        if not subs:
+            out.append((prefix, p))
+            return
+        for name, child in subs[0].choices.items():
+            walk(f"{prefix} {name}".strip(), child)
+
+    walk("", parser)
+    return out
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -24,7 +46,7 @@ def test_generated_reference_is_up_to_date():
     text = _text()
     assert BEGIN in text and END in text
     block = text[text.index(BEGIN) + len(BEGIN):text.index(END)].strip()
-    assert block == reference(), "README's command reference is stale: python -m facewarp._src.cli_reference README.md"
+    assert block == reference(), "README's command reference is stale: run the command on its begin marker line"
 
 
 def _option(command: str, flag: str):
