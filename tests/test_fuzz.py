@@ -498,3 +498,18 @@ def test_processes_one_line_no_traceback(built, small_mesh, tmp_path):
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and needle in lines[0] and "charset_normalizer" not in lines[0], label
         assert not out.exists() and _leftovers(tmp_path) == [], label
+
+
+def test_api_sizes_are_bounded(built):
+    """The API's size arguments have the CLI's bounds."""
+    head = fw.default_template(0)
+    for layers in (0, 17, 10**6, 2.0, True):
+        with pytest.raises(fw.InputError, match="layers"):
+            fw.build_anatomy(head, layers=layers)
+    for levels in (-1, 13, 10**6, 1.5):
+        with pytest.raises(fw.InputError, match="levels"):
+            fw.AdaptOptions(levels=levels).checked()
+    rig = fw.load_face_rig(built)
+    for kwargs in ({"substeps": 10**8}, {"fps": 1e6}):
+        with pytest.raises(fw.InputError, match=next(iter(kwargs))):
+            fw.FaceSimulator(rig, **kwargs)
