@@ -109,9 +109,9 @@ def build_anatomy(head, *, layers: int = 1, defs=None, placements=None, check_in
     Returns:
         :class:`Anatomy`.
     """
-    from ..core.checks import check_head
+    from ..core.checks import check_head_arg
 
-    check_head("head", head)
+    check_head_arg("head", head)
     from ..core.limits import MAX_LAYERS, check_count, check_memory, estimate_build_bytes
 
     check_count("layers", layers, high=MAX_LAYERS)

@@ -295,7 +295,7 @@ def check_path(name: str, value):
     return Path(value)
 
 
-def check_head(name: str, value):
+def check_head_arg(name: str, value):
     """A head (:class:`~facewarp.Template`, or an object with its ``vertices``, ``faces`` and
     ``fdp``)."""
     if not all(hasattr(value, k) for k in ("vertices", "faces", "fdp")):

@@ -163,9 +163,9 @@ def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_he
     Returns:
         The MJCF document as a string.
     """
-    from ..core.checks import check_head
+    from ..core.checks import check_head_arg
 
-    check_head("head", head)
+    check_head_arg("head", head)
     for arg, v in (("kp", kp), ("joint_damping", joint_damping), ("neck_kp", neck_kp)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise InputError(f"{arg}: expected a non-negative number, got {v!r}")
@@ -246,10 +246,10 @@ def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_he
 
 def write_head_mjcf(path: str | os.PathLike, head, **kwargs) -> Path:
     """Write :func:`head_mjcf` to ``path`` (atomically). Returns the path."""
-    from ..core.checks import check_head, check_path
+    from ..core.checks import check_head_arg, check_path
 
     check_path("path", path)
-    check_head("head", head)
+    check_head_arg("head", head)
     text = head_mjcf(head, **kwargs)
     with atomic_write(path, "w") as f:
         f.write(text)

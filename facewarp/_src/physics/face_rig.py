@@ -602,9 +602,9 @@ def build_face(head, *, layers: int = 1, muscle_stiffness: float = MUSCLE_STIFFN
     Returns:
         The :class:`FaceRig`, ready for :class:`~facewarp.FaceSimulator`.
     """
-    from ..core.checks import check_head
+    from ..core.checks import check_head_arg
 
-    check_head("head", head)
+    check_head_arg("head", head)
     from ..anatomy.build import build_anatomy
 
     if not (isinstance(muscle_stiffness, (int, float)) and np.isfinite(muscle_stiffness) and muscle_stiffness > 0):

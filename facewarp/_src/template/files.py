@@ -59,9 +59,9 @@ def save_template(t: Template, out: str | os.PathLike, *, progress=None) -> list
     Returns:
         The written paths.
     """
-    from ..core.checks import check_head, check_path
+    from ..core.checks import check_head_arg, check_path
 
-    check_head("t", t)
+    check_head_arg("t", t)
     check_path("out", out)
     out = Path(out)
     if out.exists() and not out.is_dir():
