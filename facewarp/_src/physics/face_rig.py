@@ -433,6 +433,8 @@ def load_face_rig(path) -> FaceRig:
         path = path / "face_rig.npz"
     if not path.is_file():
         raise InputError(f"{path}: not found (HEAD must be a `facewarp build` output folder)")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: the file is empty (not a facewarp face rig)")
     try:
         z = np.load(path, allow_pickle=False)
         if "rig_anchor_ctrl" not in z:

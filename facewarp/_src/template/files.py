@@ -123,6 +123,8 @@ def load_template_dir(path: str | os.PathLike) -> Template:
         if not (path / name).is_file():
             raise InputError(f"{path}: not a template folder ({name} is missing)")
     mesh = load_mesh(path / "template.obj")
+    if (path / "template.npz").stat().st_size == 0:
+        raise InputError(f"{path / 'template.npz'}: the file is empty")
     try:
         z = np.load(path / "template.npz", allow_pickle=False)
         n = len(mesh.vertices)
