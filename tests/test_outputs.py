@@ -137,3 +137,18 @@ def test_read_only_usd_output_is_named(built, tmp_path, capsys):
     _, err = capsys.readouterr()
     assert code == 2 and str(usd) in err and "read-only" in err and ".facewarp" not in err
     assert usd.read_bytes() == b"old"
+
+
+def test_interrupted_demo_leaves_no_folders(tmp_path):
+    """Ctrl-C while the demo writes scan/ and adapt/: none of its folders or files are left."""
+    proc = _start(["demo", "--quick", "--out", "d"], tmp_path)
+    _wait_for_staging(tmp_path, "d", proc)
+    stage = next(p for p in tmp_path.iterdir() if p.name.startswith(".d.facewarp-partial-"))
+    t0 = time.time()
+    while not (stage / "scan").exists() and time.time() - t0 < 120 and proc.poll() is None:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert not (tmp_path / "d").exists() and _leftovers(tmp_path) == []
