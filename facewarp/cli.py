@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import io
 import json
 import math
 import os
@@ -21,6 +22,8 @@ import time
 from pathlib import Path
 
 from ._src.core.errors import FacewarpError
+from ._src.core.limits import (MAX_ADAPT_LEVELS, MAX_FPS, MAX_LAYERS, MAX_MORPH_STEPS, MAX_SECONDS, MAX_SEED,
+                               MAX_SUBSTEPS)
 
 EXIT_USAGE = 2
 EXIT_INTERNAL = 1
@@ -68,9 +71,16 @@ def _number(parse, ok, expected: str):
     return check
 
 
-_finite_positive = _number(float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
-_positive_int = _number(int, lambda v: v >= 1, "a whole number >= 1")
-_non_negative_int = _number(int, lambda v: v >= 0, "a whole number >= 0")
+def _whole_in(low: int, high: int):
+    return _number(int, lambda v: low <= v <= high, f"a whole number {low}..{high}")
+
+
+def _amount_up_to(high: float):
+    return _number(float, lambda v: math.isfinite(v) and 0 < v <= high, f"a finite number > 0 and <= {high:g}")
+
+
+_seconds = _amount_up_to(MAX_SECONDS)
+_fps = _amount_up_to(MAX_FPS)
 _level = _number(int, lambda v: 0 <= v <= MAX_TEMPLATE_LEVEL, f"a level 0..{MAX_TEMPLATE_LEVEL}")
 
 
@@ -82,6 +92,13 @@ def _device(text: str) -> str:
 
 
 # ----------------------------------------------------------------------------- output
+def _raise_if_interrupted() -> None:
+    """Raise again at a progress callback when a signal came and a library swallowed its exception."""
+    from ._src.core.outputs import raise_if_interrupted
+
+    raise_if_interrupted()
+
+
 class _Progress:
     """A tqdm bar on stderr over named steps (hidden when stderr is not a terminal or --json)."""
 
@@ -91,6 +108,7 @@ class _Progress:
         self.bar = tqdm(total=total, desc=desc, disable=None if enabled else True, file=sys.stderr, leave=False)
 
     def __call__(self, msg: str):
+        _raise_if_interrupted()
         self.bar.set_postfix_str(msg)
         self.bar.update(1)
 
@@ -106,6 +124,7 @@ class _FrameBar:
         self.bar = None
 
     def __call__(self, k: int, n: int):
+        _raise_if_interrupted()
         if not self.enabled:
             return
         if self.bar is None:
@@ -504,7 +523,7 @@ def build_parser() -> argparse.ArgumentParser:
     level_help = (f"resolution level 0..{MAX_TEMPLATE_LEVEL} (default 0: 3,415 vertices; each level has about 4x the "
                   "vertices of the one before)")
     e = tsub.add_parser("export", help="write the template (mesh, FDPs, regions, anatomy refs, previews) to a folder")
-    e.add_argument("--out", required=True, type=Path, help="output folder (created if needed)")
+    e.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if needed)")
     e.add_argument("--level", type=_level, metavar="N", default=0, help=level_help)
     e.add_argument("--no-preview", action="store_true", help="skip preview_front.png / preview_side.png")
     e.add_argument("--usd", action="store_true", help="also write template.usda (skin and rigid parts)")
@@ -514,7 +533,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.set_defaults(func=cmd_template_info)
     ic = tsub.add_parser("import-ict", help="make the ICT-FaceKit neutral head a full template (FDPs, regions, parts)")
     ic.add_argument("ict_dir", type=Path, metavar="ICT_DIR", help="ICT-FaceKit folder with generic_neutral_mesh.obj")
-    ic.add_argument("--out", required=True, type=Path, help="output folder (created if needed)")
+    ic.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if needed)")
     ic.add_argument("--no-preview", action="store_true", help="skip preview_front.png / preview_side.png")
     ic.set_defaults(func=cmd_template_import_ict)
 
@@ -522,7 +541,7 @@ def build_parser() -> argparse.ArgumentParser:
     msub = m.add_subparsers(dest="mesh_command", metavar="ACTION", parser_class=_Parser)
     msub.required = True
     c = msub.add_parser("check", help="load and validate a mesh; report degenerate faces, non-manifold edges, holes")
-    c.add_argument("mesh", type=Path, help="OBJ, PLY, STL, OFF, GLB or GLTF file")
+    c.add_argument("mesh", type=Path, metavar="MESH", help="OBJ, PLY, STL, OFF, GLB or GLTF file")
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=cmd_mesh_check)
 
@@ -530,18 +549,18 @@ def build_parser() -> argparse.ArgumentParser:
     lsub = lmp.add_subparsers(dest="landmarks_command", metavar="ACTION", parser_class=_Parser)
     lsub.required = True
     c = lsub.add_parser("check", help="load and validate a landmark file (JSON or MeshLab .pp)")
-    c.add_argument("landmarks", type=Path, help='JSON {"3.7": [x, y, z], ...} or MeshLab picked points .pp')
+    c.add_argument("landmarks", type=Path, metavar="LANDMARKS.json|.pp", help='JSON {"3.7": [x, y, z], ...} or MeshLab picked points .pp')
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=cmd_landmarks_check)
     dt = lsub.add_parser("detect", help="find the FDPs on a scan in any pose, without a person (symmetry plane, "
                          "coarse fit of the template, non-rigid fit); writes a landmarks JSON and confidences")
     dt.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
-    dt.add_argument("--out", required=True, type=Path, help="landmarks JSON to write (confidences go beside it, "
+    dt.add_argument("--out", required=True, type=Path, metavar="LM.json", help="landmarks JSON to write (confidences go beside it, "
                     "NAME_confidence.json)")
     dt.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scan (and of the written landmarks)")
-    dt.add_argument("--template", type=Path, help="template folder whose FDPs to find (default: the built-in level 0)")
-    dt.add_argument("--template-mesh", type=Path, help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
-    dt.add_argument("--template-landmarks", type=Path, help="FDPs of --template-mesh (JSON or .pp)")
+    dt.add_argument("--template", type=Path, metavar="DIR", help="template folder whose FDPs to find (default: the built-in level 0)")
+    dt.add_argument("--template-mesh", type=Path, metavar="MESH", help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
+    dt.add_argument("--template-landmarks", type=Path, metavar="LM.json", help="FDPs of --template-mesh (JSON or .pp)")
     dt.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
     dt.set_defaults(func=cmd_landmarks_detect)
 
@@ -550,29 +569,29 @@ def build_parser() -> argparse.ArgumentParser:
                               "least 4 FDPs shared with the template and not coplanar, every landmark near the scan "
                               "surface.")
     a.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
-    a.add_argument("--landmarks", type=Path, help="FDPs on the scan (JSON or .pp), in --units (default: found on the "
+    a.add_argument("--landmarks", type=Path, metavar="LM.json", help="FDPs on the scan (JSON or .pp), in --units (default: found on the "
                    "scan as by `facewarp landmarks detect`, written to detected_landmarks.json)")
-    a.add_argument("--out", required=True, type=Path, help="output folder")
-    a.add_argument("--template", type=Path, help="template folder from `facewarp template export` (default: the built-in level 0)")
-    a.add_argument("--template-mesh", type=Path, help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
-    a.add_argument("--template-landmarks", type=Path, help="FDPs of --template-mesh (JSON or .pp)")
+    a.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    a.add_argument("--template", type=Path, metavar="DIR", help="template folder from `facewarp template export` (default: the built-in level 0)")
+    a.add_argument("--template-mesh", type=Path, metavar="MESH", help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
+    a.add_argument("--template-landmarks", type=Path, metavar="LM.json", help="FDPs of --template-mesh (JSON or .pp)")
     a.add_argument("--method", choices=["rbf", "csrbf", "multilevel"], default="multilevel",
                    help="multilevel (default: global RBF while the feature points are few, then compactly "
                         "supported RBF), rbf or csrbf at every level")
-    a.add_argument("--levels", type=_positive_int, metavar="N", default=2,
+    a.add_argument("--levels", type=_whole_in(1, MAX_ADAPT_LEVELS), metavar="N", default=2,
                    help="refinement levels after the FDP level, each adding feature points from the feature mesh "
-                        "and the curvature search (Sec. 4.5); whole number >= 1, default 2; stops early when the "
+                        f"and the curvature search (Sec. 4.5); whole number 1..{MAX_ADAPT_LEVELS}, default 2; stops early when the "
                         "error E (Eq. 5.2.3) rises. report.json numbers them 2..N+1 after level 0 (the calibrated "
                         "template) and level 1 (the FDPs), then the final stages (field: a smooth field fitted to "
                         "point-to-plane pairs; land: onto the scan along the normals; relax)")
-    a.add_argument("--markers", type=Path, help="FDPs held out of training, for the marker error E_m")
+    a.add_argument("--markers", type=Path, metavar="MARKERS.json", help="FDPs held out of training, for the marker error E_m")
     a.add_argument("--units", choices=["mm", "cm", "m", "auto"], default=None,
                    help="units of the scan and its landmarks; auto: the scale from the FDPs against human proportions "
                         "(eye distance, eye to mouth, nose length; README). Default: m when the scan's extent is a "
                         "plausible head in metres, else auto. FDPs far outside human proportions in the given units "
                         "stop the run")
     a.add_argument("--template-units", choices=["mm", "cm", "m"], default="m", help="units of --template-mesh")
-    a.add_argument("--texture-size", type=_positive_int, default=2048, metavar="PX",
+    a.add_argument("--texture-size", type=_whole_in(64, 16384), default=2048, metavar="PX",
                    help="side of texture.png, the scan's colour baked over the head's UVs (64..16384, default 2048; "
                         "written when the scan has colour)")
     a.set_defaults(func=cmd_adapt)
@@ -580,8 +599,9 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("build", help="skin tetrahedra, muscles and boundary conditions of a head (Sec. 6.2-6.3)")
     b.add_argument("head", help="a `template export` folder, an `adapt` output folder, or 'default[:LEVEL]' "
                                 f"(LEVEL 0..{MAX_TEMPLATE_LEVEL}, default 0)")
-    b.add_argument("--out", required=True, type=Path, help="output folder")
-    b.add_argument("--layers", type=_positive_int, metavar="N", default=1, help="tet layers through the skin (whole number >= 1, default 1)")
+    b.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    b.add_argument("--layers", type=_whole_in(1, MAX_LAYERS), metavar="N", default=1,
+                   help=f"tet layers through the skin (whole number 1..{MAX_LAYERS}, default 1)")
     b.add_argument("--up", choices=["z", "y"], default="z",
                    help="up axis of head.xml's world: z (MuJoCo's convention, the head looks along +x; default) or y "
                         "(the head's own frame)")
@@ -591,9 +611,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     rg = sub.add_parser("rig", help="a blendshape rig baked from the physics (USD UsdSkel or glTF), the jaw as a joint")
     rg.add_argument("build", type=Path, help="a `facewarp build` output folder")
-    rg.add_argument("--out", required=True, type=Path, help="rig.usdc, rig.usda or rig.glb")
+    rg.add_argument("--out", required=True, type=Path, metavar="FILE", help="rig.usdc, rig.usda or rig.glb")
     rg.add_argument("--shapes", choices=["muscles"], default="muscles", help="muscles: each muscle alone (default)")
-    rg.add_argument("--inbetweens", type=int, default=0, metavar="K",
+    rg.add_argument("--inbetweens", type=_whole_in(0, 8), default=0, metavar="K",
                     help="in-between shapes per muscle at k/(K+1) of full activation (0..8, default 0)")
     rg.add_argument("--muscles", default=None, metavar="A,B,...", help="bake only these muscles (default all)")
     rg.set_defaults(func=cmd_rig)
@@ -606,10 +626,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--activations", metavar="MUSCLE=V,...",
                    help="your own expression instead of --expression: muscle=activation (0..1) items, "
                         "e.g. zygomatic_major=0.6,corrugator_L=0.3,jaw_drop_mm=10")
-    s.add_argument("--seconds", type=_finite_positive, metavar="S", default=2.0, help="simulated time [s], > 0 (default 2)")
-    s.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0, help="frames per second, > 0 (default 30)")
-    s.add_argument("--substeps", type=_positive_int, metavar="N",
-                   help="substeps per frame, >= 1 (default: enough for the stable time step)")
+    s.add_argument("--seconds", type=_seconds, metavar="S", default=2.0,
+                   help=f"simulated time [s], > 0 and <= {MAX_SECONDS:g} (default 2)")
+    s.add_argument("--fps", type=_fps, metavar="F", default=30.0,
+                   help=f"frames per second, > 0 and <= {MAX_FPS:g} (default 30)")
+    s.add_argument("--substeps", type=_whole_in(1, MAX_SUBSTEPS), metavar="N",
+                   help=f"substeps per frame, 1..{MAX_SUBSTEPS} (default: enough for the stable time step)")
     s.add_argument("--out", required=True, type=Path, metavar="DIR|FILE.usd[a|c|z]",
                    help="output folder (frames.npz, frames.png), or a .usda/.usdc/.usdz file: only the USD "
                         "animation, streamed while simulating, no frame cap")
@@ -635,11 +657,12 @@ def build_parser() -> argparse.ArgumentParser:
                               "DIR/expressions.png, DIR/sequence.gif and the intermediate folders scan/, adapt/, "
                               "build/.")
     d.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
-    d.add_argument("--seconds", type=_finite_positive, metavar="S",
-                   help="length of the sequence [s], > 0 (default: the full sequence, 8 s; shorter squeezes it)")
+    d.add_argument("--seconds", type=_seconds, metavar="S",
+                   help=f"length of the sequence [s], > 0 and <= {MAX_SECONDS:g} (default: the full sequence, 8 s; "
+                        "shorter squeezes it)")
     d.add_argument("--quick", action="store_true", help="a smoke run: 0.2 s of sequence, small pictures")
-    d.add_argument("--seed", type=_non_negative_int, metavar="N", default=0,
-                   help="seed of the synthetic scan (face proportions, noise, holes, pose), default 0")
+    d.add_argument("--seed", type=_whole_in(0, MAX_SEED), metavar="N", default=0,
+                   help=f"seed of the synthetic scan (face proportions, noise, holes, pose), 0..{MAX_SEED}, default 0")
     d.add_argument("--jaw", choices=["mujoco", "kinematic"], default="mujoco",
                    help="the jaw: the MuJoCo hinge body of head.xml, two-way coupled (default), or kinematic (Eq. 6.4.9)")
     d.set_defaults(func=cmd_demo)
@@ -650,10 +673,11 @@ def build_parser() -> argparse.ArgumentParser:
                                "FILE.png is written beside it.")
     mo.add_argument("a", metavar="A", help="first head (s = 0)")
     mo.add_argument("b", metavar="B", help="second head (s = 1)")
-    mo.add_argument("--steps", type=_positive_int, metavar="N", default=8, help="in-between heads, >= 1 (default 8)")
+    mo.add_argument("--steps", type=_whole_in(1, MAX_MORPH_STEPS), metavar="N", default=8,
+                    help=f"in-between heads, 1..{MAX_MORPH_STEPS} (default 8)")
     mo.add_argument("--out", required=True, type=Path, metavar="FILE.usd[a|c|z]", help="the USD file")
-    mo.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0,
-                    help="time codes per second of the file, > 0 (default 30)")
+    mo.add_argument("--fps", type=_fps, metavar="F", default=30.0,
+                    help=f"time codes per second of the file, > 0 and <= {MAX_FPS:g} (default 30)")
     mo.add_argument("--build", type=Path, metavar="DIR",
                     help="also write every head as a template folder DIR/head_KK with its anatomy in "
                          "DIR/head_KK/build (simulate it with `facewarp simulate DIR/head_KK/build`)")
@@ -666,9 +690,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("expression", metavar="SEQUENCE", help="sequence .json, preset or 'sequence'")
     r.add_argument("heads", nargs="+", metavar="HEAD", help="heads to play it on")
     r.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
-    r.add_argument("--seconds", type=_finite_positive, metavar="S",
-                   help="length [s], > 0 (default: the file's length + 0.5 s; 2 s for a preset, 8 s for 'sequence')")
-    r.add_argument("--fps", type=_finite_positive, metavar="F", default=30.0, help="frames per second, > 0 (default 30)")
+    r.add_argument("--seconds", type=_seconds, metavar="S",
+                   help=f"length [s], > 0 and <= {MAX_SECONDS:g} (default: the file's length + 0.5 s; 2 s for a "
+                        "preset, 8 s for 'sequence')")
+    r.add_argument("--fps", type=_fps, metavar="F", default=30.0,
+                   help=f"frames per second, > 0 and <= {MAX_FPS:g} (default 30)")
     r.set_defaults(func=cmd_retarget)
     return p
 
@@ -722,32 +748,81 @@ def _verbose_env(on: bool):
                 os.environ["FACEWARP_VERBOSE"] = old
 
 
+def _output_targets(args) -> list[tuple[str, Path, str]]:
+    """The outputs of the parsed command: (argument, path, "dir" | "file"), staged by _run."""
+    func = args.func
+    if func in (cmd_template_export, cmd_template_import_ict, cmd_adapt, cmd_build, cmd_demo, cmd_retarget):
+        return [("out", args.out, "dir")]
+    if func is cmd_landmarks_detect:
+        return [("out", args.out, "file")]
+    if func is cmd_simulate:
+        usd = Path(args.out).suffix.lower() in (".usda", ".usdc", ".usdz")  # jobs.animation.USD_SUFFIXES
+        return [("out", args.out, "file" if usd else "dir")]
+    if func is cmd_morph:
+        return [("out", args.out, "file")] + ([("build", args.build, "dir")] if args.build is not None else [])
+    return []
+
+
 def _run(args) -> int:
-    """Run the parsed command; every error becomes one line on stderr and an exit code."""
+    """Run the parsed command; every error becomes one line on stderr and an exit code.
+
+    Outputs are staged (:mod:`facewarp._src.core.outputs`): the command writes into hidden
+    siblings of its ``--out`` (and ``--build``), moved into place only when it finished, under a
+    lock that refuses a second run on the same output. SIGINT and SIGTERM stop it with exit
+    130 / 143 and nothing written. The result is held back until the outputs are in place.
+    """
+    from ._src.core.outputs import Interrupted, interrupted_by, signals_as_exceptions, staged_outputs
+
+    stdout, args.stdout = args.stdout, io.StringIO()
+    staging = None
     try:
-        # anything printed on the way (Warp with --verbose, libraries) goes to stderr: stdout is
-        # for the result alone, written by _emit
-        with contextlib.redirect_stdout(sys.stderr):
-            _check_device(args.device)
-            args.func(args)
+        with signals_as_exceptions():
+            # anything printed on the way (Warp with --verbose, libraries) goes to stderr: stdout is
+            # for the result alone, written by _emit
+            with contextlib.redirect_stdout(sys.stderr):
+                _check_device(args.device)
+                targets = _output_targets(args)
+                with staged_outputs(targets) as staging:
+                    for name, _, _ in targets:
+                        setattr(args, name, staging.path(name))
+                    args.func(args)
+                    if interrupted_by() is not None:  # a library swallowed the KeyboardInterrupt
+                        raise Interrupted(interrupted_by())
+        text = args.stdout.getvalue()
+        stdout.write(staging.unstage(text) if staging is not None else text)
+        stdout.flush()
     except FacewarpError as e:
-        return _error(str(e))
-    except KeyboardInterrupt:
+        return _error(_unstaged(staging, str(e)))
+    except KeyboardInterrupt as e:
         print("facewarp: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return 128 + e.signum if isinstance(e, Interrupted) else EXIT_INTERRUPTED
     except BrokenPipeError:
         _quiet_broken_pipe()
         return EXIT_BROKEN_PIPE
     except OSError as e:
-        return _error(_os_error_text(e))
+        return _error(_unstaged(staging, _os_error_text(e)))
     except MemoryError:
         return _error("out of memory (try a lower level, fewer frames or a smaller mesh)", EXIT_INTERNAL)
     except Exception as e:  # a bug, or a broken installation (ImportError): one line unless --verbose
         if args.verbose:
             raise
         hint = "" if isinstance(e, ImportError) else "; --verbose shows the traceback, please report it"
-        return _error(f"{type(e).__name__}: {e}{hint}", EXIT_INTERNAL)
+        return _error(_unstaged(staging, f"{type(e).__name__}: {e}{hint}"), EXIT_INTERNAL)
     return 0
+
+
+def _unstaged(staging, text: str) -> str:
+    """``text`` (an error message) naming the user's output paths, not the staged ones, on one line."""
+    text = staging.unstage(text) if staging is not None else text
+    return " ".join(text.split("\n")).strip() if "\n" in text else text
+
+
+def readme_reference() -> tuple[str, str, str]:
+    """The README's command reference generated from :func:`build_parser`: (begin marker, block,
+    end marker); ``python -m facewarp._src.cli_reference README.md`` rewrites it in place."""
+    from ._src.cli_reference import BEGIN, END, reference
+
+    return BEGIN, reference(), END
 
 
 if __name__ == "__main__":

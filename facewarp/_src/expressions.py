@@ -218,6 +218,9 @@ def preset(name: str) -> Expression:
     Raises:
         InputError: an unknown name (the message lists the known ones).
     """
+    from .core.checks import check_name
+
+    check_name("name", name)
     try:
         return PRESETS[name]
     except KeyError:
@@ -226,6 +229,9 @@ def preset(name: str) -> Expression:
 
 def blend(weights: dict[str, float], *, name: str | None = None) -> Expression:
     """Weighted sum of presets (name -> weight), activations clamped to [0, 1]."""
+    from .core.checks import check_mapping
+
+    check_mapping("weights", weights)
     acts: dict[str, float] = {}
     ju = jv = drop = 0.0
     for pname, w in weights.items():
@@ -337,6 +343,9 @@ class Timeline:
 
 def timeline_for(name: str, *, attack: float = 0.3, hold: float = 1.0, release: float = 0.3, start: float = 0.2) -> Timeline:
     """A single preset with the given envelope."""
+    from .core.checks import check_name
+
+    check_name("name", name)
     return Timeline([Segment(preset(name), start, attack, hold, release)])
 
 
@@ -370,8 +379,12 @@ def load_sequence(path: str | os.PathLike) -> Timeline:
 
     ``expression`` is a preset name, a blend ``{"blend": {"smile": 0.5, "surprise": 0.5}}`` or
     explicit muscles with optional ``jaw_deg`` or ``jaw_drop_mm`` (chin drop [mm], converted per
-    head) and ``jaw_side_deg``.
+    head) and ``jaw_side_deg``. Unknown keys are refused; every error names the file and the
+    segment.
     """
+    from .core.checks import check_path
+
+    check_path("path", path)
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such sequence file")
@@ -384,28 +397,52 @@ def load_sequence(path: str | os.PathLike) -> Timeline:
     segs = []
     for i, s in enumerate(data["segments"]):
         src = f"{path}: segment {i}"
-        if not isinstance(s, dict) or "expression" not in s:
-            raise InputError(f"{src}: expected an object with an 'expression'")
-        e = s["expression"]
-        if isinstance(e, str):
-            expr = preset(e)
-        elif isinstance(e, dict) and "blend" in e:
-            if not isinstance(e["blend"], dict) or not e["blend"]:
-                raise InputError(f'{src}: blend must be an object {{"preset": weight, ...}}')
-            expr = blend({str(k): _num(src, e["blend"], k, 0.0, signed=True) for k in e["blend"]})
-        elif isinstance(e, dict) and "muscles" in e:
-            if not isinstance(e["muscles"], dict):
-                raise InputError(f'{src}: muscles must be an object {{"muscle": activation, ...}}')
-            if "jaw_deg" in e and "jaw_drop_mm" in e:
-                raise InputError(f"{src}: give jaw_deg or jaw_drop_mm, not both")
-            drop = _num(src, e, "jaw_drop_mm", 0.0) * 1e-3 if "jaw_drop_mm" in e else None
-            expr = Expression(f"segment{i}", dict(e["muscles"]), math.radians(_num(src, e, "jaw_deg", 0.0)),
-                              math.radians(_num(src, e, "jaw_side_deg", 0.0, signed=True)), jaw_drop_m=drop)
-        else:
-            raise InputError(f"{src}: expression must be a preset name, a blend or muscles")
-        segs.append(Segment(expr, _num(src, s, "start", 0.0), _num(src, s, "attack", 0.3), _num(src, s, "hold", 1.0),
-                            _num(src, s, "release", 0.3), _num(src, s, "weight", 1.0)))
+        try:
+            segs.append(_load_segment(src, i, s))
+        except InputError as err:  # from Expression / preset: name the file and the segment
+            text = str(err)
+            raise InputError(text if text.startswith(src) else f"{src}: {text}") from None
     return Timeline(segs)
+
+
+SEGMENT_KEYS = ("expression", "start", "attack", "hold", "release", "weight")
+"""Keys of a segment of a sequence file."""
+MUSCLES_KEYS = ("muscles", "jaw_deg", "jaw_drop_mm", "jaw_side_deg")
+"""Keys of an expression given by its muscles in a sequence file."""
+
+
+def _unknown_keys(src: str, d: dict, known) -> None:
+    extra = [k for k in d if k not in known]
+    if extra:
+        raise InputError(f"{src}: unknown key {extra[0]!r} (expected {', '.join(known)})")
+
+
+def _load_segment(src: str, i: int, s) -> Segment:
+    """Segment ``i`` of a sequence file (see :func:`load_sequence`); ``src`` names it in errors."""
+    if not isinstance(s, dict) or "expression" not in s:
+        raise InputError(f"{src}: expected an object with an 'expression'")
+    _unknown_keys(src, s, SEGMENT_KEYS)
+    e = s["expression"]
+    if isinstance(e, str):
+        expr = preset(e)
+    elif isinstance(e, dict) and "blend" in e:
+        _unknown_keys(f"{src}: expression", e, ("blend",))
+        if not isinstance(e["blend"], dict) or not e["blend"]:
+            raise InputError(f'{src}: blend must be an object {{"preset": weight, ...}}')
+        expr = blend({str(k): _num(src, e["blend"], k, 0.0, signed=True) for k in e["blend"]})
+    elif isinstance(e, dict) and "muscles" in e:
+        _unknown_keys(f"{src}: expression", e, MUSCLES_KEYS)
+        if not isinstance(e["muscles"], dict):
+            raise InputError(f'{src}: muscles must be an object {{"muscle": activation, ...}}')
+        if "jaw_deg" in e and "jaw_drop_mm" in e:
+            raise InputError(f"{src}: give jaw_deg or jaw_drop_mm, not both")
+        drop = _num(src, e, "jaw_drop_mm", 0.0) * 1e-3 if "jaw_drop_mm" in e else None
+        expr = Expression(f"segment{i}", dict(e["muscles"]), math.radians(_num(src, e, "jaw_deg", 0.0)),
+                          math.radians(_num(src, e, "jaw_side_deg", 0.0, signed=True)), jaw_drop_m=drop)
+    else:
+        raise InputError(f"{src}: expression must be a preset name, a blend or muscles")
+    return Segment(expr, _num(src, s, "start", 0.0), _num(src, s, "attack", 0.3), _num(src, s, "hold", 1.0),
+                   _num(src, s, "release", 0.3), _num(src, s, "weight", 1.0))
 
 
 def expression_from_activations(spec: str, *, name: str = "activations") -> Expression:
@@ -457,6 +494,10 @@ def timeline_from_spec(expression: str, seconds: float) -> Timeline:
             of a sequence ``.json`` file (:func:`load_sequence`).
         seconds: Length of the animation [s], > 0.
     """
+    if not isinstance(expression, (str, os.PathLike)):
+        raise InputError(f"expression: expected a preset name, 'sequence', a sequence file or 'muscle=value,...', "
+                         f"got {type(expression).__name__}")
+    expression = os.fspath(expression)
     if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
         raise InputError(f"seconds: expected a positive finite number, got {seconds!r}")
     if expression in PRESETS:

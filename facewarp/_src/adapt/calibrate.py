@@ -102,6 +102,10 @@ def calibrate(
     Raises:
         InputError: Fewer than 4 usable shared FDPs, or the shared FDPs are coplanar.
     """
+    from ..core.checks import check_landmark_dict
+
+    check_landmark_dict("scan_landmarks", scan_landmarks)
+    check_landmark_dict("template_landmarks", template_landmarks)
     shared = [k for k in scan_landmarks if k in template_landmarks]
     if fdps is not None:
         missing = [k for k in fdps if k not in scan_landmarks or k not in template_landmarks]

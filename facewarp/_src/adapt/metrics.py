@@ -124,6 +124,9 @@ def distance_error(
     Returns:
         :class:`DistanceError`.
     """
+    from ..core.checks import check_array
+
+    check_array("V", V, shape=(None, 3))
     from ..geometry.surface import MeshQuery
 
     V = np.asarray(V, dtype=np.float64)
@@ -237,6 +240,10 @@ def vertex_error(V1, V2, *, mask=None, region=None) -> VertexError:
     Returns:
         :class:`VertexError`.
     """
+    from ..core.checks import check_array
+
+    check_array("V1", V1, shape=(None, 3))
+    check_array("V2", V2, shape=(None, 3))
     V1 = np.asarray(V1, dtype=np.float64)
     V2 = np.asarray(V2, dtype=np.float64)
     if V1.shape != V2.shape or V1.ndim != 2 or V1.shape[1] != 3:

@@ -109,16 +109,15 @@ class AdaptOptions:
             raise InputError(f"refine must be one of {', '.join(REFINE_MODES)}, got {self.refine!r}")
         if self.correspondence not in ("closest", "ray"):
             raise InputError(f"correspondence must be 'closest' or 'ray', got {self.correspondence!r}")
-        levels = int(self.levels)
-        if levels < 0:
-            raise InputError(f"levels must be >= 0, got {levels}")
+        from ..core.limits import MAX_ADAPT_LEVELS, check_count
+
+        levels = check_count("levels", self.levels, low=0, high=MAX_ADAPT_LEVELS)
+        from ..core.checks import check_int, check_number
+
         for name in ("coverage_points", "curvature_points", "inner_iterations", "field_iterations", "land_iterations"):
-            if int(getattr(self, name)) < 0:
-                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+            check_int(name, getattr(self, name), low=0, high=1_000_000)
         for name in ("rho", "sigma_factor", "normal_agreement", "alpha", "beta", "land_smoothing", "field_fdp_weight"):
-            v = float(getattr(self, name))
-            if not np.isfinite(v):
-                raise InputError(f"{name} must be finite, got {v}")
+            check_number(name, getattr(self, name))
         if self.sigma0 is not None and not float(self.sigma0) > 0:
             raise InputError(f"sigma0 must be positive, got {self.sigma0}")
         stiff = tuple(float(s) for s in self.field_stiffness)

@@ -176,6 +176,9 @@ def load_head(path) -> "Template":
     Raises:
         InputError: naming the path and what is wrong with it.
     """
+    from ..core.checks import check_path
+
+    check_path("path", path)
     from ..template import MAX_LEVEL, default_template
     from ..template.files import load_template_dir
 

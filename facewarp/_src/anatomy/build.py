@@ -100,7 +100,8 @@ def build_anatomy(head, *, layers: int = 1, defs=None, placements=None, check_in
 
     Args:
         head: A :class:`facewarp.Template` (or any object with its fields and ``landmarks()``).
-        layers: Tet layers of the skin.
+        layers: Tet layers of the skin, 1..16 (:data:`~facewarp._src.core.limits.MAX_LAYERS`); the memory
+            they need is checked against the machine's first.
         defs: Muscle definitions (default: the shipped ones).
         placements: Muscle name -> skin :class:`SurfacePoints` to reuse (same topology).
         check_intersections: Include the boundary self-intersection count in the report.
@@ -108,8 +109,15 @@ def build_anatomy(head, *, layers: int = 1, defs=None, placements=None, check_in
     Returns:
         :class:`Anatomy`.
     """
-    if not (isinstance(layers, (int, np.integer)) and not isinstance(layers, bool) and layers >= 1):
-        raise InputError(f"layers: expected a whole number >= 1, got {layers!r}")
+    from ..core.checks import check_head_arg
+
+    check_head_arg("head", head)
+    from ..core.limits import MAX_LAYERS, check_count, check_memory, estimate_build_bytes
+
+    check_count("layers", layers, high=MAX_LAYERS)
+    if hasattr(head, "faces") and hasattr(head, "vertices"):
+        check_memory(estimate_build_bytes(len(head.vertices), len(head.faces), layers),
+                     f"layers: {layers} tet layers under {len(head.faces)} skin triangles")
     check_head(head)
     skin = build_skin_layer(head, layers=layers)
     lips = separate_skin_lips(head, skin)  # lips that cross at rest moved apart (anatomy/lips.py)
@@ -184,6 +192,10 @@ def write_anatomy(anatomy: Anatomy, out_dir: str | os.PathLike) -> list[Path]:
     Returns:
         The written paths.
     """
+    from ..core.checks import check_has, check_path
+
+    check_has("anatomy", anatomy, ("head", "skin", "muscles"), "an Anatomy (build_anatomy)")
+    check_path("out_dir", out_dir)
     from ..core.fileio import atomic_write, write_json
 
     out = Path(out_dir)

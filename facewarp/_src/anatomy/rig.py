@@ -127,6 +127,9 @@ def _vertex_region_amounts(head, jaw: JawKinematic) -> np.ndarray:
 
 def face_rig_from_anatomy(anatomy, *, muscle_stiffness: float = MUSCLE_STIFFNESS) -> FaceRig:
     """Pack an :class:`~facewarp._src.anatomy.Anatomy` for the solver."""
+    from ..core.checks import check_has
+
+    check_has("anatomy", anatomy, ("head", "skin", "muscles"), "an Anatomy (build_anatomy)")
     head, skin, ms = anatomy.head, anatomy.skin, anatomy.muscles
     lm = head.landmarks()
     jaw = JawKinematic.from_landmarks(head.condyles, lm)
@@ -433,6 +436,9 @@ def build_face(head, *, layers: int = 1, muscle_stiffness: float = MUSCLE_STIFFN
     Returns:
         The :class:`FaceRig`, ready for :class:`~facewarp.FaceSimulator`.
     """
+    from ..core.checks import check_head_arg
+
+    check_head_arg("head", head)
     from .build import build_anatomy
 
     if not (isinstance(muscle_stiffness, (int, float)) and np.isfinite(muscle_stiffness) and muscle_stiffness > 0):

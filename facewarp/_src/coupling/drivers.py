@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..core.errors import InputError
 
-__all__ = ["JAWS", "KinematicJawDriver", "MujocoJawDriver", "jaw_driver"]
+__all__ = ["JAWS", "KinematicJawDriver", "MujocoJawDriver", "jaw_driver", "load_mjcf"]
 
 JAWS = ("kinematic", "mujoco")
 """How the jaw is driven: the kinematic jaw of Eq. 6.4.9 (angles set per frame) or the MuJoCo
@@ -37,6 +37,24 @@ class KinematicJawDriver:
         self.sim.step()
 
 
+def load_mjcf(mjcf):
+    """The ``mujoco.MjModel`` of a head's ``head.xml`` (or the ``scene.xml`` beside it, which
+    includes it with the options); a missing or broken file is one :class:`InputError` line naming
+    it (MuJoCo's parse errors span several lines)."""
+    from .mjcf import SCENE_NAME
+    from .mujoco import _mujoco
+
+    mj = _mujoco()
+    if mjcf is None or not Path(mjcf).is_file():
+        raise InputError(f"jaw: the MuJoCo jaw needs the head's head.xml, not found at {mjcf}")
+    scene = Path(mjcf).with_name(SCENE_NAME)  # the head file's options (gravity, integrator) live there
+    path = scene if scene.is_file() else Path(mjcf)
+    try:
+        return mj.MjModel.from_xml_path(str(path))
+    except Exception as e:  # MuJoCo's parse errors are multi-line ValueErrors
+        raise InputError(f"{path}: not a valid MuJoCo model ({' '.join(str(e).split())})") from None
+
+
 class MujocoJawDriver:
     """The jaw as the MuJoCo hinge body of ``head.xml``: the expression's angles are the actuator
     targets (``jaw_open``, ``jaw_side``), :class:`~facewarp.MujocoJaw` steps skin and body together.
@@ -52,14 +70,10 @@ class MujocoJawDriver:
     name = "mujoco"
 
     def __init__(self, sim, mjcf):
-        from .mjcf import SCENE_NAME
         from .mujoco import MujocoJaw, _mujoco
 
-        if mjcf is None or not Path(mjcf).is_file():
-            raise InputError(f"jaw: the MuJoCo jaw needs the head's head.xml, not found at {mjcf}")
         mj = _mujoco()
-        scene = Path(mjcf).with_name(SCENE_NAME)  # the head file's options (gravity, integrator) live there
-        self.model = mj.MjModel.from_xml_path(str(scene if scene.is_file() else mjcf))
+        self.model = load_mjcf(mjcf)
         self.data = mj.MjData(self.model)
         self.coupler = MujocoJaw(sim, self.model, self.data)
         p = self.coupler.prefix

@@ -37,8 +37,10 @@ GRAVITY = np.array([0.0, -9.81, 0.0])
 
 def check_pose(R, t) -> tuple[np.ndarray, np.ndarray]:
     """Validate a pose: R (3, 3) a rotation (orthonormal, det +1 within 1e-4), t (3,) [m]."""
-    R = np.asarray(R, np.float64)
-    t = np.asarray(t, np.float64)
+    from ..core.checks import check_array
+
+    R = check_array("R", R, shape=(3, 3), finite=False)
+    t = check_array("t", t, shape=(3,), finite=False)
     if R.shape != (3, 3) or not np.isfinite(R).all():
         raise InputError(f"R: expected a finite (3, 3) rotation matrix, got shape {R.shape}")
     if t.shape != (3,) or not np.isfinite(t).all():

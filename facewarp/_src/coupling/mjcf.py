@@ -231,6 +231,9 @@ def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_he
     Returns:
         The MJCF document as a string.
     """
+    from ..core.checks import check_head_arg
+
+    check_head_arg("head", head)
     for arg, v in (("kp", kp), ("joint_damping", joint_damping), ("neck_kp", neck_kp)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise InputError(f"{arg}: expected a non-negative number, got {v!r}")
@@ -390,6 +393,10 @@ def scene_mjcf(head_file: str = "head.xml", *, up: str = "z", head=None, name: s
 def write_head_mjcf(path: str | os.PathLike, head, *, scene: bool = True, **kwargs) -> Path:
     """Write :func:`head_mjcf` to ``path`` and, with ``scene``, :func:`scene_mjcf` to ``scene.xml``
     beside it (atomically). Returns the head file's path."""
+    from ..core.checks import check_head_arg, check_path
+
+    check_path("path", path)
+    check_head_arg("head", head)
     path = Path(path)
     text = head_mjcf(head, **kwargs)
     scene_text = scene_mjcf(path.name, up=kwargs.get("up", "z"), head=head) if scene else None

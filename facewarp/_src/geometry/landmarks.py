@@ -206,6 +206,9 @@ def fapu(landmarks: dict[str, np.ndarray]) -> dict[str, float]:
         InputError: An FDP is missing (named), or a distance is not positive (the landmarks
             are not in the MPEG-4 frame).
     """
+    from ..core.checks import check_landmark_dict
+
+    check_landmark_dict("landmarks", landmarks)
     definitions = {
         "ES0": ("3.5", "3.6", 0),
         "IRISD0": ("3.1", "3.3", 1),
@@ -318,6 +321,9 @@ def load_landmarks(path: str | os.PathLike, *, units: str = "m") -> dict[str, np
             is not an object, an unknown FDP id, a position that is not 3 finite numbers, a
             duplicate id, or no landmarks at all. The one-line message starts with the path.
     """
+    from ..core.checks import check_path
+
+    check_path("path", path)
     scale = unit_scale(units)
     path = Path(path)
     if not path.exists():
@@ -350,6 +356,10 @@ def save_landmarks_json(path: str | os.PathLike, lm: dict[str, np.ndarray], *, u
     Raises:
         InputError: An unknown FDP id or a position that is not 3 finite numbers.
     """
+    from ..core.checks import check_landmark_dict, check_path
+
+    check_path("path", path)
+    check_landmark_dict("lm", lm)
     scale = unit_scale(units)
     out = {}
     for key in sorted(lm, key=lambda k: fdp_sort_key(k) if k in FDP_CATALOGUE else (1 << 30, 0)):

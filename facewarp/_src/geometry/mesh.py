@@ -84,6 +84,18 @@ class Mesh:
         """Whether the mesh carries colour: vertex colours, or a texture with corner UVs."""
         return self.colors is not None or (self.texture is not None and self.corner_uv is not None)
 
+    def __post_init__(self):
+        """Checks the arrays: finite (n, 3) vertices, (m, 3) whole-number faces indexing them,
+        (n, 2) finite UVs or None (an :class:`InputError` naming the field otherwise)."""
+        from ..core.checks import check_array, check_indices
+
+        self.vertices = check_array("Mesh vertices", self.vertices, shape=(None, 3))
+        self.faces = check_indices("Mesh faces", self.faces, len(self.vertices), shape=(None, 3))
+        if self.uv is not None:
+            self.uv = check_array("Mesh uv", self.uv, shape=(len(self.vertices), 2))
+        if not isinstance(self.name, str):
+            raise InputError(f"Mesh name: expected a string, got {type(self.name).__name__}")
+
     @property
     def vertex_count(self) -> int:
         return len(self.vertices)
@@ -120,7 +132,8 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m") -> Mesh:
     ``f`` are ignored. PLY, STL, OFF, GLB, GLTF: ``trimesh.load(..., process=False,
     force="mesh")``; a scene with several geometries is concatenated (transforms applied); a
     textured mesh (glTF splits its vertices along UV seams) and an STL (a triangle soup) have
-    equal positions welded into one vertex (a textured mesh's UVs kept per corner, ``corner_uv``).
+    equal positions welded into one vertex (a textured mesh's UVs kept per corner, ``corner_uv``). An ASCII PLY must hold the lines
+    its header promises.
 
     Args:
         path: Mesh file; the format is chosen by its suffix (:data:`MESH_SUFFIXES`).
@@ -134,6 +147,9 @@ def load_mesh(path: str | os.PathLike, *, units: str = "m") -> Mesh:
             file, a non-finite coordinate, no faces, or a face index out of range. The
             one-line message starts with the path.
     """
+    from ..core.checks import check_path
+
+    check_path("path", path)
     scale = unit_scale(units)
     path = Path(path)
     _check_file(path)
@@ -356,6 +372,8 @@ def _read_trimesh(path: Path, look: dict | None = None) -> tuple[np.ndarray, np.
         loaded = trimesh.load(str(path), process=False, force="mesh")
     except Exception as e:  # trimesh raises many types for bad files
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        if isinstance(e, ImportError):  # trimesh fell back to a text decoder it cannot import: not this format
+            msg = f"the file is damaged or not a {path.suffix.lower()[1:].upper()} file"
         raise InputError(f"{path}: cannot read as {path.suffix.lower()[1:].upper()} ({msg})") from None
     if isinstance(loaded, trimesh.Scene):  # force="mesh" on an empty scene
         geoms = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
@@ -368,33 +386,77 @@ def _read_trimesh(path: Path, look: dict | None = None) -> tuple[np.ndarray, np.
     F = np.asarray(loaded.faces, dtype=np.int64).reshape(-1, 3)
     if len(F) == 0:
         raise InputError(f"{path}: no faces")
-    uv = None
+    if path.suffix.lower() == ".ply":
+        _check_ply_counts(path, len(V), len(F))
     visual = getattr(loaded, "visual", None)
-    if visual is not None and getattr(visual, "kind", None) == "texture":
-        tuv = getattr(visual, "uv", None)
-        if tuv is not None:
-            tuv = np.asarray(tuv, dtype=np.float64)
-            if tuv.shape == (len(V), 2):
-                uv = tuv.copy()
-                if look is not None:
-                    look["corner_uv"] = uv[F]
-                    mat = getattr(visual, "material", None)
-                    img = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
-                    look["texture"] = _image_rgb(img)
-                    # glTF keeps one UV per vertex, so its vertices are split along the UV seams:
-                    # weld equal positions back into one surface (the UVs stay per corner)
-                    V, inverse = np.unique(V, axis=0, return_inverse=True)
-                    F = inverse.reshape(-1)[F]
-                    uv = None
-    elif path.suffix.lower() == ".stl":
-        # STL is a triangle soup (three vertices of its own per triangle): weld equal positions
-        V, inverse = np.unique(V, axis=0, return_inverse=True)
-        F = inverse.reshape(-1)[F]
-    elif visual is not None and getattr(visual, "kind", None) == "vertex" and look is not None:
+    kind = getattr(visual, "kind", None) if visual is not None else None
+    tuv = None  # per-vertex UVs of a textured mesh, read before the copies are merged
+    if kind == "texture" and getattr(visual, "uv", None) is not None:
+        tuv = np.asarray(visual.uv, dtype=np.float64)
+        if tuv.shape != (len(V), 2):
+            tuv = None
+    vc = None
+    if kind == "vertex" and look is not None:
         vc = np.asarray(visual.vertex_colors)
-        if vc.shape[0] == len(V) and vc.shape[1] >= 3:
-            look["colors"] = _as_unit_colors(vc[:, :3])
+        if not (vc.ndim == 2 and vc.shape[0] == len(V) and vc.shape[1] >= 3):
+            vc = None
+    if tuv is not None and look is not None:
+        # the UVs stay per corner (glTF splits its vertices along the UV seams; they are merged below)
+        look["corner_uv"] = tuv[F]
+        mat = getattr(visual, "material", None)
+        img = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
+        look["texture"] = _image_rgb(img)
+    merged = False
+    if np.isfinite(V).all() and len(V) <= 3 * len(F) and ((F >= 0) & (F < len(V))).all():
+        # STL stores three corners per triangle, never shared, and other exporters (trimesh's
+        # own, GLB at UV seams) may write copies too: merge the copies of each vertex (kept in
+        # order of first appearance), or triangles are islands (no normals, no curvature)
+        _, first, inv = np.unique(V, axis=0, return_index=True, return_inverse=True)
+        if len(first) < len(V):
+            order = np.argsort(first)
+            rank = np.empty_like(order)
+            rank[order] = np.arange(len(order))
+            keep = np.sort(first)
+            V, F, merged = V[keep], rank[inv.reshape(-1)][F], True
+            if vc is not None:
+                vc = vc[keep]
+    if vc is not None:
+        look["colors"] = _as_unit_colors(vc[:, :3])
+    uv = tuv.copy() if tuv is not None and not merged and look is None else None
     return V, F, uv
+
+
+def _check_ply_counts(path: Path, vertex_count: int, face_count: int) -> None:
+    """An ASCII PLY must hold as many data lines as its header's elements promise (trimesh reads
+    face lines as vertices when the header promises too many)."""
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    end = head.find(b"end_header")
+    if end < 0:
+        raise InputError(f"{path}: PLY header has no end_header line")
+    header = head[:end].decode("ascii", "replace").splitlines()
+    if not any(line.strip().startswith("format ascii") for line in header):
+        return  # binary: trimesh checks the length itself
+    counts = {}
+    for line in header:
+        w = line.split()
+        if len(w) == 3 and w[0] == "element":
+            try:
+                counts[w[1]] = int(w[2])
+            except ValueError:
+                raise InputError(f"{path}: PLY header line {line.strip()!r} has no element count") from None
+    with open(path, "rb") as f:
+        data = f.read()
+    body = data[data.find(b"end_header") + len(b"end_header"):].split(b"\n", 1)[-1]
+    lines = sum(1 for line in body.splitlines() if line.strip())
+    promised = sum(counts.values())
+    if lines != promised:
+        what = ", ".join(f"{n} {k}" for k, n in counts.items())
+        raise InputError(f"{path}: the PLY header promises {what} ({promised} lines) but the file holds {lines} "
+                         "data lines (truncated or a wrong header)")
+    if counts.get("vertex", vertex_count) != vertex_count or counts.get("face", face_count) < face_count:
+        raise InputError(f"{path}: the PLY header promises {counts.get('vertex')} vertices and {counts.get('face')} "
+                         f"faces, read {vertex_count} and {face_count}")
 
 
 # ----------------------------------------------------------------------------------------
@@ -498,20 +560,23 @@ def save_obj(path: str | os.PathLike, V, F, *, uv=None, face_uv=None, units: str
     """
     from .surface import _check_VF
 
+    from ..core.checks import check_array
+
     scale = unit_scale(units)
     V, F = _check_VF(V, F)
+    check_array("V", V, shape=(None, 3))  # finite: an OBJ has no NaN
     if uv is not None:
         uv = np.asarray(uv, dtype=np.float64)
         if face_uv is None and uv.shape != (len(V), 2):
-            raise ValueError(f"uv must have shape ({len(V)}, 2), got {uv.shape}")
+            raise InputError(f"uv must have shape ({len(V)}, 2), got {uv.shape}")
         if uv.ndim != 2 or uv.shape[1] != 2:
-            raise ValueError(f"uv must have shape (k, 2), got {uv.shape}")
+            raise InputError(f"uv must have shape (k, 2), got {uv.shape}")
     if face_uv is not None:
         if uv is None:
-            raise ValueError("face_uv needs uv")
+            raise InputError("face_uv needs uv")
         face_uv = np.asarray(face_uv, dtype=np.int64)
         if face_uv.shape != F.shape or face_uv.min() < 0 or face_uv.max() >= len(uv):
-            raise ValueError(f"face_uv must have shape {F.shape} with indices into uv ({len(uv)}), got {face_uv.shape}")
+            raise InputError(f"face_uv must have shape {F.shape} with indices into uv ({len(uv)}), got {face_uv.shape}")
     with atomic_write(path, "w") as f:
         f.write(f"# facewarp OBJ: {len(V)} vertices, {len(F)} triangles, units {units}\n")
         if mtl is not None:
@@ -594,10 +659,14 @@ class SurfacePoints:
     bary: np.ndarray
 
     def __post_init__(self):
-        self.face = np.asarray(self.face, dtype=np.int64).reshape(-1)
-        self.bary = np.asarray(self.bary, dtype=np.float64).reshape(-1, 3)
+        from ..core.checks import check_array
+
+        self.face = check_array("face", np.reshape(self.face, -1) if np.ndim(self.face) == 0 else self.face,
+                                shape=(None,), kind="i")
+        self.bary = check_array("bary", self.bary, shape=(None, 3) if np.ndim(self.bary) == 2 else (3,))
+        self.bary = self.bary.reshape(-1, 3)
         if len(self.face) != len(self.bary):
-            raise ValueError(f"face and bary must have the same length, got {len(self.face)} and {len(self.bary)}")
+            raise InputError(f"face and bary must have the same length, got {len(self.face)} and {len(self.bary)}")
 
     def __len__(self) -> int:
         return len(self.face)

@@ -86,6 +86,10 @@ def fit_similarity(src, dst, *, with_scale: bool = True, weights=None) -> Simila
     Returns:
         The :class:`Similarity`.
     """
+    from ..core.checks import check_array
+
+    check_array("src", src, shape=(None, 3))
+    check_array("dst", dst, shape=(None, 3))
     src = np.asarray(src, dtype=np.float64)
     dst = np.asarray(dst, dtype=np.float64)
     if src.ndim != 2 or src.shape[1] != 3 or src.shape != dst.shape:

@@ -37,8 +37,11 @@ __all__ = ["winding_numbers",
 def check_cells(V, C, arity: int, letter: str) -> tuple[np.ndarray, np.ndarray]:
     """V (n, 3) float64 and cells C (k, arity) int64 indexing V, or an :class:`InputError` naming
     ``letter`` ("F" for triangles, "T" for tets) and what was expected."""
-    V = np.asarray(V, dtype=np.float64)
-    C = np.asarray(C)
+    try:
+        V = np.asarray(V, dtype=np.float64)
+        C = np.asarray(C)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"V, {letter}: expected numeric arrays ({e})") from None
     if V.ndim != 2 or V.shape[1] != 3:
         raise InputError(f"V must have shape (n, 3), got {V.shape}")
     if C.ndim != 2 or C.shape[1] != arity:
@@ -56,9 +59,12 @@ def _check_VF(V, F) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _check_points(P, name: str) -> np.ndarray:
-    P = np.asarray(P, dtype=np.float64)
+    try:
+        P = np.asarray(P, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"{name}: expected a numeric array of shape (k, 3) ({e})") from None
     if P.ndim != 2 or P.shape[1] != 3:
-        raise ValueError(f"{name} must have shape (k, 3), got {P.shape}")
+        raise InputError(f"{name} must have shape (k, 3), got {P.shape}")
     return P
 
 

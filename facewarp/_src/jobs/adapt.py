@@ -15,6 +15,8 @@ figures that need no truth), ``error_heatmap.png`` (distance to the scan on the 
 
 from __future__ import annotations
 
+import contextlib
+
 from pathlib import Path
 
 import numpy as np
@@ -148,6 +150,18 @@ def detect_landmarks_files(scan, out_json, *, units="m", template_dir=None, temp
     return rep
 
 
+@contextlib.contextmanager
+def _naming_calibration(landmarks: str, template: str):
+    """Calibration errors (too few or coplanar FDPs, a scale that says the units differ) name the
+    two landmark files."""
+    try:
+        yield
+    except InputError as e:
+        if str(e).startswith("calibration"):
+            raise InputError(f"{landmarks} and {template}: {e}") from None
+        raise
+
+
 def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, template_landmarks=None,
                 method="multilevel", levels=None, markers=None, units=None, template_units="m", device="cpu",
                 progress=None, texture_size: int = 2048) -> dict:
@@ -221,12 +235,16 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
             raise InputError(f"{markers}: markers {', '.join(unknown)} are not FDPs of the template")
         mk = ({k: tlm[k] for k in scan_markers}, scan_markers)
         scan_lm = {k: v for k, v in scan_lm.items() if k not in scan_markers}
-    _check_inputs(scan_mesh, scan_lm, tlm, TV, landmarks=landmarks, scan=scan, device=device)
+    lm_name = f"the FDPs found on {scan}" if detected is not None else str(landmarks)
+    t_name = str(template_landmarks or (Path(template_dir) / "landmarks.json" if template_dir else "the default template"))
+    with _naming_calibration(lm_name, t_name):
+        _check_inputs(scan_mesh, scan_lm, tlm, TV, landmarks=landmarks, scan=scan, device=device)
     make_out_dir(out)
     step("adapting")
     settings = {} if levels is None else {"levels": levels}
-    res = adapt(TV, TF, tlm, scan_mesh.vertices, scan_mesh.faces, scan_lm, method=method, markers=mk, region=groups,
-                device=device, **settings)
+    with _naming_calibration(lm_name, t_name):
+        res = adapt(TV, TF, tlm, scan_mesh.vertices, scan_mesh.faces, scan_lm, method=method, markers=mk,
+                    region=groups, device=device, **settings)
     step("writing")
     if detected is not None:
         save_landmarks_json(out / "detected_landmarks.json", {k: v / scale for k, v in scan_lm.items()}, units="m")

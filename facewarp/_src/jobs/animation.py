@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
-from ..coupling.drivers import JAWS, jaw_driver
+from ..coupling.drivers import JAWS, jaw_driver, load_mjcf
 from ..expressions import Timeline
 from ..sim.play import Sink, play
 
-__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "FdpMotion", "UsdAnimation", "check_usd_path", "part_points",
+__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "FdpMotion", "UsdAnimation", "check_usd_path", "load_mjcf", "part_points",
            "part_transforms", "peak_frames", "play_timeline", "sim_controls"]
 
 USD_SUFFIXES = (".usda", ".usdc", ".usdz")

@@ -29,6 +29,8 @@ import numpy as np
 
 from ..adapt.transfer import load_head
 from ..core.errors import InputError
+from ..core.limits import (MAX_FPS, MAX_SECONDS, MAX_SEED, check_amount, check_count, check_memory,
+                           estimate_build_bytes, estimate_frames_bytes)
 from ..core.fileio import atomic_write, write_json
 from ..coupling.drivers import JAWS, jaw_driver
 from ..expressions import Timeline, thesis_sequence
@@ -232,6 +234,14 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
     if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
         raise InputError(f"fps: expected a finite number > 0, got {fps!r}")
     timeline, seconds = demo_timeline(QUICK_SECONDS if quick and seconds is None else seconds)
+    check_amount("seconds", seconds, high=MAX_SECONDS)
+    check_amount("fps", fps, high=MAX_FPS)
+    check_count("seed", seed, low=0, high=MAX_SEED)
+    frames = round(seconds * fps) + 1  # USD time samples (held until the file is saved) and GIF pictures
+    level0 = default_template(0)
+    check_memory(estimate_build_bytes(len(level0.vertices), len(level0.faces), 1)
+                 + estimate_frames_bytes(frames, 2 * len(level0.vertices)),
+                 f"seconds: {frames} frames of the demo's head")
     size = 200 if quick else 360
     face_height = 160 if quick else 400
     make_out_dir(out)

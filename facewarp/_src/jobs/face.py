@@ -17,6 +17,8 @@ from ..adapt.transfer import load_head
 from ..anatomy.build import build_anatomy, write_anatomy
 from ..core.errors import InputError
 from ..core.fileio import write_json
+from ..core.limits import (MAX_FPS, MAX_LAYERS, MAX_SECONDS, MAX_SUBSTEPS, check_amount, check_count,
+                           check_memory, check_steps, estimate_build_bytes, estimate_sim_bytes)
 from ..coupling.mjcf import write_head_mjcf
 from ..coupling.drivers import JAWS, jaw_driver
 from ..expressions import Expression, Timeline, timeline_from_spec
@@ -28,7 +30,7 @@ from ..present.strips import frames_sheet, sheet_font_size
 from ..sim.frames import save_frames_npz
 from ..sim.play import FrameRecorder, _play
 from ..sim.simulator import FaceSimulator
-from .animation import USD_SUFFIXES, FdpMotion, UsdAnimation, check_usd_path, peak_frames
+from .animation import USD_SUFFIXES, FdpMotion, UsdAnimation, check_usd_path, load_mjcf, peak_frames
 from .checks import check_out_dir, make_out_dir
 
 __all__ = ["MAX_FRAMES", "USD_NAME", "build_files", "build_head_files", "simulate_files"]
@@ -60,8 +62,7 @@ def _check_mjcf_options(up, prefix) -> None:
 
 
 def _check_layers(layers) -> None:
-    if not (isinstance(layers, (int, np.integer)) and not isinstance(layers, bool) and layers >= 1):
-        raise InputError(f"layers: expected a whole number >= 1, got {layers!r}")
+    check_count("layers", layers, high=MAX_LAYERS)
 
 
 def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progress=None, up: str = "z",
@@ -78,6 +79,8 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     out = check_out_dir(out)
     _check_layers(layers)
     _check_mjcf_options(up, prefix)
+    check_memory(estimate_build_bytes(len(head.vertices), len(head.faces), layers),
+                 f"layers: {layers} tet layers under {len(head.faces)} skin triangles")
     make_out_dir(out)
     step("skin layer and muscles")
     anatomy = build_anatomy(head, layers=layers)
@@ -172,15 +175,25 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
         jaw = "kinematic" if material == "thesis" else "mujoco"
     if jaw not in JAWS:
         raise InputError(f"jaw: expected one of {', '.join(JAWS)}, got {jaw!r}")
+    check_amount("seconds", seconds, high=MAX_SECONDS)
+    check_amount("fps", fps, high=MAX_FPS)
+    if substeps is not None:
+        check_count("substeps", substeps, high=MAX_SUBSTEPS)
+    check_steps(seconds, fps, substeps)
     if jaw == "mujoco" and material == "thesis":
         raise InputError("the MuJoCo jaw is coupled two-way and needs the physical material: the thesis profile's "
                              "Table 6.3 nodes (0.5 kg each) and hold springs (6e6 N/m) throw the mandible off within "
                              "two frames; use the kinematic jaw (Eq. 6.4.9) or the physical material")
     fr = load_face_rig(head_path)
+    frames = round(seconds * fps) + 1  # kept in memory (a folder) or as USD time samples (a USD file)
+    check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), frames, len(fr.head_vertices)),
+                 f"seconds, fps: {frames} frames of a head of {len(fr.nodes)} nodes and {len(fr.tets)} tets")
     mjcf = (Path(head_path) if Path(head_path).is_dir() else Path(head_path).parent) / "head.xml"
     if jaw == "mujoco" and not mjcf.is_file():
         raise InputError(f"{head_path}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, "
                          "or simulate with the kinematic jaw)")
+    if jaw == "mujoco":
+        load_mjcf(mjcf)  # a broken head.xml fails before the simulator is made
     sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps, solver=solver, material=material)
     driver = jaw_driver(sim, jaw, mjcf=mjcf)
     # the sinks: every frame kept (a folder) or only the FDPs' largest motion (a USD file alone)

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..adapt.transfer import load_head
 from ..core.errors import InputError
+from ..core.limits import MAX_MORPH_STEPS, check_memory, estimate_frames_bytes
 from ..geometry.similarity import Similarity, fit_similarity
 from ..present.animation import label_grid
 from ..present.render import render_mesh, save_png
@@ -40,7 +41,7 @@ __all__ = ["PART_SIMILARITY_TOLERANCE", "blend_heads", "check_same_topology", "m
 PART_SIMILARITY_TOLERANCE = 1e-4
 """Largest residual [m] of a part's similarity fit for the part to be morphed rigidly."""
 
-MAX_STEPS = 10_000
+MAX_STEPS = MAX_MORPH_STEPS
 
 
 def check_same_topology(a, b, names=("A", "B")) -> None:
@@ -179,6 +180,8 @@ def morph_files(head_a, head_b, out, *, steps: int = 8, fps: float = 30.0, build
     step("loading heads")
     a, b = load_head(head_a), load_head(head_b)
     check_same_topology(a, b, names=(str(head_a), str(head_b)))
+    check_memory(estimate_frames_bytes(steps + 2, 4 * len(a.vertices)),
+                 f"steps: {steps + 2} heads of {len(a.vertices)} vertices")
     motions = part_motion(a, b)
     weights = [k / (steps + 1) for k in range(steps + 2)]
     heads = [blend_heads(a, b, s, motions) for s in weights]

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..adapt.transfer import load_head
 from ..core.errors import InputError
+from ..core.limits import MAX_FPS, MAX_HEADS, MAX_SECONDS, check_amount
 from ..core.fileio import write_json
 from ..expressions import PRESETS, load_sequence, timeline_from_spec
 from ..anatomy.rig import build_face
@@ -111,6 +112,11 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
     heads = list(heads)
     if not heads:
         raise InputError("heads: expected at least one head")
+    if len(heads) > MAX_HEADS:
+        raise InputError(f"heads: at most {MAX_HEADS} heads per run, got {len(heads)}")
+    check_amount("fps", fps, high=MAX_FPS)
+    if seconds is not None:
+        check_amount("seconds", seconds, high=MAX_SECONDS)
     if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
         raise InputError(f"fps: expected a finite number > 0, got {fps!r}")
     expression = str(expression)

@@ -9,11 +9,14 @@ The rig is made at build time by :func:`facewarp._src.anatomy.rig.face_rig_from_
 from __future__ import annotations
 
 import io
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..core.checks import check_face_rig
 from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..geometry.jaw import JawKinematic
@@ -121,6 +124,10 @@ _FACE_FIELDS = ("head_vertices", "head_faces", "nodes", "tets", "layer", "surfac
 
 def save_face_rig(path, fr: FaceRig) -> Path:
     """Write ``fr`` to one ``.npz`` file atomically."""
+    from ..core.checks import check_has, check_path
+
+    check_path("path", path)
+    check_has("fr", fr, ("nodes", "tets", "rig"), "a FaceRig")
     arrays = {k: getattr(fr, k) for k in _FACE_FIELDS}
     arrays.update({f"rig_{k}": getattr(fr.rig, k) for k in _RIG_FIELDS})
     arrays["rig_names"] = np.array(fr.rig.names)
@@ -144,11 +151,16 @@ def save_face_rig(path, fr: FaceRig) -> Path:
 
 def load_face_rig(path) -> FaceRig:
     """Read a file written by :func:`save_face_rig` (a ``facewarp build`` output)."""
+    from ..core.checks import check_path
+
+    check_path("path", path)
     path = Path(path)
     if path.is_dir():
         path = path / "face_rig.npz"
     if not path.is_file():
         raise InputError(f"{path}: not found (HEAD must be a `facewarp build` output folder)")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: the file is empty (not a facewarp face rig)")
     try:
         z = np.load(path, allow_pickle=False)
         if "rig_anchor_ctrl" not in z:
@@ -162,11 +174,20 @@ def load_face_rig(path) -> FaceRig:
         opening = {k: z[k] for k in ("opening_vertex", "opening_node", "opening_weight", "head_uv", "head_face_uv")
                    if k in z}
         texture = path.parent / "texture.png"
-        return FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]),
-                       skin_texture=str(texture) if texture.is_file() else None,
-                       **{k: z[k] for k in _FACE_FIELDS}, **opening, contact=contact_from_arrays(z))
-    except (KeyError, ValueError, OSError) as e:
-        raise InputError(f"{path}: not a facewarp face rig ({e})") from None
+        fr = FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]),
+                     skin_texture=str(texture) if texture.is_file() else None,
+                     **{k: z[k] for k in _FACE_FIELDS}, **opening, contact=contact_from_arrays(z))
+    except InputError:
+        raise
+    except (KeyError, ValueError, TypeError, IndexError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        raise InputError(f"{path}: not a facewarp face rig ({_first_line(e)})") from None
+    check_face_rig(fr, str(path))
+    return fr
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(e).strip()
+    return text.splitlines()[0] if text else type(e).__name__
 
 
 def node_jaw_amounts(fr: FaceRig) -> np.ndarray:

@@ -498,6 +498,11 @@ def colormap(values, vmin: float, vmax: float, name: str = "turbo") -> np.ndarra
     Returns:
         RGB in [0, 1], shape (n, 3), float64.
     """
+    from ..core.checks import check_array, check_number
+
+    check_array("values", values, shape=(None,) * np.ndim(values), finite=False)
+    check_number("vmin", vmin)
+    check_number("vmax", vmax)
     values = np.asarray(values, dtype=np.float64)
     if values.ndim != 1:
         raise InputError(f"values must have shape (n,), got {values.shape}")

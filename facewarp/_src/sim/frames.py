@@ -58,6 +58,10 @@ class Frames:
 def save_frames_npz(path, frames: Frames) -> Path:
     """``frames.npz``: points (f, n, 3) [m], times (f,), fdp_ids (84,), fdp_points (f, 84, 3), faces,
     activations (f, M), muscle_names (M,), jaw (f, 2) [rad], muscle_curves (f, M, s, 3)."""
+    from ..core.checks import check_has, check_path
+
+    check_path("path", path)
+    check_has("frames", frames, ("points", "times", "fdp_points"), "Frames (FaceSimulator.run)")
     buf = io.BytesIO()
     np.savez_compressed(buf, points=frames.points, times=frames.times, fdp_ids=frames.fdp_ids,
                         fdp_points=frames.fdp_points, faces=frames.faces, activations=frames.activations,

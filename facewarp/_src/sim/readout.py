@@ -122,6 +122,9 @@ def activation_vector(names: list[str], activations) -> np.ndarray:
     Raises:
         InputError: unknown muscle, wrong length, or a value outside [0, 1] (NaN included).
     """
+    from ..core.checks import check_activations
+
+    activations = check_activations(activations, len(names))
     if hasattr(activations, "activation") and hasattr(activations, "jaw_u"):
         return expression_activations(names, activations)
     if isinstance(activations, dict):
@@ -150,7 +153,9 @@ def jaw_vector(opening: float, side: float = 0.0) -> np.ndarray:
     """
     from ..expressions import JAW_U_MAX, JAW_V_MAX
 
-    u, v = float(opening), float(side)
+    from ..core.checks import check_jaw_angles
+
+    u, v = check_jaw_angles(opening, side)
     if not (np.isfinite(u) and -1e-9 <= u <= JAW_U_MAX + 1e-9):
         raise InputError(f"jaw opening: expected 0..{JAW_U_MAX:.4f} rad (0..60 deg), got {opening!r}")
     if not (np.isfinite(v) and abs(v) <= JAW_V_MAX + 1e-9):

@@ -11,18 +11,21 @@ import time
 
 import numpy as np
 
+from ..core.checks import (check_array, check_choice, check_int, check_positions, check_run_args,
+                           check_simulator_args, check_step_count)
 from ..core.errors import InputError
+from ..core.limits import MAX_ADVANCE_FRAMES
 from ..coupling.head_pose import HeadPose
 from ..expressions import Timeline
 from ..physics.face_rig import FaceRig
 from ..physics.materials import material_profile
 from .frames import Frames, save_frames_npz
 from .play import FrameRecorder, play
-from .readout import activation_vector, fdp_points, head_surface
-from .readout import jaw_vector, muscle_curves, parts_at, surface_index
-from .stepper import SOLVERS, FrameStepper, check_timing, face_stages, frame_timing, make_solver, substep_count
+from .readout import activation_vector, fdp_points, head_surface, jaw_vector, muscle_curves, parts_at, surface_index
+from .stepper import SOLVERS, FrameStepper, face_stages, frame_timing, make_solver
 
 __all__ = ["SOLVERS", "FaceSimulator", "Frames", "face_stages", "save_frames_npz"]
+
 
 class FaceSimulator:
     """A simulated face: the Model of one :class:`~facewarp.FaceRig` on one device, its solver
@@ -61,7 +64,11 @@ class FaceSimulator:
                  contact_modulus: float | None = None):
         from ..physics.model import ModelBuilder
 
-        check_timing(solver, fps, dt, substeps)
+        device = check_simulator_args(fr, device=device, solver=solver, solvers=SOLVERS, dt=dt, substeps=substeps,
+                                      fps=fps, iterations=iterations, tolerance=tolerance, method=method,
+                                      solver_options=solver_options, support_stiffness=support_stiffness,
+                                      edge_damping=edge_damping, mass_scaling=mass_scaling, contact=contact,
+                                      contact_modulus=contact_modulus)
         self.fr, self.fps, self.solver_name, self.material = fr, float(fps), solver, material_profile(material)
         builder = ModelBuilder()
         builder.add_face(fr, material=self.material, edge_damping=edge_damping, support_stiffness=support_stiffness,
@@ -132,10 +139,10 @@ class FaceSimulator:
 
     # ------------------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
-        """Advance by ``dt`` [s] (default one frame, ``1 / fps``) in whole substeps, the controls set
-        since the last step ramping across it. Raises InputError (a bad ``dt``) or SimulationError
-        (a substep made a NaN or an inverted tet)."""
-        n = self.substeps if dt is None else substep_count(dt, self.dt)
+        """Advance by exactly ``dt`` [s] (default one frame, ``1 / fps``), a whole number of the solver's
+        steps (:attr:`dt`; another ``dt`` is refused, not rounded), the controls set since the last step
+        ramping across it. Raises InputError (a bad ``dt``) or SimulationError (a NaN, an inverted tet)."""
+        n = self.substeps if dt is None else check_step_count(dt, self.dt)
         t0 = time.perf_counter()
         if not self._pose.identity:  # the head rides a moving body: loads of the accelerating frame
             f = self._pose.node_forces(self.positions(), self.builder.mass, n * self.dt)
@@ -149,8 +156,7 @@ class FaceSimulator:
 
     def advance(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``1 / fps`` with the current controls."""
-        if not (isinstance(frames, (int, np.integer)) and frames >= 0):
-            raise InputError(f"frames: expected a whole number >= 0, got {frames!r}")
+        check_int("frames", frames, low=0, high=MAX_ADVANCE_FRAMES)
         for _ in range(int(frames)):
             self.step()
 
@@ -187,8 +193,9 @@ class FaceSimulator:
         """Head vertices [m], shape (n, 3), float64 (:func:`.readout.head_surface`) at node positions
         X (default the current state; head frame) and ``jaw_angles`` (default the current jaw), in
         the ``"world"`` frame (the head pose applied) or the ``"head"`` frame."""
-        if frame not in ("world", "head"):
-            raise InputError(f"frame: expected 'world' or 'head', got {frame!r}")
+        check_choice("frame", frame, ("world", "head"))
+        X = check_positions("X", X, len(self.fr.nodes))
+        jaw_angles = None if jaw_angles is None else check_array("jaw_angles", jaw_angles, shape=(2,))
         V = head_surface(self.fr, self.positions() if X is None else X, self._j if jaw_angles is None else jaw_angles,
                          self._surface_index)
         return self._pose.to_world(V) if frame == "world" else V
@@ -199,6 +206,7 @@ class FaceSimulator:
         (:func:`~facewarp.physics.contact_crossings`; 0 each while the contact holds)."""
         from ..physics.contact import contact_crossings
 
+        X = check_positions("X", X, len(self.fr.nodes))
         return contact_crossings(self.fr, self.positions() if X is None else X, self._j)
 
     def fdp(self, fdp_id: str) -> np.ndarray:
@@ -220,6 +228,7 @@ class FaceSimulator:
 
     def muscle_curves(self, samples: int = 24) -> np.ndarray:
         """Muscle fibre polylines at the current state [m], shape (M, samples, 3), float64, world frame."""
+        check_int("samples", samples, low=2, high=10_000)
         C = self._curves(samples)
         return self._pose.to_world(C.reshape(-1, 3)).reshape(C.shape)
 
@@ -233,6 +242,8 @@ class FaceSimulator:
     def run(self, timeline: Timeline, seconds: float, *, progress=None, curve_samples: int = 24, jaw=None) -> Frames:
         """Simulate ``seconds`` of ``timeline`` from rest and keep every frame: :func:`~facewarp.play`
         with a :class:`~facewarp.FrameRecorder` (its ``jaw`` and ``progress``: the same)."""
+        seconds = check_run_args(timeline, seconds, progress, curve_samples, fps=self.fps,
+                                 vertex_count=len(self.fr.head_vertices))
         rec = FrameRecorder(curve_samples=curve_samples)
         play(self, timeline, seconds, sinks=(rec,), jaw=jaw, progress=progress)
         return rec.frames

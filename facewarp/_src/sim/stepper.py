@@ -11,7 +11,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.warp import get_warp
 
-__all__ = ["SOLVERS", "FrameStepper", "check_timing", "face_stages", "frame_timing", "make_solver", "substep_count"]
+__all__ = ["SOLVERS", "FrameStepper", "face_stages", "frame_timing", "make_solver"]
 
 SOLVERS = ("implicit", "verlet")
 """Solvers of :class:`FaceSimulator`: ``implicit`` (backward Euler, a few steps per frame; the
@@ -28,22 +28,6 @@ def face_stages(model) -> dict:
     return {"carry": CarryStage.from_model(model), "jaw": JawStage.from_model(model),
             "support": SupportStage.from_model(model), "muscles": MuscleStage.from_model(model),
             "contact": ContactStage.from_model(model) if model.contact is not None else None}
-
-
-def check_timing(solver: str, fps, dt, substeps) -> None:
-    """The simulator's solver name and frame timing, checked at the public edge.
-
-    Raises:
-        InputError: an unknown solver, a non-positive ``fps`` or ``dt``, ``substeps`` < 1.
-    """
-    if solver not in SOLVERS:
-        raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
-    if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
-        raise InputError(f"fps: expected a positive number, got {fps!r}")
-    if substeps is not None and not (isinstance(substeps, (int, np.integer)) and substeps >= 1):
-        raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
-    if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-        raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
 
 
 def frame_timing(builder, solver: str, fps: float, dt=None, substeps=None, *, mass_scaling: bool = True):
@@ -69,17 +53,6 @@ def make_solver(model, stages, solver: str, *, method=None, iterations=None, tol
         return SolverVerlet(model, stages=stages)
     opts = {"tolerance": 3e-5 if tolerance is None else tolerance, **(solver_options or {})}
     return SolverImplicit(model, stages=stages, method=method, iterations=iterations, **opts)
-
-
-def substep_count(dt, step: float) -> int:
-    """Whole substeps of ``step`` [s] in ``dt`` [s] (at least one).
-
-    Raises:
-        InputError: ``dt`` not a positive finite number.
-    """
-    if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-        raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
-    return max(1, int(round(float(dt) / step)))
 
 
 class FrameStepper:

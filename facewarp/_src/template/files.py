@@ -18,6 +18,8 @@ from __future__ import annotations
 import io
 import json
 import os
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +59,10 @@ def save_template(t: Template, out: str | os.PathLike, *, progress=None) -> list
     Returns:
         The written paths.
     """
+    from ..core.checks import check_head_arg, check_path
+
+    check_head_arg("t", t)
+    check_path("out", out)
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(f"out {out}: exists and is not a folder")
@@ -109,6 +115,9 @@ def save_template(t: Template, out: str | os.PathLike, *, progress=None) -> list
 
 def load_template_dir(path: str | os.PathLike) -> Template:
     """Read a folder written by :func:`save_template` back into a :class:`Template`."""
+    from ..core.checks import check_path
+
+    check_path("path", path)
     path = Path(path)
     if not path.is_dir():
         raise InputError(f"{path}: not a template folder (no such directory)")
@@ -116,6 +125,8 @@ def load_template_dir(path: str | os.PathLike) -> Template:
         if not (path / name).is_file():
             raise InputError(f"{path}: not a template folder ({name} is missing)")
     mesh = load_mesh(path / "template.obj")
+    if (path / "template.npz").stat().st_size == 0:
+        raise InputError(f"{path / 'template.npz'}: the file is empty")
     try:
         z = np.load(path / "template.npz", allow_pickle=False)
         n = len(mesh.vertices)
@@ -136,5 +147,9 @@ def load_template_dir(path: str | os.PathLike) -> Template:
             condyles=z["condyles"], fdp=fdp, parts=parts, level=int(z["level"]),
             thickness_factor=float(z["thickness_factor"]), uv=uv, face_uv=face_uv,
         )
-    except (KeyError, ValueError, OSError) as e:
-        raise InputError(f"{path}: template.npz is unreadable ({e})") from None
+    except InputError:
+        raise
+    except (KeyError, ValueError, TypeError, IndexError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        text = str(e).strip()
+        raise InputError(f"{path / 'template.npz'}: unreadable ({text.splitlines()[0] if text else type(e).__name__})"
+                         ) from None
