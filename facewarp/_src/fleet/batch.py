@@ -22,6 +22,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import shutil
 import time
 from pathlib import Path
 
@@ -219,6 +220,8 @@ def run_batch(scans: list[ScanInput], out, *, steps=STEPS, expression: str = "sm
     finally:
         bar.close()
         executor.close(abort=bool(inflight) or interrupted, handles=list(inflight))
+        for key, step, _ in inflight.values():  # killed halfway: no half-written step folder stays
+            shutil.rmtree(manifest.folder(key) / f".{step}.partial", ignore_errors=True)
         manifest.save()
     summary = write_reports(manifest, keys)
     summary.update(executor=executor.description, tasks_run=counts["done"] + counts["failed"], tasks_kept=kept,
