@@ -77,9 +77,12 @@ def per_step(manifest: dict) -> dict:
         recs = [e["steps"][step] for e in manifest["scans"].values()
                 if e["steps"].get(step, {}).get("status") == "done"]
         secs = [r["seconds"] for r in recs]
+        cpu = [r["cpu_seconds"] for r in recs if r.get("cpu_seconds") is not None]
         rss = [r["worker"]["peak_rss_mib"] for r in recs if r.get("worker") and r["worker"].get("peak_rss_mib")]
         out[step] = {"tasks": len(recs), "seconds_median": round(statistics.median(secs), 2) if secs else None,
                      "seconds_max": round(max(secs), 2) if secs else None, "seconds_sum": round(sum(secs), 2),
+                     "cpu_seconds_median": round(statistics.median(cpu), 2) if cpu else None,
+                     "cpu_seconds_sum": round(sum(cpu), 2),
                      "worker_peak_rss_mib_max": max(rss) if rss else None}
     return out
 
@@ -130,7 +133,14 @@ def main(argv=None) -> int:
         figures["ray_overhead_over_local"] = round(runs["ray"]["wall_s"] / runs["local"]["wall_s"] - 1.0, 4)
         figures["ray_startup_s"] = ray_startup_s(args.workers)
     for mode, r in runs.items():
-        figures.setdefault("per_step_" + mode, per_step(r["manifest"]))
+        steps = per_step(r["manifest"])
+        figures.setdefault("per_step_" + mode, steps)
+        busy = sum(s["seconds_sum"] for s in steps.values())
+        cpu = sum(s["cpu_seconds_sum"] for s in steps.values())
+        # CPU the workers got per second of task: 1.0 on an idle machine; below it when other
+        # processes take the cores (then more workers cannot shorten the wall time)
+        figures[mode].update(task_seconds_sum=round(busy, 2), task_cpu_seconds_sum=round(cpu, 2),
+                             cpu_share_of_tasks=round(cpu / busy, 3) if busy else None)
     print(json.dumps({k: v for k, v in figures.items() if not k.startswith("per_step_")}, indent=1), file=sys.stderr)
     print("wrote", save("fleet_cpu", figures, device="cpu"))
     return 0

@@ -14,7 +14,8 @@ Manifest layout (``"fleet": 1``)::
                      "paths": [every scan path seen with this content],
                      "steps": {STEP: {"status": "done" | "failed" | "skipped", "error": one line | null,
                                       "params": {...}, "outputs": [files, relative to DIR],
-                                      "seconds": s, "worker": {"pid", "host"}, "attempts": n,
+                                      "seconds": s, "cpu_seconds": s, "attempts": n,
+                                      "worker": {"pid", "host", "peak_rss_mib"},
                                       "summary": {...}}}}}}
 """
 

@@ -49,6 +49,17 @@ def _one_line(e: BaseException) -> str:
     return text[: MAX_ERROR - 3] + "..." if len(text) > MAX_ERROR else text
 
 
+def _cpu_seconds() -> float | None:
+    """User + system CPU time of this process so far [s]."""
+    try:
+        import resource
+
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+    except (ImportError, OSError):
+        return None
+
+
 def _peak_rss_mib() -> float | None:
     try:
         import resource
@@ -120,10 +131,11 @@ def run_step(task: dict) -> dict:
     ``task``: ``step`` (adapt, build or simulate), ``name``, ``folder`` (the scan's output folder),
     ``out`` (the batch folder), ``scan``, ``landmarks`` (or None), ``units``, ``params`` (the
     step's options) and ``device``. The record: ``status`` (``done`` or ``failed``), ``error`` (one
-    line or None), ``outputs`` (files relative to ``out``), ``seconds``, ``worker`` (pid, host,
+    line or None), ``outputs`` (files relative to ``out``), ``seconds`` (wall), ``cpu_seconds``
+    (user + system CPU time of the worker during the step), ``worker`` (pid, host,
     peak resident memory of the worker process [MiB]) and ``summary`` (:func:`step_summary`).
     """
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _cpu_seconds()
     step, folder, out = task["step"], Path(task["folder"]), Path(task["out"])
     kill = os.environ.get(KILL_ENV, "")
     if kill and kill == f"{task['name']}:{step}":
@@ -144,5 +156,7 @@ def run_step(task: dict) -> dict:
         record["error"] = _one_line(e)
         shutil.rmtree(tmp, ignore_errors=True)
     record["seconds"] = round(time.perf_counter() - t0, 3)
+    c1 = _cpu_seconds()
+    record["cpu_seconds"] = None if c0 is None or c1 is None else round(c1 - c0, 3)
     record["worker"] = {"pid": os.getpid(), "host": socket.gethostname(), "peak_rss_mib": _peak_rss_mib()}
     return record
