@@ -217,5 +217,6 @@ class Manifest:
     def save(self) -> None:
         """Write the manifest atomically (a reader never sees half a file)."""
         self.out.mkdir(parents=True, exist_ok=True)
-        write_json(self.path, {"fleet": FORMAT, "updated": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                               "out": str(self.out), "scans": self.scans})
+        doc = {"fleet": FORMAT, "updated": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+               "out": str(self.out), "scans": self.scans}
+        write_json(self.path, doc, indent=1)
