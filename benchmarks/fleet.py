@@ -120,7 +120,11 @@ def main(argv=None) -> int:
             runs[mode] = run_mode(scans, tmp / mode, modes[mode], args)
             print(f"{mode}: {runs[mode]['wall_s']:.1f} s, {runs[mode]['done']} done, {runs[mode]['failed']} failed, "
                   f"load {runs[mode]['load_before']} -> {runs[mode]['load_after']}", file=sys.stderr)
-    figures = {"scans": args.scans, "broken_scans": 2, "workers": args.workers, "smile_seconds": args.seconds,
+    try:  # 1: the cores are shared per session, so a busy box gives one batch's local workers one share
+        autogroup = int(Path("/proc/sys/kernel/sched_autogroup_enabled").read_text())
+    except (OSError, ValueError):
+        autogroup = None
+    figures = {"scheduler_autogroup": autogroup, "scans": args.scans, "broken_scans": 2, "workers": args.workers, "smile_seconds": args.seconds,
                "adapt_levels": args.levels, "scan_faces": args.faces, "steps": list(STEPS)}
     for mode, r in runs.items():
         figures[mode] = {k: v for k, v in r.items() if k != "manifest"}

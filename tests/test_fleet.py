@@ -164,3 +164,34 @@ def test_ray_local_two_workers(scans, tmp_path, capsys, monkeypatch):
     assert m["broken"]["steps"]["adapt"]["status"] == "failed"
     v = m["victim"]["steps"]["adapt"]
     assert v["status"] == "failed" and "died 2 times" in v["error"]
+
+
+def test_ctrl_c_leaves_finished_work_and_a_valid_manifest(scans, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "facewarp", "batch", "run", str(scans / "good1.obj"),
+                             str(scans / "good2.obj"), "--out", str(out), "--steps", "adapt,build", "--levels", "1",
+                             "--workers", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:  # until the first step is done
+            if (out / "manifest.json").is_file() and '"done"' in (out / "manifest.json").read_text():
+                break
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert "interrupted" in err
+    m = _manifest(out)  # valid JSON
+    done = [(n, s) for n, e in m.items() for s, r in e["steps"].items() if r["status"] == "done"]
+    assert done and all((out / m[n]["folder"] / s).is_dir() for n, s in done)
+    assert len(done) < 4 and not list(out.glob("scans/*/.*.partial"))
+    assert json.loads((out / "report.json").read_text())["totals"]["scans"] == 2
