@@ -189,7 +189,8 @@ def run_batch(scans: list[ScanInput], out, *, steps=STEPS, expression: str = "sm
     def task_of(key: str, step: str) -> dict:
         e = manifest.scans[key]
         lm = e["inputs"]["landmarks"]
-        return {"step": step, "name": e["name"], "folder": str(manifest.folder(key)), "out": str(out),
+        return {"step": step, "name": e["name"], "folder": str(manifest.folder(key).absolute()),
+                "out": str(out.absolute()),
                 "scan": e["inputs"]["scan"]["path"], "landmarks": lm["path"] if lm else None,
                 "units": e["inputs"]["units"], "params": params[step], "device": executor.device(step, device)}
 

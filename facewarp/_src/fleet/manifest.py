@@ -58,7 +58,7 @@ def sha256_file(path: Path) -> str:
 
 def file_record(path: Path) -> dict:
     """``{"path", "size", "sha256"}`` of an existing file (size in bytes)."""
-    path = Path(path)
+    path = Path(path).absolute()  # the workers (other processes, other nodes) have other working folders
     return {"path": str(path), "size": path.stat().st_size, "sha256": sha256_file(path)}
 
 
@@ -200,8 +200,8 @@ class Manifest:
             name = _safe_name(scan.name or scan.scan.stem)
             entry = {"name": name, "folder": f"scans/{name}-{key[:12]}", "inputs": inputs, "paths": [], "steps": {}}
             self.scans[key] = entry
-        if str(scan.scan) not in entry["paths"]:
-            entry["paths"].append(str(scan.scan))
+        if inputs["scan"]["path"] not in entry["paths"]:
+            entry["paths"].append(inputs["scan"]["path"])
         return key
 
     def folder(self, key: str) -> Path:
