@@ -124,7 +124,8 @@ def main(argv=None) -> int:
         autogroup = int(Path("/proc/sys/kernel/sched_autogroup_enabled").read_text())
     except (OSError, ValueError):
         autogroup = None
-    figures = {"scheduler_autogroup": autogroup, "scans": args.scans, "broken_scans": 2, "workers": args.workers, "smile_seconds": args.seconds,
+    figures = {"scheduler_autogroup": autogroup, "scans": args.scans, "broken_scans": 2, "workers": args.workers,
+               "smile_seconds": args.seconds,
                "adapt_levels": args.levels, "scan_faces": args.faces, "steps": list(STEPS)}
     for mode, r in runs.items():
         figures[mode] = {k: v for k, v in r.items() if k != "manifest"}

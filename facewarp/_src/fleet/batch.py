@@ -10,8 +10,9 @@ Re-running is idempotent by content: a step already ``done`` with the same optio
 folder present) is kept, a ``failed`` one is kept unless ``retry_failed``. A worker that dies is
 retried up to ``max_retries`` times (by the loop for local processes, by Ray for Ray tasks), then
 recorded failed. The manifest is rewritten as tasks finish (at most every half second, or
-every ten times its own write time for a large batch) and at the end. Ctrl-C kills the running tasks, leaves the finished ones and a valid manifest,
-writes the reports and raises :class:`KeyboardInterrupt`.
+every ten times its own write time for a large batch) and at the end. Ctrl-C kills the running
+tasks, leaves the finished ones and a valid manifest, writes the reports and raises
+:class:`KeyboardInterrupt`.
 
 Outputs in ``out``: ``manifest.json``, ``scans/NAME-KEY12/{adapt,build,simulate}/`` (each the
 folder its job writes), ``report.json`` and ``report.csv`` (one row per scan: the adaptation's

@@ -184,8 +184,8 @@ class Manifest:
             try:
                 doc = json.loads(self.path.read_text())
             except (UnicodeDecodeError, json.JSONDecodeError) as e:
-                raise InputError(f"out {self.out}: manifest.json is not valid JSON ({e}); move it away to start afresh") \
-                    from None
+                raise InputError(f"out {self.out}: manifest.json is not valid JSON ({e}); "
+                                 "move it away to start afresh") from None
             if not isinstance(doc, dict) or doc.get("fleet") != FORMAT or not isinstance(doc.get("scans"), dict):
                 raise InputError(f"out {self.out}: manifest.json is not a facewarp batch manifest (format {FORMAT})")
             self.scans = doc["scans"]
