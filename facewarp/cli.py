@@ -474,6 +474,55 @@ def cmd_retarget(args):
              for h in rep["heads"]] + ["  wrote " + ", ".join(Path(f).name for f in rep["files"])])
 
 
+# ----------------------------------------------------------------------------- batch
+def _steps(text: str) -> tuple[str, ...]:
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    known = ("adapt", "build", "simulate")
+    bad = [n for n in names if n not in known]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(f"expected a comma list of {', '.join(known)}, got {text!r}")
+    return tuple(names)
+
+
+_non_negative = _number(float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0")
+
+
+def cmd_batch_run(args):
+    from ._src.fleet.batch import run_batch
+    from ._src.fleet.manifest import read_input_list, scans_from_paths
+
+    if bool(args.scans) == (args.manifest is not None):
+        raise FacewarpError("batch run: give scans or --manifest IN.json, not both" if args.scans
+                            else "batch run: give scans (SCANS...) or --manifest IN.json")
+    if args.ray is not None and args.ray != "local" and Path(args.ray).is_file():
+        raise FacewarpError(f"--ray {args.ray}: is a file, not a Ray address (put --ray after the scans, "
+                            "or write --ray local)")
+    scans = (read_input_list(args.manifest, units=args.units) if args.manifest is not None
+             else scans_from_paths(args.scans, units=args.units))
+    rep = run_batch(scans, args.out, steps=args.steps, expression=args.expression, seconds=args.seconds,
+                    levels=args.levels, device=args.device, ray=args.ray, workers=args.workers,
+                    gpus_per_task=args.gpus_per_task, max_retries=args.max_retries, retry_failed=args.retry_failed,
+                    progress=not args.json)
+    cols = [s for s in ("adapt", "build", "simulate")]
+    width = max([len(r["name"]) for r in rep["rows"]] + [4])
+    lines = [f"batch of {rep['scans']} scans in {args.out} on {rep['executor']}: {rep['done']} done, "
+             f"{rep['failed']} failed, {rep['incomplete']} incomplete ({rep['tasks_run']} steps run, "
+             f"{rep['tasks_kept']} kept from earlier runs) in {rep['seconds']:.1f} s",
+             f"  {'scan':<{width}}  " + "  ".join(f"{c + ' [s]':>12}" for c in cols) + "  status"]
+    shown = rep["rows"][:50]
+    for r in shown:
+        cells = []
+        for c in cols:
+            v = r.get(f"{c}_s")
+            cells.append(f"{v:>12.1f}" if v is not None else f"{('failed' if r['failed_step'] == c else '-'):>12}")
+        lines.append(f"  {r['name']:<{width}}  " + "  ".join(cells) + f"  {r['status']}"
+                     + (f": {r['failed_step']}: {r['error']}" if r["error"] else ""))
+    if len(rep["rows"]) > len(shown):
+        lines.append(f"  ... {len(rep['rows']) - len(shown)} more in {rep['report_csv']}")
+    lines.append(f"  wrote {rep['manifest']}, {rep['report']}, {rep['report_csv']}")
+    _emit(args, rep, lines)
+
+
 # ----------------------------------------------------------------------------- parser
 def _simulate_epilog() -> str:
     import textwrap
@@ -696,6 +745,44 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fps", type=_fps, metavar="F", default=30.0,
                    help=f"frames per second, > 0 and <= {MAX_FPS:g} (default 30)")
     r.set_defaults(func=cmd_retarget)
+
+    bt = sub.add_parser("batch", help="many scans through adapt, build and simulate, in local processes or on Ray")
+    btsub = bt.add_subparsers(dest="batch_command", metavar="ACTION", parser_class=_Parser)
+    btsub.required = True
+    br = btsub.add_parser(
+        "run", help="run every scan through the chosen steps; a manifest makes re-runs skip finished work",
+        epilog="Writes DIR/manifest.json (per scan: inputs with their SHA-256, each step's status, error, outputs, "
+               "seconds and worker; rewritten atomically as tasks finish), DIR/scans/NAME-KEY/{adapt,build,simulate}/, "
+               "DIR/report.json and DIR/report.csv. A scan is known by its content: a re-run (or a renamed copy) "
+               "skips the steps done. A scan's landmarks are looked for beside it (NAME_landmarks.json, "
+               "NAME.landmarks.json, NAME.json, NAME.pp, landmarks.json), else found on the scan. Ray: "
+               "pip install 'facewarp[ray]'; --ray alone starts a local Ray, --ray auto or --ray ray://HOST:10001 "
+               "joins a cluster (`ray start --head`; the scans and DIR on a file system every node sees).")
+    br.add_argument("scans", nargs="*", type=Path, metavar="SCANS", help="scan meshes (OBJ, PLY, STL, OFF, GLB, GLTF)")
+    br.add_argument("--manifest", type=Path, metavar="IN.json",
+                    help='the scans as a file: {"scans": ["a.obj", {"scan": "b.ply", "landmarks": "b.json", '
+                         '"units": "mm", "name": "b"}]} (paths relative to the file), or a batch\'s manifest.json')
+    br.add_argument("--out", required=True, type=Path, metavar="DIR", help="batch folder (continued if it has a manifest)")
+    br.add_argument("--steps", type=_steps, default=("adapt", "build", "simulate"), metavar="adapt,build,simulate",
+                    help="the steps to run, in this order per scan (default all three)")
+    br.add_argument("--expression", default="smile", metavar="NAME|sequence|FILE.json",
+                    help="what simulate plays (as `facewarp simulate --expression`; default smile)")
+    br.add_argument("--seconds", type=_finite_positive, metavar="S", default=2.0, help="simulated time [s], > 0 (default 2)")
+    br.add_argument("--levels", type=_positive_int, metavar="N", default=2,
+                    help="adapt's refinement levels after the FDP level (as `facewarp adapt --levels`; default 2)")
+    br.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scans and their landmarks")
+    br.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
+                    help="run as Ray tasks: alone, on a local Ray started here; with auto, ray://HOST:10001 or "
+                         "HOST:6379, on that cluster")
+    br.add_argument("--workers", type=_positive_int, metavar="N",
+                    help="local worker processes (default: the usable cores); with --ray the CPUs of the local Ray "
+                         "(default: all) or the tasks kept in flight on a cluster")
+    br.add_argument("--gpus-per-task", type=_non_negative, metavar="F",
+                    help="GPUs per simulate task on Ray (default 1 when the cluster has a GPU, else 0: on the CPU)")
+    br.add_argument("--max-retries", type=_non_negative_int, metavar="N", default=2,
+                    help="retries of a step whose worker process died (killed, out of memory), default 2")
+    br.add_argument("--retry-failed", action="store_true", help="run the steps that failed in an earlier run again")
+    br.set_defaults(func=cmd_batch_run)
     return p
 
 

@@ -1,0 +1,185 @@
+"""One step of one scan, as run in a worker process (a local process or a Ray worker).
+
+:func:`run_step` calls the job of the step (:func:`~facewarp._src.jobs.adapt.adapt_files`,
+:func:`~facewarp._src.jobs.face.build_files`, :func:`~facewarp._src.jobs.face.simulate_files`)
+on the scan's folder: it writes into ``FOLDER/.STEP.partial`` and renames that to ``FOLDER/STEP``
+only when the job succeeded, so a step's folder is either complete or absent. An error of the
+scan (a bad file, a failed adaptation) is returned as the one-line error of a ``failed`` record and
+never raised: a bad scan does not stop the batch, and Ray does not retry it. Only the death of the
+worker process itself (killed, out of memory) reaches the caller, which retries the step.
+
+The task and its result are plain dicts (they cross process and machine boundaries).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["KILL_ENV", "init_worker", "run_step", "step_summary"]
+
+KILL_ENV = "FACEWARP_FLEET_TEST_KILL"
+"""Test hook: ``NAME:STEP`` makes the worker running that step of the scan named ``NAME`` kill
+itself (SIGKILL), as a crashed or out-of-memory worker would die."""
+
+MAX_ERROR = 400
+"""Longest error line kept in the manifest [characters]."""
+
+
+def init_worker() -> None:
+    """Initialiser of a local worker process.
+
+    Ctrl-C is the driver's to handle (it stops the workers); anything a library prints goes to
+    stderr (stdout carries the command's result). The worker starts a session of its own, as Ray's
+    workers do: Linux's autogroup scheduler shares a busy machine's cores per session, and in the
+    driver's session N workers would get one share between them (measured: 2 local workers no
+    faster than 1 on a loaded box, 2 Ray workers 2x). Out of the driver's session it no longer
+    hears the terminal, so it watches the driver and exits when the driver is gone.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+    if hasattr(os, "setsid"):
+        try:
+            os.setsid()
+        except OSError:
+            pass
+    import threading
+
+    parent = os.getppid()
+
+    def watch() -> None:
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="facewarp-parent-watch", daemon=True).start()
+
+
+def _one_line(e: BaseException) -> str:
+    from ..core.errors import FacewarpError
+
+    text = str(e) if isinstance(e, FacewarpError) else f"{type(e).__name__}: {e}"
+    text = " ".join(text.split()) or type(e).__name__
+    return text[: MAX_ERROR - 3] + "..." if len(text) > MAX_ERROR else text
+
+
+def _cpu_seconds() -> float | None:
+    """User + system CPU time of this process so far [s]."""
+    try:
+        import resource
+
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+    except (ImportError, OSError):
+        return None
+
+
+def _peak_rss_mib() -> float | None:
+    try:
+        import resource
+
+        kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux, bytes on macOS
+        return round(kib / (2**20 if sys.platform == "darwin" else 2**10), 1)
+    except (ImportError, OSError):
+        return None
+
+
+def _g(d, *keys):
+    for k in keys:
+        if not isinstance(d, dict) or k not in d:
+            return None
+        d = d[k]
+    return d
+
+
+def _mm(v):
+    return None if v is None else v * 1e3
+
+
+def step_summary(step: str, rep: dict) -> dict:
+    """The few figures of a step's report that go into the manifest and ``report.json``."""
+    if step == "adapt":
+        last = rep["levels"][-1] if rep.get("levels") else {}
+        stretch = _g(rep, "quality", "distortion", "all", "stretch_rms")
+        return {"adapt_seconds": rep.get("seconds"), "fp_count": rep.get("fp_count"), "E_d_m2": last.get("E_d"),
+                "distance_median_mm": _mm(_g(rep, "distance_to_scan_m", "median")),
+                "distance_rms_mm": _mm(_g(rep, "distance_to_scan_m", "rms")),
+                "distance_p95_mm": _mm(_g(rep, "distance_to_scan_m", "p95")),
+                "folds": _g(rep, "quality", "surface", "folds"),
+                "stretch_rms_percent": None if stretch is None else stretch * 100.0}
+    if step == "build":
+        return {k: rep.get(k) for k in ("tet_count", "inverted_count", "min_dihedral_deg", "muscle_count",
+                                         "conforming")}
+    return {k: rep.get(k) for k in ("expression", "frames", "frames_per_second", "realtime_factor",
+                                     "steps_per_second", "device", "nodes", "tets")}
+
+
+def _run_job(task: dict, tmp: Path) -> dict:
+    step, folder, p = task["step"], Path(task["folder"]), task["params"]
+    device = task.get("device", "cpu")
+    if step == "adapt":
+        from ..jobs.adapt import adapt_files
+
+        return adapt_files(task["scan"], task.get("landmarks"), tmp, units=task.get("units", "m"),
+                           levels=p.get("levels"), device=device)
+    if step == "build":
+        from ..jobs.face import build_files
+
+        return build_files(folder / "adapt", tmp, layers=p.get("layers", 1), device=device)
+    if step == "simulate":
+        from ..core.fileio import write_json
+        from ..jobs.face import simulate_files
+        from .manifest import plain
+
+        rep = simulate_files(folder / "build", p["expression"], tmp, seconds=p["seconds"], fps=p.get("fps", 30.0),
+                             device=device, jaw=p.get("jaw", "mujoco"))
+        rep["files"] = [str(folder / step / Path(f).name) for f in rep.get("files", [])]
+        write_json(tmp / "report.json", plain(rep))
+        return rep
+    raise ValueError(f"unknown step {step!r}")
+
+
+def run_step(task: dict) -> dict:
+    """Run one step of one scan; returns its manifest record.
+
+    ``task``: ``step`` (adapt, build or simulate), ``name``, ``folder`` (the scan's output folder),
+    ``out`` (the batch folder), ``scan``, ``landmarks`` (or None), ``units``, ``params`` (the
+    step's options) and ``device``. The record: ``status`` (``done`` or ``failed``), ``error`` (one
+    line or None), ``outputs`` (files relative to ``out``), ``seconds`` (wall), ``cpu_seconds``
+    (user + system CPU time of the worker during the step), ``worker`` (pid, host,
+    peak resident memory of the worker process [MiB]) and ``summary`` (:func:`step_summary`).
+    """
+    t0, c0 = time.perf_counter(), _cpu_seconds()
+    step, folder, out = task["step"], Path(task["folder"]), Path(task["out"])
+    kill = os.environ.get(KILL_ENV, "")
+    if kill and kill == f"{task['name']}:{step}":
+        os.kill(os.getpid(), signal.SIGKILL)
+    final, tmp = folder / step, folder / f".{step}.partial"
+    record = {"status": "failed", "error": None, "outputs": [], "summary": {}}
+    try:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
+        rep = _run_job(task, tmp)
+        if final.exists():
+            shutil.rmtree(final)
+        os.replace(tmp, final)
+        record.update(status="done", summary=step_summary(step, rep),
+                      outputs=sorted(str(f.relative_to(out)) for f in final.rglob("*") if f.is_file()))
+    except Exception as e:  # the scan's error, recorded; the batch goes on
+        record["error"] = _one_line(e)
+        shutil.rmtree(tmp, ignore_errors=True)
+    record["seconds"] = round(time.perf_counter() - t0, 3)
+    c1 = _cpu_seconds()
+    record["cpu_seconds"] = None if c0 is None or c1 is None else round(c1 - c0, 3)
+    record["worker"] = {"pid": os.getpid(), "host": socket.gethostname(), "peak_rss_mib": _peak_rss_mib()}
+    return record
