@@ -767,20 +767,21 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the steps to run, in this order per scan (default all three)")
     br.add_argument("--expression", default="smile", metavar="NAME|sequence|FILE.json",
                     help="what simulate plays (as `facewarp simulate --expression`; default smile)")
-    br.add_argument("--seconds", type=_finite_positive, metavar="S", default=2.0, help="simulated time [s], > 0 (default 2)")
-    br.add_argument("--levels", type=_positive_int, metavar="N", default=2,
-                    help="adapt's refinement levels after the FDP level (as `facewarp adapt --levels`; default 2)")
+    br.add_argument("--seconds", type=_seconds, metavar="S", default=2.0,
+                    help=f"simulated time [s], > 0 and <= {MAX_SECONDS:g} (default 2)")
+    br.add_argument("--levels", type=_whole_in(1, MAX_ADAPT_LEVELS), metavar="N", default=2,
+                    help=f"adapt's refinement levels after the FDP level (as `facewarp adapt --levels`; 1..{MAX_ADAPT_LEVELS}, default 2)")
     br.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scans and their landmarks")
     br.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                     help="run as Ray tasks: alone, on a local Ray started here; with auto, ray://HOST:10001 or "
                          "HOST:6379, on that cluster")
-    br.add_argument("--workers", type=_positive_int, metavar="N",
-                    help="local worker processes (default: the usable cores); with --ray the CPUs of the local Ray "
+    br.add_argument("--workers", type=_whole_in(1, 1024), metavar="N",
+                    help="local worker processes, 1..1024 (default: the usable cores); with --ray the CPUs of the local Ray "
                          "(default: all) or the tasks kept in flight on a cluster")
-    br.add_argument("--gpus-per-task", type=_non_negative, metavar="F",
-                    help="GPUs per simulate task on Ray (default 1 when the cluster has a GPU, else 0: on the CPU)")
-    br.add_argument("--max-retries", type=_non_negative_int, metavar="N", default=2,
-                    help="retries of a step whose worker process died (killed, out of memory), default 2")
+    br.add_argument("--gpus-per-task", type=_number(float, lambda v: math.isfinite(v) and 0 <= v <= 64, "a number 0..64"),
+                    metavar="F", help="GPUs per simulate task on Ray, 0..64 (default 1 when the cluster has a GPU, else 0: on the CPU)")
+    br.add_argument("--max-retries", type=_whole_in(0, 100), metavar="N", default=2,
+                    help="retries of a step whose worker process died (killed, out of memory), 0..100, default 2")
     br.add_argument("--retry-failed", action="store_true", help="run the steps that failed in an earlier run again")
     br.set_defaults(func=cmd_batch_run)
     return p
