@@ -484,7 +484,6 @@ def _steps(text: str) -> tuple[str, ...]:
     return tuple(names)
 
 
-_non_negative = _number(float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0")
 
 
 def cmd_batch_run(args):

@@ -48,11 +48,13 @@ def load_mjcf(mjcf):
     if mjcf is None or not Path(mjcf).is_file():
         raise InputError(f"jaw: the MuJoCo jaw needs the head's head.xml, not found at {mjcf}")
     scene = Path(mjcf).with_name(SCENE_NAME)  # the head file's options (gravity, integrator) live there
-    path = scene if scene.is_file() else Path(mjcf)
-    try:
-        return mj.MjModel.from_xml_path(str(path))
-    except Exception as e:  # MuJoCo's parse errors are multi-line ValueErrors
-        raise InputError(f"{path}: not a valid MuJoCo model ({' '.join(str(e).split())})") from None
+    model = None
+    for path in (Path(mjcf), scene) if scene.is_file() else (Path(mjcf),):  # the head first: its errors name it
+        try:
+            model = mj.MjModel.from_xml_path(str(path))
+        except Exception as e:  # MuJoCo's parse errors are multi-line ValueErrors
+            raise InputError(f"{path}: not a valid MuJoCo model ({' '.join(str(e).split())})") from None
+    return model
 
 
 class MujocoJawDriver:

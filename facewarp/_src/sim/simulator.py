@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from ..core.checks import (check_array, check_choice, check_int, check_positions, check_run_args,
+from ..core.checks import (check_array, check_choice, check_int, check_name, check_positions, check_run_args,
                            check_simulator_args, check_step_count)
 from ..core.errors import InputError
 from ..core.limits import MAX_ADVANCE_FRAMES
@@ -211,6 +211,7 @@ class FaceSimulator:
 
     def fdp(self, fdp_id: str) -> np.ndarray:
         """Current position [m] of one FDP (e.g. ``"2.1"``, the chin), shape (3,), float64."""
+        check_name("fdp_id", fdp_id)
         ids = [str(k) for k in self.fr.fdp_ids]
         if str(fdp_id) not in ids:
             raise InputError(f"fdp_id: {fdp_id!r} is not an FDP of this head")
