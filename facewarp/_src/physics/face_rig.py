@@ -18,7 +18,8 @@ from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..geometry.jaw import JawKinematic
 from .contact import ContactGeometry, contact_from_arrays, contact_to_arrays
-from .muscle_stage import MuscleRig
+from .model import node_jaw_amounts
+from .muscle_rig import MuscleRig
 
 __all__ = ["FaceRig", "load_face_rig", "node_jaw_amounts", "save_face_rig"]
 
@@ -90,9 +91,12 @@ class FaceRig:
     head_face_uv: np.ndarray | None = None
     skin_texture: str | None = None
 
-    @property
-    def jaw(self) -> JawKinematic:
-        return JawKinematic(self.jaw_pivot, self.jaw_u, self.jaw_v, self.lip_corners, self.mouth_center)
+    jaw: JawKinematic = field(init=False, repr=False, compare=False)
+    """The kinematic jaw of ``jaw_pivot``, ``jaw_u``, ``jaw_v``, ``lip_corners`` and ``mouth_center``
+    (made with the rig: a plain attribute)."""
+
+    def __post_init__(self):
+        self.jaw = JawKinematic(self.jaw_pivot, self.jaw_u, self.jaw_v, self.lip_corners, self.mouth_center)
 
     def part_at(self, name: str, jaw_angles=(0.0, 0.0)) -> np.ndarray:
         """Vertices [m] of rigid part ``name`` in the head frame at ``jaw_angles`` (u, v) [rad],
@@ -156,29 +160,19 @@ def load_face_rig(path) -> FaceRig:
         if "contact_node_side" not in z:
             raise InputError(f"{path}: a face rig of an older facewarp (no contact geometry); rebuild it with "
                              "`facewarp build`")
-        rig = MuscleRig(names=[str(n) for n in z["rig_names"]], **{k: z[f"rig_{k}"] for k in _RIG_FIELDS})
+        # every field read first, then the parts made in one pass (the muscles, the contact, the rig)
+        names = [str(n) for n in z["rig_names"]]
+        rig_fields = {k: z[f"rig_{k}"] for k in _RIG_FIELDS}
         parts = {str(k): (z[f"part_{k}_V"], z[f"part_{k}_F"]) for k in z["part_names"]}
         part_jaw = {str(k): float(z[f"part_{k}_jaw"]) for k in z["part_names"]}
         opening = {k: z[k] for k in ("opening_vertex", "opening_node", "opening_weight", "head_uv", "head_face_uv")
                    if k in z}
+        face = {k: z[k] for k in _FACE_FIELDS}
         texture = path.parent / "texture.png"
-        return FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]),
-                       skin_texture=str(texture) if texture.is_file() else None,
-                       **{k: z[k] for k in _FACE_FIELDS}, **opening, contact=contact_from_arrays(z))
+        texture = str(texture) if texture.is_file() else None
+        rig = MuscleRig(names=names, **rig_fields)
+        contact = contact_from_arrays(z)
+        return FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]), skin_texture=texture, **face,
+                       **opening, contact=contact)
     except (KeyError, ValueError, OSError) as e:
         raise InputError(f"{path}: not a facewarp face rig ({e})") from None
-
-
-def node_jaw_amounts(fr: FaceRig) -> np.ndarray:
-    """Eq. 6.4.9 jaw amount of every tet node, shape (p,), float64: that of the head vertex the
-    node lies on or under (sheets are stored one after another, node ``l * q + i`` below outer
-    node ``i``). Rigs without ``vertex_jaw`` give the held and supported nodes' amounts only."""
-    n = len(fr.nodes)
-    out = np.zeros(n)
-    q = int((fr.layer == 0).sum())
-    if fr.vertex_jaw is not None and q and n % q == 0 and (fr.surface_vertex[:q] >= 0).all():
-        out = np.asarray(fr.vertex_jaw, np.float64)[fr.surface_vertex[np.arange(n) % q]]
-    else:
-        out[fr.jaw_nodes] = fr.jaw_amount
-        out[fr.support_nodes] = fr.support_amount
-    return out
