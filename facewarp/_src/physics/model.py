@@ -76,8 +76,15 @@ __all__ = [
     "ModelJaw",
     "ModelMuscles",
     "ModelSupports",
+    "ContactArrays",
+    "ContactSurface",
+    "JawNodeArrays",
+    "MuscleArrays",
+    "SupportArrays",
     "Springs",
     "State",
+    "group_indices",
+    "node_jaw_amounts",
 ]
 
 EDGE_OUTER = 0
@@ -506,7 +513,8 @@ class ModelBuilder:
                 spring's muscle end turns with the jaw by its node's amount (default: the muscle's).
 
         Sets ``muscle_rig`` (the rig with the final ``att_stiffness`` [N/m]), ``muscle_node_amount``
-        and ``muscle_count`` (the activations in :class:`Control`: one per muscle).
+        and ``muscle_count`` (the activations in :class:`Control`: one per muscle). The rig's own
+        checks (:meth:`~facewarp.MuscleRig.validate`) run in :meth:`finalize`, with its derived arrays.
         """
         self._need_tissue("add_muscles")
         n, mat = self.vertex_count, self.material
@@ -695,10 +703,17 @@ class ModelBuilder:
         return len(self.vertices)
 
     def finalize(self, device=None) -> Model:
-        """Copy the model onto ``device`` (a Warp device or its name; None: Warp's default).
+        """Copy the model onto ``device`` (a Warp device or its name; None: Warp's default): every
+        device array of what is simulated, made here in one place: the tissue, and the stages'
+        (:class:`MuscleArrays`, :class:`SupportArrays`, :class:`JawNodeArrays`,
+        :class:`ContactArrays`, with the scratch their kernels rewrite each step). A stage's
+        ``from_model`` keeps references to them; the solver reads the Model's fields.
 
         Returns:
             A read-only :class:`Model` of Warp arrays (float32 / int32) on that device.
+
+        Raises:
+            InputError: a muscle rig that fails its checks (:meth:`~facewarp.MuscleRig.validate`).
         """
         wp = _warp()
         rig = self.muscle_rig
@@ -963,7 +978,7 @@ class State:
 
 @dataclass(frozen=True, eq=False)
 class ModelMuscles:
-    """The muscles of a :class:`Model` (host, NumPy; the muscle stage copies them to the device)."""
+    """The muscles of a :class:`Model` (host, NumPy, and their device arrays)."""
 
     rig: object
     """The :class:`~facewarp._src.physics.muscle_stage.MuscleRig` with its final ``att_stiffness`` [N/m]."""
@@ -975,7 +990,7 @@ class ModelMuscles:
 
 @dataclass(frozen=True, eq=False)
 class ModelSupports:
-    """The sliding supports of a :class:`Model` (host, NumPy)."""
+    """The sliding supports of a :class:`Model` (host, NumPy, and their device arrays)."""
 
     nodes: np.ndarray
     """Supported nodes, shape (s,), int64."""
@@ -991,7 +1006,7 @@ class ModelSupports:
 
 @dataclass(frozen=True, eq=False)
 class ModelJaw:
-    """The kinematic jaw of a :class:`Model` (host, NumPy)."""
+    """The kinematic jaw of a :class:`Model` (host, NumPy, and its device arrays)."""
 
     joint: object
     """Pivot [m] and unit axes of the jaw (``pivot``, ``u_axis``, ``v_axis``; :class:`~facewarp.JawKinematic`)."""
@@ -1011,7 +1026,7 @@ class ModelJaw:
 
 @dataclass(frozen=True, eq=False)
 class ModelContact:
-    """The contact of a :class:`Model` (host, NumPy)."""
+    """The contact of a :class:`Model` (host, NumPy, and its device arrays)."""
 
     geometry: object
     """The :class:`~facewarp._src.physics.contact.ContactGeometry` (made at build time)."""

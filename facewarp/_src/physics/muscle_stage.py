@@ -1,10 +1,14 @@
-"""Muscles and jaw as solver stages: packed arrays on the device and the kernels that use them.
+"""Muscles and supports as solver stages (kernel groups), with the NumPy references of the muscles.
 
-:class:`MuscleRig` is the host-side (NumPy, SI) packing of any set of muscles: control points,
-(rational) quadratic Bezier curves, ellipsoid segments, anchors and skin attachments. The
-anatomy module fills it (:func:`facewarp._src.anatomy.muscle_rig`); tests build small rigs by
-hand. :class:`MuscleStage` and :class:`JawStage` follow the solver's stage protocol: each
-substep they only launch kernels (no allocation, no host read), so a frame can be captured.
+:class:`~.muscle_rig.MuscleRig` (:mod:`.muscle_rig`) is the host-side (NumPy, SI) packing of any
+set of muscles: control points, (rational) quadratic Bezier curves, ellipsoid segments, anchors
+and skin attachments. The anatomy module fills it (:func:`facewarp._src.anatomy.muscle_rig`);
+tests build small rigs by hand. :meth:`~facewarp._src.physics.model.ModelBuilder.finalize` puts
+its arrays on the device (:class:`~facewarp._src.physics.model.MuscleArrays`,
+:class:`~facewarp._src.physics.model.SupportArrays`); :class:`MuscleStage` and
+:class:`SupportStage` keep references to them (``from_model``; their constructors make the arrays
+of a hand-made stage) and follow the solver's stage protocol: each substep they only launch
+kernels (no allocation, no host read), so a frame can be captured.
 """
 
 from __future__ import annotations
