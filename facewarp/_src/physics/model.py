@@ -947,7 +947,8 @@ class State:
     geometry of the step's controls, the jaw carry) and the solver hands them on to
     ``state_out`` (:meth:`assign_stage_data`), so two States can be swapped step by step and a
     copy of the rest State is a reset. What a stage recomputes from State and Control before
-    every use (springs, ellipsoids, contact points) is scratch of its kernel group, not state.
+    every use (springs, ellipsoids, contact points) is scratch, not state: allocated once with
+    the stage arrays of :meth:`ModelBuilder.finalize` (e.g. :class:`MuscleArrays`).
     """
 
     positions: object
