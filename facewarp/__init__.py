@@ -85,7 +85,7 @@ _NAMES = {
     "SolverDeviceNewtonPCG": "physics.solvers.newton_pcg", "IncrementalPotential": "physics.solvers.incremental",
     "MaterialPhysical": "physics.materials",
     "MaterialThesis": "physics.materials",
-    "MuscleRig": "physics.muscle_stage", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
+    "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
     # MuJoCo coupling, moving head
     "MujocoJaw": "coupling.mujoco", "HeadPose": "coupling.head_pose", "head_mjcf": "coupling.mjcf",
@@ -146,7 +146,8 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.anatomy.rig import build_face, face_rig_from_anatomy
     from ._src.physics.face_rig import FaceRig, load_face_rig, save_face_rig
     from ._src.physics.model import Control, Model, ModelBuilder, State
-    from ._src.physics.muscle_stage import MuscleRig, MuscleStage, SupportStage
+    from ._src.physics.muscle_rig import MuscleRig
+    from ._src.physics.muscle_stage import MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
     from ._src.physics.solvers.base import SolverStage
     from ._src.physics.solvers.host_implicit import SolverHostImplicit

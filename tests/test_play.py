@@ -131,9 +131,7 @@ def test_simulate_jobs_side_enters_once(simulate_path):
         assert counts.get(m, 0) <= 1, f"{m} entered {counts.get(m)} times: " + " -> ".join(simulate_path)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 22 done-when not met yet: the simulator's construction (contact "
-                                       "geometry, Model, stages) enters core.warp and physics modules repeatedly")
 def test_simulate_enters_no_module_more_than_twice(simulate_path):
     # issue 22: following the head from simulate_files to the first kernel launch
     counts = entry_counts(simulate_path)
-    assert max(counts.values()) <= 2, " -> ".join(simulate_path)
+    assert max(counts.values()) <= 2, f"{counts}: " + " -> ".join(simulate_path)

@@ -25,7 +25,7 @@ from ..core.errors import InputError
 from ..geometry.jaw import JawKinematic
 from ..geometry.surface import gaussian_sums
 from ..physics.face_rig import FaceRig
-from ..physics.muscle_stage import PIVOT_CENTER, PIVOT_FIXED, MuscleRig
+from ..physics.muscle_rig import PIVOT_CENTER, PIVOT_FIXED, MuscleRig
 from ..template import FRONTAL_REGIONS, REGIONS
 
 __all__ = ["BONE_REGIONS", "MUSCLE_STIFFNESS", "OPENING_FALLOFF", "SUPPORT_SMOOTHING", "build_face",

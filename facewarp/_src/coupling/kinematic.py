@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.warp import get_warp
-from ..physics.model import Model
+from ..physics.model import JawNodeArrays, Model
 
 __all__ = ["CarryStage", "JawStage"]
 
@@ -15,17 +15,21 @@ class _JawNodes:
     """Nodes moved by the jaw with their Eq. 6.4.9 amounts (those with amount > 0), on the device,
     with the jaw's pivot and axes."""
 
-    def __init__(self, jaw, nodes, amounts, device):
-        wp = get_warp()
+    def __init__(self, jaw, nodes, amounts, device, rest_positions=None):
+        self._bind(JawNodeArrays(get_warp(), jaw, nodes, amounts, device, rest_positions))
+
+    def _bind(self, arrays: JawNodeArrays) -> None:
+        """Keep references to the jaw nodes' device arrays (no copy) and the kernels."""
         from ..physics import kernels_muscle as km
 
         self.km = km
-        self.device = device
-        keep = np.asarray(amounts) > 0
-        self.count = int(keep.sum())
-        self.nodes = wp.array(np.asarray(nodes)[keep].astype(np.int32), dtype=wp.int32, device=device)
-        self.amounts = wp.array(np.asarray(amounts)[keep].astype(np.float32), dtype=float, device=device)
-        self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
+        vars(self).update(vars(arrays))
+
+    @classmethod
+    def _of(cls, arrays: JawNodeArrays):
+        st = cls.__new__(cls)
+        st._bind(arrays)
+        return st
 
 
 class JawStage(_JawNodes):
@@ -34,12 +38,10 @@ class JawStage(_JawNodes):
     @classmethod
     def from_model(cls, model: Model) -> JawStage:
         """The targets of ``model.jaw`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_jaw`)."""
-        j = model.jaw
-        return cls(j.joint, j.nodes, j.amounts, model.rest_positions, model.device)
+        return cls._of(model.jaw.target_arrays)
 
     def __init__(self, jaw, nodes, amounts, rest_positions, device):
-        super().__init__(jaw, nodes, amounts, device)
-        self.rest = rest_positions
+        super().__init__(jaw, nodes, amounts, device, rest_positions)
 
     def prepare(self, model: Model, state_in, control, dt, targets) -> None:
         """Implicit solvers: the same targets, once per step."""
@@ -70,8 +72,7 @@ class CarryStage(_JawNodes):
     @classmethod
     def from_model(cls, model: Model) -> CarryStage:
         """The carry of ``model.jaw`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_jaw`)."""
-        j = model.jaw
-        return cls(j.joint, j.carry_nodes, j.carry_amounts, model.device)
+        return cls._of(model.jaw.carry_arrays)
 
     def prepare(self, model: Model, state_in, control, dt, targets) -> None:
         """Implicit solvers: the same carry, once per step (by the change over the step)."""

@@ -94,7 +94,7 @@ from ..core.warp import get_warp
 from .materials import CONTACT_MODULUS, CONTACT_MUSCLE_RATIO
 from ..geometry.surface import winding_numbers
 from ..geometry.tets import lip_crossings
-from .model import Springs
+from .model import ContactArrays
 
 __all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "LIP_REACH_M", "TEETH_REACH_M", "ContactGeometry",
            "ContactStage", "contact_crossings", "contact_from_arrays", "contact_to_arrays"]
@@ -267,30 +267,6 @@ def contact_crossings(fr, X=None, jaw_angles=(0.0, 0.0), *, geometry: ContactGeo
             "lid_lid": lid, "lid_lid_depth_m": lid_depth}
 
 
-class _SurfaceSet:
-    """Candidate nodes against one closed surface: its ``wp.Mesh`` and the nodes' springs."""
-
-    def __init__(self, nodes, k, surface_points, faces, device, reach, gap, *, follows=None, rigid=None):
-        wp = get_warp()
-        self.count = len(nodes)
-        self.reach, self.gap = float(reach), float(gap)
-        self.follows = follows  # node indices the surface points are (a lip), or None
-        self.rigid = rigid  # (rest points, jaw amount) of a rigid part, or None
-        self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
-        self.k = wp.array(np.asarray(k, np.float32), dtype=float, device=device)
-        self.points = wp.array(np.asarray(surface_points, np.float32), dtype=wp.vec3, device=device)
-        if rigid is not None:
-            self.rest = wp.array(np.asarray(rigid[0], np.float32), dtype=wp.vec3, device=device)
-            self.amount = float(rigid[1])
-        if follows is not None:
-            self.follow = wp.array(np.asarray(follows, np.int32), dtype=wp.int32, device=device)
-        self.mesh = wp.Mesh(points=self.points, indices=wp.array(np.asarray(faces, np.int32).ravel(), dtype=wp.int32,
-                                                                   device=device))
-        self.springs = Springs(node=self.nodes, point=wp.zeros(self.count, dtype=wp.vec3, device=device),
-                               stiffness=wp.zeros(self.count, dtype=float, device=device),
-                               axis=wp.zeros(self.count, dtype=wp.vec3, device=device), one_sided=True)
-
-
 class ContactStage:
     """Lip, teeth and eyeball contact as one-sided penalty springs (solver stage; module doc).
 
@@ -330,123 +306,28 @@ class ContactStage:
     def __init__(self, fr, node_stiffness, device, *, gap: float = CONTACT_GAP, lips: bool = True,
                  teeth: bool = True, eyes: bool = True, lids: bool = True, ties: bool = True,
                  geometry: ContactGeometry | None = None, glide_stiffness=None):
-        wp = get_warp()
         from . import kernels_contact as kc
 
         self.kc = kc
-        self.device = device
-        if not (np.isfinite(gap) and gap >= 0.0):
-            raise InputError(f"gap: expected a finite distance >= 0 [m], got {gap!r}")
-        X = np.asarray(fr.nodes, np.float64)
-        kn = np.asarray(node_stiffness, np.float64)
-        if kn.shape != (len(X),) or not (np.isfinite(kn).all() and (kn >= 0).all()):
-            raise InputError(f"node_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
         g = _geometry_of(fr, geometry)
-        self.geometry = g
-        jaw = getattr(fr, "jaw", None)
-        if jaw is not None:
-            self.pivot, self.u, self.v = (wp.vec3(*map(float, a)) for a in (jaw.pivot, jaw.u_axis, jaw.v_axis))
-        else:
-            self.pivot, self.u, self.v = wp.vec3(0.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0)
+        self._bind(ContactArrays(get_warp(), fr.nodes, node_stiffness, device, gap=gap, lips=lips, teeth=teeth, eyes=eyes,
+                                 lids=lids, ties=ties, geometry=g, glide_stiffness=glide_stiffness,
+                                 jaw=getattr(fr, "jaw", None)))
 
-        def stiff(nodes):
-            k = kn[nodes]
-            pos = k[k > 0]
-            return np.where(k > 0, k, np.median(pos) if len(pos) else 0.0)
-
-        self.surfaces: list[_SurfaceSet] = []
-        if lips:
-            for S, nodes in zip(g.lip_faces, g.lip_nodes):
-                if len(S) == 0 or len(nodes) == 0:
-                    continue
-                used, local = np.unique(S, return_inverse=True)
-                self.surfaces.append(_SurfaceSet(nodes, stiff(nodes), X[used], local.reshape(-1, 3), device,
-                                                 LIP_REACH_M, gap, follows=used))
-        if teeth:
-            for name, TV, TF, amount, nodes in g.teeth:
-                if len(nodes):
-                    self.surfaces.append(_SurfaceSet(nodes, stiff(nodes), TV, TF, device, TEETH_REACH_M, gap,
-                                                     rigid=(TV, amount)))
-        sets = [s.springs for s in self.surfaces]
-        glide = np.asarray(g.eye_glide, bool)
-        if len(glide) != len(g.eye_nodes):
-            glide = np.zeros(len(g.eye_nodes), bool)
-        self.eye_count = len(g.eye_nodes) if eyes else 0
-        self.glide_count = int(glide.sum()) if eyes else 0
-        kg = kn if glide_stiffness is None else np.asarray(glide_stiffness, np.float64)
-        if kg.shape != (len(X),) or not (np.isfinite(kg).all() and (kg >= 0).all()):
-            raise InputError(f"glide_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
-
-        def eye_set(mine, r, k, one_sided, centers=None):
-            en = g.eye_nodes[mine]
-            c = g.eye_centers[g.eye_of_node[mine]] if centers is None else centers[mine]
-            return Springs(node=wp.array(en.astype(np.int32), dtype=wp.int32, device=device),
-                           point=wp.array(c.astype(np.float32), dtype=wp.vec3, device=device),
-                           stiffness=wp.array(k.astype(np.float32), dtype=float, device=device),
-                           rest_length=wp.array(r[mine].astype(np.float32), dtype=float, device=device),
-                           one_sided=one_sided)
-
-        d_rest = np.linalg.norm(X[g.eye_nodes] - g.eye_centers[g.eye_of_node], axis=1)
-        if self.eye_count:
-            # a node inside the ball (or within the gap) at rest gets its rest distance less
-            # EYE_REST_SLACK_M: no force at rest, and it may not sink deeper
-            r = np.minimum(g.eye_radii[g.eye_of_node] + gap, d_rest - EYE_REST_SLACK_M)
-            every = np.ones(len(g.eye_nodes), bool)
-            self.eye_springs = eye_set(every, r, stiff(g.eye_nodes), True)
-            sets.append(self.eye_springs)
-        if self.glide_count:
-            # the inner lid sheet glides on the eyeball: on its glide sphere (glide_spheres; about
-            # the eyeball's centre through its rest position where none is given), two-sided at
-            # the sliding support's stiffness, and it may not sink below that sphere (one-sided at
-            # its contact stiffness, EYE_REST_SLACK_M short of it); the contact above keeps it out
-            # of the ball
-            if len(g.glide_centers) == len(g.eye_nodes) and len(g.glide_radii) == len(g.eye_nodes):
-                gc, gr = np.asarray(g.glide_centers, np.float64), np.asarray(g.glide_radii, np.float64)
-            else:
-                gc, gr = g.eye_centers[g.eye_of_node], d_rest
-            self.glide_springs = eye_set(glide, gr, kg[g.eye_nodes[glide]], False, gc)
-            self.floor_springs = eye_set(glide, gr - EYE_REST_SLACK_M, stiff(g.eye_nodes)[glide], True, gc)
-            sets += [self.glide_springs, self.floor_springs]
-        self.lid_count = len(g.lid_nodes) if lids else 0
-        self.tie_count = 0
-        if self.lid_count:
-            ln = g.lid_nodes
-            c, n = g.lid_planes[g.lid_plane, 0], g.lid_planes[g.lid_plane, 1]
-            a = g.lid_side[:, None] * n  # toward the node's own side
-            # the plane gap / 2 short of the fissure plane (the two margins stop gap apart; a
-            # node nearer at rest, with a geometry made for a smaller gap, keeps its rest distance)
-            r = np.minimum(0.5 * gap, np.einsum("ij,ij->i", X[ln] - c, a))
-            self.lid_springs = Springs(
-                node=wp.array(ln.astype(np.int32), dtype=wp.int32, device=device),
-                point=wp.array((c + r[:, None] * a).astype(np.float32), dtype=wp.vec3, device=device),
-                stiffness=wp.array((LID_STIFFNESS_RATIO * stiff(ln)).astype(np.float32), dtype=float, device=device),
-                axis=wp.array(a.astype(np.float32), dtype=wp.vec3, device=device), one_sided=True)
-            sets.append(self.lid_springs)
-            partner = np.asarray(g.lid_partner, np.int64)
-            if ties and len(partner) == len(ln) and len(g.lid_tangent) == len(ln) and (partner >= 0).any():
-                # margins that close meet point to point along the fissure (kernels_contact._lid_ties),
-                # held as firmly as the inner sheet on its support (the glide stiffness: the
-                # contact's stiffness there stalled the CPU L-BFGS on the level-1 head)
-                self.tie_count = self.lid_count
-                mate = np.maximum(partner, 0)
-                off = 0.5 * (X[ln] - X[ln[mate]])
-                above = np.einsum("ij,ij->i", X[ln] - c, a) - r  # from the node's spring plane at rest
-                self.tie_rest = wp.array((above + above[mate]).astype(np.float32), dtype=float, device=device)
-                self.tie_partner = wp.array(partner.astype(np.int32), dtype=wp.int32, device=device)
-                self.tie_offset = wp.array(off.astype(np.float32), dtype=wp.vec3, device=device)
-                self.tie_stiffness = wp.array(kg[ln].astype(np.float32), dtype=float, device=device)
-                self.tie_springs = Springs(
-                    node=self.lid_springs.node, point=wp.zeros(len(ln), dtype=wp.vec3, device=device),
-                    stiffness=wp.zeros(len(ln), dtype=float, device=device),
-                    axis=wp.array(np.asarray(g.lid_tangent, np.float32), dtype=wp.vec3, device=device))
-                sets.append(self.tie_springs)
-        self.springs = tuple(sets)
+    def _bind(self, arrays: ContactArrays) -> None:
+        """Keep references to the contact's device arrays (no copy)."""
+        vars(self).update(vars(arrays))
 
     @classmethod
     def from_model(cls, model) -> ContactStage:
-        """The contact of ``model.contact`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_contacts`)."""
-        c = model.contact
-        return cls(c, c.node_stiffness, model.device, geometry=c.geometry, glide_stiffness=c.glide_stiffness)
+        """The contact of ``model.contact`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_contacts`): references
+        to the arrays :meth:`~facewarp._src.physics.model.ModelBuilder.finalize` made."""
+        from . import kernels_contact as kc
+
+        st = cls.__new__(cls)
+        st.kc = kc
+        st._bind(model.contact.arrays)
+        return st
 
     @property
     def counts(self) -> dict:

@@ -9,6 +9,7 @@ The rig is made at build time by :func:`facewarp._src.anatomy.rig.face_rig_from_
 from __future__ import annotations
 
 import io
+import os
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -21,7 +22,8 @@ from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..geometry.jaw import JawKinematic
 from .contact import ContactGeometry, contact_from_arrays, contact_to_arrays
-from .muscle_stage import MuscleRig
+from .model import node_jaw_amounts
+from .muscle_rig import MuscleRig
 
 __all__ = ["FaceRig", "load_face_rig", "node_jaw_amounts", "save_face_rig"]
 
@@ -93,9 +95,12 @@ class FaceRig:
     head_face_uv: np.ndarray | None = None
     skin_texture: str | None = None
 
-    @property
-    def jaw(self) -> JawKinematic:
-        return JawKinematic(self.jaw_pivot, self.jaw_u, self.jaw_v, self.lip_corners, self.mouth_center)
+    jaw: JawKinematic = field(init=False, repr=False, compare=False)
+    """The kinematic jaw of ``jaw_pivot``, ``jaw_u``, ``jaw_v``, ``lip_corners`` and ``mouth_center``
+    (made with the rig: a plain attribute)."""
+
+    def __post_init__(self):
+        self.jaw = JawKinematic(self.jaw_pivot, self.jaw_u, self.jaw_v, self.lip_corners, self.mouth_center)
 
     def part_at(self, name: str, jaw_angles=(0.0, 0.0)) -> np.ndarray:
         """Vertices [m] of rigid part ``name`` in the head frame at ``jaw_angles`` (u, v) [rad],
@@ -151,9 +156,9 @@ def save_face_rig(path, fr: FaceRig) -> Path:
 
 def load_face_rig(path) -> FaceRig:
     """Read a file written by :func:`save_face_rig` (a ``facewarp build`` output)."""
-    from ..core.checks import check_path
-
-    check_path("path", path)
+    # the path checked here, not by core.checks, which the checks of the rig itself enter once
+    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)) or not str(path).strip():
+        raise InputError(f"path: expected a file or folder path, got {path!r:.80}")
     path = Path(path)
     if path.is_dir():
         path = path / "face_rig.npz"
@@ -168,15 +173,20 @@ def load_face_rig(path) -> FaceRig:
         if "contact_node_side" not in z:
             raise InputError(f"{path}: a face rig of an older facewarp (no contact geometry); rebuild it with "
                              "`facewarp build`")
-        rig = MuscleRig(names=[str(n) for n in z["rig_names"]], **{k: z[f"rig_{k}"] for k in _RIG_FIELDS})
+        # every field read first, then the parts made in one pass (the muscles, the contact, the rig)
+        names = [str(n) for n in z["rig_names"]]
+        rig_fields = {k: z[f"rig_{k}"] for k in _RIG_FIELDS}
         parts = {str(k): (z[f"part_{k}_V"], z[f"part_{k}_F"]) for k in z["part_names"]}
         part_jaw = {str(k): float(z[f"part_{k}_jaw"]) for k in z["part_names"]}
         opening = {k: z[k] for k in ("opening_vertex", "opening_node", "opening_weight", "head_uv", "head_face_uv")
                    if k in z}
+        face = {k: z[k] for k in _FACE_FIELDS}
         texture = path.parent / "texture.png"
-        fr = FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]),
-                     skin_texture=str(texture) if texture.is_file() else None,
-                     **{k: z[k] for k in _FACE_FIELDS}, **opening, contact=contact_from_arrays(z))
+        texture = str(texture) if texture.is_file() else None
+        rig = MuscleRig(names=names, **rig_fields)
+        contact = contact_from_arrays(z)
+        fr = FaceRig(rig=rig, parts=parts, part_jaw=part_jaw, level=int(z["level"]), skin_texture=texture, **face,
+                     **opening, contact=contact)
     except InputError:
         raise
     except (KeyError, ValueError, TypeError, IndexError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:
@@ -188,18 +198,3 @@ def load_face_rig(path) -> FaceRig:
 def _first_line(e: BaseException) -> str:
     text = str(e).strip()
     return text.splitlines()[0] if text else type(e).__name__
-
-
-def node_jaw_amounts(fr: FaceRig) -> np.ndarray:
-    """Eq. 6.4.9 jaw amount of every tet node, shape (p,), float64: that of the head vertex the
-    node lies on or under (sheets are stored one after another, node ``l * q + i`` below outer
-    node ``i``). Rigs without ``vertex_jaw`` give the held and supported nodes' amounts only."""
-    n = len(fr.nodes)
-    out = np.zeros(n)
-    q = int((fr.layer == 0).sum())
-    if fr.vertex_jaw is not None and q and n % q == 0 and (fr.surface_vertex[:q] >= 0).all():
-        out = np.asarray(fr.vertex_jaw, np.float64)[fr.surface_vertex[np.arange(n) % q]]
-    else:
-        out[fr.jaw_nodes] = fr.jaw_amount
-        out[fr.support_nodes] = fr.support_amount
-    return out

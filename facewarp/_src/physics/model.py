@@ -57,8 +57,8 @@ import numpy as np
 
 from ..core.warp import get_warp
 from ..core.errors import InputError
-from ..geometry.tets import TET_EDGES, TET_FACES, signed_tet_volumes
-from .materials import (CONTACT_MODULUS, CONTACT_MUSCLE_RATIO, EDGE_DAMPING, MaterialPhysical,
+from ..geometry.tets import TET_EDGES, TET_FACES
+from .materials import (CONTACT_MODULUS, CONTACT_MUSCLE_RATIO, EDGE_DAMPING, MaterialPhysical, MaterialThesis,
                         material_profile)
 
 __all__ = [
@@ -76,8 +76,15 @@ __all__ = [
     "ModelJaw",
     "ModelMuscles",
     "ModelSupports",
+    "ContactArrays",
+    "ContactSurface",
+    "JawNodeArrays",
+    "MuscleArrays",
+    "SupportArrays",
     "Springs",
     "State",
+    "group_indices",
+    "node_jaw_amounts",
 ]
 
 EDGE_OUTER = 0
@@ -101,6 +108,17 @@ TABLE_6_3 = {
 _TET_EDGES, _TET_FACES = TET_EDGES, TET_FACES
 
 
+
+
+_WARP = []
+
+
+def _warp():
+    """Warp (:func:`~facewarp._src.core.warp.get_warp`), asked once per process and kept: the
+    builder and the Model make their arrays without calling back out of this module."""
+    if not _WARP:
+        _WARP.append(get_warp())
+    return _WARP[0]
 
 
 def _vertex_array(a, n: int, name: str, dtype) -> np.ndarray:
@@ -172,6 +190,21 @@ def sheet_areas(V, T, layer) -> np.ndarray:
     B = B[(lay == lay[:, :1]).all(axis=1)]
     a = 0.5 * np.linalg.norm(np.cross(V[B[:, 1]] - V[B[:, 0]], V[B[:, 2]] - V[B[:, 0]]), axis=1)
     return np.bincount(B.ravel(), weights=np.repeat(a / 3.0, 3), minlength=n)
+
+
+def node_jaw_amounts(fr) -> np.ndarray:
+    """Eq. 6.4.9 jaw amount of every tet node of a face rig (:class:`~facewarp.FaceRig`), shape (p,), float64: that of the head vertex the
+    node lies on or under (sheets are stored one after another, node ``l * q + i`` below outer
+    node ``i``). Rigs without ``vertex_jaw`` give the held and supported nodes' amounts only."""
+    n = len(fr.nodes)
+    out = np.zeros(n)
+    q = int((fr.layer == 0).sum())
+    if fr.vertex_jaw is not None and q and n % q == 0 and (fr.surface_vertex[:q] >= 0).all():
+        out = np.asarray(fr.vertex_jaw, np.float64)[fr.surface_vertex[np.arange(n) % q]]
+    else:
+        out[fr.jaw_nodes] = fr.jaw_amount
+        out[fr.support_nodes] = fr.support_amount
+    return out
 
 
 class ModelBuilder:
@@ -300,7 +333,8 @@ class ModelBuilder:
         """
         if self.head_count:
             raise InputError("add_tissue: this builder has its head already (one head per builder)")
-        mat = material_profile("thesis" if material is None else material)
+        mat = material if isinstance(material, (MaterialThesis, MaterialPhysical)) else material_profile(
+            "thesis" if material is None else material)
         physical = isinstance(mat, MaterialPhysical)
         V = np.asarray(vertices, dtype=np.float64)
         if V.ndim != 2 or V.shape[1] != 3:
@@ -330,7 +364,8 @@ class ModelBuilder:
         # kernels see, so that the rest state is an equilibrium up to float32 arithmetic only
         # (and a tet valid here is not inverted in the kernels' eyes).
         V32 = V.astype(np.float32).astype(np.float64)
-        vol = signed_tet_volumes(V32, T)
+        x0, x1, x2, x3 = (V32[T[:, c]] for c in range(4))  # geometry.tets.signed_tet_volumes, the builder's own
+        vol = np.einsum("ij,ij->i", x1 - x0, np.cross(x2 - x0, x3 - x0)) / 6.0
         scale = np.linalg.norm(V[T[:, 1:]] - V[T[:, :1]], axis=2).max(axis=1)
         tiny = 1e-6 * scale**3  # a regular tet has 0.118 scale^3
         inv = vol <= tiny
@@ -478,19 +513,17 @@ class ModelBuilder:
                 spring's muscle end turns with the jaw by its node's amount (default: the muscle's).
 
         Sets ``muscle_rig`` (the rig with the final ``att_stiffness`` [N/m]), ``muscle_node_amount``
-        and ``muscle_count`` (the activations in :class:`Control`: one per muscle).
+        and ``muscle_count`` (the activations in :class:`Control`: one per muscle). The rig's own
+        checks (:meth:`~facewarp.MuscleRig.validate`) run in :meth:`finalize`, with its derived arrays.
         """
-        from dataclasses import replace
-
         self._need_tissue("add_muscles")
-        rig.validate()
         n, mat = self.vertex_count, self.material
         att = self._node_index(rig.att_node, "rig.att_node")
         per_node = np.bincount(att, minlength=n)
-        if isinstance(mat, MaterialPhysical):
-            rig = replace(rig, att_stiffness=mat.muscle_modulus * self.vertex_area[att] / np.maximum(per_node[att], 1))
-        elif mat.muscle_stiffness is not None:
-            rig = replace(rig, att_stiffness=mat.muscle_stiffness / np.maximum(per_node[att], 1))
+        if isinstance(mat, MaterialPhysical) or mat.muscle_stiffness is not None:
+            rig = copy.copy(rig)  # the rig with the builder's stiffness (finalize validates it)
+            rig.att_stiffness = (mat.muscle_modulus * self.vertex_area[att] if isinstance(mat, MaterialPhysical)
+                                 else mat.muscle_stiffness) / np.maximum(per_node[att], 1)
         if node_amount is not None:
             node_amount = _vertex_array(node_amount, n, "node_amount", np.float64)
         self.muscle_rig = rig
@@ -595,9 +628,8 @@ class ModelBuilder:
         Raises:
             InputError: bad values, or ``contact`` with a rig that has no contact geometry.
         """
-        from .face_rig import node_jaw_amounts
-
-        mat = material_profile("physical" if material is None else material)
+        mat = material if isinstance(material, (MaterialThesis, MaterialPhysical)) else material_profile(
+            "physical" if material is None else material)
         physical = isinstance(mat, MaterialPhysical)
         if edge_damping is None:
             edge_damping = 0.0 if physical else EDGE_DAMPING
@@ -671,12 +703,23 @@ class ModelBuilder:
         return len(self.vertices)
 
     def finalize(self, device=None) -> Model:
-        """Copy the model onto ``device`` (a Warp device or its name; None: Warp's default).
+        """Copy the model onto ``device`` (a Warp device or its name; None: Warp's default): every
+        device array of what is simulated, made here in one place: the tissue, and the stages'
+        (:class:`MuscleArrays`, :class:`SupportArrays`, :class:`JawNodeArrays`,
+        :class:`ContactArrays`, with the scratch their kernels rewrite each step). A stage's
+        ``from_model`` keeps references to them; the solver reads the Model's fields.
 
         Returns:
             A read-only :class:`Model` of Warp arrays (float32 / int32) on that device.
+
+        Raises:
+            InputError: a muscle rig that fails its checks (:meth:`~facewarp.MuscleRig.validate`).
         """
-        wp = get_warp()
+        wp = _warp()
+        rig = self.muscle_rig
+        if rig is not None:  # the rig checked and its derived arrays, at once (Eq. 6.4.1, Fig. 6.4)
+            rig.validate()
+            derived = (rig.weighted_stiffness(), rig.attachment_jaw(), rig.attachment_across(), rig.curve_normals())
         dev = wp.get_device(device)
 
         def f32(a, dtype=float):
@@ -686,6 +729,7 @@ class ModelBuilder:
             return wp.array(np.ascontiguousarray(a, dtype=np.int32), dtype=dtype, device=dev)
 
         inv_mass = np.where(self.fixed, 0.0, 1.0 / self.mass)
+        rest = f32(self.vertices, wp.vec3)
         # force slots: edge e -> 2e (i), 2e+1 (j); face f -> 2E + 3f + (0, 1, 2); tet t -> 2E + 3F + 4t + (0..3)
         slot_node = np.concatenate([self.edges.ravel(), self.faces.ravel(), self.tets.ravel()])
         _, start, order = group_indices(slot_node, np.arange(len(self.vertices)))
@@ -696,7 +740,7 @@ class ModelBuilder:
             face_count=len(self.faces),
             tet_count=len(self.tets),
             muscle_count=self.muscle_count,
-            rest_positions=f32(self.vertices, wp.vec3),
+            rest_positions=rest,
             vertex_mass=f32(self.mass),
             vertex_inv_mass=f32(inv_mass),
             vertex_layer=i32(self.layer),
@@ -723,12 +767,12 @@ class ModelBuilder:
             node_slots=i32(order),
             damping_rate=self.damping_rate,
             material=self.material.name,
-            **self._finalize_stages(dev, f32),
+            **self._finalize_stages(wp, dev, f32, rest, derived if rig is not None else None),
         )
 
-    def _finalize_stages(self, dev, f32) -> dict:
-        """The Model's stage fields and per-head ranges (one head; a batch appends rows)."""
-        wp = get_warp()
+    def _finalize_stages(self, wp, dev, f32, rest, derived) -> dict:
+        """The Model's stage fields, their device arrays and per-head ranges (one head; a batch
+        appends rows)."""
         rig = self.muscle_rig
         P = 0 if rig is None else len(rig.ctrl_rest)
         K = 0 if rig is None else len(rig.att_node)
@@ -741,14 +785,21 @@ class ModelBuilder:
         return dict(
             head_count=self.head_count,
             **ranges,
-            muscles=None if rig is None else ModelMuscles(rig, self.muscle_node_amount),
+            muscles=None if rig is None else ModelMuscles(
+                rig, self.muscle_node_amount, MuscleArrays(wp, rig, self.jaw, dev, self.muscle_node_amount, *derived)),
             muscle_ctrl_rest=(f32(rig.ctrl_rest, wp.vec3) if P else wp.zeros(0, dtype=wp.vec3, device=dev)),
             supports=ModelSupports(self.support_nodes, self.support_normal, self.support_amount,
-                                   self.support_stiffness),
-            jaw=None if self.jaw is None else ModelJaw(self.jaw, self.jaw_nodes, self.jaw_amount, self.carry_nodes,
-                                                       self.carry_amount),
-            contact=None if g is None else ModelContact(g, self.contact_stiffness, self.glide_stiffness,
-                                                        self.vertices, self.jaw),
+                                   self.support_stiffness,
+                                   SupportArrays(wp, self.jaw, self.support_nodes, self.support_normal,
+                                                 self.support_amount, self.support_stiffness, rest, dev)),
+            jaw=None if self.jaw is None else ModelJaw(
+                self.jaw, self.jaw_nodes, self.jaw_amount, self.carry_nodes, self.carry_amount,
+                JawNodeArrays(wp, self.jaw, self.jaw_nodes, self.jaw_amount, dev, rest),
+                JawNodeArrays(wp, self.jaw, self.carry_nodes, self.carry_amount, dev)),
+            contact=None if g is None else ModelContact(
+                g, self.contact_stiffness, self.glide_stiffness, self.vertices, self.jaw,
+                ContactArrays(wp, self.vertices, self.contact_stiffness, dev, geometry=g,
+                              glide_stiffness=self.glide_stiffness, jaw=self.jaw)),
         )
 
 
@@ -867,7 +918,7 @@ class Model:
     def state(self) -> State:
         """A new :class:`State` at rest: positions = previous positions = rest positions, the
         muscle control points at rest, the jaw carried to (0, 0)."""
-        wp = get_warp()
+        wp = _warp()
         ctrl = self.muscle_ctrl_rest
         return State(
             positions=wp.clone(self.rest_positions),
@@ -878,7 +929,7 @@ class Model:
 
     def control(self) -> Control:
         """A new :class:`Control`: no activation, jaw closed, no external force, cranium at rest."""
-        wp = get_warp()
+        wp = _warp()
         return Control(
             activations=wp.zeros(self.muscle_count, dtype=float, device=self.device),
             jaw_angles=wp.zeros(2, dtype=float, device=self.device),
@@ -896,7 +947,8 @@ class State:
     geometry of the step's controls, the jaw carry) and the solver hands them on to
     ``state_out`` (:meth:`assign_stage_data`), so two States can be swapped step by step and a
     copy of the rest State is a reset. What a stage recomputes from State and Control before
-    every use (springs, ellipsoids, contact points) is scratch of its kernel group, not state.
+    every use (springs, ellipsoids, contact points) is scratch, not state: allocated once with
+    the stage arrays of :meth:`ModelBuilder.finalize` (e.g. :class:`MuscleArrays`).
     """
 
     positions: object
@@ -927,17 +979,19 @@ class State:
 
 @dataclass(frozen=True, eq=False)
 class ModelMuscles:
-    """The muscles of a :class:`Model` (host, NumPy; the muscle stage copies them to the device)."""
+    """The muscles of a :class:`Model` (host, NumPy, and their device arrays)."""
 
     rig: object
     """The :class:`~facewarp._src.physics.muscle_stage.MuscleRig` with its final ``att_stiffness`` [N/m]."""
     node_amount: np.ndarray | None
     """Jaw amount (Eq. 6.4.9) of every node, shape (vertex_count,), float64, or None."""
+    arrays: MuscleArrays | None = None
+    """The muscles on the device (:class:`MuscleArrays`, made by :meth:`ModelBuilder.finalize`)."""
 
 
 @dataclass(frozen=True, eq=False)
 class ModelSupports:
-    """The sliding supports of a :class:`Model` (host, NumPy)."""
+    """The sliding supports of a :class:`Model` (host, NumPy, and their device arrays)."""
 
     nodes: np.ndarray
     """Supported nodes, shape (s,), int64."""
@@ -947,11 +1001,13 @@ class ModelSupports:
     """Their jaw amounts, shape (s,), float64."""
     stiffness: np.ndarray
     """Spring stiffness [N/m], shape (s,), float64."""
+    arrays: SupportArrays | None = None
+    """The supports on the device (:class:`SupportArrays`, made by :meth:`ModelBuilder.finalize`)."""
 
 
 @dataclass(frozen=True, eq=False)
 class ModelJaw:
-    """The kinematic jaw of a :class:`Model` (host, NumPy)."""
+    """The kinematic jaw of a :class:`Model` (host, NumPy, and its device arrays)."""
 
     joint: object
     """Pivot [m] and unit axes of the jaw (``pivot``, ``u_axis``, ``v_axis``; :class:`~facewarp.JawKinematic`)."""
@@ -963,11 +1019,15 @@ class ModelJaw:
     """Free nodes carried with the jaw, shape (c,), int64."""
     carry_amounts: np.ndarray
     """Their amounts, shape (c,), float64."""
+    target_arrays: JawNodeArrays | None = None
+    """The jaw-moved fixed / held nodes on the device (:class:`JawNodeArrays`, by :meth:`ModelBuilder.finalize`)."""
+    carry_arrays: JawNodeArrays | None = None
+    """The carried free nodes on the device (:class:`JawNodeArrays`, by :meth:`ModelBuilder.finalize`)."""
 
 
 @dataclass(frozen=True, eq=False)
 class ModelContact:
-    """The contact of a :class:`Model` (host, NumPy)."""
+    """The contact of a :class:`Model` (host, NumPy, and its device arrays)."""
 
     geometry: object
     """The :class:`~facewarp._src.physics.contact.ContactGeometry` (made at build time)."""
@@ -979,6 +1039,8 @@ class ModelContact:
     """Rest positions [m], shape (vertex_count, 3), float64 (the contact stage's rest frame)."""
     jaw: object
     """The jaw joint (the lower teeth turn with it), or None."""
+    arrays: ContactArrays | None = None
+    """The contact on the device (:class:`ContactArrays`, made by :meth:`ModelBuilder.finalize`)."""
 
 
 @dataclass(eq=False)
@@ -1044,3 +1106,289 @@ class Springs:
     @property
     def count(self) -> int:
         return int(self.node.shape[0])
+
+
+# ---------------------------------------------------------------------------------------- stage arrays
+# What the kernel groups (stages) read and write on the device, made once by ModelBuilder.finalize
+# (or by a stage's own constructor for a hand-made stage); a stage keeps references to them only.
+# Each holds the model's arrays of its part and the scratch its kernels rewrite every step
+# (springs, ellipsoids, contact points): recomputed from State and Control before every use.
+
+
+def _jaw_axes(wp, jaw):
+    """The jaw's pivot [m] and unit axes as wp.vec3 (defaults without a jaw)."""
+    if jaw is None:
+        return wp.vec3(0.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0)
+    return (wp.vec3(float(jaw.pivot[0]), float(jaw.pivot[1]), float(jaw.pivot[2])),
+            wp.vec3(float(jaw.u_axis[0]), float(jaw.u_axis[1]), float(jaw.u_axis[2])),
+            wp.vec3(float(jaw.v_axis[0]), float(jaw.v_axis[1]), float(jaw.v_axis[2])))
+
+
+class MuscleArrays:
+    """The muscles on the device (:class:`~facewarp._src.physics.muscle_stage.MuscleStage`'s arrays).
+
+    Model (read only), float32 / int32 copies of the rig's fields (:class:`~facewarp.MuscleRig`,
+    same names and units): ``ctrl_rest`` (P,) vec3 [m], ``ctrl_muscle``, ``ctrl_pivot`` (P,),
+    ``ctrl_jaw`` (P,), ``muscle_activation``, ``muscle_contraction``, ``muscle_saturation``,
+    ``muscle_center`` (M,) vec3 [m], ``muscle_center_jaw``, ``muscle_center_normal`` (M,) vec3,
+    ``muscle_glide``, ``muscle_glide_center`` (M,) vec3 [m], ``curve_ctrl`` (C,) vec3i,
+    ``curve_weight`` (C,) vec3, ``curve_normal`` (C,) vec3 (rest plane normals), ``seg_curve``
+    (S,), ``seg_t`` (S,) vec2, ``seg_rest_radii`` (S,) vec3 [m]; anchors grouped (``anchor_count``,
+    ``anchor_start`` (A + 1,), ``anchor_ctrl``, ``anchor_passive``); attachments ``att_node``,
+    ``att_seg``, ``att_uv`` (K,) vec2, ``att_rest_length`` [m], ``att_stiffness`` [N/m] (after the
+    area weights), ``att_jaw_shift`` (node amount less the muscle's), ``att_across`` (K,) int32,
+    grouped per node (``att_nodes_unique``, ``att_node_start``, ``att_order``); ``jaw_pivot`` [m],
+    ``jaw_u``, ``jaw_v`` (wp.vec3).
+
+    Scratch (rewritten every step): ``ctrl_jawed``, ``ctrl_contracted`` (P,) vec3 [m];
+    ``seg_center`` (S,) vec3 [m], ``seg_frame`` (S,) mat33, ``seg_radii`` (S,) vec3 [m];
+    ``att_point`` (K,) vec3 [m], ``spring_stiffness`` (K,) [N/m], ``att_force`` (K,) vec3 [N];
+    ``springs`` (:class:`Springs` over them).
+    """
+
+    def __init__(self, wp, rig, jaw, device, node_amount, weighted_stiffness, attachment_jaw, attachment_across,
+                 curve_normals):
+        f32 = lambda a, dt=float: wp.array(np.ascontiguousarray(a, dtype=np.float32), dtype=dt, device=device)  # noqa: E731
+        i32 = lambda a, dt=wp.int32: wp.array(np.ascontiguousarray(a, dtype=np.int32), dtype=dt, device=device)  # noqa: E731
+        self.rig = rig
+        self.device = device
+        self.ctrl_rest = f32(rig.ctrl_rest, wp.vec3)
+        self.ctrl_muscle = i32(rig.ctrl_muscle)
+        self.ctrl_pivot = i32(rig.ctrl_pivot)
+        self.ctrl_jaw = f32(rig.ctrl_jaw)
+        self.muscle_activation = i32(rig.activation_index)
+        self.muscle_contraction = f32(rig.contraction)
+        self.muscle_saturation = f32(rig.saturation)
+        self.muscle_center_normal = f32(rig.center_normal, wp.vec3)
+        self.muscle_glide = i32(rig.glide)
+        self.muscle_glide_center = f32(rig.glide_center, wp.vec3)
+        self.muscle_center = f32(rig.center, wp.vec3)
+        self.muscle_center_jaw = f32(rig.center_jaw)
+        self.curve_ctrl = i32(rig.curve_ctrl, wp.vec3i)
+        self.curve_weight = f32(rig.curve_weight, wp.vec3)
+        self.curve_normal = f32(curve_normals, wp.vec3)
+        self.seg_curve = i32(rig.seg_curve)
+        self.seg_t = f32(rig.seg_t, wp.vec2)
+        self.seg_rest_radii = f32(rig.seg_rest_radii, wp.vec3)
+        groups, a_start, a_order = group_indices(rig.anchor_group)
+        self.anchor_count = len(groups)
+        self.anchor_start = i32(a_start)
+        self.anchor_ctrl = i32(np.asarray(rig.anchor_ctrl)[a_order])
+        self.anchor_passive = f32(np.asarray(rig.anchor_passive)[a_order])
+        self.att_node = i32(rig.att_node)
+        self.att_seg = i32(rig.att_seg)
+        self.att_uv = f32(rig.att_uv, wp.vec2)
+        self.att_rest_length = f32(rig.att_rest_length)
+        self.att_stiffness = f32(weighted_stiffness)
+        shift = np.zeros(len(rig.att_node))
+        if node_amount is not None and len(rig.att_node):
+            shift = np.asarray(node_amount, np.float64)[rig.att_node] - attachment_jaw
+        self.att_jaw_shift = f32(shift)
+        self.att_across = i32(attachment_across)
+        nodes_u, n_start, order = group_indices(rig.att_node)
+        self.att_nodes_unique = i32(nodes_u)
+        self.att_node_start = i32(n_start)
+        self.att_order = i32(order)
+        self.att_force = wp.zeros(len(order), dtype=wp.vec3, device=device)
+        P, S, K = len(rig.ctrl_rest), len(rig.seg_curve), len(rig.att_node)
+        self.ctrl_jawed = wp.zeros(P, dtype=wp.vec3, device=device)
+        self.ctrl_contracted = wp.zeros(P, dtype=wp.vec3, device=device)
+        self.seg_center = wp.zeros(S, dtype=wp.vec3, device=device)
+        self.seg_frame = wp.zeros(S, dtype=wp.mat33, device=device)
+        self.seg_radii = wp.zeros(S, dtype=wp.vec3, device=device)
+        self.att_point = wp.zeros(K, dtype=wp.vec3, device=device)
+        self.spring_stiffness = wp.zeros(K, dtype=float, device=device)
+        self.springs = Springs(node=self.att_node, point=self.att_point, stiffness=self.spring_stiffness,
+                               rest_length=self.att_rest_length)
+        self.jaw_pivot, self.jaw_u, self.jaw_v = _jaw_axes(wp, jaw)
+
+
+class SupportArrays:
+    """The sliding supports on the device (:class:`~facewarp._src.physics.muscle_stage.SupportStage`'s arrays).
+
+    Model: ``count``; ``nodes`` (s,) int32; ``normals`` (s,) vec3 (unit rest normals); ``amounts``
+    (s,) float32 (jaw amounts); ``stiffness`` (s,) float32 [N/m]; ``rest`` (vertex_count,) vec3 [m]
+    (the Model's rest positions); ``pivot``, ``u``, ``v`` (wp.vec3: the jaw). Scratch: ``point``,
+    ``axis`` (s,) vec3 (the step's anchors [m] and axes) and ``springs`` over them.
+    """
+
+    def __init__(self, wp, jaw, nodes, normals, amounts, stiffness, rest_positions, device):
+        self.device = device
+        self.count = len(nodes)
+        self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
+        n = np.asarray(normals, np.float64).reshape(-1, 3)
+        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        self.normals = wp.array(n.astype(np.float32), dtype=wp.vec3, device=device)
+        self.amounts = wp.array(np.asarray(amounts, np.float32), dtype=float, device=device)
+        k = np.broadcast_to(np.asarray(stiffness, np.float64), (self.count,))
+        if not (np.isfinite(k).all() and (k >= 0).all()):
+            raise InputError(f"support stiffness must be finite and >= 0 [N/m], got min {k.min() if len(k) else 0}")
+        self.stiffness = wp.array(k.astype(np.float32), dtype=float, device=device)
+        self.rest = rest_positions
+        self.pivot, self.u, self.v = _jaw_axes(wp, jaw)
+        self.point = wp.zeros(self.count, dtype=wp.vec3, device=device)
+        self.axis = wp.zeros(self.count, dtype=wp.vec3, device=device)
+        self.springs = Springs(node=self.nodes, point=self.point, stiffness=self.stiffness, axis=self.axis)
+
+
+class JawNodeArrays:
+    """Nodes moved by the jaw with their Eq. 6.4.9 amounts (those > 0), on the device
+    (:mod:`facewarp._src.coupling.kinematic`'s stages): ``count``; ``nodes`` (j,) int32;
+    ``amounts`` (j,) float32; ``pivot``, ``u``, ``v`` (wp.vec3: the jaw); ``rest`` (vertex_count,)
+    vec3 [m] (the Model's rest positions, or None for the carry)."""
+
+    def __init__(self, wp, jaw, nodes, amounts, device, rest_positions=None):
+        self.device = device
+        keep = np.asarray(amounts) > 0
+        self.count = int(keep.sum())
+        self.nodes = wp.array(np.asarray(nodes)[keep].astype(np.int32), dtype=wp.int32, device=device)
+        self.amounts = wp.array(np.asarray(amounts)[keep].astype(np.float32), dtype=float, device=device)
+        self.pivot, self.u, self.v = _jaw_axes(wp, jaw)
+        self.rest = rest_positions
+
+
+class ContactSurface:
+    """Candidate nodes against one closed surface: its ``wp.Mesh`` and the nodes' springs (contact scratch)."""
+
+    def __init__(self, wp, nodes, k, surface_points, faces, device, reach, gap, *, follows=None, rigid=None):
+        self.count = len(nodes)
+        self.reach, self.gap = float(reach), float(gap)
+        self.follows = follows  # node indices the surface points are (a lip), or None
+        self.rigid = rigid  # (rest points, jaw amount) of a rigid part, or None
+        self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
+        self.k = wp.array(np.asarray(k, np.float32), dtype=float, device=device)
+        self.points = wp.array(np.asarray(surface_points, np.float32), dtype=wp.vec3, device=device)
+        if rigid is not None:
+            self.rest = wp.array(np.asarray(rigid[0], np.float32), dtype=wp.vec3, device=device)
+            self.amount = float(rigid[1])
+        if follows is not None:
+            self.follow = wp.array(np.asarray(follows, np.int32), dtype=wp.int32, device=device)
+        self.mesh = wp.Mesh(points=self.points, indices=wp.array(np.asarray(faces, np.int32).ravel(), dtype=wp.int32,
+                                                                   device=device))
+        self.springs = Springs(node=self.nodes, point=wp.zeros(self.count, dtype=wp.vec3, device=device),
+                               stiffness=wp.zeros(self.count, dtype=float, device=device),
+                               axis=wp.zeros(self.count, dtype=wp.vec3, device=device), one_sided=True)
+
+
+class ContactArrays:
+    """The contact on the device (:class:`~facewarp._src.physics.contact.ContactStage`'s arrays;
+    the arguments are the stage's, with ``nodes`` the rest positions [m], (p, 3), and ``jaw`` the
+    joint the lower teeth turn with, or None).
+
+    Model: ``geometry`` (the :class:`~facewarp._src.physics.contact.ContactGeometry`), ``pivot``,
+    ``u``, ``v`` (wp.vec3: the jaw); per obstacle surface a :class:`ContactSurface` in ``surfaces``
+    (its candidate nodes, stiffness [N/m], points [m] and ``wp.Mesh``); counts ``eye_count``,
+    ``glide_count``, ``lid_count``, ``tie_count``; the lid ties' ``tie_rest`` [m], ``tie_partner``,
+    ``tie_offset`` [m], ``tie_stiffness`` [N/m]. The spring sets (``eye_springs``, ``glide_springs``,
+    ``floor_springs``, ``lid_springs``, ``tie_springs``; all in ``springs``): fixed nodes and
+    stiffness, their points, axes and stiffness the detection's scratch.
+    """
+
+    def __init__(self, wp, nodes, node_stiffness, device, *, gap=None, lips=True, teeth=True, eyes=True, lids=True,
+                 ties=True, geometry=None, glide_stiffness=None, jaw=None):
+        from . import contact as C
+
+        gap = C.CONTACT_GAP if gap is None else gap
+        self.device = device
+        if not (np.isfinite(gap) and gap >= 0.0):
+            raise InputError(f"gap: expected a finite distance >= 0 [m], got {gap!r}")
+        X = np.asarray(nodes, np.float64)
+        kn = np.asarray(node_stiffness, np.float64)
+        if kn.shape != (len(X),) or not (np.isfinite(kn).all() and (kn >= 0).all()):
+            raise InputError(f"node_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
+        g = geometry
+        self.geometry = g
+        self.pivot, self.u, self.v = _jaw_axes(wp, jaw)
+
+        def stiff(nodes):
+            k = kn[nodes]
+            pos = k[k > 0]
+            return np.where(k > 0, k, np.median(pos) if len(pos) else 0.0)
+
+        self.surfaces: list[ContactSurface] = []
+        if lips:
+            for S, nodes in zip(g.lip_faces, g.lip_nodes):
+                if len(S) == 0 or len(nodes) == 0:
+                    continue
+                used, local = np.unique(S, return_inverse=True)
+                self.surfaces.append(ContactSurface(wp, nodes, stiff(nodes), X[used], local.reshape(-1, 3), device,
+                                                 C.LIP_REACH_M, gap, follows=used))
+        if teeth:
+            for name, TV, TF, amount, nodes in g.teeth:
+                if len(nodes):
+                    self.surfaces.append(ContactSurface(wp, nodes, stiff(nodes), TV, TF, device, C.TEETH_REACH_M, gap,
+                                                     rigid=(TV, amount)))
+        sets = [s.springs for s in self.surfaces]
+        glide = np.asarray(g.eye_glide, bool)
+        if len(glide) != len(g.eye_nodes):
+            glide = np.zeros(len(g.eye_nodes), bool)
+        self.eye_count = len(g.eye_nodes) if eyes else 0
+        self.glide_count = int(glide.sum()) if eyes else 0
+        kg = kn if glide_stiffness is None else np.asarray(glide_stiffness, np.float64)
+        if kg.shape != (len(X),) or not (np.isfinite(kg).all() and (kg >= 0).all()):
+            raise InputError(f"glide_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
+
+        def eye_set(mine, r, k, one_sided, centers=None):
+            en = g.eye_nodes[mine]
+            c = g.eye_centers[g.eye_of_node[mine]] if centers is None else centers[mine]
+            return Springs(node=wp.array(en.astype(np.int32), dtype=wp.int32, device=device),
+                           point=wp.array(c.astype(np.float32), dtype=wp.vec3, device=device),
+                           stiffness=wp.array(k.astype(np.float32), dtype=float, device=device),
+                           rest_length=wp.array(r[mine].astype(np.float32), dtype=float, device=device),
+                           one_sided=one_sided)
+
+        d_rest = np.linalg.norm(X[g.eye_nodes] - g.eye_centers[g.eye_of_node], axis=1)
+        if self.eye_count:
+            # a node inside the ball (or within the gap) at rest gets its rest distance less
+            # C.EYE_REST_SLACK_M: no force at rest, and it may not sink deeper
+            r = np.minimum(g.eye_radii[g.eye_of_node] + gap, d_rest - C.EYE_REST_SLACK_M)
+            every = np.ones(len(g.eye_nodes), bool)
+            self.eye_springs = eye_set(every, r, stiff(g.eye_nodes), True)
+            sets.append(self.eye_springs)
+        if self.glide_count:
+            # the inner lid sheet glides on the eyeball: on its glide sphere (glide_spheres; about
+            # the eyeball's centre through its rest position where none is given), two-sided at
+            # the sliding support's stiffness, and it may not sink below that sphere (one-sided at
+            # its contact stiffness, C.EYE_REST_SLACK_M short of it); the contact above keeps it out
+            # of the ball
+            if len(g.glide_centers) == len(g.eye_nodes) and len(g.glide_radii) == len(g.eye_nodes):
+                gc, gr = np.asarray(g.glide_centers, np.float64), np.asarray(g.glide_radii, np.float64)
+            else:
+                gc, gr = g.eye_centers[g.eye_of_node], d_rest
+            self.glide_springs = eye_set(glide, gr, kg[g.eye_nodes[glide]], False, gc)
+            self.floor_springs = eye_set(glide, gr - C.EYE_REST_SLACK_M, stiff(g.eye_nodes)[glide], True, gc)
+            sets += [self.glide_springs, self.floor_springs]
+        self.lid_count = len(g.lid_nodes) if lids else 0
+        self.tie_count = 0
+        if self.lid_count:
+            ln = g.lid_nodes
+            c, n = g.lid_planes[g.lid_plane, 0], g.lid_planes[g.lid_plane, 1]
+            a = g.lid_side[:, None] * n  # toward the node's own side
+            # the plane gap / 2 short of the fissure plane (the two margins stop gap apart; a
+            # node nearer at rest, with a geometry made for a smaller gap, keeps its rest distance)
+            r = np.minimum(0.5 * gap, np.einsum("ij,ij->i", X[ln] - c, a))
+            self.lid_springs = Springs(
+                node=wp.array(ln.astype(np.int32), dtype=wp.int32, device=device),
+                point=wp.array((c + r[:, None] * a).astype(np.float32), dtype=wp.vec3, device=device),
+                stiffness=wp.array((C.LID_STIFFNESS_RATIO * stiff(ln)).astype(np.float32), dtype=float, device=device),
+                axis=wp.array(a.astype(np.float32), dtype=wp.vec3, device=device), one_sided=True)
+            sets.append(self.lid_springs)
+            partner = np.asarray(g.lid_partner, np.int64)
+            if ties and len(partner) == len(ln) and len(g.lid_tangent) == len(ln) and (partner >= 0).any():
+                # margins that close meet point to point along the fissure (kernels_contact._lid_ties),
+                # held as firmly as the inner sheet on its support (the glide stiffness: the
+                # contact's stiffness there stalled the CPU L-BFGS on the level-1 head)
+                self.tie_count = self.lid_count
+                mate = np.maximum(partner, 0)
+                off = 0.5 * (X[ln] - X[ln[mate]])
+                above = np.einsum("ij,ij->i", X[ln] - c, a) - r  # from the node's spring plane at rest
+                self.tie_rest = wp.array((above + above[mate]).astype(np.float32), dtype=float, device=device)
+                self.tie_partner = wp.array(partner.astype(np.int32), dtype=wp.int32, device=device)
+                self.tie_offset = wp.array(off.astype(np.float32), dtype=wp.vec3, device=device)
+                self.tie_stiffness = wp.array(kg[ln].astype(np.float32), dtype=float, device=device)
+                self.tie_springs = Springs(
+                    node=self.lid_springs.node, point=wp.zeros(len(ln), dtype=wp.vec3, device=device),
+                    stiffness=wp.zeros(len(ln), dtype=float, device=device),
+                    axis=wp.array(np.asarray(g.lid_tangent, np.float32), dtype=wp.vec3, device=device))
+                sets.append(self.tie_springs)
+        self.springs = tuple(sets)

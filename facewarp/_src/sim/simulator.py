@@ -18,11 +18,10 @@ from ..core.limits import MAX_ADVANCE_FRAMES
 from ..coupling.head_pose import HeadPose
 from ..expressions import Timeline
 from ..physics.face_rig import FaceRig
-from ..physics.materials import material_profile
 from .frames import Frames, save_frames_npz
 from .play import FrameRecorder, play
 from .readout import activation_vector, fdp_points, head_surface, jaw_vector, muscle_curves, parts_at, surface_index
-from .stepper import SOLVERS, FrameStepper, face_stages, frame_timing, make_solver
+from .stepper import SOLVERS, FrameStepper, build_face, face_stages
 
 __all__ = ["SOLVERS", "FaceSimulator", "Frames", "face_stages", "save_frames_npz"]
 
@@ -62,30 +61,24 @@ class FaceSimulator:
                  solver_options: dict | None = None, support_stiffness: float | None = None,
                  edge_damping: float | None = None, mass_scaling: bool = True, contact: bool = True,
                  contact_modulus: float | None = None):
-        from ..physics.model import ModelBuilder
-
         device = check_simulator_args(fr, device=device, solver=solver, solvers=SOLVERS, dt=dt, substeps=substeps,
                                       fps=fps, iterations=iterations, tolerance=tolerance, method=method,
                                       solver_options=solver_options, support_stiffness=support_stiffness,
                                       edge_damping=edge_damping, mass_scaling=mass_scaling, contact=contact,
                                       contact_modulus=contact_modulus)
-        self.fr, self.fps, self.solver_name, self.material = fr, float(fps), solver, material_profile(material)
-        builder = ModelBuilder()
-        builder.add_face(fr, material=self.material, edge_damping=edge_damping, support_stiffness=support_stiffness,
-                         contact=contact, contact_modulus=contact_modulus, mass_scaling=mass_scaling)
-        self.substeps, self.dt, self.added_mass_fraction = frame_timing(builder, solver, self.fps, dt, substeps,
-                                                                        mass_scaling=mass_scaling)
-        self.builder, self.model = builder, builder.finalize(device)
-        self.device, self.jaw, self.contact_geometry = self.model.device, fr.jaw, fr.contact if contact else None
-        st = face_stages(self.model)
+        b = build_face(fr, device=device, solver=solver, material=material, fps=fps, dt=dt, substeps=substeps,
+                       iterations=iterations, tolerance=tolerance, method=method, solver_options=solver_options,
+                       support_stiffness=support_stiffness, edge_damping=edge_damping, mass_scaling=mass_scaling,
+                       contact=contact, contact_modulus=contact_modulus)
+        self.fr, self.fps, self.solver_name, self.material = fr, float(fps), solver, b["material"]
+        self.builder, self.model, self.solver = b["builder"], b["model"], b["solver"]
+        self.substeps, self.dt, self.added_mass_fraction = b["substeps"], b["dt"], b["added_mass_fraction"]
+        st = b["stages"]
         self.carry, self.jaw_stage, self.support, self.muscles, self.contact = (
             st["carry"], st["jaw"], st["support"], st["muscles"], st["contact"])
-        self.solver = make_solver(self.model, [s for s in st.values() if s is not None], solver, method=method,
-                                  iterations=iterations, tolerance=tolerance, solver_options=solver_options)
-        self.control = self.model.control()
-        self.rest_state = self.model.state()  # the rest fibres of zero control (frame 0 of run() draws them)
-        self.muscles.update_geometry(self.control, self.rest_state)
-        self.state, self.scratch = self.model.state(), self.model.state()
+        self.control, self.rest_state, self.state, self.scratch = b["control"], b["rest_state"], b["state"], b["scratch"]
+        self.muscles.update_geometry(self.control, self.rest_state)  # the rest fibres of zero control (frame 0 of run())
+        self.device, self.jaw, self.contact_geometry = self.model.device, fr.jaw, fr.contact if contact else None
         self.stepper = FrameStepper(self.solver, self.state, self.scratch, self.control, self.dt,
                                     chunks=self.CONTROL_CHUNKS)
         self.step_seconds = 0.0

@@ -11,7 +11,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.warp import get_warp
 
-__all__ = ["SOLVERS", "FrameStepper", "face_stages", "frame_timing", "make_solver"]
+__all__ = ["SOLVERS", "FrameStepper", "build_face", "check_timing", "face_stages"]
 
 SOLVERS = ("implicit", "verlet")
 """Solvers of :class:`FaceSimulator`: ``implicit`` (backward Euler, a few steps per frame; the
@@ -20,7 +20,8 @@ default) and ``verlet`` (the explicit reference, hundreds of substeps per frame)
 
 def face_stages(model) -> dict:
     """The kernel groups of a face Model, in step order: ``carry``, ``jaw``, ``support``,
-    ``muscles`` (Eq. 6.4.9, supports, Eq. 6.4.1) and ``contact`` (None without it)."""
+    ``muscles`` (Eq. 6.4.9, supports, Eq. 6.4.1) and ``contact`` (None without it); each keeps
+    references to the arrays the Model's ``finalize`` made."""
     from ..coupling.kinematic import CarryStage, JawStage
     from ..physics.contact import ContactStage
     from ..physics.muscle_stage import MuscleStage, SupportStage
@@ -30,29 +31,76 @@ def face_stages(model) -> dict:
             "contact": ContactStage.from_model(model) if model.contact is not None else None}
 
 
-def frame_timing(builder, solver: str, fps: float, dt=None, substeps=None, *, mass_scaling: bool = True):
-    """Substeps per frame and the substep [s] of ``solver`` for a face builder: the implicit
-    solver one step per frame (or ``substeps``, or as many as ``dt`` needs), the Verlet reference
-    its stable step (:meth:`~facewarp._src.physics.model.ModelBuilder.explicit_step`, which may
-    scale masses). Returns ``(substeps, dt [s], added mass fraction)``."""
-    frame_dt = 1.0 / fps
-    if solver == "verlet":
-        return builder.explicit_step(frame_dt, dt=dt, substeps=substeps, mass_scaling=mass_scaling)
-    n = int(substeps if substeps is not None else 1 if dt is None else np.ceil(frame_dt / dt))
-    return n, frame_dt / n, 0.0
+def check_timing(solver: str, fps, dt, substeps) -> None:
+    """The simulator's solver name and frame timing, checked at the public edge.
+
+    Raises:
+        InputError: an unknown solver, a non-positive ``fps`` or ``dt``, ``substeps`` < 1.
+    """
+    if solver not in SOLVERS:
+        raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
+    if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
+        raise InputError(f"fps: expected a positive number, got {fps!r}")
+    if substeps is not None and not (isinstance(substeps, (int, np.integer)) and substeps >= 1):
+        raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
+    if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+        raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
 
 
-def make_solver(model, stages, solver: str, *, method=None, iterations=None, tolerance=None, solver_options=None):
-    """The solver of a face Model: :class:`~facewarp._src.physics.solvers.verlet.SolverVerlet`, or
-    :class:`~facewarp._src.physics.solvers.implicit.SolverImplicit` (``tolerance`` default 3e-5 m,
-    ``solver_options`` its further keywords)."""
+def build_face(fr, *, device, solver: str, material, fps: float, dt=None, substeps=None, iterations=None,
+               tolerance=None, method=None, solver_options=None, support_stiffness=None, edge_damping=None,
+               mass_scaling: bool = True, contact: bool = True, contact_modulus=None) -> dict:
+    """A face rig made into a simulation, one way down: the timing checked, one
+    :class:`~facewarp._src.physics.model.ModelBuilder` (``add_face``: every stiffness), its
+    ``finalize`` (every device array of what is simulated, the rest State and the Control), the
+    stages (:func:`face_stages`: kernel groups on the Model's arrays) and the solver (the Verlet
+    reference, or :class:`~facewarp._src.physics.solvers.implicit.SolverImplicit` with
+    ``tolerance`` default 3e-5 m and ``solver_options`` its further keywords). The arguments are
+    :class:`~facewarp.FaceSimulator`'s.
+
+    Frame timing: the implicit solver one step per frame (or ``substeps``, or as many as ``dt``
+    needs), the Verlet reference its stable step
+    (:meth:`~facewarp._src.physics.model.ModelBuilder.explicit_step`, which may scale masses).
+
+    Returns:
+        A dict: ``material``, ``builder``, ``model``, ``substeps``, ``dt`` [s],
+        ``added_mass_fraction``, ``control``, ``rest_state``, ``state``, ``scratch``, ``stages``
+        (:func:`face_stages`'s dict) and ``solver``.
+
+    Raises:
+        InputError: an unknown solver, material or method, or bad numbers.
+    """
+    from ..physics.materials import material_profile
+    from ..physics.model import ModelBuilder
     from ..physics.solvers.implicit import SolverImplicit
     from ..physics.solvers.verlet import SolverVerlet
 
+    check_timing(solver, fps, dt, substeps)
+    mat = material_profile(material)
+    builder = ModelBuilder()
+    builder.add_face(fr, material=mat, edge_damping=edge_damping, support_stiffness=support_stiffness,
+                     contact=contact, contact_modulus=contact_modulus, mass_scaling=mass_scaling)
+    frame_dt = 1.0 / fps
     if solver == "verlet":
-        return SolverVerlet(model, stages=stages)
-    opts = {"tolerance": 3e-5 if tolerance is None else tolerance, **(solver_options or {})}
-    return SolverImplicit(model, stages=stages, method=method, iterations=iterations, **opts)
+        n, step, added = builder.explicit_step(frame_dt, dt=dt, substeps=substeps, mass_scaling=mass_scaling)
+    else:
+        n = int(substeps if substeps is not None else 1 if dt is None else np.ceil(frame_dt / dt))
+        step, added = frame_dt / n, 0.0
+    model = builder.finalize(device)
+    out = {"material": mat, "builder": builder, "model": model, "substeps": n, "dt": step,
+           "added_mass_fraction": added, "control": model.control(), "rest_state": model.state(),
+           "state": model.state(), "scratch": model.state()}
+    stages = out["stages"] = face_stages(model)
+    listed = []
+    for st in stages.values():
+        if st is not None:
+            listed.append(st)
+    if solver == "verlet":
+        out["solver"] = SolverVerlet(model, stages=listed)
+    else:
+        opts = {"tolerance": 3e-5 if tolerance is None else tolerance, **(solver_options or {})}
+        out["solver"] = SolverImplicit(model, stages=listed, method=method, iterations=iterations, **opts)
+    return out
 
 
 class FrameStepper:

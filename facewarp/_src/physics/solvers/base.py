@@ -20,6 +20,8 @@ from ...core.warp import get_warp
 from .. import kernels_tissue as kt
 from ..model import Control, Model, State
 
+wp = get_warp()  # the kernels of this package import Warp already
+
 __all__ = ["SolverBase", "SolverStage", "check_step_args", "stage_springs"]
 
 
@@ -98,7 +100,6 @@ class SolverBase:
     """
 
     def __init__(self, model: Model, *, stages=()):
-        wp = get_warp()
         if not isinstance(model, Model):
             raise InputError(f"model: expected a Model (ModelBuilder.finalize), got {type(model).__name__}")
         self.model = model
@@ -112,7 +113,7 @@ class SolverBase:
 
     def _launch_guard(self, state_out: State) -> None:
         m = self.model
-        get_warp().launch(kt._check_tets, dim=m.tet_count, inputs=[m.tet_indices, self.step_counter, state_out.positions],
+        wp.launch(kt._check_tets, dim=m.tet_count, inputs=[m.tet_indices, self.step_counter, state_out.positions],
                           outputs=[self.guard], device=self.device)
 
     @property
@@ -141,7 +142,6 @@ class SolverBase:
         Raises:
             SimulationError: naming the first failing step and tet (and vertex).
         """
-        wp = get_warp()
         wp.copy(self._guard_host, self.guard)
         if self.device.is_cuda:
             wp.synchronize_stream(wp.get_stream(self.device))

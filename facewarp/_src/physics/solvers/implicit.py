@@ -142,7 +142,6 @@ class SolverImplicit(SolverBase):
 
     def __init__(self, model: Model, *, stages=(), tolerance: float = 1e-5, max_iterations: int = 50,
                  iterations: int | None = None, extrapolate: float = 0.0):
-        super().__init__(model, stages=stages)
         for name, val in (("tolerance", tolerance), ("extrapolate", extrapolate)):
             if not (np.isfinite(val) and val >= 0):
                 raise InputError(f"{name}: expected a finite number >= 0, got {val!r}")
@@ -150,16 +149,23 @@ class SolverImplicit(SolverBase):
             raise InputError(f"max_iterations: expected a whole number >= 1, got {max_iterations!r}")
         if iterations is not None and not (isinstance(iterations, (int, np.integer)) and iterations >= 1):
             raise InputError(f"iterations: expected a whole number >= 1 or None, got {iterations!r}")
-        for st in self.stages:
+        stages = list(stages)
+        refreshers = []
+        for st in stages:
             if not hasattr(st, "prepare"):
                 raise InputError(f"stages: {type(st).__name__} has no prepare(): it drives explicit solvers only")
+            if hasattr(st, "refresh"):
+                refreshers.append(st)
+        # then the base (targets, guard), the springs and the potential, in one pass: what the solver
+        # needs of the Model is taken here, once
+        super().__init__(model, stages=stages)
         self.tolerance = float(tolerance)
         self.max_iterations = int(max_iterations)
         self.iterations = None if iterations is None else int(iterations)
         self.extrapolate = float(extrapolate)
         self.adaptive = False
         self.contact_slack = 3.0e-4  # [m] near-closed contacts kept in the factorised model (lbfgs)
-        self._refreshers = [st for st in self.stages if hasattr(st, "refresh")]
+        self._refreshers = refreshers
         self.last_iterations = 0
         self._host_total = 0
         self.factorizations = 0

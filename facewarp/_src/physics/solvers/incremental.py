@@ -19,12 +19,24 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.warp import get_warp
-from ..model import Control, Model, State, group_indices
+from ..model import Control, Model, State
 from . import kernels_hessian as kh
 from . import kernels_line_search as kl
 from . import kernels_potential as kp
 
 __all__ = ["IncrementalPotential"]
+
+wp = get_warp()  # the kernel modules above import Warp already
+
+
+def _group_indices(keys, groups=None):
+    """:func:`~facewarp._src.physics.model.group_indices` (the same CSR grouping), here so that the
+    solver's construction reads the Model without calling back into it."""
+    keys = np.asarray(keys, dtype=np.int64)
+    groups = np.unique(keys) if groups is None else np.asarray(groups, dtype=np.int64)
+    order = np.argsort(keys, kind="stable")
+    start = np.searchsorted(keys[order], groups, side="left")
+    return groups, np.r_[start, len(keys)], order
 
 
 class _SpringSet:
@@ -45,7 +57,6 @@ class _SpringPool:
     per node (deterministic sums)."""
 
     def __init__(self, sets: list, device):
-        wp = get_warp()
         dummy_f = wp.zeros(1, dtype=float, device=device)
         dummy_v = wp.zeros(1, dtype=wp.vec3, device=device)
         descs = []
@@ -65,7 +76,7 @@ class _SpringPool:
         self.set_index = i32(np.repeat(np.arange(len(sets)), counts))
         self.local = i32(np.concatenate([np.arange(c) for c in counts]) if sets else np.zeros(0))
         node = np.concatenate([s.node_host for s in sets]) if sets else np.zeros(0, np.int64)
-        nodes_u, start, order = group_indices(node)
+        nodes_u, start, order = _group_indices(node)
         self.group_nodes, self.group_start, self.group_order = i32(nodes_u), i32(start), i32(order)
         self.grad = wp.zeros(self.count, dtype=wp.vec3, device=device)
 
@@ -96,12 +107,11 @@ class IncrementalPotential:
     """
 
     def __init__(self, model: Model, springs, targets):
-        wp = get_warp()
         m, dev, n = model, model.device, model.vertex_count
         self.model = model
         self.device = dev
         self.targets = targets
-        self.springs = [_SpringSet(sp_) for sp_ in springs if sp_.count > 0]
+        self.springs = [_SpringSet(sp_) for sp_ in springs if sp_.node.shape[0] > 0]
         self.pool = _SpringPool(self.springs, dev)
         self.x = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.z = wp.zeros(n, dtype=wp.vec3, device=dev)
@@ -125,7 +135,6 @@ class IncrementalPotential:
     # ------------------------------------------------------------------------------ Hessian pattern
     def _build_blocks(self):
         """Block slots of every element, node and spring, and the BSR pattern they sum into."""
-        wp = get_warp()
         m, dev, n = self.model, self.device, self.model.vertex_count
         E = m.edge_indices.numpy().astype(np.int64)
         F = m.face_indices.numpy().astype(np.int64)
@@ -144,7 +153,7 @@ class IncrementalPotential:
         code = rows * n + cols
         uniq, inv = np.unique(code, return_inverse=True)
         nb = len(uniq)
-        _, start, order = group_indices(inv, np.arange(nb))
+        _, start, order = _group_indices(inv, np.arange(nb))
         brow, bcol = uniq // n, uniq % n
         self.block_count = nb
         self.bsr_offsets = np.searchsorted(brow, np.arange(n + 1)).astype(np.int32)
@@ -187,7 +196,6 @@ class IncrementalPotential:
     def begin(self, state_in: State, control: Control, h: float, extrapolate: float) -> None:
         """The dashpots' start constraints, the inertial target and the first guess of a step of
         ``h`` [s] from ``state_in`` (the stages must have prepared the step already)."""
-        wp = get_warp()
         m, dev = self.model, self.device
         x = state_in.positions
         wp.launch(kp._edge_constraints, dim=m.edge_count, inputs=[m.edge_indices, m.edge_rest_length, x],
@@ -217,7 +225,6 @@ class IncrementalPotential:
 
     def launch_energy(self, x, control: Control, h: float, with_grad: bool = True) -> None:
         """Per-term energies into :attr:`energy` and the gradient into :attr:`grad` at x."""
-        wp = get_warp()
         m, dev = self.model, self.device
         ih = 1.0 / h
         ee, ef, et, en = self._e_views[:4]
@@ -256,7 +263,6 @@ class IncrementalPotential:
         ``slack`` [m]: one-sided springs slack by less than this keep their block (the factorised
         model of the host L-BFGS), 0 for the exact Hessian; a host number or a one-element device
         array (the device method's, changed on the device)."""
-        wp = get_warp()
         m, dev = self.model, self.device
         if not isinstance(slack, wp.array):  # a host number: into the host slack array
             self._host_slack.fill_(float(slack or 0.0))
