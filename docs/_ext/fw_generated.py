@@ -33,7 +33,7 @@ def _import_origins(modname: str) -> dict:
     statements (and ``facewarp._NAMES`` for the top level)."""
     mod = importlib.import_module(modname)
     if modname == "facewarp":
-        return {n: f"facewarp._src.{m}" for n, m in mod._NAMES.items()}
+        return {n: (f"facewarp._src.{m}", n) for n, m in mod._NAMES.items()}
     tree = ast.parse(Path(inspect.getsourcefile(mod)).read_text())
     out = {}
     pkg = modname.rsplit(".", 1)[0] if "." in modname else modname
@@ -42,7 +42,7 @@ def _import_origins(modname: str) -> dict:
             base = importlib.util.resolve_name("." * node.level + node.module, pkg if node.level else "") \
                 if node.level else node.module
             for a in node.names:
-                out[a.asname or a.name] = base
+                out[a.asname or a.name] = (base, a.name)
     return out
 
 
@@ -89,7 +89,8 @@ def public_names() -> list[tuple[str, str, object, str, str]]:
                 kind, doc = "function", inspect.getdoc(obj) or ""
             else:
                 kind = "data"
-                doc = attribute_doc(origins.get(n, modname), n) or _defining_doc(n, obj)
+                origin, orig = origins.get(n, (modname, n))
+                doc = attribute_doc(origin, orig) or _defining_doc(orig, obj)
             rows.append((modname, n, obj, kind, doc))
     return rows
 
@@ -113,7 +114,7 @@ def _api_pages() -> None:
             if m != modname:
                 continue
             full = f"{modname}.{n}"
-            key = id(obj) if kind != "data" else (_import_origins(modname).get(n, modname), n)
+            key = id(obj) if kind != "data" else _import_origins(modname).get(n, (modname, n))
             if key in seen:  # documented once, where it is first public (the top level first)
                 lines += [f"- ``{n}``: the same object as :py:obj:`{seen[key]}`.", ""]
                 continue
@@ -127,7 +128,7 @@ def _api_pages() -> None:
                 for dl in (doc or "").splitlines():
                     lines.append(f"   {dl}" if dl else "")
                 r = repr(obj)
-                if len(r) < 200:
+                if len(r) < 200 and "\n" not in r:
                     lines += ["", f"   Value: ``{r}``"]
                 lines.append("")
         (api / f"{modname}.rst").write_text("\n".join(lines) + "\n")

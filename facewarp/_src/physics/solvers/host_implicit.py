@@ -99,8 +99,10 @@ def _factorize(A, backend: str):
 class SolverHostImplicit(SolverImplicit):
     """Backward Euler by a host factorisation: L-BFGS (default) or Newton (module doc). CPU only.
 
-    Args (besides :class:`~.implicit.SolverImplicit`'s ``stages``, ``tolerance``,
-    ``max_iterations`` (default 50), ``iterations``):
+    :class:`~.implicit.SolverImplicit`'s ``stages``, ``tolerance``, ``max_iterations`` (default 50)
+    and ``iterations`` apply too.
+
+    Args:
         method: ``"lbfgs"`` (default) or ``"newton"``.
         extrapolate: the first guess's extrapolation (:class:`~.implicit.SolverImplicit`).
             Default 0.5 with a fixed ``iterations`` (measured on the laugh preset: the lag of the

@@ -64,7 +64,9 @@ def default_linear_iterations(node_count: int) -> int:
 class SolverDeviceNewtonPCG(SolverImplicit):
     """Backward Euler by Newton-PCG on the model's device (module doc); ``method="newton-pcg"``.
 
-    Args (besides :class:`~.implicit.SolverImplicit`'s ``stages``, ``tolerance``, ``iterations``):
+    :class:`~.implicit.SolverImplicit`'s ``stages``, ``tolerance`` and ``iterations`` apply too.
+
+    Args:
         method: ``"newton-pcg"`` or None.
         max_iterations: At most this many Newton iterations per round of the adaptive loop
             (default 12: a bounded frame time; the thesis profile's stiff layer otherwise took up
