@@ -1,9 +1,9 @@
-"""The README's benchmark tables, generated from the committed results (never typed by hand).
+"""The benchmark tables of the README and the docs pages, generated from the committed results (never typed by hand).
 
     python -m benchmarks --tables            # rewrite every table in README.md from benchmarks/results
     python -m benchmarks --tables --check    # exit 1, naming the tables, if README.md is not up to date
 
-A table sits in README.md between ``<!-- table:NAME -->`` and ``<!-- /table:NAME -->``; NAME is a
+A table sits in README.md or a docs page between ``<!-- table:NAME -->`` and ``<!-- /table:NAME -->``; NAME is a
 function registered here with :func:`table`, which reads result documents (``benchmarks/results/*.json``,
 the one schema of :mod:`benchmarks._common`) and returns the Markdown between the markers. A number in
 a table comes from a result file; the few cells that hold words or a figure no committed result
@@ -26,6 +26,12 @@ import numpy as np
 from benchmarks._common import COMMITTED, SCHEMA_KEYS
 
 README = COMMITTED.parents[1] / "README.md"
+DOCS = COMMITTED.parents[1] / "docs"
+
+
+def documents() -> list[Path]:
+    """The pages that may hold tables: README.md and the docs' Markdown pages (not the generated ones)."""
+    return [README, *sorted(p for p in DOCS.rglob("*.md") if "_generated" not in p.parts)]
 TABLES: dict[str, Callable[["Results"], str]] = {}
 _MARK = re.compile(r"<!-- table:([a-z0-9_]+) -->\n(.*?)<!-- /table:\1 -->", re.S)
 
@@ -544,8 +550,11 @@ def update(text: str, results: Results | None = None) -> str:
                                f"<!-- /table:{m.group(1)} -->", text)
 
 
-def stale(path: Path = README, results: Results | None = None) -> list[str]:
-    """The tables of ``path`` whose text differs from what the results give."""
+def stale(path: Path | None = None, results: Results | None = None) -> list[str]:
+    """The tables of ``path`` (default: every page of :func:`documents`) whose text differs from what
+    the results give."""
+    if path is None:
+        return [k for p in documents() for k in stale(p, results)]
     text = path.read_text()
     new = update(text, results)
     old_bodies = dict(_MARK.findall(text))
@@ -556,16 +565,23 @@ def stale(path: Path = README, results: Results | None = None) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks --tables", description=__doc__.split("\n\n")[0])
     ap.add_argument("--check", action="store_true", help="only check: exit 1 naming the tables that are out of date")
-    ap.add_argument("--readme", type=Path, default=README, help="the file with the table markers (default README.md)")
+    ap.add_argument("--readme", type=Path, default=None,
+                    help="the file with the table markers (default: README.md and every docs page)")
     args = ap.parse_args(argv)
-    names = re.findall(r"<!-- table:([a-z0-9_]+) -->", args.readme.read_text())
-    if args.check:
-        bad = stale(args.readme)
-        if bad:
-            print(f"{args.readme}: out of date: {', '.join(bad)} (run python -m benchmarks --tables)", file=sys.stderr)
-            return 1
-        print(f"{args.readme}: {len(names)} tables up to date ({', '.join(names)})")
-        return 0
-    args.readme.write_text(update(args.readme.read_text()))
-    print(f"{args.readme}: regenerated {', '.join(names) or 'no tables (no markers)'}")
-    return 0
+    pages = [args.readme] if args.readme else documents()
+    bad_any = False
+    for page in pages:
+        names = re.findall(r"<!-- table:([a-z0-9_]+) -->", page.read_text())
+        if not names:
+            continue
+        if args.check:
+            bad = stale(page)
+            if bad:
+                bad_any = True
+                print(f"{page}: out of date: {', '.join(bad)} (run python -m benchmarks --tables)", file=sys.stderr)
+            else:
+                print(f"{page}: {len(names)} tables up to date ({', '.join(names)})")
+            continue
+        page.write_text(update(page.read_text()))
+        print(f"{page}: regenerated {', '.join(names)}")
+    return 1 if bad_any else 0

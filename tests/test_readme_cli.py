@@ -35,11 +35,17 @@ def commands(parser):
     walk("", parser)
     return out
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "docs" / "commands.md"  # the command reference (the README links to it)
+PAGES = [ROOT / "README.md", *sorted(p for p in (ROOT / "docs").rglob("*.md") if "_generated" not in p.parts)]
 
 
 def _text() -> str:
     return README.read_text()
+
+
+def _all_text() -> str:
+    return "\n".join(p.read_text() for p in PAGES)
 
 
 def test_generated_reference_is_up_to_date():
@@ -62,7 +68,7 @@ def test_defaults_in_prose_match_the_parser():
     """`adapt --levels N` (default 2 ...): the number after "default" is the parser's default."""
     names = [name for name, _ in commands(build_parser())]
     found = 0
-    for m in re.finditer(r"`(?:facewarp )?([a-z -]+?) (--[a-z-]+)[^`]*` \(default:? ([^,;)]+)", _text()):
+    for m in re.finditer(r"`(?:facewarp )?([a-z -]+?) (--[a-z-]+)[^`]*` \(default:? ([^,;)]+)", _all_text()):
         command, flag, claimed = m.group(1).strip(), m.group(2), m.group(3).strip()
         if command not in names:
             continue
@@ -77,9 +83,9 @@ def test_defaults_in_prose_match_the_parser():
 
 
 def _examples():
-    """Every `facewarp ...` command line in the README's bash blocks."""
+    """Every `facewarp ...` command line in the bash blocks of the README and the docs pages."""
     out = []
-    for block in re.findall(r"```bash\n(.*?)```", _text(), flags=re.S):
+    for block in re.findall(r"```bash\n(.*?)```", _all_text(), flags=re.S):
         for line in block.replace("\\\n", " ").splitlines():
             line = line.split(" #")[0].strip()
             if line.startswith("facewarp "):

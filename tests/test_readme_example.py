@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
-README = Path(__file__).resolve().parents[1] / "README.md"
-HEADING = "## Python API"
+README = Path(__file__).resolve().parents[1] / "docs" / "python-api.md"  # the README links to it
+HEADING = "# The Python API"
 
 
 def readme_example(path: Path = README) -> str:
-    """The first fenced ``python`` block after the heading ``## Python API``."""
+    """The first fenced ``python`` block after the heading ``# The Python API``."""
     text = path.read_text(encoding="utf-8")
     head = re.search(rf"^{re.escape(HEADING)}[ \t]*$", text, flags=re.M)
     assert head, f"{path.name} has no heading {HEADING!r}"

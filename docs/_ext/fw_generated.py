@@ -206,7 +206,7 @@ def _scalars(d, prefix="", out=None, depth=0):
 
 def benchmarks_markdown() -> str:
     res = ROOT / "benchmarks" / "results"
-    out = ["# Benchmark results", "",
+    out = ["## Every committed result", "",
            "Generated from the committed results in `benchmarks/results/` (each JSON file as written by its "
            "benchmark; `python -m benchmarks --list` lists them, `python -m benchmarks NAME` re-runs one). "
            "Timings are from the machine and date named with each.", ""]
@@ -218,7 +218,7 @@ def benchmarks_markdown() -> str:
         if not isinstance(data, dict):
             continue
         meta = {k: data.get(k) for k in ("benchmark", "date", "machine", "device") if data.get(k) is not None}
-        out += [f"## `{f.name}`", ""]
+        out += [f"### `{f.name}`", ""]
         for k, v in meta.items():
             out.append(f"- {k}: {_cell(json.dumps(v) if isinstance(v, (dict, list)) else v)}")
         figs = _scalars(data.get("figures", {k: v for k, v in data.items() if k not in meta}))

@@ -1,11 +1,11 @@
-"""The README's command reference, generated from the ``facewarp`` argument parser.
+"""The command reference of ``docs/commands.md``, generated from the ``facewarp`` argument parser.
 
 The block between ``<!-- cli-reference:begin -->`` and ``<!-- cli-reference:end -->`` in
 README.md is :func:`reference` (a usage line per command, then a table of every option with
 whether it is required, its default and its values or bounds); ``tests/test_readme_cli.py``
 fails when it is out of date. Rewrite it with::
 
-    python -m facewarp._src.cli_reference README.md
+    python -m facewarp._src.cli_reference docs/commands.md
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from pathlib import Path
 
 __all__ = ["BEGIN", "END", "commands", "reference", "update_readme"]
 
-BEGIN = "<!-- cli-reference:begin (generated from the parser: python -m facewarp._src.cli_reference README.md) -->"
+BEGIN = "<!-- cli-reference:begin (generated from the parser: python -m facewarp._src.cli_reference docs/commands.md) -->"
 END = "<!-- cli-reference:end -->"
 
 
@@ -128,5 +128,5 @@ def update_readme(path: str | Path) -> bool:
 
 
 if __name__ == "__main__":
-    changed = update_readme(sys.argv[1] if len(sys.argv) > 1 else "README.md")
+    changed = update_readme(sys.argv[1] if len(sys.argv) > 1 else "docs/commands.md")
     print("updated" if changed else "up to date")
