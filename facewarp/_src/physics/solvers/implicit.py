@@ -201,6 +201,7 @@ class SolverImplicit(SolverBase):
             InputError: ``dt`` not a positive finite number, or the same state buffers.
         """
         check_step_args(state_in, state_out, dt)
+        self._check_devices(state_in, state_out, control)
         h = float(dt)
         t0 = time.perf_counter()
         self._begin(state_in, control, h)
