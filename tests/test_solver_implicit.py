@@ -553,3 +553,16 @@ def test_a_crushed_tet_stays_above_the_volume_floor():
     X = a.positions.numpy().astype(np.float64)
     r = np.dot(X[1] - X[0], np.cross(X[2] - X[0], X[3] - X[0])) / 6 / model.tet_rest_volume.numpy()[0]
     assert VOLUME_FLOOR < r < 0.05, r
+
+
+def test_last_converged_tells_a_solve_cut_short():
+    """``last_converged`` (the rollback's check): False when the iteration bound cut the solve
+    short of its tolerance, True when it converged or ran a fixed iteration count."""
+    V, b, f = loaded_slab()
+    model = b.finalize("cpu")
+    for kw, want in (({"max_iterations": 1, "tolerance": 1e-12}, False), ({}, True), ({"iterations": 1}, True)):
+        solver = SolverImplicit(model, **kw)
+        a, s, c = model.state(), model.state(), model.control()
+        c.external_force.assign(f)
+        solver.step(a, s, c, 1 / 30)
+        assert solver.last_converged is want, kw

@@ -224,6 +224,7 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
         "frames_per_second": stats.frames_per_second, "realtime_factor": stats.realtime_factor,
         "nodes": int(len(fr.nodes)), "tets": int(len(fr.tets)), "files": [str(w) for w in written],
         "max_fdp_motion_m": {str(k): float(v) for k, v in zip(fr.fdp_ids, moved) if v > 1e-4},
+        "frame_stats": stats.frame_stats, "mujoco_events": stats.mujoco_events,
     }
 
 
