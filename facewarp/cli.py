@@ -713,7 +713,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--jaw", choices=["mujoco", "kinematic"], default=None,
                    help="mujoco (default with --material physical: the mandible is the hinge body of the build's "
                         "head.xml, two-way coupled to the skin) or kinematic (Eq. 6.4.9 angles imposed; default "
-                        "with --material thesis, which the MuJoCo jaw refuses)")
+                        "with --material thesis; the MuJoCo jaw couples it too, its stiff holds scaled to MuJoCo's step)")
     s.set_defaults(func=cmd_simulate)
 
     d = sub.add_parser("demo", help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "

@@ -107,6 +107,43 @@ def test_a_head_jump_beyond_physical_motion_is_refused(rig):
 
 
 # ----------------------------------------------------------------------------------------
+# the MuJoCo jaw: its warnings reach the user (the thesis profile's stability: tests/test_mujoco.py)
+
+
+def test_a_zygomatic_pull_with_the_mujoco_jaw_runs(rig):
+    """The issue's case: zygomatic_major 0.9 over 0.2 s with the MuJoCo jaw inverted tet 1814 at
+    step 5 (the jaw carry flattened a tet that the muscles had already pressed to 5e-4 of its volume)."""
+    mujoco = pytest.importorskip("mujoco")
+    sim = fw.FaceSimulator(rig)
+    model = mujoco.MjModel.from_xml_string(fw.head_mjcf(fw.default_template(0)))
+    jaw = fw.MujocoJaw(sim, model, mujoco.MjData(model))
+    tl = fw.timeline_from_spec("zygomatic_major=0.9", 0.2).for_head(rig)
+    for k in range(1, 7):
+        sim.set_activations(tl.sample(k / 30))
+        jaw.step()
+        assert volume_ratios(rig, sim.positions()).min() >= VOLUME_FLOOR
+    st = sim.stats.as_dict()
+    assert st["frames"] == 6 and st["min_volume_ratio"] >= VOLUME_FLOOR
+
+
+def test_an_unstable_mujoco_step_is_an_error(rig, tmp_path, monkeypatch):
+    mujoco = pytest.importorskip("mujoco")
+    from facewarp.coupling import mujoco_warnings
+
+    monkeypatch.chdir(tmp_path)
+    sim = fw.FaceSimulator(rig)
+    model = mujoco.MjModel.from_xml_string(fw.head_mjcf(fw.default_template(0)))
+    data = mujoco.MjData(model)
+    jaw = fw.MujocoJaw(sim, model, data)
+    jaw.step()
+    data.qvel[0] = 1e11  # beyond MuJoCo's limit: it warns (BADQVEL) and resets its state
+    with pytest.raises(SimulationError, match="MuJoCo jaw went unstable .*mjWARN_BADQVEL"):
+        jaw.step()
+    assert any("qvel" in m.lower() or "QVEL" in m for m in mujoco_warnings())
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
+# ----------------------------------------------------------------------------------------
 # devices: every array a stage, Springs or solver receives is on the model's device
 
 
