@@ -21,8 +21,6 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-import numpy as np
-
 from ..core.errors import SimulationError
 from ..core.warp import get_warp
 from ..physics.volume_barrier import VOLUME_FLOOR
