@@ -396,8 +396,23 @@ def cmd_simulate(args):
         f"{rep.get('jaw', 'kinematic')} jaw: {rep.get('frames_per_second', float('nan')):.1f} frames/s "
         f"({rep.get('frames_per_second', float('nan')) / rep['fps']:.2f}x real time), "
         f"{rep['steps_per_second']:.0f} steps/s",
+        *_frame_stats_lines(rep.get("frame_stats")),
+        *[f"  MuJoCo: {e}" for e in rep.get("mujoco_events", [])[:5]],
         "  wrote " + ", ".join(rep["files"]),
     ])
+
+
+def _frame_stats_lines(st) -> list[str]:
+    """The report lines of the simulator's frame stats (sub-stepped frames, volume floor)."""
+    if not st:
+        return []
+    line = (f"  {st['substepped_frames']} of {st['frames']} frames sub-stepped (up to {st['max_substep_factor']}x), "
+            f"smallest tet volume {st['min_volume_ratio'] * 100:.1f} % of rest")
+    if st.get("frames_below_floor"):
+        line += f", {st['frames_below_floor']} frames below the {st['volume_floor'] * 100:.0f} % floor"
+    if st.get("unconverged_frames"):
+        line += f", {st['unconverged_frames']} frames not converged"
+    return [line]
 
 
 class _StageBar:
@@ -437,6 +452,8 @@ def cmd_demo(args):
         f"  anatomy: {q['tet_count']} tets, {q['inverted_count']} inverted, {q['muscle_count']} muscles",
         f"  simulation: {s['frames']} frames ({s['seconds']:g} s), {s['frames_per_second']:.1f} frames/s "
         f"({s['jaw']} jaw)",
+        *_frame_stats_lines(s.get("frame_stats")),
+        *[f"  MuJoCo: {e}" for e in s.get("mujoco_events", [])[:5]],
         "  wrote animation.usdc, head.xml, scene.xml, report.json, adapted_head.png, likeness.png, expressions.png, sequence.gif",
     ])
 
@@ -696,7 +713,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--jaw", choices=["mujoco", "kinematic"], default=None,
                    help="mujoco (default with --material physical: the mandible is the hinge body of the build's "
                         "head.xml, two-way coupled to the skin) or kinematic (Eq. 6.4.9 angles imposed; default "
-                        "with --material thesis, which the MuJoCo jaw refuses)")
+                        "with --material thesis; the MuJoCo jaw couples it too, its stiff holds scaled to MuJoCo's step)")
     s.set_defaults(func=cmd_simulate)
 
     d = sub.add_parser("demo", help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "

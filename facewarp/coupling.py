@@ -7,7 +7,7 @@ Re-exports of ``facewarp._src.coupling``; see each name's docstring for shapes a
 from __future__ import annotations
 
 from ._src.coupling.drivers import JAWS, KinematicJawDriver, MujocoJawDriver, jaw_driver  # noqa: F401
-from ._src.coupling.head_pose import GRAVITY, HeadPose, check_pose  # noqa: F401
+from ._src.coupling.head_pose import GRAVITY, HEAD_MOTION_LIMITS, HeadPose, check_pose  # noqa: F401
 from ._src.coupling.kinematic import CarryStage, JawStage  # noqa: F401
 from ._src.coupling.mjcf import (  # noqa: F401
     BONE_DENSITY,
@@ -26,10 +26,10 @@ from ._src.coupling.mjcf import (  # noqa: F401
     up_rotation,
     write_head_mjcf,
 )
-from ._src.coupling.mujoco import MujocoJaw  # noqa: F401
+from ._src.coupling.mujoco import STIFF_SKIN_RATIO, MujocoJaw, mujoco_warnings  # noqa: F401
 from ._src.coupling.mujoco_skin import MujocoSkin  # noqa: F401
 
-__all__ = ["BONE_DENSITY", "GRAVITY", "HEAD_MASS", "JAWS", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "MANDIBLE_PLATE",
-           "SCENE_NAME", "UPS", "Z_UP", "CarryStage", "HeadPose", "JawStage", "KinematicJawDriver", "MandibleInertia",
+__all__ = ["BONE_DENSITY", "GRAVITY", "HEAD_MASS", "HEAD_MOTION_LIMITS", "JAWS", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "MANDIBLE_PLATE",
+           "SCENE_NAME", "STIFF_SKIN_RATIO", "UPS", "Z_UP", "CarryStage", "HeadPose", "JawStage", "KinematicJawDriver", "MandibleInertia",
            "MujocoJaw", "MujocoJawDriver", "MujocoSkin", "check_pose", "head_mjcf", "jaw_driver", "mandible_geometry",
-           "mandible_inertia", "scene_mjcf", "up_rotation", "write_head_mjcf"]
+           "mandible_inertia", "mujoco_warnings", "scene_mjcf", "up_rotation", "write_head_mjcf"]

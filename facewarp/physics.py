@@ -35,9 +35,15 @@ from ._src.physics.potential import (  # noqa: F401
     StepData,
     StepPotential,
 )
+from ._src.physics.volume_barrier import (  # noqa: F401
+    VOLUME_BARRIER_ONSET,
+    VOLUME_BARRIER_STIFFNESS,
+    VOLUME_FLOOR,
+)
 from ._src.physics.solvers.base import (  # noqa: F401
     SolverBase,
     SolverStage,
+    check_device,
 )
 from ._src.physics.solvers.verlet import (  # noqa: F401
     MASS_SCALING_QUANTILE,
@@ -108,4 +114,4 @@ from ._src.sim.simulator import (  # noqa: F401
 )
 
 __all__ = ["BONE_REGIONS", "CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "CarryStage", "ContactGeometry",
-           "ContactStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "HOST_METHODS", "IMPLICIT_METHODS", "IncrementalPotential", "JawStage", "MASS_SCALING_QUANTILE", "MATERIALS", "MUSCLE_STIFFNESS", "MaterialPhysical", "MaterialThesis", "Model", "ModelBuilder", "ModelContact", "ModelJaw", "ModelMuscles", "ModelSupports", "MuscleRig", "MuscleStage", "SOLVERS", "SolverBase", "SolverDeviceNewtonPCG", "SolverHostImplicit", "SolverImplicit", "SolverStage", "SolverVerlet", "Springs", "State", "StepData", "StepPotential", "SupportStage", "TABLE_6_3", "TISSUE_DENSITY", "build_face", "contact_crossings", "contraction_curve", "contact_geometry", "default_linear_iterations", "ellipsoid_uv", "lid_contact_geometry", "lip_contact_geometry", "face_rig_from_anatomy", "factorization_backend", "isotropic_moduli", "linear_stiffness", "load_face_rig", "material_profile", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "sheet_areas", "simulate", "stable_dt", "thesis_substep"]
+           "ContactStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "HOST_METHODS", "IMPLICIT_METHODS", "IncrementalPotential", "JawStage", "MASS_SCALING_QUANTILE", "MATERIALS", "MUSCLE_STIFFNESS", "MaterialPhysical", "MaterialThesis", "Model", "ModelBuilder", "ModelContact", "ModelJaw", "ModelMuscles", "ModelSupports", "MuscleRig", "MuscleStage", "SOLVERS", "SolverBase", "SolverDeviceNewtonPCG", "SolverHostImplicit", "SolverImplicit", "SolverStage", "SolverVerlet", "Springs", "State", "StepData", "StepPotential", "SupportStage", "TABLE_6_3", "TISSUE_DENSITY", "VOLUME_BARRIER_ONSET", "VOLUME_BARRIER_STIFFNESS", "VOLUME_FLOOR", "build_face", "check_device", "contact_crossings", "contraction_curve", "contact_geometry", "default_linear_iterations", "ellipsoid_uv", "lid_contact_geometry", "lip_contact_geometry", "face_rig_from_anatomy", "factorization_backend", "isotropic_moduli", "linear_stiffness", "load_face_rig", "material_profile", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "sheet_areas", "simulate", "stable_dt", "thesis_substep"]

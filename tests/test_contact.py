@@ -106,11 +106,13 @@ def test_kernels_evaluate_one_sided_springs_like_the_reference(method):
     ref = one_sided_springs(X)
     sets = []
     for node, p, k, r, a, _ in ref:
-        sets.append(Springs(node=wp.array(node.astype(np.int32), dtype=wp.int32),
-                            point=wp.array(p.astype(np.float32), dtype=wp.vec3),
-                            stiffness=wp.array(k.astype(np.float32), dtype=float),
-                            rest_length=None if r is None else wp.array(r.astype(np.float32), dtype=float),
-                            axis=None if a is None else wp.array(a.astype(np.float32), dtype=wp.vec3), one_sided=True))
+        dev = model.device  # the model's device, not Warp's default (cuda:0 on a GPU machine)
+        sets.append(Springs(node=wp.array(node.astype(np.int32), dtype=wp.int32, device=dev),
+                            point=wp.array(p.astype(np.float32), dtype=wp.vec3, device=dev),
+                            stiffness=wp.array(k.astype(np.float32), dtype=float, device=dev),
+                            rest_length=None if r is None else wp.array(r.astype(np.float32), dtype=float, device=dev),
+                            axis=None if a is None else wp.array(a.astype(np.float32), dtype=wp.vec3, device=dev),
+                            one_sided=True))
     solver = SolverImplicit(model, method=method, stages=[_Springs(tuple(sets))])
     state, control = model.state(), model.control()
     e, G, H = solver.potential(state, control, 0.01, X, hessian=True)
@@ -165,10 +167,12 @@ def test_a_lid_pushed_into_the_eyeball_is_pushed_out(method):
     for contact in (False, True):
         stages = []
         if contact:
-            stages = [_Springs(Springs(node=wp.array(mid.astype(np.int32), dtype=wp.int32),
-                                       point=wp.array(np.tile(centre, (len(mid), 1)).astype(np.float32), dtype=wp.vec3),
-                                       stiffness=wp.full(len(mid), 2e4, dtype=float),
-                                       rest_length=wp.full(len(mid), r, dtype=float), one_sided=True))]
+            dev = model.device
+            stages = [_Springs(Springs(node=wp.array(mid.astype(np.int32), dtype=wp.int32, device=dev),
+                                       point=wp.array(np.tile(centre, (len(mid), 1)).astype(np.float32), dtype=wp.vec3,
+                                                      device=dev),
+                                       stiffness=wp.full(len(mid), 2e4, dtype=float, device=dev),
+                                       rest_length=wp.full(len(mid), r, dtype=float, device=dev), one_sided=True))]
         X = _settle(model, stages, f, 8 if method == "newton-pcg" else 15, method)
         depth[contact] = float((r - np.linalg.norm(X[mid] - centre, axis=1)).max())
     assert depth[False] > 5e-4, f"the force should drive the slab 0.5 mm into the ball, got {depth[False]:.2e} m"

@@ -471,3 +471,98 @@ def test_interactive_mode_runs_a_fixed_iteration_count():
         a, s = s, a
         assert solver.last_iterations == 2
     solver.check(a)
+
+
+# ----------------------------------------------------------------------------------------
+# the volume barrier (issue 23): a floor under every tet's volume
+
+
+def flattened_tet(ratio: float):
+    """The regular tet with its apex lowered to ``ratio`` of the rest volume (and nudged sideways)."""
+    V, T = one_tet()
+    X = V.copy()
+    X[3, 2] *= ratio
+    X[3, 0] += 0.1 * CM
+    return V, T, X
+
+
+@pytest.mark.parametrize("ratio", [0.01, 0.04])
+def test_volume_barrier_gradient_and_kernels_match_the_reference(ratio):
+    """Below the onset the barrier is in the potential: its gradient is the finite difference of
+    the energy, its Gauss-Newton block is PSD, and the Warp kernels equal the NumPy reference."""
+    from facewarp.physics import VOLUME_BARRIER_ONSET, VOLUME_BARRIER_STIFFNESS
+
+    def barrier(r):  # the module doc's phi (IPC's barrier), below the onset
+        return -(r - VOLUME_BARRIER_ONSET) ** 2 * np.log(r / VOLUME_BARRIER_ONSET)
+
+    V, T, X = flattened_tet(ratio)
+    b = ModelBuilder(V, T, material="physical", k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_area=0.0,
+                     damping_rate=0.0)
+    model = b.finalize("cpu")
+    P = StepPotential(model)
+    data = P.begin_step(V, V, 0.01, V)
+    e, G = P.gradient(X, data)
+    assert ratio < VOLUME_BARRIER_ONSET
+    k = float(model.tet_k.numpy()[0])
+    r = np.dot(X[1] - X[0], np.cross(X[2] - X[0], X[3] - X[0])) / 6 / model.tet_rest_volume.numpy()[0]
+    assert e > 0.5 * k * (r - 1) ** 2 + VOLUME_BARRIER_STIFFNESS * k * barrier(r) * (1 - 1e-6) > 0.5 * k * (r - 1) ** 2
+    h = 1e-9
+    FD = np.zeros_like(X)
+    for a, d in itertools.product(range(4), range(3)):
+        Xp, Xm = X.copy(), X.copy()
+        Xp[a, d] += h
+        Xm[a, d] -= h
+        FD[a, d] = (P.energy(Xp, data) - P.energy(Xm, data)) / (2 * h)
+    np.testing.assert_allclose(G, FD, rtol=1e-5, atol=1e-6 * np.abs(FD).max(), err_msg="barrier gradient")
+    H = P.hessian(X, data).toarray()
+    assert np.linalg.eigvalsh(H).min() > -1e-9 * np.abs(H).max()
+    solver = SolverImplicit(model)
+    state, control = model.state(), model.control()
+    state.positions.assign(V.astype(np.float32))
+    state.prev_positions.assign(V.astype(np.float32))
+    e_k, G_k, H_k = solver.potential(state, control, 0.01, X, hessian=True)
+    X32 = X.astype(np.float32).astype(np.float64)
+    e_ref, G_ref = P.gradient(X32, data)
+    assert e_k == pytest.approx(e_ref, rel=1e-3)
+    np.testing.assert_allclose(G_k, G_ref, rtol=2e-3, atol=2e-3 * np.abs(G_ref).max(), err_msg="kernel gradient")
+    np.testing.assert_allclose(H_k.toarray(), P.hessian(X32, data).toarray(), rtol=2e-3,
+                               atol=1e-4 * np.abs(H_k.toarray()).max(), err_msg="kernel Hessian")
+
+
+def test_a_crushed_tet_stays_above_the_volume_floor():
+    """A force of 5 k (k: the tet's volume stiffness [J] over its height) on the apex of a tet whose
+    base is fixed: without the barrier the volume term alone (at most k / height) cannot stop it and
+    the tet would invert; with it the tet settles above the documented floor."""
+    from facewarp.physics import VOLUME_FLOOR
+
+    V, T = one_tet()
+    fixed = np.array([True, True, True, False])
+    b = ModelBuilder(V, T, material="physical", fixed=fixed, k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_area=0.0)
+    model = b.finalize("cpu")
+    k = float(model.tet_k.numpy()[0])
+    height = V[3, 2]
+    solver = SolverImplicit(model)
+    a, c, control = model.state(), model.state(), model.control()
+    f = np.zeros((4, 3), np.float32)
+    f[3, 2] = -5.0 * k / height
+    control.external_force.assign(f)
+    for _ in range(40):
+        solver.step(a, c, control, 1 / 30)
+        a, c = c, a
+    solver.check(a)
+    X = a.positions.numpy().astype(np.float64)
+    r = np.dot(X[1] - X[0], np.cross(X[2] - X[0], X[3] - X[0])) / 6 / model.tet_rest_volume.numpy()[0]
+    assert VOLUME_FLOOR < r < 0.05, r
+
+
+def test_last_converged_tells_a_solve_cut_short():
+    """``last_converged`` (the rollback's check): False when the iteration bound cut the solve
+    short of its tolerance, True when it converged or ran a fixed iteration count."""
+    V, b, f = loaded_slab()
+    model = b.finalize("cpu")
+    for kw, want in (({"max_iterations": 1, "tolerance": 1e-12}, False), ({}, True), ({"iterations": 1}, True)):
+        solver = SolverImplicit(model, **kw)
+        a, s, c = model.state(), model.state(), model.control()
+        c.external_force.assign(f)
+        solver.step(a, s, c, 1 / 30)
+        assert solver.last_converged is want, kw

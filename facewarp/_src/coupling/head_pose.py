@@ -29,10 +29,16 @@ import numpy as np
 
 from ..core.errors import InputError
 
-__all__ = ["GRAVITY", "HeadPose", "check_pose"]
+__all__ = ["GRAVITY", "HEAD_MOTION_LIMITS", "HeadPose", "check_pose"]
 
 GRAVITY = np.array([0.0, -9.81, 0.0])
 """Gravity in the world frame [m/s^2] (y up, as the head's own frame)."""
+
+HEAD_MOTION_LIMITS = {"linear_acceleration": 1000.0, "angular_velocity": 100.0, "angular_acceleration": 2.0e4}
+"""The head motion a step takes [SI]: linear acceleration 1,000 m/s^2 (about 100 g, a severe
+impact), angular velocity 100 rad/s (16 rev/s) and angular acceleration 20,000 rad/s^2 (sports
+impacts stay below about 10,000). A pose that needs more over the coming step is refused
+(:meth:`HeadPose.check_motion`): it is a jump, not a motion of a head."""
 
 
 def check_pose(R, t) -> tuple[np.ndarray, np.ndarray]:
@@ -107,6 +113,23 @@ class HeadPose:
         w12 = _log(R1.T @ R2) / h
         alpha = (w12 - w01) / h
         return R1.T @ a_world, w12, alpha
+
+    def check_motion(self, h: float) -> None:
+        """Refuse a pose that moves the head beyond :data:`HEAD_MOTION_LIMITS` over the coming
+        step of ``h`` [s].
+
+        Raises:
+            InputError: naming the quantity, its value and the limit.
+        """
+        a, w, alpha = self.accelerations(h)
+        for name, v, unit in (("linear_acceleration", np.linalg.norm(a), "m/s^2"),
+                              ("angular_velocity", np.linalg.norm(w), "rad/s"),
+                              ("angular_acceleration", np.linalg.norm(alpha), "rad/s^2")):
+            limit = HEAD_MOTION_LIMITS[name]
+            if not v <= limit:
+                raise InputError(f"head pose: reaching the pose set by set_head_pose in {h:.4g} s needs a "
+                                 f"{name.replace('_', ' ')} of {v:.3g} {unit}, above the limit {limit:g} {unit} "
+                                 "of a moving head; move it over more steps")
 
     def node_forces(self, X, mass, h: float) -> np.ndarray:
         """Fictitious (and gravity-change) forces [N] on nodes X (p, 3) [m, body frame] of

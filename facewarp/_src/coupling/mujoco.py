@@ -28,6 +28,18 @@ exchanged once per frame, not per substep:
    a spring that answers the mandible's motion inside the frame, which keeps the exchange stable
    at the frame's step.
 
+A skin much stiffer than MuJoCo's explicit spring can take (the thesis profile's hold springs:
+its upper-bound stiffness ``sum k a^2 |axis x r|^2`` above :data:`STIFF_SKIN_RATIO` times the
+limit) would throw the mandible: the skin's torque (28 N m in the thesis smile) acts for a
+whole frame against only the clipped spring and the jaw's actuator. There the coupling passes
+MuJoCo the stiffness it can take and scales the skin's torque by the same factor (the skin's
+stiffness estimate over the limit): the jaw's static equilibrium under the skin is kept, its
+motion toward it is slower. After every MuJoCo step the coupling reads MuJoCo's warning
+counters (``data.warning``): an unstable step (NaN / huge accelerations, which MuJoCo answers by
+resetting its state) raises :class:`~facewarp.SimulationError`, other warnings are kept in
+:attr:`MujocoJaw.events`; MuJoCo's own warning text goes through :func:`mujoco_warnings` (no
+``MUJOCO_LOG.TXT`` in the user's folder).
+
 What is conserved and what is approximated: the force pair between skin and mandible is equal
 and opposite at the frame boundaries (the torque applied to MuJoCo is exactly the reaction of
 the springs the skin feels at that instant); inside a frame the skin's answer is the linear
@@ -43,10 +55,28 @@ import math
 
 import numpy as np
 
-from ..core.errors import InputError
+from ..core.errors import InputError, SimulationError
 from .mjcf import HEAD_SITE, Z_UP
 
-__all__ = ["MujocoJaw"]
+__all__ = ["STIFF_SKIN_RATIO", "MujocoJaw", "mujoco_warnings"]
+
+STIFF_SKIN_RATIO = 10.0
+"""A skin whose upper-bound hinge stiffness exceeds this many times what MuJoCo's step takes gets
+the scaled (equilibrium-keeping) coupling of the module doc."""
+
+_UNSTABLE = ("mjWARN_BADQACC", "mjWARN_BADQVEL", "mjWARN_BADQPOS")
+_messages: list[str] = []
+
+
+def _collect_warning(text) -> None:
+    _messages.append(str(text).strip())
+    del _messages[:-20]
+
+
+def mujoco_warnings() -> list[str]:
+    """The last MuJoCo warning texts (at most 20) since the coupling was first made; MuJoCo's
+    default handler would append them to ``MUJOCO_LOG.TXT`` in the current folder."""
+    return list(_messages)
 
 
 def _mujoco():
@@ -54,6 +84,8 @@ def _mujoco():
         import mujoco
     except ImportError:  # pragma: no cover - depends on the environment
         raise InputError("the MuJoCo coupling needs the package mujoco: pip install mujoco") from None
+    if mujoco.get_mju_user_warning() is None:  # MuJoCo's default writes MUJOCO_LOG.TXT into the cwd
+        mujoco.set_mju_user_warning(_collect_warning)
     return mujoco
 
 
@@ -126,10 +158,11 @@ class MujocoJaw:
 
     Raises:
         InputError: a body or joint name not in the model, a joint that is not a hinge, or
-            several heads and no prefix;
-            ``two_way`` with the thesis material (its Table 6.3 nodes of 0.5 kg and hold springs of
-            6e6 N/m, coupled to a mandible of physical mass, throw it off within two frames with
-            either solver: a skin torque of 240 N m at the second frame of smile).
+            several heads and no prefix.
+        SimulationError: (from :meth:`step`) MuJoCo went unstable (its NaN / huge-value warnings).
+
+    Every material profile couples (the thesis profile's stiff holds through the scaled coupling
+    of the module doc); MuJoCo's other warnings are kept in ``events`` (text).
     """
 
     def __init__(self, sim, model, data, *, prefix: str | None = None, mandible: str = "mandible",
@@ -139,10 +172,6 @@ class MujocoJaw:
         self.mj = mj
         self.sim, self.model, self.data = sim, model, data
         self.two_way = bool(two_way)
-        if self.two_way and getattr(getattr(sim, "material", None), "name", None) == "thesis":
-            raise InputError("the MuJoCo jaw is coupled two-way and needs the physical material: the thesis profile's "
-                             "Table 6.3 nodes (0.5 kg each) and hold springs (6e6 N/m) throw the mandible off within "
-                             "two frames; use the kinematic jaw (Eq. 6.4.9) or the physical material")
         if prefix is None:
             prefix = _find_prefix(mj, model, mandible, open_joint)
         elif not isinstance(prefix, str):
@@ -193,6 +222,9 @@ class MujocoJaw:
         self._last = None  # (angles, generalised forces) of the previous frame
         self.torque = np.zeros(len(self.joints))
         self.stiffness = np.zeros(len(self.joints))
+        self.events: list[str] = []  # MuJoCo warnings (not instabilities, which raise) as text
+        self._k_true = None  # the stiff skin's stiffness estimate [N m / rad] per hinge
+        self._warned = np.zeros(len(mj.mjtWarning.__members__) - 1, np.int64)
 
     # ---------------------------------------------------------------------------------------
     def angles(self) -> np.ndarray:
@@ -251,8 +283,8 @@ class MujocoJaw:
             moved = np.abs(dq) > 1e-5
             with np.errstate(divide="ignore", invalid="ignore"):
                 k = np.where(moved, np.clip(-dt / np.where(moved, dq, 1.0), 0.0, k_bound), k)
-        k = np.minimum(k, self._k_max)
         self._last = (ang[: len(self.joints)].copy(), tau.copy())
+        k, applied = self._linearisation(k, k_bound, tau)
         self.torque, self.stiffness = tau, k
         if self.two_way:
             for i, (j, q, d) in enumerate(zip(self.joints, self.qadr, self.dadr)):
@@ -260,7 +292,36 @@ class MujocoJaw:
                 self.model.qpos_spring[q] = ang[i]
                 # the joint's own spring keeps its reference: -(s0 + k)(q - ang) = -s0 (q - r0)
                 # - k (q - ang) - s0 (r0 - ang), so the last term is given back here
-                self.data.qfrc_applied[d] = tau[i] + self._stiff0[i] * (self._ref0[i] - ang[i])
+                self.data.qfrc_applied[d] = applied[i] + self._stiff0[i] * (self._ref0[i] - ang[i])
+
+    def _linearisation(self, k: np.ndarray, k_bound: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The stiffness and torque handed to MuJoCo per hinge from the secant stiffness ``k``,
+        the upper bound ``k_bound`` and the skin's torque ``tau`` (module doc): ``k`` clipped to
+        MuJoCo's limit and ``tau`` as is, or for a stiff skin the limit and ``tau`` scaled by the
+        limit over the skin's stiffness estimate (the same static equilibrium)."""
+        k_max = np.asarray(self._k_max)
+        stiff = k_bound > STIFF_SKIN_RATIO * k_max
+        if not stiff.any():
+            return np.minimum(k, k_max), tau
+        if self._k_true is None:
+            self._k_true = np.asarray(k_bound, np.float64).copy()
+        self._k_true = np.where(k > k_max, k, self._k_true)  # a measured secant above the limit
+        scale = np.where(stiff, np.minimum(1.0, k_max / np.maximum(self._k_true, 1e-30)), 1.0)
+        return np.where(stiff, k_max, np.minimum(k, k_max)), tau * scale
+
+    def _check_warnings(self) -> None:
+        """Read MuJoCo's warning counters after a step: an instability raises, others are kept."""
+        mj = self.mj
+        counts = np.array([self.data.warning[i].number for i in range(len(self._warned))], np.int64)
+        new = np.flatnonzero(counts > self._warned)
+        self._warned = counts
+        for i in new:
+            name = mj.mjtWarning(i).name
+            text = f"MuJoCo {name} at t = {self.data.time:.4f} s" + (f": {_messages[-1]}" if _messages else "")
+            if name in _UNSTABLE:
+                raise SimulationError(f"the MuJoCo jaw went unstable ({text}); MuJoCo reset its state. "
+                                      "Lower the jaw actuator's gain or the skin stiffness, or use the kinematic jaw")
+            self.events.append(text)
 
     def step(self) -> None:
         """One frame: :meth:`exchange`, then MuJoCo steps until its clock reaches the frame's end
@@ -270,6 +331,7 @@ class MujocoJaw:
         h = float(self.model.opt.timestep)
         while self._elapsed + 0.5 * h < self._clock:
             self.mj.mj_step(self.model, self.data)
+            self._check_warnings()
             self._elapsed += h
 
     def detach(self) -> None:

@@ -148,7 +148,8 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
     (the default with the physical material: the mandible is the hinge body of the build's
     ``head.xml``, two-way coupled to the skin, the expressions' jaw angles its actuator targets) or
     ``"kinematic"`` (Eq. 6.4.9 angles imposed directly; the default with the thesis material, whose
-    Table 6.3 masses and hold springs are not physical: the MuJoCo jaw refuses it).
+    Table 6.3 masses and hold springs are not physical; the MuJoCo jaw couples it too, through
+    the scaled stiff-skin coupling of :mod:`~facewarp._src.coupling.mujoco`).
 
     ``out`` is a folder (``frames.npz``, ``frames.png``: per expression the whole head at rest and
     at its peak, front and three-quarter, over its displacement heat map; and with ``usd`` the USD animation
@@ -180,10 +181,6 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
     if substeps is not None:
         check_count("substeps", substeps, high=MAX_SUBSTEPS)
     check_steps(seconds, fps, substeps)
-    if jaw == "mujoco" and material == "thesis":
-        raise InputError("the MuJoCo jaw is coupled two-way and needs the physical material: the thesis profile's "
-                             "Table 6.3 nodes (0.5 kg each) and hold springs (6e6 N/m) throw the mandible off within "
-                             "two frames; use the kinematic jaw (Eq. 6.4.9) or the physical material")
     fr = load_face_rig(head_path)
     frames = round(seconds * fps) + 1  # kept in memory (a folder) or as USD time samples (a USD file)
     check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), frames, len(fr.head_vertices)),
@@ -224,6 +221,7 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
         "frames_per_second": stats.frames_per_second, "realtime_factor": stats.realtime_factor,
         "nodes": int(len(fr.nodes)), "tets": int(len(fr.tets)), "files": [str(w) for w in written],
         "max_fdp_motion_m": {str(k): float(v) for k, v in zip(fr.fdp_ids, moved) if v > 1e-4},
+        "frame_stats": stats.frame_stats, "mujoco_events": stats.mujoco_events,
     }
 
 

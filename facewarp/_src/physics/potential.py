@@ -19,7 +19,8 @@ Energies per element (C dimensionless, see :mod:`.model`):
 
 * distance (Eq. 6.4.4, 6.4.6): ``k0 (C^2 / 2 + C^4 / 4)``, C = |x_i - x_j| / D0 - 1;
 * area (Eq. 6.4.7): ``k / 2 C^2``, C = A / A0 - 1;
-* volume (Eq. 6.4.8): ``k / 2 C^2``, C = V / V0 - 1 (signed volume);
+* volume (Eq. 6.4.8): ``k / 2 C^2``, C = V / V0 - 1 (signed volume), plus the volume barrier
+  ``kappa k phi(C + 1)`` below a twentieth of the rest volume (:mod:`..volume_barrier`);
 * springs (:class:`~facewarp._src.physics.model.Springs`): ``k / 2 (|p - x| - l0)^2`` (muscles,
   Eq. 6.4.1 with the fibre cosine frozen over the step) or ``k / 2 ((x - p) . a)^2`` (supports);
   one-sided (contact): ``k / 2 min(0, |x - p| - l0)^2`` (out of a ball) or
@@ -39,6 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .model import Model
+from .volume_barrier import VOLUME_BARRIER_STIFFNESS, barrier, barrier_d, barrier_dd
 
 __all__ = ["StepPotential", "StepData"]
 
@@ -249,6 +251,7 @@ class StepPotential:
         ct = v / self.V0 - 1.0
         dct = ct - data.tet_c
         e_sum += 0.5 * np.sum(self.kt * ct * ct) + 0.5 * ih * np.sum(self.dt_ * dct * dct)
+        e_sum += VOLUME_BARRIER_STIFFNESS * np.sum(self.kt * barrier(ct + 1.0))
         Fd = None
         if self.shear:  # the shear term (model doc): k_s / 2 |G|^2 + d_s / (2h) |G - G_n|^2
             Fd = np.stack([t1, t2, t3], axis=2) @ self.Dmi
@@ -270,7 +273,7 @@ class StepPotential:
         gf[:, 1] = s_f[:, None] * gj
         gf[:, 2] = s_f[:, None] * gk
         gf[:, 0] = -(gf[:, 1] + gf[:, 2])
-        s_t = (self.kt * ct + ih * self.dt_ * dct) / (6.0 * self.V0)
+        s_t = (self.kt * (ct + VOLUME_BARRIER_STIFFNESS * barrier_d(ct + 1.0)) + ih * self.dt_ * dct) / (6.0 * self.V0)
         gt = np.empty((len(T), 4, 3))
         gt[:, 1] = s_t[:, None] * c23
         gt[:, 2] = s_t[:, None] * np.cross(t3, t1)
@@ -386,7 +389,7 @@ class StepPotential:
         gv[:, 2] = np.cross(t3, t1) / 6.0
         gv[:, 3] = np.cross(t1, t2) / 6.0
         gv[:, 0] = -(gv[:, 1] + gv[:, 2] + gv[:, 3])
-        s = (self.kt + ih * self.dt_) / self.V0**2
+        s = (self.kt * (1.0 + VOLUME_BARRIER_STIFFNESS * barrier_dd(ct + 1.0)) + ih * self.dt_) / self.V0**2
         Ht = s[:, None, None, None, None] * gv[:, :, None, :, None] * gv[:, None, :, None, :]
         if Fd is not None:
             # shear term, Gauss-Newton: block (a, b)_cd = (k_s + d_s / h) / 2 ((F F^T)_cd (b_a . b_b) + (F b_b)_c (F b_a)_d)

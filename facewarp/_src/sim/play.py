@@ -44,6 +44,9 @@ class PlayStats:
         realtime_factor: Simulated seconds per second of stepping (1: real time).
         substeps: Solver substeps per frame; dt_s: substep [s].
         device: The simulator's device; jaw: the jaw driver's name.
+        frame_stats: The simulator's :attr:`~facewarp.FaceSimulator.stats` as a dict (frames
+            sub-stepped by the rollback, the smallest tet volume ratio, frames below the floor).
+        mujoco_events: MuJoCo warnings met on the way (the MuJoCo jaw's ``events``; [] otherwise).
     """
 
     frames: int
@@ -57,6 +60,8 @@ class PlayStats:
     dt_s: float
     device: str
     jaw: str
+    frame_stats: dict
+    mujoco_events: list
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -206,7 +211,9 @@ def _play(sim, timeline: Timeline, seconds: float, sinks: list, jaw, progress) -
     stats = PlayStats(frames=nf, seconds=seconds, wall_s=wall, simulation_wall_s=stepping,
                       frames_per_second=(nf - 1) / stepping, steps_per_second=(nf - 1) * sim.substeps / stepping,
                       realtime_factor=(nf - 1) / sim.fps / stepping, substeps=int(sim.substeps), dt_s=float(sim.dt),
-                      device=str(sim.device), jaw=str(getattr(jaw, "name", type(jaw).__name__)))
+                      device=str(sim.device), jaw=str(getattr(jaw, "name", type(jaw).__name__)),
+                      frame_stats=sim.stats.as_dict(),
+                      mujoco_events=list(getattr(getattr(jaw, "coupler", None), "events", ())))
     for s in sinks:
         s.finish(sim, stats)
     return stats

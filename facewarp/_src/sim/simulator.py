@@ -21,6 +21,7 @@ from ..physics.face_rig import FaceRig
 from .frames import Frames, save_frames_npz
 from .play import FrameRecorder, play
 from .readout import activation_vector, fdp_points, head_surface, jaw_vector, muscle_curves, parts_at, surface_index
+from .rollback import MAX_REFINEMENT, FrameGuard, FrameStats, step_frame
 from .stepper import SOLVERS, FrameStepper, build_face, face_stages
 
 __all__ = ["SOLVERS", "FaceSimulator", "Frames", "face_stages", "save_frames_npz"]
@@ -31,7 +32,8 @@ class FaceSimulator:
     and State. Step it in your own loop (:meth:`set_activations`, :meth:`set_jaw`, :meth:`step`
     or :meth:`advance`, then :meth:`surface`, :meth:`positions` or :meth:`fdp`; :meth:`reset`
     goes back to rest), or play a :class:`~facewarp.Timeline` with :meth:`run`. Controls ramp
-    linearly across a step in up to :attr:`CONTROL_CHUNKS` pieces (:class:`.stepper.FrameStepper`).
+    linearly across a step in up to :attr:`CONTROL_CHUNKS` pieces (:class:`.stepper.FrameStepper`). ``stats``:
+    the frames since :meth:`reset` (:class:`.rollback.FrameStats`); ``max_refinement``: retries up to 2^6 x substeps.
 
     Args:
         fr: The face rig (:func:`~facewarp.build_face` or :func:`~facewarp.load_face_rig`).
@@ -84,6 +86,7 @@ class FaceSimulator:
         self.step_seconds = 0.0
         self._surface_index = surface_index(fr)
         self._pose = HeadPose()
+        self.max_refinement, self.frame_guard = MAX_REFINEMENT, FrameGuard(self)
         self.reset()
 
     # ------------------------------------------------------------------------------ controls
@@ -129,22 +132,24 @@ class FaceSimulator:
         self._a, self._j = np.zeros(len(self.fr.rig.names), np.float32), np.zeros(2, np.float32)
         self._target_a, self._target_j = self._a.copy(), self._j.copy()
         self._steps_taken = 0
+        self.stats = FrameStats()
 
     # ------------------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
         """Advance by exactly ``dt`` [s] (default one frame, ``1 / fps``), a whole number of the solver's
         steps (:attr:`dt`; another ``dt`` is refused, not rounded), the controls set since the last step
-        ramping across it. Raises InputError (a bad ``dt``) or SimulationError (a NaN, an inverted tet)."""
+        ramping across it; a failing frame is retried with more substeps (:mod:`.rollback`). Raises InputError
+        (a bad ``dt``, a head jump) or SimulationError (a NaN, an inverted tet at the retry bound)."""
         n = self.substeps if dt is None else check_step_count(dt, self.dt)
         t0 = time.perf_counter()
         if not self._pose.identity:  # the head rides a moving body: loads of the accelerating frame
+            self._pose.check_motion(n * self.dt)  # a jump beyond a head's motion is refused, nothing changed
             f = self._pose.node_forces(self.positions(), self.builder.mass, n * self.dt)
             self.control.external_force.assign(f.astype(np.float32))
-        self.stepper.frame(n, self._a, self._target_a, self._j, self._target_j)
+        step_frame(self, n, self._a, self._target_a, self._j, self._target_j)  # checked, rolled back if it fails
         self._a, self._j = self._target_a.copy(), self._target_j.copy()
         self._pose.advance()
         self._steps_taken += n
-        self.solver.check(self.state)  # a host read: also waits for the device
         self.step_seconds += time.perf_counter() - t0
 
     def advance(self, frames: int = 1) -> None:

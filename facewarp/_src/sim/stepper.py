@@ -108,7 +108,7 @@ class FrameStepper:
     ramped linearly from their old to their new values in up to ``chunks`` pieces.
 
     Each piece is a run of substeps with no host round trip inside: on CUDA a replayed graph
-    (one per substep count; the adaptive device solver's Newton loop is a conditional graph node,
+    (one per substep count and substep length; the adaptive device solver's Newton loop is a conditional graph node,
     CUDA 12.4+: without one, the frames run launch by launch). The controls go up through pinned
     host memory, one row per piece, so no piece's values are overwritten before its copy has run.
 
@@ -130,11 +130,12 @@ class FrameStepper:
         self.host = wp.zeros(self.chunks * (self.na + 2), dtype=float, device="cpu", pinned=bool(self.device.is_cuda))
         self.use_graph = bool(self.device.is_cuda) and (
             not getattr(solver, "adaptive", False) or wp.is_conditional_graph_supported())
-        self.graphs: dict[int, object] = {}
+        self.graphs: dict[tuple, object] = {}
 
-    def frame(self, n: int, a0, a1, j0, j1) -> None:
-        """``n`` substeps with activations ramping from ``a0`` to ``a1`` (M,) and jaw angles from
-        ``j0`` to ``j1`` (2,) [rad], float32."""
+    def frame(self, n: int, a0, a1, j0, j1, h: float | None = None) -> None:
+        """``n`` substeps of ``h`` [s] (default :attr:`dt`; the rollback's retries take shorter
+        ones) with activations ramping from ``a0`` to ``a1`` (M,) and jaw angles from ``j0`` to
+        ``j1`` (2,) [rad], float32."""
         wp = get_warp()
         chunks = max(1, min(n, self.chunks))
         bounds = np.linspace(0, n, chunks + 1).round().astype(int)
@@ -146,25 +147,28 @@ class FrameStepper:
             if na:
                 wp.copy(self.control.activations, self.host, src_offset=o, count=na)
             wp.copy(self.control.jaw_angles, self.host, src_offset=o + na, count=2)
-            self.substeps(int(bounds[c + 1] - bounds[c]))
+            self.substeps(int(bounds[c + 1] - bounds[c]), h)
 
-    def substeps(self, n: int) -> None:
-        """``n`` substeps with the current control (a replayed graph on CUDA)."""
+    def substeps(self, n: int, h: float | None = None) -> None:
+        """``n`` substeps of ``h`` [s] (default :attr:`dt`) with the current control (a replayed
+        graph on CUDA, one per ``(n, h)``)."""
         wp = get_warp()
         if n <= 0:
             return
-        if self.use_graph and n not in self.graphs:
+        h = self.dt if h is None else float(h)
+        key = (n, h)
+        if self.use_graph and key not in self.graphs:
             with wp.ScopedCapture(device=self.device) as cap:
-                self._substeps(n)
-            self.graphs[n] = cap.graph
+                self._substeps(n, h)
+            self.graphs[key] = cap.graph
         if self.use_graph:
-            wp.capture_launch(self.graphs[n])
+            wp.capture_launch(self.graphs[key])
         else:
-            self._substeps(n)
+            self._substeps(n, h)
 
-    def _substeps(self, n: int) -> None:
+    def _substeps(self, n: int, h: float) -> None:
         for s in range(n):
             src, dst = (self.state, self.scratch) if s % 2 == 0 else (self.scratch, self.state)
-            self.solver.step(src, dst, self.control, self.dt)
+            self.solver.step(src, dst, self.control, h)
         if n % 2 == 1:
             self.state.assign(self.scratch)

@@ -22,7 +22,8 @@ from ..model import Control, Model, State
 
 wp = get_warp()  # the kernels of this package import Warp already
 
-__all__ = ["SolverBase", "SolverStage", "check_step_args", "stage_springs"]
+__all__ = ["SolverBase", "SolverStage", "check_device", "check_model_devices", "check_stage_devices", "check_step_args",
+           "stage_springs"]
 
 
 def check_step_args(state_in: State, state_out: State, dt) -> None:
@@ -36,6 +37,50 @@ def check_step_args(state_in: State, state_out: State, dt) -> None:
         raise InputError(f"dt must be a positive number of seconds, got {dt!r}")
     if state_in.positions.ptr == state_out.positions.ptr:
         raise InputError("state_in and state_out must be different State buffers")
+
+
+def check_device(value, device, name: str) -> None:
+    """Raise :class:`InputError` if ``value`` is a Warp array on another device than ``device``
+    (a CPU kernel handed a CUDA pointer, or the other way round, crashes the process).
+
+    Args:
+        value: Anything; only Warp arrays are checked.
+        device: The model's device.
+        name: What to name in the message (e.g. ``"stages: MuscleStage.att_node"``).
+    """
+    if isinstance(value, wp.array) and str(value.device) != str(device):
+        raise InputError(f"{name}: a Warp array on {value.device}, but the model is on {device}; "
+                         "make it with device=model.device")
+
+
+def _check_fields(obj, device, name: str) -> None:
+    """Every Warp array among ``obj``'s attributes on ``device`` (one level; host side)."""
+    for attr, v in vars(obj).items():
+        check_device(v, device, f"{name}.{attr}")
+
+
+def check_model_devices(model: Model) -> None:
+    """The device arrays :meth:`~facewarp._src.physics.model.ModelBuilder.finalize` made for the
+    model's parts (``MuscleArrays``, ``SupportArrays``, ``JawNodeArrays``, ``ContactArrays``) on
+    the model's device; an :class:`InputError` naming the part and field otherwise."""
+    for part, fields in (("muscles", ("arrays",)), ("supports", ("arrays",)), ("contact", ("arrays",)),
+                         ("jaw", ("target_arrays", "carry_arrays"))):
+        sub = getattr(model, part, None)
+        for f in fields:
+            arrays = getattr(sub, f, None) if sub is not None else None
+            if arrays is not None:
+                _check_fields(arrays, model.device, f"model.{part}.{f}")
+
+
+def check_stage_devices(stages, device) -> None:
+    """Every Warp array a stage holds (its attributes, the model's arrays it binds included) and
+    every array of its ``Springs`` on ``device``; an :class:`InputError` naming the stage and field
+    otherwise."""
+    for st in stages:
+        _check_fields(st, device, f"stages: {type(st).__name__}")
+        for i, s_ in enumerate(stage_springs([st])):
+            for field in ("node", "point", "stiffness", "rest_length", "axis"):
+                check_device(getattr(s_, field, None), device, f"stages: {type(st).__name__}.springs[{i}].{field}")
 
 
 def stage_springs(stages) -> list:
@@ -105,11 +150,18 @@ class SolverBase:
         self.model = model
         self.device = model.device
         self.stages = list(stages)
+        check_model_devices(model)
+        check_stage_devices(self.stages, self.device)
         self.targets = wp.clone(model.rest_positions)
         self.step_counter = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.guard = wp.array([kt.GUARD_NONE, kt.GUARD_NONE], dtype=wp.int32, device=self.device)
         # the guard comes back through pinned host memory (no allocation per check)
         self._guard_host = wp.zeros(2, dtype=wp.int32, device="cpu", pinned=bool(self.device.is_cuda))
+
+    def _check_devices(self, state_in: State, state_out: State, control: Control) -> None:
+        """The step's states and controls on the model's device (host side, no device work)."""
+        for name, obj in (("state_in", state_in), ("state_out", state_out), ("control", control)):
+            _check_fields(obj, self.device, name)
 
     def _launch_guard(self, state_out: State) -> None:
         m = self.model

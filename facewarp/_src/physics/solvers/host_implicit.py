@@ -174,6 +174,7 @@ class SolverHostImplicit(SolverImplicit):
         self._history = ([], [], [])
         self._h = None
         self._solve0 = None
+        self._solve_converged = True
 
     # ------------------------------------------------------------------------------ evaluation
     def _host_eval(self, x64: np.ndarray, control: Control, h: float) -> tuple[float, np.ndarray, float]:
@@ -219,6 +220,7 @@ class SolverHostImplicit(SolverImplicit):
             if self._inverted:  # the extrapolated guess inverts a tet: start from x_n instead
                 ip.launch_guess(state_in, 0.0)
         x64 = ip.x.numpy().astype(np.float64)
+        self._solve_converged = True
         if self.method == "lbfgs" and (self._solve0 is None or self._h != h):
             self._solve0 = self._host_factor(x64, h)
             self._h = h
@@ -259,6 +261,8 @@ class SolverHostImplicit(SolverImplicit):
                 self._solve0 = self._host_factor(x64, h)
         ip.x.numpy()[:] = x64
         self.last_iterations = total
+        # the last solve reached the tolerance (always true with a fixed iteration count)
+        self.last_converged = self.iterations is not None or self._solve_converged
 
     def _refresh_springs(self, x64: np.ndarray, control: Control) -> tuple[bool, bool]:
         """Re-evaluate the refreshable springs at x64; whether they changed: ``(springs,
@@ -315,7 +319,9 @@ class SolverHostImplicit(SolverImplicit):
             t, xn, e, g, noise = self._line_search(x64, d, e, g, noise, control, h)
             step, x64 = t * d, xn
             if t == 0.0 or self._converged(step):
+                self._solve_converged = True
                 return k + 1, x64
+        self._solve_converged = False
         return its, x64
 
     def _lbfgs(self, x64, e, g, noise, control, h) -> tuple[int, np.ndarray]:
@@ -354,6 +360,7 @@ class SolverHostImplicit(SolverImplicit):
             if t == 0.0:
                 if not S:
                     if fresh:
+                        self._solve_converged = True  # no lower energy from a fresh factorisation: a minimum
                         return k + 1, x64
                     # the factorisation was made at another shape: where the mesh has a soft
                     # mode there (a flap, a sliver) its direction can be metres long and no
@@ -381,7 +388,9 @@ class SolverHostImplicit(SolverImplicit):
             fresh = False
             self._last_step_size = float(np.abs(s_).max(initial=0.0))
             if self._converged(s_):
+                self._solve_converged = True
                 return k + 1, x64
+        self._solve_converged = False
         return its, x64
 
     def reset(self) -> None:

@@ -124,6 +124,8 @@ class SolverImplicit(SolverBase):
         last_iterations: Iterations of the last step (host; 0 before the first step; not updated
             by a replayed CUDA graph: see :attr:`total_iterations`).
         factorizations: Number of factorisations made so far (host solver; 0 on the device).
+        last_converged: Whether the last step's last solve reached the tolerance (the CPU methods;
+            always True with a fixed iteration count and for the device method).
         timings: Seconds spent, accumulated: ``{"prepare", "gradient", "solve", "factor"}``.
     """
 
@@ -167,6 +169,7 @@ class SolverImplicit(SolverBase):
         self.contact_slack = 3.0e-4  # [m] near-closed contacts kept in the factorised model (lbfgs)
         self._refreshers = refreshers
         self.last_iterations = 0
+        self.last_converged = True  # the CPU methods: the last step's last solve reached the tolerance
         self._host_total = 0
         self.factorizations = 0
         self.timings = {"prepare": 0.0, "gradient": 0.0, "solve": 0.0, "factor": 0.0}
@@ -201,6 +204,7 @@ class SolverImplicit(SolverBase):
             InputError: ``dt`` not a positive finite number, or the same state buffers.
         """
         check_step_args(state_in, state_out, dt)
+        self._check_devices(state_in, state_out, control)
         h = float(dt)
         t0 = time.perf_counter()
         self._begin(state_in, control, h)

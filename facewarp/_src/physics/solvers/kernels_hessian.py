@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .kernels_potential import SpringSet, _outer, _pick4, _row
+from .kernels_potential import SpringSet, _barrier_dd, _outer, _pick4, _row
 
 # PSD Hessian blocks (the same approximations as potential.StepPotential.hessian):
 #   distance: a n n^T + b (I - n n^T) with a = (k0 (1 + 3 C^2) + d/h) / D0^2 and
@@ -127,7 +127,8 @@ def _tet_hessian(
     g3 = wp.cross(e1, e2) / 6.0
     g0 = -(g1 + g2 + g3)
     v0 = tet_rest_volume[t]
-    s = (tet_k[t] + tet_damping[t] * inv_h) / (v0 * v0)
+    r = wp.dot(e1, wp.cross(e2, e3)) / 6.0 / v0  # the volume ratio (the barrier's Gauss-Newton term)
+    s = (tet_k[t] * (1.0 + _barrier_dd(r)) + tet_damping[t] * inv_h) / (v0 * v0)
     # shear term, Gauss-Newton: (k_s + d_s / h) dG/dx_a : dG/dx_b, block (c, d) =
     # (k_s + d_s / h) / 2 ((F F^T)_cd (b_a . b_b) + (F b_b)_c (F b_a)_d)
     ss = 0.5 * (tet_shear_k[t] + tet_shear_damping[t] * inv_h)

@@ -10,7 +10,7 @@ reference of the same terms):
     Phi(x) = sum_i mu_i / 2 |x_i - z_i|^2 + sum_held k_h / 2 |x - target|^2 - f . x
            + sum_edges [k0 (C^2 / 2 + C^4 / 4) + d / (2 h) (C - C_n)^2]         (Eq. 6.4.4, 6.4.6)
            + sum_faces [k / 2 C^2 + d / (2 h) (C - C_n)^2]                             (Eq. 6.4.7)
-           + sum_tets  [k / 2 C^2 + d / (2 h) (C - C_n)^2]                             (Eq. 6.4.8)
+           + sum_tets  [k / 2 C^2 + d / (2 h) (C - C_n)^2 + kappa k phi(C + 1)]        (Eq. 6.4.8)
            + sum_springs E_s(x),
 
 with ``mu = m (1 + alpha h) / h^2``, z the inertial target, C_n the constraint at the step's
@@ -26,6 +26,12 @@ from __future__ import annotations
 
 import warp as wp
 
+from ..volume_barrier import _R_MIN, INVERTED_ENERGY, VOLUME_BARRIER_ONSET, VOLUME_BARRIER_STIFFNESS
+
+_BARRIER_ONSET = wp.constant(VOLUME_BARRIER_ONSET)
+_BARRIER_STIFFNESS = wp.constant(VOLUME_BARRIER_STIFFNESS)
+_INVERTED_ENERGY = wp.constant(INVERTED_ENERGY)
+_BARRIER_R_MIN = wp.constant(_R_MIN)
 
 @wp.func
 def _outer(a: wp.vec3, b: wp.vec3):
@@ -195,10 +201,38 @@ def _tet_c(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3, v0: float):
     return wp.dot(xj - xi, wp.cross(xk - xi, xl - xi)) / 6.0 / v0 - 1.0
 
 
+# The volume barrier kappa phi(r), r = C + 1 (module doc of facewarp._src.physics.volume_barrier):
+# phi = -(r - r_b)^2 ln(r / r_b) below r_b, 0 above; phi' and phi'' for the gradient and the
+# Gauss-Newton Hessian (derivatives at r_min where r <= 0).
+@wp.func
+def _barrier_d(r: float):
+    if r >= _BARRIER_ONSET:
+        return 0.0
+    rc = wp.max(r, _BARRIER_R_MIN)
+    s = rc - _BARRIER_ONSET
+    return _BARRIER_STIFFNESS * (-2.0 * s * wp.log(rc / _BARRIER_ONSET) - s * s / rc)
+
+
+@wp.func
+def _barrier_dd(r: float):
+    if r >= _BARRIER_ONSET:
+        return 0.0
+    rc = wp.max(r, _BARRIER_R_MIN)
+    s = rc - _BARRIER_ONSET
+    return _BARRIER_STIFFNESS * (-2.0 * wp.log(rc / _BARRIER_ONSET) - 4.0 * s / rc + s * s / (rc * rc))
+
+
 @wp.func
 def _tet_e(c: float, k: float, dmp: float, c_start: float):
     dc = c - c_start
-    return 0.5 * k * c * c + 0.5 * dmp * dc * dc
+    e = 0.5 * k * c * c + 0.5 * dmp * dc * dc
+    r = c + 1.0
+    if r < _BARRIER_ONSET:
+        if r <= 0.0:
+            return _INVERTED_ENERGY
+        s = r - _BARRIER_ONSET
+        e = e - _BARRIER_STIFFNESS * k * s * s * wp.log(r / _BARRIER_ONSET)
+    return e
 
 
 @wp.func
@@ -361,7 +395,7 @@ def _tet_energy(
     dc = c - tet_c_start[t]
     dmp = tet_damping[t] * inv_h
     e = _tet_e(c, tet_k[t], dmp, tet_c_start[t])
-    s = (tet_k[t] * c + dmp * dc) / (6.0 * v0)
+    s = (tet_k[t] * (c + _barrier_d(c + 1.0)) + dmp * dc) / (6.0 * v0)
     gj = s * wp.cross(e2, e3)
     gk = s * wp.cross(e3, e1)
     gl = s * wp.cross(e1, e2)

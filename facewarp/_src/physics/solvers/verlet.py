@@ -332,6 +332,7 @@ class SolverVerlet(SolverBase):
         not synchronise, so it can be captured in a CUDA graph.
         """
         check_step_args(state_in, state_out, dt)
+        self._check_devices(state_in, state_out, control)
         wp = get_warp()
         m = self.model
         self.compute_forces(state_in, control, dt)
