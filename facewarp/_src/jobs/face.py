@@ -166,9 +166,6 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
     timeline, name = _timeline(expression, seconds, name)
     usd_out = Path(out).suffix.lower() in USD_SUFFIXES
     out = check_usd_path(out) if usd_out else check_out_dir(out)
-    if substeps is not None and not (isinstance(substeps, (int, np.integer)) and not isinstance(substeps, bool)
-                                     and substeps >= 1):
-        raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
     if not usd_out and not seconds * fps < MAX_FRAMES:  # a FrameRecorder keeps round(seconds * fps) + 1 frames
         raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
                          f"more than {MAX_FRAMES} per run")

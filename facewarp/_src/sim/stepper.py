@@ -11,7 +11,7 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.warp import get_warp
 
-__all__ = ["SOLVERS", "FrameStepper", "build_face", "check_timing", "face_stages"]
+__all__ = ["SOLVERS", "FrameStepper", "build_face", "face_stages"]
 
 SOLVERS = ("implicit", "verlet")
 """Solvers of :class:`FaceSimulator`: ``implicit`` (backward Euler, a few steps per frame; the
@@ -31,26 +31,10 @@ def face_stages(model) -> dict:
             "contact": ContactStage.from_model(model) if model.contact is not None else None}
 
 
-def check_timing(solver: str, fps, dt, substeps) -> None:
-    """The simulator's solver name and frame timing, checked at the public edge.
-
-    Raises:
-        InputError: an unknown solver, a non-positive ``fps`` or ``dt``, ``substeps`` < 1.
-    """
-    if solver not in SOLVERS:
-        raise InputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
-    if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
-        raise InputError(f"fps: expected a positive number, got {fps!r}")
-    if substeps is not None and not (isinstance(substeps, (int, np.integer)) and substeps >= 1):
-        raise InputError(f"substeps: expected a whole number >= 1, got {substeps!r}")
-    if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-        raise InputError(f"dt: expected a positive number of seconds, got {dt!r}")
-
-
 def build_face(fr, *, device, solver: str, material, fps: float, dt=None, substeps=None, iterations=None,
                tolerance=None, method=None, solver_options=None, support_stiffness=None, edge_damping=None,
                mass_scaling: bool = True, contact: bool = True, contact_modulus=None) -> dict:
-    """A face rig made into a simulation, one way down: the timing checked, one
+    """A face rig made into a simulation, one way down (the arguments checked by the simulator first): one
     :class:`~facewarp._src.physics.model.ModelBuilder` (``add_face``: every stiffness), its
     ``finalize`` (every device array of what is simulated, the rest State and the Control), the
     stages (:func:`face_stages`: kernel groups on the Model's arrays) and the solver (the Verlet
@@ -75,7 +59,6 @@ def build_face(fr, *, device, solver: str, material, fps: float, dt=None, subste
     from ..physics.solvers.implicit import SolverImplicit
     from ..physics.solvers.verlet import SolverVerlet
 
-    check_timing(solver, fps, dt, substeps)
     mat = material_profile(material)
     builder = ModelBuilder()
     builder.add_face(fr, material=mat, edge_damping=edge_damping, support_stiffness=support_stiffness,
