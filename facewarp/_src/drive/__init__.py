@@ -1,0 +1,1 @@
+"""Driving the face from data: tracks of markers or ARKit curves, the inverse solve, the tracker."""
