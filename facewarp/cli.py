@@ -493,8 +493,9 @@ def cmd_retarget(args):
 
 # ----------------------------------------------------------------------------- batch
 def _steps(text: str) -> tuple[str, ...]:
+    from ._src.fleet.manifest import STEPS as known
+
     names = [t.strip() for t in text.split(",") if t.strip()]
-    known = ("adapt", "build", "simulate")
     bad = [n for n in names if n not in known]
     if not names or bad:
         raise argparse.ArgumentTypeError(f"expected a comma list of {', '.join(known)}, got {text!r}")
@@ -503,9 +504,19 @@ def _steps(text: str) -> tuple[str, ...]:
 
 
 
+def _rig_formats(text: str) -> tuple[str, ...]:
+    from ._src.fleet.batch import RIG_FORMATS
+
+    names = [t.strip().lower().lstrip(".") for t in text.split(",") if t.strip()]
+    bad = [n for n in names if n not in RIG_FORMATS]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(f"expected a comma list of {', '.join(RIG_FORMATS)}, got {text!r}")
+    return tuple(names)
+
+
 def cmd_batch_run(args):
     from ._src.fleet.batch import run_batch
-    from ._src.fleet.manifest import read_input_list, scans_from_paths
+    from ._src.fleet.manifest import STEPS, read_input_list, scans_from_paths
 
     if bool(args.scans) == (args.manifest is not None):
         raise FacewarpError("batch run: give scans or --manifest IN.json, not both" if args.scans
@@ -516,10 +527,12 @@ def cmd_batch_run(args):
     scans = (read_input_list(args.manifest, units=args.units) if args.manifest is not None
              else scans_from_paths(args.scans, units=args.units))
     rep = run_batch(scans, args.out, steps=args.steps, expression=args.expression, seconds=args.seconds,
-                    levels=args.levels, device=args.device, ray=args.ray, workers=args.workers,
+                    levels=args.levels, rig_formats=args.rig_formats, rig_inbetweens=args.rig_inbetweens,
+                    rig_muscles=[m for m in args.rig_muscles.split(",") if m] if args.rig_muscles else None,
+                    device=args.device, ray=args.ray, workers=args.workers,
                     gpus_per_task=args.gpus_per_task, max_retries=args.max_retries, retry_failed=args.retry_failed,
                     progress=not args.json)
-    cols = [s for s in ("adapt", "build", "simulate")]
+    cols = list(STEPS)
     width = max([len(r["name"]) for r in rep["rows"]] + [4])
     lines = [f"batch of {rep['scans']} scans in {args.out} on {rep['executor']}: {rep['done']} done, "
              f"{rep['failed']} failed, {rep['incomplete']} incomplete ({rep['tasks_run']} steps run, "
@@ -762,15 +775,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"frames per second, > 0 and <= {MAX_FPS:g} (default 30)")
     r.set_defaults(func=cmd_retarget)
 
-    bt = sub.add_parser("batch", help="many scans through adapt, build and simulate, in local processes or on Ray")
+    bt = sub.add_parser("batch", help="many scans through adapt, build, simulate and rig, in local processes or on Ray")
     btsub = bt.add_subparsers(dest="batch_command", metavar="ACTION", parser_class=_Parser)
     btsub.required = True
     br = btsub.add_parser(
         "run", help="run every scan through the chosen steps; a manifest makes re-runs skip finished work",
         epilog="Writes DIR/manifest.json (per scan: inputs with their SHA-256, each step's status, error, outputs, "
-               "seconds and worker; rewritten atomically as tasks finish), DIR/scans/NAME-KEY/{adapt,build,simulate}/, "
+               "seconds and worker; rewritten atomically as tasks finish), DIR/scans/NAME-KEY/{adapt,build,simulate,rig}/, "
                "DIR/report.json and DIR/report.csv. A scan is known by its content: a re-run (or a renamed copy) "
-               "skips the steps done. A scan's landmarks are looked for beside it (NAME_landmarks.json, "
+               "skips the steps done; a step not chosen must be done from an earlier run for the steps that read it "
+               "(simulate and rig read the build: --steps rig alone rigs the builds in DIR). A scan's landmarks are looked for beside it (NAME_landmarks.json, "
                "NAME.landmarks.json, NAME.json, NAME.pp, landmarks.json), else found on the scan. Ray: "
                "pip install 'facewarp[ray]'; --ray alone starts a local Ray, --ray auto or --ray ray://HOST:10001 "
                "joins a cluster (`ray start --head`; the scans and DIR on a file system every node sees).")
@@ -779,14 +793,21 @@ def build_parser() -> argparse.ArgumentParser:
                     help='the scans as a file: {"scans": ["a.obj", {"scan": "b.ply", "landmarks": "b.json", '
                          '"units": "mm", "name": "b"}]} (paths relative to the file), or a batch\'s manifest.json')
     br.add_argument("--out", required=True, type=Path, metavar="DIR", help="batch folder (continued if it has a manifest)")
-    br.add_argument("--steps", type=_steps, default=("adapt", "build", "simulate"), metavar="adapt,build,simulate",
-                    help="the steps to run, in this order per scan (default all three)")
+    br.add_argument("--steps", type=_steps, default=("adapt", "build", "simulate"), metavar="adapt,build,simulate,rig",
+                    help="the steps to run, in this order per scan (default adapt,build,simulate); rig: the build's "
+                         "blendshape rig as `facewarp rig` bakes it (UsdSkel, glTF) into NAME-KEY/rig/")
     br.add_argument("--expression", default="smile", metavar="NAME|sequence|FILE.json",
                     help="what simulate plays (as `facewarp simulate --expression`; default smile)")
     br.add_argument("--seconds", type=_seconds, metavar="S", default=2.0,
                     help=f"simulated time [s], > 0 and <= {MAX_SECONDS:g} (default 2)")
     br.add_argument("--levels", type=_whole_in(1, MAX_ADAPT_LEVELS), metavar="N", default=2,
                     help=f"adapt's refinement levels after the FDP level (as `facewarp adapt --levels`; 1..{MAX_ADAPT_LEVELS}, default 2)")
+    br.add_argument("--rig-formats", type=_rig_formats, default=("usdc", "glb"), metavar="usdc,usda,glb",
+                    help="the rig step's files rig.FORMAT, one bake written in each (default usdc,glb)")
+    br.add_argument("--rig-inbetweens", type=_whole_in(0, 8), default=0, metavar="K",
+                    help="the rig step's in-between shapes per muscle (as `facewarp rig --inbetweens`; 0..8, default 0)")
+    br.add_argument("--rig-muscles", default=None, metavar="A,B,...",
+                    help="the rig step bakes only these muscles (as `facewarp rig --muscles`; default all)")
     br.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scans and their landmarks")
     br.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                     help="run as Ray tasks: alone, on a local Ray started here; with auto, ray://HOST:10001 or "
@@ -795,7 +816,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="local worker processes, 1..1024 (default: the usable cores); with --ray the CPUs of the local Ray "
                          "(default: all) or the tasks kept in flight on a cluster")
     br.add_argument("--gpus-per-task", type=_number(float, lambda v: math.isfinite(v) and 0 <= v <= 64, "a number 0..64"),
-                    metavar="F", help="GPUs per simulate task on Ray, 0..64 (default 1 when the cluster has a GPU, else 0: on the CPU)")
+                    metavar="F", help="GPUs per simulate or rig task, 0..64: on Ray its num_gpus (default 1 when the "
+                         "cluster has a GPU, else 0: on the CPU); with local processes > 0 runs those steps on cuda "
+                         "when this machine has a GPU (default: on --device)")
     br.add_argument("--max-retries", type=_whole_in(0, 100), metavar="N", default=2,
                     help="retries of a step whose worker process died (killed, out of memory), 0..100, default 2")
     br.add_argument("--retry-failed", action="store_true", help="run the steps that failed in an earlier run again")
