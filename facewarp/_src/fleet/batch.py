@@ -119,9 +119,10 @@ class _Saver:
             self.dirty, self.last, self.cost = False, time.perf_counter(), time.perf_counter() - now
 
 
-def run_batch(scans: list[ScanInput], out, *, steps=STEPS, expression: str = "smile", seconds: float = 2.0,
-              fps: float = 30.0, levels: int | None = 2, jaw: str = "mujoco", rig_formats=("usdc", "glb"),
-              rig_inbetweens: int = 0, rig_muscles=None, device: str = "cpu", ray: str | None = None, workers: int | None = None, gpus_per_task: float | None = None,
+def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate"), expression: str = "smile",
+              seconds: float = 2.0, fps: float = 30.0, levels: int | None = 2, jaw: str = "mujoco", rig_formats=("usdc", "glb"),
+              rig_inbetweens: int = 0, rig_muscles=None, device: str = "cpu", ray: str | None = None,
+              workers: int | None = None, gpus_per_task: float | None = None,
               max_retries: int = 2, retry_failed: bool = False, progress: bool = True) -> dict:
     """Run ``scans`` through ``steps`` into the folder ``out``; returns the batch summary.
 
@@ -130,7 +131,7 @@ def run_batch(scans: list[ScanInput], out, *, steps=STEPS, expression: str = "sm
         out: The batch folder (created; a manifest already in it is continued).
         steps: Some of ``adapt``, ``build``, ``simulate``, ``rig`` (run in that order per scan;
             simulate and rig read the build; a step not chosen must be done already from an earlier
-            run for the steps that read it to run).
+            run for the steps that read it to run; default adapt, build, simulate).
         expression, seconds, fps, jaw: What ``simulate`` plays (:func:`~facewarp._src.jobs.face.simulate_files`).
         levels: ``adapt``'s refinement levels.
         rig_formats: The files of the ``rig`` step (:func:`~facewarp._src.jobs.rig.rig_files`),
@@ -197,7 +198,8 @@ def run_batch(scans: list[ScanInput], out, *, steps=STEPS, expression: str = "sm
                 failed_kept += 1
                 blocked[s] = None  # the scan stays failed at this step; the steps reading it stay as recorded
             elif need is not None and need not in chain and not (
-                    (manifest.step(key, need) or {}).get("status") == "done" and (manifest.folder(key) / need).is_dir()):
+                    (manifest.step(key, need) or {}).get("status") == "done"
+                    and (manifest.folder(key) / need).is_dir()):
                 failed = (manifest.step(key, need) or {}).get("status") == "failed"
                 blocked[s] = f"{need} failed" if failed else f"needs {need} done first (add it to --steps)"
                 missing.setdefault(key, (s, need))

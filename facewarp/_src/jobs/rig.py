@@ -90,7 +90,8 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
             write_glb(out, rig, frames=frames, looks=looks)
         else:
             _write_usd(out, rig, frames, looks, camera)
-    return {"file": str(outs[0]), "files": [str(o) for o in outs], "targets": len(rig.names), "muscles": len(rig.muscle_names),
+    return {"file": str(outs[0]), "files": [str(o) for o in outs], "targets": len(rig.names),
+            "muscles": len(rig.muscle_names),
             "inbetweens": int(inbetweens), "vertices": int(len(rig.rest)), "frames": len(frames),
             "seconds": frames[-1][0], "jaw_angle_rad": rig.jaw_angle,
             "bake_frames_max": int(max(max(v) for v in rig.bake_frames.values()))}
