@@ -182,6 +182,9 @@ class FaceBatch:
         # the end-of-frame checks of every head land in two device arrays, read back at once
         self._guard_all = wp.zeros(2 * n, dtype=wp.int32, device=self.device)
         self._ratio_all = wp.zeros(n, dtype=float, device=self.device)
+        from . import kernels_rollback as kr
+
+        wp.load_module(kr, device=self.device)  # its kernel is captured in the frame's graph: loaded before
         self._graphs: dict[tuple, list] = {}
         self._use_graph = all(h.stepper.use_graph for h in self.heads)
         self.step_seconds = 0.0
@@ -355,6 +358,7 @@ class FaceBatch:
                     self._piece(live, c, chunks, int(bounds[c + 1] - bounds[c]), dt)
                 graphs.append(cap.graph)
             self._graphs[key] = graphs
+        self._raised: dict[int, str] = {}
         for c in range(chunks):
             wp.copy(self._ctrl, self._ctrl_host, src_offset=c * total, count=total)
             if self._use_graph:
@@ -366,9 +370,11 @@ class FaceBatch:
         self._ratios = ratio
         from ..physics import kernels_tissue as kt
 
-        problems = {}
+        problems = dict(self._raised)
         for i in live:
             h = self.heads[i]
+            if i in problems:
+                continue
             if int(guard[i, 0]) != kt.GUARD_NONE:
                 problems[i] = "a NaN or an inverted tet"
             elif not ratio[i] >= VOLUME_FLOOR:
@@ -387,7 +393,13 @@ class FaceBatch:
             if c == 0:  # the rollback's frame start (FrameGuard.save's device part)
                 for a, s in zip(h.frame_guard._arrays, h.frame_guard._saved):
                     wp.copy(s, a)
-            h.stepper._substeps(steps, dt)
+            if i in self._raised:
+                continue
+            try:
+                h.stepper._substeps(steps, dt)
+            except SimulationError as e:  # a host-side solver's (CPU) own check: this head only
+                self._raised[i] = str(e)
+                continue
             if c == chunks - 1:
                 m = h.model
                 wp.copy(self._guard_all, h.solver.guard, dest_offset=2 * i, count=2)

@@ -1,0 +1,106 @@
+"""FaceBatch: N heads stepped together give each head what it gets alone; bad inputs are one line."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import facewarp as fw
+
+FRAMES = 12  # 0.4 s at 30 fps: the laugh ramping in with its jaw
+
+
+@pytest.fixture(scope="module")
+def rigs():
+    t = fw.default_template(0)
+    s = np.array([1.06, 0.95, 1.03])  # another person: the default head stretched (same topology, new rest shape)
+    other = replace(t, vertices=t.vertices * s, condyles=t.condyles * s,
+                    parts={k: (V * s, F) for k, (V, F) in t.parts.items()})
+    return fw.build_face(t), fw.build_face(other)
+
+
+def _controls(rig, k):
+    tl = fw.timeline_for("laugh", attack=0.3, hold=1.0, release=0.1, start=0.0).for_head(rig)
+    return tl.sample(k / 30.0)
+
+
+def test_batch_gives_each_head_its_own_answer(rigs, device):
+    a, b = rigs
+    heads = [a, b, a]
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    batch = fw.FaceBatch(heads, device=device, placements=(np.stack([np.eye(3), R, np.eye(3)]),
+                                                            np.array([[0, 0, 0], [1.0, 0, 0], [0, 2.0, 0]])))
+    alone = [fw.FaceSimulator(fr, device=device) for fr in (a, b)]
+    for k in range(1, FRAMES + 1):
+        es = [_controls(fr, k) for fr in heads]
+        es[2] = fw.Expression("quiet", {}, 0.0, 0.0)  # head 2: the same rig as head 0, other controls
+        batch.set_activations(es)
+        batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
+        batch.step()
+        for sim, e in zip(alone, es):
+            sim.set_activations(e)
+            sim.set_jaw(e.jaw_u, e.jaw_v)
+            sim.step()
+    for i, sim in enumerate(alone):
+        np.testing.assert_allclose(batch.positions(i), sim.positions(), atol=1e-6, rtol=0, err_msg=f"head {i}")
+    moved = np.abs(batch.positions(0) - a.nodes).max()
+    assert moved > 1e-3, moved  # the laugh moved the face
+    assert np.abs(batch.positions(2) - a.nodes).max() < 1e-4  # head 2 kept its rest: no cross-talk
+    # placements apply at read-out: head 1's FDPs are its alone FDPs rotated and shifted
+    np.testing.assert_allclose(batch.fdp_points(1), alone[1].fdp_points() @ R.T + [1.0, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(batch.surface(0), alone[0].surface(), atol=1e-6)
+    assert [s["ok"] for s in batch.status] == [True] * 3 and batch.status[1]["frames"] == FRAMES
+    batch.reset(heads=[0])
+    np.testing.assert_allclose(batch.positions(0), a.nodes, atol=1e-6)
+    assert np.abs(batch.positions(1) - b.nodes).max() > 1e-3  # the others kept their state
+
+
+def test_failing_head_is_frozen_and_reported(rigs, device):
+    a, _ = rigs
+    batch = fw.FaceBatch(a, 2, device=device)
+    batch.heads[1].max_refinement = 0  # no retries for the poisoned head
+    X = batch.heads[1].state.positions.numpy()
+    X[5] = np.nan  # a NaN in head 1
+    batch.heads[1].state.positions.assign(X)
+    batch.heads[1].state.prev_positions.assign(X)
+    e = _controls(a, 5)
+    batch.set_activations([e, e])
+    batch.step()
+    st = batch.status
+    assert st[0]["ok"] and not st[1]["ok"] and ("non-finite" in st[1]["error"] or "NaN" in st[1]["error"])
+    assert batch.live == [0]
+    ok = batch.positions(0)
+    assert np.isfinite(ok).all() and np.abs(ok - a.nodes).max() > 0  # head 0 went on
+    batch.step()
+    assert batch.status[0]["frames"] == 2 and batch.status[1]["frames"] == 0
+
+
+def test_bad_inputs_are_input_errors(rigs):
+    a, b = rigs
+    with pytest.raises(fw.InputError, match="rigs"):
+        fw.FaceBatch([], device="cpu")
+    with pytest.raises(fw.InputError, match="rigs\\[1\\]"):
+        fw.FaceBatch([a, "b"], device="cpu")
+    with pytest.raises(fw.InputError, match="count"):
+        fw.FaceBatch([a, b], count=3, device="cpu")
+    with pytest.raises(fw.InputError, match="count"):
+        fw.FaceBatch(a, 0, device="cpu")
+    with pytest.raises(fw.InputError, match="placements"):
+        fw.FaceBatch(a, 2, device="cpu", placements=(np.ones((2, 3, 3)), np.zeros((2, 3))))
+    with pytest.raises(fw.InputError, match="speed"):
+        fw.FaceBatch(a, 2, device="cpu", speed=3)
+    batch = fw.FaceBatch([a, b], device="cpu")
+    with pytest.raises(fw.InputError, match="activations"):
+        batch.set_activations(np.zeros((3, len(a.rig.names))))
+    with pytest.raises(fw.InputError, match="head 1"):
+        batch.set_activations([{}, {"no_such_muscle": 1.0}])
+    with pytest.raises(fw.InputError, match="angles"):
+        batch.set_jaw(np.zeros((2, 3)))
+    with pytest.raises(fw.InputError, match="head"):
+        batch.surface(2)
+    with pytest.raises(fw.InputError, match="heads"):
+        batch.reset(heads=[5])
+    with pytest.raises(fw.InputError, match="head pose"):
+        batch.set_head_pose(np.eye(3), np.zeros((3, 3)))
