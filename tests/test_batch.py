@@ -104,3 +104,28 @@ def test_bad_inputs_are_input_errors(rigs):
         batch.reset(heads=[5])
     with pytest.raises(fw.InputError, match="head pose"):
         batch.set_head_pose(np.eye(3), np.zeros((3, 3)))
+
+
+def test_batch_simulate_cli(tmp_path, capsys):
+    from facewarp.cli import main
+
+    assert main(["build", "default", "--out", str(tmp_path / "b")]) == 0
+    per = tmp_path / "per.json"
+    per.write_text('{"heads": ["smile", {"expression": "laugh"}]}')
+    b = str(tmp_path / "b")
+    capsys.readouterr()
+    assert main(["--json", "batch", "simulate", b, b, "--per-head", str(per), "--seconds", "0.2",
+                 "--out", str(tmp_path / "o")]) == 0
+    import json
+
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["heads"] == 2 and rep["ok"] == 2 and rep["frames"] == 7 and rep["head_frames_per_second"] > 0
+    assert [r["expression"] for r in rep["rows"]] == ["smile", "laugh"]
+    for f in ("head_00.usdc", "head_01.usdc", "report.json"):
+        assert (tmp_path / "o" / f).is_file(), f
+    # bad input: one line, exit 2, nothing written
+    per.write_text('{"heads": ["smile"]}')
+    assert main(["batch", "simulate", b, b, "--per-head", str(per), "--out", str(tmp_path / "o2")]) == 2
+    err = capsys.readouterr().err
+    assert "1 entries for 2 heads" in err and err.count("\n") == 1
+    assert not (tmp_path / "o2").exists()
