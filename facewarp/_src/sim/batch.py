@@ -17,7 +17,11 @@ a frame's controls go up in one copy per ramp piece; on CUDA the frame of every 
 start-of-frame save of the rollback (:mod:`.rollback`), the solver's substeps (the adaptive
 Newton-PCG loop of each head a conditional graph node) and the end-of-frame checks — is one
 captured CUDA graph, replayed every frame, and the checks come back in one read. On the CPU the
-heads run one after another through the same calls. Each head converges on its own: its own
+heads run one after another through the same calls. A level-0 head's kernels are small (a few
+thousand threads each), so one graph of N heads runs them one after another; with ``streams=K``
+the heads are split into K groups, each group's frame its own graph on its own stream, launched
+side by side after the controls' upload and joined before the checks are read, so K heads'
+kernels share the GPU at a time. Each head converges on its own: its own
 solver decides its iteration count (the Newton-PCG loop on CUDA stops per head on its own
 residual; the CPU L-BFGS factorises and iterates per head), so a head at rest costs few
 iterations whatever the others do.
@@ -128,6 +132,9 @@ class FaceBatch:
         fps: Frames per second of :meth:`step`.
         placements: Each head's fixed place in the world: ``(R, t)`` with R (3, 3) or (N, 3, 3)
             rotations and t (3,) or (N, 3) translations [m] (default: all at the origin).
+        streams: CUDA only: the heads split into this many groups, each group's frame one graph
+            on its own stream, the groups run side by side (default 1: one graph for all heads;
+            module doc). The CPU ignores it.
         **options: :class:`~facewarp.FaceSimulator`'s keywords (``solver``, ``material``, ``dt``,
             ``substeps``, ``iterations``, ``tolerance``, ``method``, ``solver_options``,
             ``support_stiffness``, ``edge_damping``, ``mass_scaling``, ``contact``,
@@ -144,7 +151,7 @@ class FaceBatch:
     """
 
     def __init__(self, rigs, count: int | None = None, *, device: str = "cpu", fps: float = 30.0,
-                 placements=None, **options):
+                 placements=None, streams: int = 1, **options):
         bad = sorted(set(options) - set(_SIM_KEYS))
         if bad:
             raise InputError(f"{bad[0]}: not an option of FaceBatch (options: {', '.join(_SIM_KEYS)})")
@@ -187,8 +194,20 @@ class FaceBatch:
         wp.load_module(kr, device=self.device)  # its kernel is captured in the frame's graph: loaded before
         self._graphs: dict[tuple, list] = {}
         self._use_graph = all(h.stepper.use_graph for h in self.heads)
+        self._stream_pool: list = []
+        self.streams = streams
         self.step_seconds = 0.0
         self.reset()
+
+    @property
+    def streams(self) -> int:
+        """CUDA streams the heads' frames are spread over (module doc; 1: one graph for all; the CPU ignores it)."""
+        return self._streams
+
+    @streams.setter
+    def streams(self, value: int) -> None:
+        self._streams = int(check_int("streams", value, low=1, high=1024))
+        self._graphs = {}
 
     # ------------------------------------------------------------------------------ controls
     def _heads_arg(self, heads) -> list[int]:
@@ -350,19 +369,37 @@ class FaceBatch:
         for i in live:  # the host part of the rollback's save (the CPU solvers' history), before the frame
             g, solver = self.heads[i].frame_guard, self.heads[i].solver
             g._host_state = {k: _copy_host(getattr(solver, k)) for k in _SOLVER_HOST_STATE if hasattr(solver, k)}
-        key = (tuple(live), n, dt)
+        groups = [g.tolist() for g in np.array_split(np.asarray(live), min(self._streams, len(live)))]
+        key = (tuple(live), n, dt, len(groups))
         if self._use_graph and key not in self._graphs:
+            while len(self._stream_pool) < len(groups) - 1:
+                self._stream_pool.append(wp.Stream(self.device))
+            streams = [wp.get_stream(self.device)] + self._stream_pool[:len(groups) - 1]
             graphs = []
-            for c in range(chunks):
-                with wp.ScopedCapture(device=self.device) as cap:
-                    self._piece(live, c, chunks, int(bounds[c + 1] - bounds[c]), dt)
-                graphs.append(cap.graph)
+            for c in range(chunks):  # per ramp piece, one graph per group of heads, each on its stream
+                row = []
+                for g, st in zip(groups, streams):
+                    with wp.ScopedStream(st), wp.ScopedCapture(device=self.device) as cap:
+                        self._piece(g, c, chunks, int(bounds[c + 1] - bounds[c]), dt)
+                    row.append((cap.graph, st))
+                graphs.append(row)
             self._graphs[key] = graphs
         self._raised: dict[int, str] = {}
         for c in range(chunks):
             wp.copy(self._ctrl, self._ctrl_host, src_offset=c * total, count=total)
             if self._use_graph:
-                wp.capture_launch(self._graphs[key][c])
+                row = self._graphs[key][c]
+                if len(row) == 1:
+                    wp.capture_launch(row[0][0], stream=row[0][1])
+                else:  # fork after the upload, the groups side by side, join before the checks are read
+                    main = wp.get_stream(self.device)
+                    ev = main.record_event()
+                    for graph, st in row[1:]:
+                        st.wait_event(ev)
+                        wp.capture_launch(graph, stream=st)
+                    wp.capture_launch(row[0][0], stream=main)
+                    for _, st in row[1:]:
+                        main.wait_stream(st)
             else:
                 self._piece(live, c, chunks, int(bounds[c + 1] - bounds[c]), dt)
         guard = self._guard_all.numpy().reshape(-1, 2)  # one read of every head's checks
