@@ -129,3 +129,85 @@ def test_batch_simulate_cli(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "1 entries for 2 heads" in err and err.count("\n") == 1
     assert not (tmp_path / "o2").exists()
+
+
+def _box(nx, ny, nz, h):
+    g = np.stack(np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij"), -1)
+    V = g.transpose(2, 1, 0, 3).reshape(-1, 3).astype(np.float64) * h
+
+    def vid(i, j, k):
+        return (k * (ny + 1) + j) * (nx + 1) + i
+
+    T = []
+    for k in range(nz):
+        for j in range(ny):
+            for i in range(nx):
+                c = [vid(i + a, j + b, k + d) for d in (0, 1) for b in (0, 1) for a in (0, 1)]
+                for tet in ((0, 1, 3, 7), (0, 1, 5, 7), (0, 2, 3, 7), (0, 2, 6, 7), (0, 4, 5, 7), (0, 4, 6, 7)):
+                    T.append([c[q] for q in tet])
+    T = np.array(T)
+    x = V[T]
+    vol = np.einsum("ij,ij->i", x[:, 1] - x[:, 0], np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]))
+    T[vol < 0] = T[vol < 0][:, [0, 2, 1, 3]]
+    return V, T
+
+
+def test_replicated_tissue_model_steps_each_head_as_alone(device):
+    """ModelBuilder.add_builder / replicate: N tissues in one Model, each placed by its transform,
+    stepped by one solver: each head moves as it does alone (in its own frame)."""
+    from facewarp.physics import ModelBuilder, SolverVerlet
+
+    heads = []
+    for dims, h in (((3, 2, 1), 0.01), ((2, 2, 2), 0.012)):
+        V, T = _box(*dims, h)
+        fixed = V[:, 2] < 1e-9
+        heads.append(ModelBuilder(V, T, fixed=fixed, material="physical"))
+    c, s = np.cos(0.7), np.sin(0.7)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    big = ModelBuilder()
+    big.add_builder(heads[0])
+    big.replicate(heads[1], 2, xforms=[(R, [0.05, 0.0, 0.0]), np.eye(4)])
+    m = big.finalize(device)
+    n0, n1 = heads[0].vertex_count, heads[1].vertex_count
+    assert m.head_count == 3 and m.head_node_start.tolist() == [0, n0, n0 + n1, n0 + 2 * n1]
+    assert m.head_tet_start[-1] == m.tet_count == len(heads[0].tets) + 2 * len(heads[1].tets)
+
+    def run(model, force):
+        solver = SolverVerlet(model)
+        st, sc, ctl = model.state(), model.state(), model.control()
+        ctl.external_force.assign(force.astype(np.float32))
+        for _ in range(40):
+            solver.step(st, sc, ctl, 1e-4)
+            st, sc = sc, st
+        return st.positions.numpy().astype(np.float64)
+
+    rng = np.random.default_rng(0)
+    f0, f1 = rng.normal(0, 0.05, (n0, 3)), rng.normal(0, 0.05, (n1, 3))
+    alone0 = run(heads[0].finalize(device), f0)
+    alone1 = run(heads[1].finalize(device), f1)
+    X = run(m, np.concatenate([f0, f1 @ R.T, f1]))  # head 1's load turned with it
+    assert np.abs(alone1 - heads[1].vertices).max() > 1e-5  # the load moved it
+    np.testing.assert_allclose(X[:n0], alone0, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(X[n0:n0 + n1], alone1 @ R.T + [0.05, 0.0, 0.0], atol=1e-6, rtol=0)
+    np.testing.assert_allclose(X[n0 + n1:], alone1, atol=1e-6, rtol=0)
+
+
+def test_replicate_refuses_what_it_cannot_merge(rigs):
+    from facewarp.physics import ModelBuilder
+
+    V, T = _box(1, 1, 1, 0.01)
+    tissue = ModelBuilder(V, T)
+    face = ModelBuilder()
+    face.add_face(rigs[0])
+    with pytest.raises(fw.InputError, match="FaceBatch"):
+        ModelBuilder().add_builder(face)
+    with pytest.raises(fw.InputError, match="no head"):
+        ModelBuilder().add_builder(ModelBuilder())
+    with pytest.raises(fw.InputError, match="count"):
+        ModelBuilder().replicate(tissue, 0)
+    with pytest.raises(fw.InputError, match="xforms\\[0\\]"):
+        ModelBuilder().replicate(tissue, 1, xforms=[np.ones((4, 4))])
+    with pytest.raises(fw.InputError, match="damping rate"):
+        b = ModelBuilder()
+        b.add_builder(tissue)
+        b.add_builder(ModelBuilder(V, T, damping_rate=3.0))
