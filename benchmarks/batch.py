@@ -15,7 +15,9 @@ memory pool before and after the batch was made), construction seconds, and the 
 sub-stepping; the naive baseline (the same heads' :class:`facewarp.FaceSimulator` objects
 stepped one after another, each its own graph per frame) for N <= ``--naive-max`` with the FDPs
 of both compared (the same answer); Newton's ``SolverVBD`` on the same tets replicated N times
-(benchmarks/peers.py's problem) when ``newton`` is importable, else a note. On the CPU the
+(benchmarks/peers.py's problem) when ``newton`` is importable, else a note; and the same tissue
+replicated N times in ONE facewarp Model (``ModelBuilder.replicate``, one implicit solver),
+Newton's like-for-like and the cost of a merged face Model. On the CPU the
 figure of merit is one frame of 4 heads against one head's frame (target <= 4x).
 
 Each N is caught on its own (out of memory ends the sweep; the JSON keeps what was measured)
@@ -149,6 +151,49 @@ def newton_replicated(problem: dict, n: int, device: str, frames: int, substeps:
         return {"error": f"{type(e).__name__}: {e}"}
 
 
+def facewarp_replicated(problem: dict, n: int, device: str, frames: int) -> dict:
+    """The peer problem's tissue (tets, pinned nodes, the dead load; no muscles, jaw or contact)
+    replicated ``n`` times in ONE Model (ModelBuilder.replicate) and stepped by one implicit
+    solver: the like-for-like of Newton VBD's replicate, and what a merged face Model would cost."""
+    import warp as wp
+
+    from facewarp.physics import MaterialPhysical, ModelBuilder, SolverImplicit
+
+    one = ModelBuilder(problem["nodes"], problem["tets"], layer=problem["layer"], fixed=problem["pinned"],
+                       material=MaterialPhysical())
+    big = ModelBuilder()
+    big.replicate(one, n)
+    m = big.finalize(device)
+    solver = SolverImplicit(m, tolerance=3e-5)
+    st, sc, ctl = m.state(), m.state(), m.control()
+    ctl.external_force.assign(np.tile(np.asarray(problem["force"], np.float32), (n, 1)))
+    dt = 1.0 / 30.0
+
+    def two():
+        solver.step(st, sc, ctl, dt)
+        solver.step(sc, st, ctl, dt)
+
+    graph = None
+    if m.device.is_cuda and (not getattr(solver, "adaptive", False) or wp.is_conditional_graph_supported()):
+        with wp.ScopedCapture(device=m.device) as cap:
+            two()
+        graph = cap.graph
+    run = (lambda: wp.capture_launch(graph)) if graph is not None else two
+    run()  # warm-up
+    wp.synchronize()
+    pairs = max(1, frames // 2)
+    t0 = time.perf_counter()
+    for _ in range(pairs):
+        run()
+    wp.synchronize()
+    sec = (time.perf_counter() - t0) / (2 * pairs)
+    X = st.positions.numpy()
+    return {"seconds_per_frame": sec, "head_frames_per_second": n / sec, "method": solver.method,
+            "finite": bool(np.isfinite(X).all()),
+            "note": "tissue only in one Model (the peer problem: pinned nodes and the dead load), one solver, "
+                    "global convergence"}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cpu")
@@ -162,7 +207,8 @@ def main(argv=None) -> int:
     ap.add_argument("--level", type=int, default=0)
     ap.add_argument("--streams", default=None,
                     help="comma list of FaceBatch stream counts to time per N (default cuda 1,8,32; cpu 1)")
-    ap.add_argument("--no-newton", action="store_true")
+    ap.add_argument("--no-peers", action="store_true", help="skip Newton VBD and the one-Model tissue rows")
+    ap.add_argument("--one-model-max", type=int, default=4000, help="largest N of the one-Model tissue row")
     ap.add_argument("--name", default=None, help="result name (default batch_<device>)")
     ap.add_argument("--append", action="store_true",
                     help="keep the rows of an earlier result of this name for the sizes not run now")
@@ -182,17 +228,18 @@ def main(argv=None) -> int:
     problem = None
     import importlib.util
 
-    if args.no_newton:
-        notes.append("Newton VBD not run (--no-newton)")
-    elif importlib.util.find_spec("newton") is None:
-        notes.append("Newton VBD skipped: the newton package is not installed here (pip install newton)")
+    have_newton = importlib.util.find_spec("newton") is not None
+    if args.no_peers:
+        notes.append("Newton VBD and the one-Model tissue not run (--no-peers)")
     else:
+        if not have_newton:
+            notes.append("Newton VBD skipped: the newton package is not installed here (pip install newton)")
         try:
             from benchmarks.peers import export_problem
 
             problem = export_problem(rigs[0], args.preset)
         except Exception as e:
-            notes.append(f"Newton problem not exported: {type(e).__name__}: {e}")
+            notes.append(f"peer problem not exported: {type(e).__name__}: {e}")
     figures = {"device": device, "level": args.level, "heads": specs, "preset": args.preset, "frames": args.frames,
                "tets_per_head": [int(len(fr.tets)) for fr in rigs], "notes": notes, "rows": []}
     naive_frames = args.naive_frames or args.frames
@@ -211,9 +258,11 @@ def main(argv=None) -> int:
             x = [r["n"] for r in rows]
             series = {"FaceBatch": [r["head_frames_per_second"] for r in rows],
                       "naive loop": [r.get("naive", {}).get("head_frames_per_second", np.nan) for r in rows]}
-            nv = [r.get("newton_vbd", {}).get("head_frames_per_second", np.nan) for r in rows]
-            if np.isfinite(nv).any():
-                series["Newton VBD (tissue only)"] = nv
+            for key, label in (("one_model_tissue", "facewarp one Model (tissue only)"),
+                               ("newton_vbd", "Newton VBD (tissue only)")):
+                v = [r.get(key, {}).get("head_frames_per_second", np.nan) for r in rows]
+                if np.isfinite(v).any():
+                    series[label] = v
             line_chart(RESULTS / f"{name}.png", np.log10(x), series, log_y=True,
                        title=f"head-frames/s on {device}, level {args.level}, {args.preset}",
                        xlabel="log10 N heads", ylabel="head-frames / s", width=640, height=400)
@@ -288,7 +337,15 @@ def main(argv=None) -> int:
                     wp.synchronize_device(device)
                 except Exception:
                     pass
-        if problem is not None:
+        if problem is not None and n <= args.one_model_max:
+            try:
+                row["one_model_tissue"] = facewarp_replicated(problem, n, device, min(args.frames, 10))
+                print(f"  one Model of {n} tissues: {row['one_model_tissue']['seconds_per_frame'] * 1e3:.1f} ms/frame",
+                      flush=True)
+            except Exception as e:
+                row["one_model_tissue"] = {"error": f"{type(e).__name__}: {' '.join(str(e).split())[:300]}"}
+            gc.collect()
+        if problem is not None and have_newton:
             row["newton_vbd"] = newton_replicated(problem, n, device, min(args.frames, 10))
         write()
     one = next((r for r in figures["rows"] if r["n"] == 1 and "ms_per_frame" in r), None)
