@@ -545,7 +545,7 @@ def cmd_batch_simulate(args):
     bar = _FrameBar(not args.json)
     try:
         rep = batch_simulate_files(args.builds, args.expression, args.out, per_head=args.per_head,
-                                   seconds=args.seconds, fps=args.fps, device=args.device, progress=bar)
+                                   seconds=args.seconds, fps=args.fps, device=args.device, jaw=args.jaw, progress=bar)
     finally:
         bar.close()
     width = max(len(Path(r["build"]).name) for r in rep["rows"])
@@ -826,8 +826,7 @@ def build_parser() -> argparse.ArgumentParser:
     bs = btsub.add_parser(
         "simulate", help="many built heads played together in one FaceBatch (one step, one CUDA graph per frame for all)",
         epilog="Writes DIR/head_KK.usdc (one USD animation per head, in the order given) and DIR/report.json "
-               "(per head: status, error, frames sub-stepped; frames/s and head-frames/s of the batch). The jaw is "
-               "kinematic (Eq. 6.4.9). A head that fails (NaN, inverted tet even when sub-stepped) is frozen at its "
+               "(per head: status, error, frames sub-stepped; frames/s and head-frames/s of the batch). A head that fails (NaN, inverted tet even when sub-stepped) is frozen at its "
                "last good frame and reported; the others go on. --per-head FILE.json: {\"heads\": [\"smile\", "
                "{\"expression\": \"laugh\"}, ...]}, one entry per BUILD_DIR.")
     bs.add_argument("builds", nargs="+", type=Path, metavar="BUILD_DIR", help="`facewarp build` output folders")
@@ -838,6 +837,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"simulated time [s], > 0 and <= {MAX_SECONDS:g} (default 2)")
     bs.add_argument("--fps", type=_fps, metavar="F", default=30.0,
                     help=f"frames per second, > 0 and <= {MAX_FPS:g} (default 30)")
+    bs.add_argument("--jaw", choices=["kinematic", "mujoco"], default="kinematic",
+                    help="kinematic (default: Eq. 6.4.9 angles, inside the batched step) or mujoco (each build's "
+                         "head.xml hinge body two-way coupled, one CPU MuJoCo per head stepped in a loop)")
     bs.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     bs.set_defaults(func=cmd_batch_simulate)
     return p

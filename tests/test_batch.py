@@ -106,20 +106,50 @@ def test_bad_inputs_are_input_errors(rigs):
         batch.set_head_pose(np.eye(3), np.zeros((3, 3)))
 
 
-def test_batch_simulate_cli(tmp_path, capsys):
+@pytest.fixture(scope="module")
+def build_dir(tmp_path_factory):
     from facewarp.cli import main
 
-    assert main(["build", "default", "--out", str(tmp_path / "b")]) == 0
+    d = tmp_path_factory.mktemp("build") / "b"
+    assert main(["build", "default", "--out", str(d)]) == 0
+    return d
+
+
+def test_batch_mujoco_jaws_match_the_single_head_driver(build_dir):
+    from facewarp.coupling import MujocoJawDriver
+
+    fr = fw.load_face_rig(build_dir)
+    mjcf = build_dir / "head.xml"
+    batch = fw.FaceBatch(fr, 2)
+    batch.use_mujoco_jaws(mjcf)
+    alone = fw.FaceSimulator(fr)
+    driver = MujocoJawDriver(alone, mjcf)
+    quiet = fw.Expression("quiet", {}, 0.0, 0.0)
+    for k in range(1, 9):
+        e = _controls(fr, k)
+        batch.set_activations([e, quiet])
+        batch.set_jaw(np.array([[e.jaw_u, e.jaw_v], [0.0, 0.0]]))
+        batch.step()
+        alone.set_activations(e)
+        driver.step(e)
+    np.testing.assert_allclose(batch.positions(0), alone.positions(), atol=1e-6, rtol=0)
+    assert batch.heads[0].jaw_angles[0] > 0.005 and abs(batch.heads[1].jaw_angles[0]) < 1e-3
+    assert all(s["ok"] for s in batch.status)
+
+
+def test_batch_simulate_cli(build_dir, tmp_path, capsys):
+    from facewarp.cli import main
+
     per = tmp_path / "per.json"
     per.write_text('{"heads": ["smile", {"expression": "laugh"}]}')
-    b = str(tmp_path / "b")
+    b = str(build_dir)
     capsys.readouterr()
-    assert main(["--json", "batch", "simulate", b, b, "--per-head", str(per), "--seconds", "0.2",
+    assert main(["--json", "batch", "simulate", b, b, "--per-head", str(per), "--seconds", "0.2", "--jaw", "mujoco",
                  "--out", str(tmp_path / "o")]) == 0
     import json
 
     rep = json.loads(capsys.readouterr().out)
-    assert rep["heads"] == 2 and rep["ok"] == 2 and rep["frames"] == 7 and rep["head_frames_per_second"] > 0
+    assert rep["heads"] == 2 and rep["ok"] == 2 and rep["frames"] == 7 and rep["jaw"] == "mujoco" and rep["head_frames_per_second"] > 0
     assert [r["expression"] for r in rep["rows"]] == ["smile", "laugh"]
     for f in ("head_00.usdc", "head_01.usdc", "report.json"):
         assert (tmp_path / "o" / f).is_file(), f

@@ -59,10 +59,10 @@ def read_per_head(path, count: int) -> list[str]:
 
 
 def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds: float = 2.0, fps: float = 30.0,
-                         device: str = "cpu", progress=None) -> dict:
+                         device: str = "cpu", jaw: str = "kinematic", progress=None) -> dict:
     """Play ``expression`` (or each head's own from ``per_head``) on every build folder of
-    ``heads`` at once (:class:`~facewarp.FaceBatch`, the kinematic jaw) and write ``out/head_KK.usdc``
-    and ``out/report.json``.
+    ``heads`` at once (:class:`~facewarp.FaceBatch`) and write ``out/head_KK.usdc`` and
+    ``out/report.json``.
 
     Args:
         heads: ``facewarp build`` folders, one per head.
@@ -72,6 +72,8 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
         per_head: A ``--per-head`` file (:func:`read_per_head`), or None.
         seconds, fps: Length [s] and frames per second.
         device: Warp device.
+        jaw: ``"kinematic"`` (default: Eq. 6.4.9, inside the batched step) or ``"mujoco"`` (each
+            build's ``head.xml`` hinge body, one CPU MuJoCo per head: :meth:`~facewarp.FaceBatch.use_mujoco_jaws`).
         progress: Optional ``progress(k, frame_count)`` after each frame.
 
     Returns:
@@ -91,6 +93,12 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     for key, v, high in (("seconds", seconds, MAX_SECONDS), ("fps", fps, MAX_FPS)):
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and 0 < v <= high):
             raise InputError(f"{key}: expected a finite number > 0 and <= {high:g}, got {v!r}")
+    if jaw not in ("kinematic", "mujoco"):
+        raise InputError(f"jaw: expected kinematic or mujoco, got {jaw!r}")
+    if jaw == "mujoco":
+        for h in heads:
+            if not (h / "head.xml").is_file():
+                raise InputError(f"{h}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, or use --jaw kinematic)")
     specs = read_per_head(per_head, len(heads)) if per_head is not None else [str(expression)] * len(heads)
     timelines = {s: timeline_from_spec(s, float(seconds)) for s in dict.fromkeys(specs)}
     rigs, loaded = [], {}
@@ -103,6 +111,8 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     batch = FaceBatch(rigs, device=device, fps=fps)
+    if jaw == "mujoco":
+        batch.use_mujoco_jaws([h / "head.xml" for h in heads])
     build_s = time.perf_counter() - t0
     per = [timelines[s].for_head(fr) for s, fr in zip(specs, rigs)]
     nf = int(round(seconds * fps)) + 1
@@ -136,7 +146,7 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     rows = [{**s, "build": str(h), "expression": spec, "file": str(out / n)}
             for s, h, spec, n in zip(status, heads, specs, names)]
     rep = {"heads": len(heads), "ok": sum(r["ok"] for r in rows), "failed": sum(not r["ok"] for r in rows),
-           "frames": nf, "seconds": float(seconds), "fps": float(fps), "device": str(batch.device), "jaw": "kinematic",
+           "frames": nf, "seconds": float(seconds), "fps": float(fps), "device": str(batch.device), "jaw": jaw,
            "build_seconds": build_s, "simulation_wall_s": stepping,
            "frames_per_second": (nf - 1) / stepping, "head_frames_per_second": (nf - 1) * len(heads) / stepping,
            "rows": rows, "files": [str(out / n) for n in names] + [str(out / "report.json")]}

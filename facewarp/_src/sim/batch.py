@@ -48,9 +48,13 @@ tissue as :meth:`~facewarp.FaceSimulator.set_head_pose` does) are applied at rea
 The jaws
 --------
 The kinematic jaw (Eq. 6.4.9) of every head is its Control's ``jaw_angles`` (:meth:`FaceBatch.set_jaw`),
-stepped inside the batched frame. The MuJoCo jaw (:meth:`FaceBatch.mujoco_jaws`) is one CPU
-MuJoCo model per head, stepped in a loop around the batched skin step (MuJoCo's own step costs
-~20-40 us per head and frame on one core; the skin's torque per head is a host read).
+stepped inside the batched frame. The MuJoCo jaw (:meth:`FaceBatch.use_mujoco_jaws`) is one CPU
+MuJoCo model per head (the ``head.xml`` of its build), stepped in a loop around the batched skin
+step: before it, each head's MuJoCo angles and head pose are set on its skin; after it, the skin's
+torque on the hinge is read back (a host read of the jaw nodes per head) and MuJoCo takes its
+steps to the frame's end. Its cost grows with N on the host whatever the device
+(``benchmarks/batch.py --mujoco`` measures it); MuJoCo Warp (``mujoco-warp``, one Model with
+``nworld`` worlds on the GPU) would keep it on the device and is not used yet.
 """
 
 from __future__ import annotations
@@ -196,8 +200,32 @@ class FaceBatch:
         self._use_graph = all(h.stepper.use_graph for h in self.heads)
         self._stream_pool: list = []
         self.streams = streams
+
         self.step_seconds = 0.0
+        self._mujoco = None
+        self._jaw_goal = np.zeros((n, 2))
         self.reset()
+
+    def use_mujoco_jaws(self, mjcf) -> None:
+        """Drive every head's jaw by the MuJoCo hinge body of its ``head.xml`` (written by ``facewarp
+        build``), two-way coupled as :class:`~facewarp.coupling.MujocoJawDriver` does for one head:
+        :meth:`set_jaw`'s angles become the actuator targets, MuJoCo's angles and head pose go onto
+        the skin before each batched step and the skin's torque back after it. One CPU MuJoCo model
+        per head, stepped in a loop (module doc).
+
+        Args:
+            mjcf: One ``head.xml`` path for every head, or a list of N (one per head).
+
+        Raises:
+            InputError: a missing or broken file, a list of the wrong length, or no ``mujoco``.
+        """
+        from ..coupling.drivers import MujocoJawDriver
+
+        paths = list(mjcf) if isinstance(mjcf, (list, tuple)) else [mjcf] * self.count
+        if len(paths) != self.count:
+            raise InputError(f"mjcf: expected one head.xml or {self.count} (one per head), got {len(paths)}")
+        self._mujoco = [MujocoJawDriver(h, p) for h, p in zip(self.heads, paths)]
+        self._mjcf = paths
 
     @property
     def streams(self) -> int:
@@ -275,8 +303,9 @@ class FaceBatch:
                 targets.append(jaw_vector(float(a[i, 0]), float(a[i, 1]) if a.shape[1] > 1 else 0.0))
             except InputError as e:
                 raise InputError(f"angles of head {i}: {e}") from None
-        for h, j in zip(self.heads, targets):
+        for i, (h, j) in enumerate(zip(self.heads, targets)):
             h._target_j = j
+            self._jaw_goal[i] = (a[i, 0], a[i, 1] if a.shape[1] > 1 else 0.0)  # MuJoCo's targets, as given
 
     def set_head_pose(self, R, t) -> None:
         """Set every head's pose (in its placement) reached at the end of the next :meth:`step`:
@@ -289,10 +318,17 @@ class FaceBatch:
 
     def reset(self, heads=None) -> None:
         """Back to rest, all heads (default) or the listed ones: each head's
-        :meth:`~facewarp.FaceSimulator.reset`; a frozen head is live again."""
+        :meth:`~facewarp.FaceSimulator.reset` (and its MuJoCo jaw's model made again); a frozen
+        head is live again."""
         idx = self._heads_arg(heads)
         for i in idx:
             self.heads[i].reset()
+            self._jaw_goal[i] = 0.0
+        if getattr(self, "_mujoco", None) is not None:  # MuJoCo from its initial state too
+            from ..coupling.drivers import MujocoJawDriver
+
+            for i in idx:
+                self._mujoco[i] = MujocoJawDriver(self.heads[i], self._mjcf[i])
         if heads is None:
             self.failed: dict[int, str] = {}
             self.frames = 0
@@ -316,6 +352,14 @@ class FaceBatch:
         """
         t0 = time.perf_counter()
         live = self.live
+        angles = {}
+        if self._mujoco is not None:  # MuJoCo's angles and head poses onto the skins (one CPU MuJoCo per head)
+            for i in live:
+                d = self._mujoco[i]
+                for a, target in zip(d.act, self._jaw_goal[i]):
+                    if a >= 0:
+                        d.data.ctrl[a] = target
+                angles[i] = d.coupler.exchange_begin()
         for i in live:
             self.heads[i]._frame_loads(self.heads[i].substeps)
         same = len({self.heads[i].substeps for i in live}) == 1 and len({self.heads[i].dt for i in live}) == 1
@@ -340,6 +384,15 @@ class FaceBatch:
                 st.frames += 1
                 st.min_volume_ratio = min(st.min_volume_ratio, self._ratios[i])
             h._frame_done(n)
+        if self._mujoco is not None:  # the skins' torques to MuJoCo, then MuJoCo's frame, head by head
+            for i in live:
+                if i in self.failed:
+                    continue
+                try:
+                    self._mujoco[i].coupler.exchange_end(angles[i])
+                    self._mujoco[i].coupler.mujoco_frame()
+                except SimulationError as e:
+                    self.failed[i] = str(e)
         self.frames += 1
         self.step_seconds += time.perf_counter() - t0
 
