@@ -160,6 +160,7 @@ class FaceBatch:
         if bad:
             raise InputError(f"{bad[0]}: not an option of FaceBatch (options: {', '.join(_SIM_KEYS)})")
         rigs = _rig_list(rigs, count)
+        check_int("streams", streams, low=1, high=1024)
         n = len(rigs)
         if placements is None:
             self._place_R, self._place_t = np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3))
@@ -200,7 +201,6 @@ class FaceBatch:
         self._use_graph = all(h.stepper.use_graph for h in self.heads)
         self._stream_pool: list = []
         self.streams = streams
-
         self.step_seconds = 0.0
         self._mujoco = None
         self._jaw_goal = np.zeros((n, 2))
@@ -504,14 +504,17 @@ class FaceBatch:
     def status(self) -> list[dict]:
         """Per head: ``head`` (index), ``ok`` (False: frozen by a failure), ``error`` (the
         failure, or None), ``frames`` (frames taken), ``substepped_frames``, ``retries``,
-        ``min_volume_ratio`` (:class:`~facewarp._src.sim.rollback.FrameStats`)."""
+        ``frames_below_floor``, ``unconverged_frames``, ``min_volume_ratio``
+        (:class:`~facewarp._src.sim.rollback.FrameStats`), ``iterations`` (the head's own solver
+        iterations since its reset: each head converges on its own; a device read per head on CUDA)."""
         out = []
         for i, h in enumerate(self.heads):
             st = h.stats
             out.append({"head": i, "ok": i not in self.failed, "error": self.failed.get(i),
                         "frames": st.frames, "substepped_frames": st.substepped_frames, "retries": st.retries,
                         "frames_below_floor": st.frames_below_floor, "unconverged_frames": st.unconverged_frames,
-                        "min_volume_ratio": float(st.min_volume_ratio)})
+                        "min_volume_ratio": float(st.min_volume_ratio),
+                        "iterations": int(getattr(h.solver, "total_iterations", 0))})
         return out
 
     def positions(self, head: int | None = None, *, frame: str = "head"):
