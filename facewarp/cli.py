@@ -552,6 +552,29 @@ def cmd_batch_run(args):
     _emit(args, rep, lines)
 
 
+def cmd_batch_simulate(args):
+    from ._src.jobs.batch_simulate import batch_simulate_files
+
+    bar = _FrameBar(not args.json)
+    try:
+        rep = batch_simulate_files(args.builds, args.expression, args.out, per_head=args.per_head,
+                                   seconds=args.seconds, fps=args.fps, device=args.device, jaw=args.jaw, progress=bar)
+    finally:
+        bar.close()
+    width = max(len(Path(r["build"]).name) for r in rep["rows"])
+    lines = [f"batch of {rep['heads']} heads on {rep['device']} ({rep['jaw']} jaw): {rep['ok']} ok, {rep['failed']} failed; "
+             f"{rep['frames']} frames ({rep['seconds']:g} s) at {rep['frames_per_second']:.1f} frames/s, "
+             f"{rep['head_frames_per_second']:.1f} head-frames/s (heads made in {rep['build_seconds']:.1f} s)"]
+    for r in rep["rows"][:50]:
+        lines.append(f"  {r['head']:>4}  {Path(r['build']).name:<{width}}  {r['expression']:<12}  "
+                     + ("ok" if r["ok"] else f"FAILED: {r['error']}")
+                     + (f" ({r['substepped_frames']} frames sub-stepped)" if r["substepped_frames"] else ""))
+    if len(rep["rows"]) > 50:
+        lines.append(f"  ... {len(rep['rows']) - 50} more in report.json")
+    lines.append(f"  wrote {len(rep['files']) - 1} USD files and report.json in {args.out}")
+    _emit(args, rep, lines)
+
+
 # ----------------------------------------------------------------------------- parser
 def _simulate_epilog() -> str:
     import textwrap
@@ -823,6 +846,25 @@ def build_parser() -> argparse.ArgumentParser:
                     help="retries of a step whose worker process died (killed, out of memory), 0..100, default 2")
     br.add_argument("--retry-failed", action="store_true", help="run the steps that failed in an earlier run again")
     br.set_defaults(func=cmd_batch_run)
+    bs = btsub.add_parser(
+        "simulate", help="many built heads played together in one FaceBatch (one step, one CUDA graph per frame for all)",
+        epilog="Writes DIR/head_KK.usdc (one USD animation per head, in the order given) and DIR/report.json "
+               "(per head: status, error, frames sub-stepped; frames/s and head-frames/s of the batch). A head that fails (NaN, inverted tet even when sub-stepped) is frozen at its "
+               "last good frame and reported; the others go on. --per-head FILE.json: {\"heads\": [\"smile\", "
+               "{\"expression\": \"laugh\"}, ...]}, one entry per BUILD_DIR.")
+    bs.add_argument("builds", nargs="+", type=Path, metavar="BUILD_DIR", help="`facewarp build` output folders")
+    bs.add_argument("--expression", default="smile", metavar="NAME|sequence|FILE.json",
+                    help="what every head plays (as `facewarp simulate --expression`; default smile)")
+    bs.add_argument("--per-head", type=Path, metavar="FILE.json", help="one expression per head (overrides --expression)")
+    bs.add_argument("--seconds", type=_seconds, metavar="S", default=2.0,
+                    help=f"simulated time [s], > 0 and <= {MAX_SECONDS:g} (default 2)")
+    bs.add_argument("--fps", type=_fps, metavar="F", default=30.0,
+                    help=f"frames per second, > 0 and <= {MAX_FPS:g} (default 30)")
+    bs.add_argument("--jaw", choices=["kinematic", "mujoco"], default="kinematic",
+                    help="kinematic (default: Eq. 6.4.9 angles, inside the batched step) or mujoco (each build's "
+                         "head.xml hinge body two-way coupled, one CPU MuJoCo per head stepped in a loop)")
+    bs.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    bs.set_defaults(func=cmd_batch_simulate)
     return p
 
 
@@ -878,7 +920,8 @@ def _verbose_env(on: bool):
 def _output_targets(args) -> list[tuple[str, Path, str]]:
     """The outputs of the parsed command: (argument, path, "dir" | "file"), staged by _run."""
     func = args.func
-    if func in (cmd_template_export, cmd_template_import_ict, cmd_adapt, cmd_build, cmd_demo, cmd_retarget):
+    if func in (cmd_template_export, cmd_template_import_ict, cmd_adapt, cmd_build, cmd_demo, cmd_retarget,
+                cmd_batch_simulate):
         return [("out", args.out, "dir")]
     if func is cmd_landmarks_detect:
         return [("out", args.out, "file")]
