@@ -424,6 +424,7 @@ class FaceBatch:
             g._host_state = {k: _copy_host(getattr(solver, k)) for k in _SOLVER_HOST_STATE if hasattr(solver, k)}
         groups = [g.tolist() for g in np.array_split(np.asarray(live), min(self._streams, len(live)))]
         key = (tuple(live), n, dt, len(groups))
+        self._raised: dict[int, str] = {}  # before a capture: _piece reads it
         if self._use_graph and key not in self._graphs:
             while len(self._stream_pool) < len(groups) - 1:
                 self._stream_pool.append(wp.Stream(self.device))
@@ -437,7 +438,6 @@ class FaceBatch:
                     row.append((cap.graph, st))
                 graphs.append(row)
             self._graphs[key] = graphs
-        self._raised: dict[int, str] = {}
         for c in range(chunks):
             wp.copy(self._ctrl, self._ctrl_host, src_offset=c * total, count=total)
             if self._use_graph:
