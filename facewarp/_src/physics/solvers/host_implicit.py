@@ -198,7 +198,12 @@ class SolverHostImplicit(SolverImplicit):
         ip.x.numpy()[:] = x64
         ip.launch_hessian(ip.x, h, self.contact_slack if self.method == "lbfgs" else 0.0)
         self._contacts_factored = ip.contact_set(x64, self.contact_slack)
-        solve = _factorize(ip.hessian_matrix(), self.backend)
+        if self.backend == "qdldl":  # QDLDL reads the upper triangle
+            import qdldl
+
+            solve = qdldl.Solver(ip.hessian_upper()).solve
+        else:
+            solve = _factorize(ip.hessian_matrix(), self.backend)
         self._clear_history()
         self.factorizations += 1
         self._excess = 0
