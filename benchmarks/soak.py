@@ -129,6 +129,22 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
+def control_stream(rng: np.random.Generator, muscles: int, fps: float):
+    """The soak's controls, one frame at a time, forever: ``(activations (muscles,) in [0, 1],
+    jaw opening [rad], jaw side angle [rad], head rotation of the frame (3, 3))`` (the module doc)."""
+    axis, omega = np.array([0.0, 1.0, 0.0]), 0.0
+    k = 0
+    while True:
+        a = np.where(rng.random(muscles) < ACTIVE_FRACTION, rng.random(muscles), 0.0)
+        u = math.radians(rng.uniform(0.0, JAW_OPEN_MAX_DEG))
+        v = math.radians(rng.uniform(-JAW_SIDE_MAX_DEG, JAW_SIDE_MAX_DEG))
+        if k % SPIN_HOLD_FRAMES == 0:
+            axis = rng.normal(size=3)
+            omega = 2 * math.pi * rng.uniform(0.0, SPIN_MAX_REV_S)
+        yield a, u, v, _rotation(axis, omega / fps)
+        k += 1
+
+
 def _volume_ratios(rig, X: np.ndarray, v0: np.ndarray) -> np.ndarray:
     T = rig.tets
     a = X[T[:, 0]]
@@ -150,24 +166,19 @@ def soak_head(rig, seconds: float, rng: np.random.Generator, *, device: str = "c
     v0 = np.einsum("ij,ij->i", np.cross(rig.nodes[T[:, 1]] - a0, rig.nodes[T[:, 2]] - a0),
                    rig.nodes[T[:, 3]] - a0) / 6.0
     frames = int(round(seconds * sim.fps))
-    axis, omega = np.array([0.0, 1.0, 0.0]), 0.0
     row = {"frames": 0, "failures": 0, "failure": None, "nan_frames": 0, "inverted_frames": 0,
            "min_volume_ratio": 1.0, "stopped_by_budget": False}
     wall0, cpu0 = time.perf_counter(), time.process_time()
     step_wall = step_cpu = 0.0
     last = wall0
+    stream = control_stream(rng, M, sim.fps)
     for k in range(frames):
         if deadline is not None and time.perf_counter() > deadline:
             row["stopped_by_budget"] = True
             break
-        a = np.where(rng.random(M) < ACTIVE_FRACTION, rng.random(M), 0.0)
+        a, u, v, dR = next(stream)
         sim.set_activations(a)
-        u = math.radians(rng.uniform(0.0, JAW_OPEN_MAX_DEG))
-        v = math.radians(rng.uniform(-JAW_SIDE_MAX_DEG, JAW_SIDE_MAX_DEG))
-        if k % SPIN_HOLD_FRAMES == 0:
-            axis = rng.normal(size=3)
-            omega = 2 * math.pi * rng.uniform(0.0, SPIN_MAX_REV_S)
-        sim.set_head_pose(_rotation(axis, omega / sim.fps) @ sim.head_pose[0], np.zeros(3))
+        sim.set_head_pose(dR @ sim.head_pose[0], np.zeros(3))
         w0, c0 = time.perf_counter(), time.process_time()
         try:
             sim.set_jaw(u, v)

@@ -566,3 +566,39 @@ def test_last_converged_tells_a_solve_cut_short():
         c.external_force.assign(f)
         solver.step(a, s, c, 1 / 30)
         assert solver.last_converged is want, kw
+
+
+def _crushed_tet_run(step_bound: bool):
+    """The crushed tet of the test above (5 k on the apex), 40 steps; (positions, solver)."""
+    V, T = one_tet()
+    fixed = np.array([True, True, True, False])
+    b = ModelBuilder(V, T, material="physical", fixed=fixed, k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_area=0.0)
+    model = b.finalize("cpu")
+    k = float(model.tet_k.numpy()[0])
+    solver = SolverImplicit(model)
+    solver.step_bound = step_bound
+    a, c, control = model.state(), model.state(), model.control()
+    f = np.zeros((4, 3), np.float32)
+    f[3, 2] = -5.0 * k / V[3, 2]
+    control.external_force.assign(f)
+    for _ in range(40):
+        solver.step(a, c, control, 1 / 30)
+        a, c = c, a
+    return a.positions.numpy().copy(), solver
+
+
+def test_line_search_skips_inverting_trials_and_takes_the_same_steps():
+    """The host line search's ``step_bound``: the trials at which the tet would invert are skipped
+    without an evaluation, and the steps are those of plain halving (positions bit for bit); the
+    Hessian's upper triangle for QDLDL is scipy's triu of the full matrix, entry for entry."""
+    import scipy.sparse as sp
+
+    X_on, on = _crushed_tet_run(True)
+    X_off, off = _crushed_tet_run(False)
+    np.testing.assert_array_equal(X_on, X_off)
+    assert on.line_search_trials < off.line_search_trials, (on.line_search_trials, off.line_search_trials)
+    ip = on.incremental
+    ip.launch_hessian(ip.x, 1 / 30, 0.0)
+    U, ref = ip.hessian_upper(), sp.triu(sp.csc_matrix(ip.hessian_matrix()), format="csc")
+    for name in ("indptr", "indices", "data"):
+        np.testing.assert_array_equal(getattr(U, name), getattr(ref, name), err_msg=name)

@@ -334,6 +334,23 @@ class IncrementalPotential:
         return sp.bsr_matrix((self.block_values.numpy().astype(np.float64), self.bsr_columns, self.bsr_offsets),
                              shape=(3 * n, 3 * n))
 
+    def hessian_upper(self):
+        """The upper triangle of :attr:`block_values`' matrix as a SciPy CSC matrix (3n, 3n),
+        float64 (host read), with the same entries (explicit zeros included) and order as
+        ``scipy.sparse.triu(hessian_matrix(), format="csc")``, gathered by an index map made at
+        the first call (about 1 ms at level 0 instead of 10 for the conversion)."""
+        import scipy.sparse as sp
+
+        if getattr(self, "_upper_map", None) is None:
+            n = self.model.vertex_count
+            marker = np.arange(1, 9 * self.block_count + 1, dtype=np.float64).reshape(-1, 3, 3)
+            A = sp.bsr_matrix((marker, self.bsr_columns, self.bsr_offsets), shape=(3 * n, 3 * n))
+            U = sp.triu(sp.csc_matrix(A), format="csc")
+            self._upper_map = (U.data.astype(np.int64) - 1, U.indices.copy(), U.indptr.copy(), U.shape)
+        take, indices, indptr, shape = self._upper_map
+        values = self.block_values.numpy().reshape(-1).astype(np.float64)[take]
+        return sp.csc_matrix((values, indices, indptr), shape=shape)
+
     def contact_set(self, x64: np.ndarray, slack: float) -> np.ndarray:
         """The contact active set: which one-sided springs are compressed or within ``slack`` [m]
         of it at x64, all sets concatenated, shape (total,), bool."""
