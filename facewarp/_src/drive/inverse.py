@@ -4,15 +4,17 @@ target skin points, with the physics in the loop (issue 24).
 Each frame is one simulated step of the :class:`~facewarp.FaceSimulator`. Its 29 controls ``u``
 (27 activations in [0, 1], the jaw's opening 0..60 deg and side +-5 deg) minimise
 
-    sum_k w_k |p_k(u) - p*_k|^2 / s^2  +  smoothness |u - u_prev|^2  +  effort |a|^2
+    sum_k w_k |p_k(u) - p*_k|^2 / s^2  +  smoothness sum_k |J_k (u - u_prev)|^2 / s^2  +  effort |a|^2
 
-(``p_k`` the simulated points, ``p*_k`` the targets, ``s`` = 1 mm; jaw angles measured in units
-of their range, so every control spans about 1) within the bounds, by bounded Gauss-Newton on
-the step's linearisation ``p(u) ~ p_b + J (u - u_b)`` (:func:`scipy.optimize.lsq_linear`; 29
-unknowns). ``J`` is the solver's own sensitivity (:func:`.sensitivity.step_sensitivity`: the
-step's Hessian factorised once, one back-substitution per control) mapped through the linear
-read-out (:class:`.sensitivity.PointReadout`). The weights ``w_k`` are 0 for missing points (NaN)
-and Huber weights otherwise (iteratively reweighted), so outliers pull little.
+(``p_k`` the simulated points, ``p*_k`` the targets, ``s`` = 1 mm; the smoothness is the motion
+of all K points since the last frame, so a point seen alone cannot drag the muscles it watches;
+jaw angles in units of their range, so every control spans about 1) within the bounds, by
+bounded Gauss-Newton on the step's linearisation ``p(u) ~ p_b + J (u - u_b)``
+(:func:`scipy.optimize.lsq_linear`; 29 unknowns). ``J`` is the solver's own sensitivity
+(:func:`.sensitivity.step_sensitivity`: the step's Hessian factorised once, one back-substitution
+per control) mapped through the linear read-out (:class:`.sensitivity.PointReadout`). The
+weights ``w_k`` are 0 for missing points (NaN) and robust otherwise (Cauchy weights, iteratively
+reweighted from the residuals of no change on), so an outlier centimetres off pulls next to nothing.
 
 ``J`` is reused across frames: after every step the change the step showed updates it
 (Broyden's rank-one update on the predicted vs simulated points), and it is computed afresh
@@ -40,7 +42,11 @@ MODES = ("offline", "realtime")
 """Tracker modes: ``offline`` (frames re-taken until the step matches its prediction) and
 ``realtime`` (one step per frame, nothing re-taken)."""
 
+ROBUST = ("cauchy", "huber", "none")
+"""Point weights of :class:`Tracker` (iteratively reweighted least squares)."""
+
 _SCALE = 1e-3  # [m] the point residual's unit in the objective (1 mm)
+_CONTROL_SMOOTHNESS = 1e-3  # weight of |u - u_prev|^2 beside the point-space smoothness (what no point sees)
 
 
 def _jaw_range() -> np.ndarray:
@@ -116,11 +122,14 @@ class Tracker:
         points: The K point names: FDP ids (``"2.1"``) or head vertices ``"v<index>"``.
         mode: ``"offline"`` (default: frames re-taken while the prediction misses) or ``"realtime"``
             (each frame one step; with a simulator made with ``iterations=1`` the fixed-cost live loop).
-        smoothness: Weight of ``|u - u_prev|^2`` (default 0.02; per unit activation, jaw in units of its range),
-            against point residuals in mm^2.
+        smoothness: Weight of the points' motion since the last frame, ``|J (u - u_prev)|^2`` over all K
+            points (default 0.05), against the residuals of the present points (both in mm^2): a point seen
+            alone cannot drag the muscles it watches far in one frame.
         effort: Weight of ``|a|^2`` (default 1e-3): among activations that fit equally, the smaller.
-        robust: ``"huber"`` (default) or ``"none"``: the point weights.
-        robust_scale: Huber threshold [m] (default 2e-3): points farther off than this pull with a force that no longer grows.
+        robust: The point weights (:data:`ROBUST`): ``"cauchy"`` (default: Cauchy weights
+            ``1 / (1 + (r / s)^2)`` from the residuals of no change on, so a point centimetres off pulls next to nothing),
+            ``"huber"`` (a point farther off than ``s`` pulls with a force that no longer grows) or ``"none"``.
+        robust_scale: ``s`` [m] (default 1e-3: twice the noise of good markers).
         refine: Re-takes of a frame at most (default 2 offline, 0 real-time).
         refine_tolerance: Re-take while the simulated points miss the prediction by more than
             this RMS [m] (default 1e-4).
@@ -133,8 +142,8 @@ class Tracker:
         InputError: a bad argument (one line naming it), unknown point names (all named).
     """
 
-    def __init__(self, sim, points, *, mode: str = "offline", smoothness: float = 0.02, effort: float = 1e-3,
-                 robust: str = "huber", robust_scale: float = 2e-3, refine: int | None = None,
+    def __init__(self, sim, points, *, mode: str = "offline", smoothness: float = 0.05, effort: float = 1e-3,
+                 robust: str = "cauchy", robust_scale: float = 1e-3, refine: int | None = None,
                  refine_tolerance: float = 1e-4, refresh_every: int | None = None, refresh_tolerance: float = 3e-4,
                  corrections: int | None = None):
         from ..sim.simulator import FaceSimulator
@@ -147,7 +156,7 @@ class Tracker:
         self.mode = check_choice("mode", mode, MODES)
         self.smoothness = check_number("smoothness", smoothness, low=0.0)
         self.effort = check_number("effort", effort, low=0.0)
-        self.robust = check_choice("robust", robust, ("huber", "none"))
+        self.robust = check_choice("robust", robust, ROBUST)
         self.robust_scale = check_number("robust_scale", robust_scale, low=0.0, low_open=True)
         offline = self.mode == "offline"
         self.refine = check_int("refine", 2 if refine is None and offline else 0 if refine is None else refine,
@@ -240,24 +249,37 @@ class Tracker:
         rows = np.repeat(visible, 3)
         Jv = J[rows] / _SCALE
         r0 = (p_b - targets)[visible].ravel() / _SCALE  # residual at u_b [mm]
-        w = np.ones(int(visible.sum()))
-        s, e = np.sqrt(self.smoothness), np.sqrt(self.effort)
+        c = self.robust_scale / _SCALE
+        res0 = np.linalg.norm(r0.reshape(-1, 3), axis=1)
+        # the first weights from the residuals of no change: a point centimetres off from the face
+        # as it is (an outlier, or one the face cannot follow) starts out weak and stays so
+        w = {"none": np.ones_like(res0), "huber": np.where(res0 <= c, 1.0, c / np.maximum(res0, 1e-30)),
+             "cauchy": 1.0 / (1.0 + (res0 / c) ** 2)}[self.robust]
+        e = np.sqrt(self.effort)
         E = np.zeros(n)
         E[:self.M] = e
-        A_reg = np.vstack([s * np.eye(n), np.diag(E)])
-        b_reg = np.r_[s * (u_prev - u_b), -E * u_b]  # in the increment du = u - u_b
+        # smoothness in point space: the motion of all K points since the last frame, |J (u - u_prev)|^2
+        # (as a 29 x 29 Cholesky factor), plus a little in control space for what no point sees
+        G = self.smoothness * (J.T @ J) / _SCALE**2 + _CONTROL_SMOOTHNESS * np.eye(n)
+        R = np.linalg.cholesky(G).T
+        A_reg = np.vstack([R, np.diag(E)])
+        b_reg = np.r_[R @ (u_prev - u_b), -E * u_b]  # in the increment du = u - u_b
         lo, hi = self._lo - u_b, self._hi - u_b
         lo, hi = np.minimum(lo, 0.0), np.maximum(hi, 0.0)  # u_b itself is feasible
         du = np.zeros(n)
-        for it in range(4 if self.robust == "huber" else 1):
+        rounds = {"none": (), "huber": ("huber",) * 4, "cauchy": ("cauchy",) * 5}[self.robust]
+        for it in range(len(rounds) + 1):
             sw = np.repeat(np.sqrt(w), 3)
             A = np.vstack([sw[:, None] * Jv, A_reg])
             b = np.r_[-sw * r0, b_reg]
             du = lsq_linear(A, b, bounds=(lo, hi), method="bvls").x
-            if self.robust != "huber":
+            if it == len(rounds):
                 break
-            res = np.linalg.norm((Jv @ du + r0).reshape(-1, 3), axis=1) * _SCALE
-            w_new = np.where(res <= self.robust_scale, 1.0, self.robust_scale / np.maximum(res, 1e-30))
+            res = np.linalg.norm((Jv @ du + r0).reshape(-1, 3), axis=1)
+            if rounds[it] == "huber":
+                w_new = np.where(res <= c, 1.0, c / np.maximum(res, 1e-30))
+            else:  # redescending: a point far off beyond the scale stops pulling
+                w_new = 1.0 / (1.0 + (res / c) ** 2)
             if np.abs(w_new - w).max() < 1e-3:
                 break
             w = w_new
