@@ -45,8 +45,12 @@ MODES = ("offline", "realtime")
 ROBUST = ("cauchy", "huber", "none")
 """Point weights of :class:`Tracker` (iteratively reweighted least squares)."""
 
+FIRST_FRAME_REFINE = 8
+"""Re-takes of a tracker's first frame at most (both modes): a take may start far from the
+simulator's state (an expression held at frame 0), and the linearisation at rest reaches it in steps."""
+
 _SCALE = 1e-3  # [m] the point residual's unit in the objective (1 mm)
-_CONTROL_SMOOTHNESS = 1e-3  # weight of |u - u_prev|^2 beside the point-space smoothness (what no point sees)
+_CONTROL_SMOOTHNESS = 0.05  # weight of |u - u_prev|^2 beside the point-space smoothness (what no point sees)
 
 
 def _jaw_range() -> np.ndarray:
@@ -129,12 +133,14 @@ class Tracker:
         robust: The point weights (:data:`ROBUST`): ``"cauchy"`` (default: Cauchy weights
             ``1 / (1 + (r / s)^2)`` from the residuals of no change on, so a point centimetres off pulls next to nothing),
             ``"huber"`` (a point farther off than ``s`` pulls with a force that no longer grows) or ``"none"``.
-        robust_scale: ``s`` [m] (default 1e-3: twice the noise of good markers).
+        robust_scale: ``s`` [m] (default 1e-3: twice the noise of good markers; 1.5 times the median
+            residual where that is larger, so a fast motion is not taken for outliers).
         refine: Re-takes of a frame at most (default 2 offline, 0 real-time).
         refine_tolerance: Re-take while the simulated points miss the prediction by more than
             this RMS [m] (default 1e-4).
         refresh_every: A fresh sensitivity every this many frames (default 10 offline, 60 real-time).
-        refresh_tolerance: ... or when a step misses its prediction by more than this RMS [m] (default 3e-4).
+        refresh_tolerance: ... or when a step misses its prediction by more than this RMS [m] (default
+            3e-4 offline; never in real time, where a step of one solver iteration always lags its prediction).
         corrections: Iterations of a fresh sensitivity towards the exact tangent (default 1 offline,
             0 real-time; :func:`.sensitivity.step_sensitivity`).
 
@@ -144,7 +150,7 @@ class Tracker:
 
     def __init__(self, sim, points, *, mode: str = "offline", smoothness: float = 0.05, effort: float = 1e-3,
                  robust: str = "cauchy", robust_scale: float = 1e-3, refine: int | None = None,
-                 refine_tolerance: float = 1e-4, refresh_every: int | None = None, refresh_tolerance: float = 3e-4,
+                 refine_tolerance: float = 1e-4, refresh_every: int | None = None, refresh_tolerance: float | None = None,
                  corrections: int | None = None):
         from ..sim.simulator import FaceSimulator
 
@@ -164,7 +170,8 @@ class Tracker:
         self.refine_tolerance = check_number("refine_tolerance", refine_tolerance, low=0.0)
         self.refresh_every = check_int("refresh_every", (10 if offline else 60) if refresh_every is None
                                        else refresh_every, low=1, high=1_000_000)
-        self.refresh_tolerance = check_number("refresh_tolerance", refresh_tolerance, low=0.0)
+        self.refresh_tolerance = ((3e-4 if offline else np.inf) if refresh_tolerance is None
+                                  else check_number("refresh_tolerance", refresh_tolerance, low=0.0))
         self.corrections = check_int("corrections", (1 if offline else 0) if corrections is None else corrections,
                                      low=0, high=10)
         self.sim = sim
@@ -249,8 +256,10 @@ class Tracker:
         rows = np.repeat(visible, 3)
         Jv = J[rows] / _SCALE
         r0 = (p_b - targets)[visible].ravel() / _SCALE  # residual at u_b [mm]
-        c = self.robust_scale / _SCALE
         res0 = np.linalg.norm(r0.reshape(-1, 3), axis=1)
+        # the scale: robust_scale, or 1.5 x the median residual when the face moves fast (a far point is
+        # far compared with the others)
+        c = max(self.robust_scale / _SCALE, 1.5 * float(np.median(res0)))
         # the first weights from the residuals of no change: a point centimetres off from the face
         # as it is (an outlier, or one the face cannot follow) starts out weak and stays so
         w = {"none": np.ones_like(res0), "huber": np.where(res0 <= c, 1.0, c / np.maximum(res0, 1e-30)),
@@ -276,6 +285,7 @@ class Tracker:
             if it == len(rounds):
                 break
             res = np.linalg.norm((Jv @ du + r0).reshape(-1, 3), axis=1)
+            c = max(self.robust_scale / _SCALE, 1.5 * float(np.median(res)))  # the scale follows fast motion
             if rounds[it] == "huber":
                 w_new = np.where(res <= c, 1.0, c / np.maximum(res, 1e-30))
             else:  # redescending: a point far off beyond the scale stops pulling
@@ -320,7 +330,8 @@ class Tracker:
         if self._J is None:  # the first frame: the sensitivity at the current state (at rest: an equilibrium)
             self._J = self._jacobian(snap.start, u_prev, sim.positions())
         u_b, p_b = u_prev, p_now
-        for attempt in range(self.refine + 1):
+        refine = self.refine if self.stats.frames else max(self.refine, FIRST_FRAME_REFINE)  # a take may start mid-expression
+        for attempt in range(refine + 1):
             t0 = time.perf_counter()
             u = self._lsq(self._J, p_b, u_b, u_prev, T, visible) if visible.any() else u_prev.copy()
             self.stats.solve_seconds += time.perf_counter() - t0
@@ -333,7 +344,7 @@ class Tracker:
             elif float(du @ du) > 1e-10:  # Broyden: the step's own change, along the controls that moved
                 self._J += np.outer(miss.ravel(), du) / float(du @ du)
                 self.stats.broyden_updates += 1
-            if attempt == self.refine or rms_miss <= self.refine_tolerance:
+            if attempt == refine or rms_miss <= self.refine_tolerance:
                 break
             snap.restore()  # take the frame again, linearised about the step just seen
             self.stats.refinements += 1
