@@ -4,10 +4,11 @@ target skin points, with the physics in the loop (issue 24).
 Each frame is one simulated step of the :class:`~facewarp.FaceSimulator`. Its 29 controls ``u``
 (27 activations in [0, 1], the jaw's opening 0..60 deg and side +-5 deg) minimise
 
-    sum_k w_k |p_k(u) - p*_k|^2 / s^2  +  smoothness sum_k |J_k (u - u_prev)|^2 / s^2  +  effort |a|^2
+    sum_k w_k |p_k(u) - p*_k|^2 / s^2  +  smoothness sum_k |J_k (u - u_ref)|^2 / s^2  +  effort |a|^2
 
 (``p_k`` the simulated points, ``p*_k`` the targets, ``s`` = 1 mm; the smoothness is the motion
-of all K points since the last frame, so a point seen alone cannot drag the muscles it watches;
+of all K points away from the controls' motion continued, ``u_ref = 2 u_prev - u_prev2``, so a
+steady motion has no lag, noise is held and a point seen alone cannot drag the muscles it watches;
 jaw angles in units of their range, so every control spans about 1) within the bounds, by
 bounded Gauss-Newton on the step's linearisation ``p(u) ~ p_b + J (u - u_b)``
 (:func:`scipy.optimize.lsq_linear`; 29 unknowns). ``J`` is the solver's own sensitivity
@@ -126,8 +127,8 @@ class Tracker:
         points: The K point names: FDP ids (``"2.1"``) or head vertices ``"v<index>"``.
         mode: ``"offline"`` (default: frames re-taken while the prediction misses) or ``"realtime"``
             (each frame one step; with a simulator made with ``iterations=1`` the fixed-cost live loop).
-        smoothness: Weight of the points' motion since the last frame, ``|J (u - u_prev)|^2`` over all K
-            points (default 0.05), against the residuals of the present points (both in mm^2): a point seen
+        smoothness: Weight of the points' motion away from the motion continued, ``|J (u - u_ref)|^2`` over
+            all K points (default 0.05; module doc), against the residuals of the present points (both in mm^2): a point seen
             alone cannot drag the muscles it watches far in one frame.
         effort: Weight of ``|a|^2`` (default 1e-3): among activations that fit equally, the smaller.
         robust: The point weights (:data:`ROBUST`): ``"cauchy"`` (default: Cauchy weights
@@ -137,10 +138,12 @@ class Tracker:
             residual where that is larger, so a fast motion is not taken for outliers).
         refine: Re-takes of a frame at most (default 2 offline, 0 real-time).
         refine_tolerance: Re-take while the simulated points miss the prediction by more than
-            this RMS [m] (default 1e-4).
+            this RMS [m] (default 2e-4).
         refresh_every: A fresh sensitivity every this many frames (default 10 offline, 60 real-time).
         refresh_tolerance: ... or when a step misses its prediction by more than this RMS [m] (default
-            3e-4 offline; never in real time, where a step of one solver iteration always lags its prediction).
+            5e-4 offline; never in real time, where a step of one solver iteration always lags its prediction).
+        momentum: The smoothness pulls towards ``u_prev + momentum (u_prev - u_prev2)`` (default 1: the
+            controls' motion continued, so a steady motion has no lag and noise is held; 0: towards ``u_prev``).
         corrections: Iterations of a fresh sensitivity towards the exact tangent (default 1 offline,
             0 real-time; :func:`.sensitivity.step_sensitivity`).
 
@@ -150,8 +153,8 @@ class Tracker:
 
     def __init__(self, sim, points, *, mode: str = "offline", smoothness: float = 0.05, effort: float = 1e-3,
                  robust: str = "cauchy", robust_scale: float = 1e-3, refine: int | None = None,
-                 refine_tolerance: float = 1e-4, refresh_every: int | None = None, refresh_tolerance: float | None = None,
-                 corrections: int | None = None):
+                 refine_tolerance: float = 2e-4, refresh_every: int | None = None, refresh_tolerance: float | None = None,
+                 corrections: int | None = None, momentum: float = 1.0):
         from ..sim.simulator import FaceSimulator
 
         if not isinstance(sim, FaceSimulator):
@@ -170,8 +173,9 @@ class Tracker:
         self.refine_tolerance = check_number("refine_tolerance", refine_tolerance, low=0.0)
         self.refresh_every = check_int("refresh_every", (10 if offline else 60) if refresh_every is None
                                        else refresh_every, low=1, high=1_000_000)
-        self.refresh_tolerance = ((3e-4 if offline else np.inf) if refresh_tolerance is None
+        self.refresh_tolerance = ((5e-4 if offline else np.inf) if refresh_tolerance is None
                                   else check_number("refresh_tolerance", refresh_tolerance, low=0.0))
+        self.momentum = check_number("momentum", momentum, low=0.0, high=1.0)
         self.corrections = check_int("corrections", (1 if offline else 0) if corrections is None else corrections,
                                      low=0, high=10)
         self.sim = sim
@@ -189,6 +193,7 @@ class Tracker:
         """Forget the sensitivity and the statistics; the next :meth:`update` starts from the
         simulator's current state."""
         self._J = None  # (3K, M + 2) dp/du in control units
+        self._u_older = None  # the controls a frame before the current ones
         self._since = 0
         self._solve = None
         self.stats = TrackerStats()
@@ -248,7 +253,7 @@ class Tracker:
         return J.reshape(self.count, 3, self.M + 2)
 
     # ------------------------------------------------------------------------------ the solve
-    def _lsq(self, J, p_b, u_b, u_prev, targets, visible) -> np.ndarray:
+    def _lsq(self, J, p_b, u_b, u_ref, targets, visible) -> np.ndarray:
         """The bounded, reweighted least squares of one linearisation (module doc)."""
         from scipy.optimize import lsq_linear
 
@@ -267,12 +272,12 @@ class Tracker:
         e = np.sqrt(self.effort)
         E = np.zeros(n)
         E[:self.M] = e
-        # smoothness in point space: the motion of all K points since the last frame, |J (u - u_prev)|^2
+        # smoothness in point space: the motion of all K points away from the motion continued, |J (u - u_ref)|^2
         # (as a 29 x 29 Cholesky factor), plus a little in control space for what no point sees
         G = self.smoothness * (J.T @ J) / _SCALE**2 + _CONTROL_SMOOTHNESS * np.eye(n)
         R = np.linalg.cholesky(G).T
         A_reg = np.vstack([R, np.diag(E)])
-        b_reg = np.r_[R @ (u_prev - u_b), -E * u_b]  # in the increment du = u - u_b
+        b_reg = np.r_[R @ (u_ref - u_b), -E * u_b]  # in the increment du = u - u_b
         lo, hi = self._lo - u_b, self._hi - u_b
         lo, hi = np.minimum(lo, 0.0), np.maximum(hi, 0.0)  # u_b itself is feasible
         du = np.zeros(n)
@@ -330,10 +335,15 @@ class Tracker:
         if self._J is None:  # the first frame: the sensitivity at the current state (at rest: an equilibrium)
             self._J = self._jacobian(snap.start, u_prev, sim.positions())
         u_b, p_b = u_prev, p_now
+        # the smoothness pulls towards the motion continued (constant velocity of the controls): no lag
+        # on a steady motion, and what noise would shake is held
+        older = u_prev if self._u_older is None else self._u_older
+        u_ref = np.clip(u_prev + self.momentum * (u_prev - older), self._lo, self._hi)
+        self._u_older = u_prev
         refine = self.refine if self.stats.frames else max(self.refine, FIRST_FRAME_REFINE)  # a take may start mid-expression
         for attempt in range(refine + 1):
             t0 = time.perf_counter()
-            u = self._lsq(self._J, p_b, u_b, u_prev, T, visible) if visible.any() else u_prev.copy()
+            u = self._lsq(self._J, p_b, u_b, u_ref, T, visible) if visible.any() else u_prev.copy()
             self.stats.solve_seconds += time.perf_counter() - t0
             p = self._step(u)
             miss = p - (p_b + (self._J @ (u - u_b)).reshape(-1, 3))
