@@ -27,6 +27,7 @@ Writes benchmarks/results/<name>.json (default ``drive_cpu``).
 from __future__ import annotations
 
 import argparse
+import os
 import secrets
 import time
 
@@ -129,7 +130,8 @@ def run_head(head: str, seconds: float, fps: float, rng) -> dict:
     A, J = random_performance(rng, frames, fps, len(rig.muscle_names))
     P, S, truth_fps = ground_truth(fw, rig, A, J, fps)
     ids = [str(k) for k in rig.fdp_ids]
-    row = {"head": head, "frames": frames, "seconds": seconds, "fps": fps,
+    row = {"head": head, "nodes": len(rig.nodes), "tets": len(rig.tets) if hasattr(rig, "tets") else None,
+           "frames": frames, "seconds": seconds, "fps": fps,
            "active_muscles": int((A.max(0) > 0).sum()), "jaw_open_max_deg": float(np.degrees(J[:, 0].max())),
            "ground_truth_frames_per_second": truth_fps, "cases": {}}
     idx30 = [ids.index(k) for k in TRACKER_30]
@@ -158,6 +160,7 @@ def main(argv=None) -> dict:
     seed = args.seed if args.seed is not None else secrets.randbits(32)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
+    load0 = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     rows, complete = [], True
     for head in args.heads:
         if args.budget_s is not None and time.perf_counter() - t0 > args.budget_s:
@@ -166,9 +169,11 @@ def main(argv=None) -> dict:
         rows.append(run_head(head, args.seconds, args.fps, rng))
     cases = [c for r in rows for c in r["cases"].values() if not c.get("failed")]
     figures = {
+        "load_average_at_start": load0,
+        "load_average_at_end": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
         "seed": seed, "complete": complete, "wall_s": time.perf_counter() - t0,
         "note": (f"takes of {args.seconds:g} s at {args.fps:g} fps (the issue's 10 s shortened to fit the shared "
-                 "2-core box); level 0; CPU; the same random performance fed as 84 FDPs and as the 30 a tracker gives"),
+                 "2-core box, other jobs running beside: speeds are lower bounds); level 0 default head; CPU; the same random performance fed as 84 FDPs and as the 30 a tracker gives"),
         "targets": {"round_trip_rms_mm": 0.5, "offline_frames_per_second": 30, "realtime_frames_per_second": 60,
                     "robust_max_jump_mm": 2.0},
         "failures": sum(1 for r in rows for c in r["cases"].values() if c.get("failed")),

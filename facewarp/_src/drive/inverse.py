@@ -51,6 +51,7 @@ FIRST_FRAME_REFINE = 8
 simulator's state (an expression held at frame 0), and the linearisation at rest reaches it in steps."""
 
 _SCALE = 1e-3  # [m] the point residual's unit in the objective (1 mm)
+_REJECT = 5.0  # Cauchy weights are cut to 0 beyond this many scales (a point 2 cm off pulls nothing at all)
 _CONTROL_SMOOTHNESS = 0.05  # weight of |u - u_prev|^2 beside the point-space smoothness (what no point sees)
 
 
@@ -132,7 +133,8 @@ class Tracker:
             alone cannot drag the muscles it watches far in one frame.
         effort: Weight of ``|a|^2`` (default 1e-3): among activations that fit equally, the smaller.
         robust: The point weights (:data:`ROBUST`): ``"cauchy"`` (default: Cauchy weights
-            ``1 / (1 + (r / s)^2)`` from the residuals of no change on, so a point centimetres off pulls next to nothing),
+            ``1 / (1 + (r / s)^2)`` from the residuals of no change on, 0 beyond ``5 s``, so a point centimetres
+            off pulls nothing),
             ``"huber"`` (a point farther off than ``s`` pulls with a force that no longer grows) or ``"none"``.
         robust_scale: ``s`` [m] (default 1e-3: twice the noise of good markers; 1.5 times the median
             residual where that is larger, so a fast motion is not taken for outliers).
@@ -268,7 +270,7 @@ class Tracker:
         # the first weights from the residuals of no change: a point centimetres off from the face
         # as it is (an outlier, or one the face cannot follow) starts out weak and stays so
         w = {"none": np.ones_like(res0), "huber": np.where(res0 <= c, 1.0, c / np.maximum(res0, 1e-30)),
-             "cauchy": 1.0 / (1.0 + (res0 / c) ** 2)}[self.robust]
+             "cauchy": (1.0 / (1.0 + (res0 / c) ** 2)) * (res0 <= _REJECT * c)}[self.robust]
         e = np.sqrt(self.effort)
         E = np.zeros(n)
         E[:self.M] = e
@@ -294,7 +296,7 @@ class Tracker:
             if rounds[it] == "huber":
                 w_new = np.where(res <= c, 1.0, c / np.maximum(res, 1e-30))
             else:  # redescending: a point far off beyond the scale stops pulling
-                w_new = 1.0 / (1.0 + (res / c) ** 2)
+                w_new = (1.0 / (1.0 + (res / c) ** 2)) * (res <= _REJECT * c)
             if np.abs(w_new - w).max() < 1e-3:
                 break
             w = w_new
