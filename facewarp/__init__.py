@@ -87,6 +87,7 @@ _NAMES = {
     "SolverDeviceNewtonPCG": "physics.solvers.newton_pcg", "IncrementalPotential": "physics.solvers.incremental",
     "MaterialPhysical": "physics.materials",
     "MarkerTrack": "drive.tracks", "ArkitTrack": "drive.tracks", "ARKIT_NAMES": "drive.tracks",
+    "Tracker": "drive.inverse", "drive": "drive.inverse", "DriveResult": "drive.inverse",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
@@ -152,6 +153,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.physics.muscle_rig import MuscleRig
     from ._src.physics.muscle_stage import MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
+    from ._src.drive.inverse import DriveResult, Tracker, drive
     from ._src.drive.tracks import ARKIT_NAMES, ArkitTrack, MarkerTrack
     from ._src.physics.solvers.base import SolverStage
     from ._src.physics.solvers.host_implicit import SolverHostImplicit
