@@ -104,6 +104,8 @@ class ArkitTable:
         fdp_ids: The K head FDP ids the targets are given at.
         rest_fdp: (K, 3) float64 [m]: those FDPs of the static rest shape, head frame.
         targets: (52, K, 3) float64 [m]: each shape's FDP displacement on this head (zero where no data).
+        basis: (3 K, M + 2) float64: the linear model, FDP displacement [m] per unit control
+            (activation; jaw opening and side per rad), from the static probes.
         reasons: ARKit name -> why its entry is zero (out of reach, or no data).
         key: The cache key (rig, solver, shapes, settings).
         info: Build settings and timings (JSON-ready).
@@ -119,6 +121,7 @@ class ArkitTable:
     fdp_ids: list
     rest_fdp: np.ndarray
     targets: np.ndarray
+    basis: np.ndarray
     reasons: dict = field(default_factory=dict)
     key: str = ""
     info: dict = field(default_factory=dict)
@@ -159,6 +162,42 @@ class ArkitTable:
         W = self._weights(weights)
         return self.rest_fdp[None] + np.einsum("ts,skd->tkd", W, self.targets)
 
+    def refine(self, sim, weights, *, rounds: int = 2, tol: float = 2e-5, max_frames: int = 40):
+        """One frame's controls refined against its blended target by the static chord method
+        (converged static shapes of ``sim``, corrections from :attr:`basis`; see the module docstring).
+
+        Args:
+            sim: The :class:`~facewarp.FaceSimulator` of this table's head (reset and stepped; left reset).
+            weights: (52,) float in [0, 1].
+            rounds: Refinement rounds (0..10); a round that does not lower the residual ends it.
+
+        Returns:
+            (activations (M,) float32, jaw (2,) float32 [rad], FDP RMS residual [m] per round, list
+            starting with the blended controls').
+        """
+        from ..core.checks import check_int
+
+        W = self._weights(weights)
+        if len(W) != 1:
+            raise InputError(f"weights: refine takes one frame, (52,), got {len(W)} frames")
+        rounds = check_int("rounds", rounds, low=0, high=10)
+        if list(getattr(sim, "muscle_names", [])) != list(self.muscle_names) or rig_key(sim) != self.key_rig:
+            raise InputError("sim: not the head (or the solver) this ARKit table was built for")
+        a, j = self.controls(W)
+        statics = _Statics(sim, _head_fdps(sim.fr)[1], tol, max_frames)
+        target = self.targets_for(W)[0]
+        x, res = _chord(statics, self.basis, self._effort(), np.r_[a[0], j[0]].astype(np.float64), target, rounds)
+        sim.reset()
+        return x[:-2].astype(np.float32), x[-2:].astype(np.float32), res
+
+    def _effort(self) -> float:
+        return float(self.info.get("settings", {}).get("effort", 1e-3))
+
+    @property
+    def key_rig(self) -> str:
+        """The rig part of :attr:`key` (:func:`rig_key` of the simulator it was built with)."""
+        return str(self.info.get("rig_key", ""))
+
     def out_of_reach(self) -> dict:
         """ARKit name -> reason, for the shapes whose entry is zero."""
         return dict(self.reasons)
@@ -172,6 +211,7 @@ class ArkitTable:
                             activations=self.activations, jaw=self.jaw, solved=self.solved,
                             residual_m=self.residual_m, target_rms_m=self.target_rms_m,
                             fdp_ids=np.array(self.fdp_ids), rest_fdp=self.rest_fdp, targets=self.targets,
+                            basis=self.basis,
                             reasons=np.array(json.dumps(self.reasons)), key=np.array(self.key),
                             info=np.array(json.dumps(self.info)), version=np.array(_VERSION))
         os.replace(tmp, path)
@@ -194,7 +234,7 @@ def load_arkit_table(path) -> ArkitTable:
                            solved=z["solved"].astype(bool), residual_m=z["residual_m"].astype(np.float64),
                            target_rms_m=z["target_rms_m"].astype(np.float64),
                            fdp_ids=[str(n) for n in z["fdp_ids"]], rest_fdp=z["rest_fdp"].astype(np.float64),
-                           targets=z["targets"].astype(np.float64), reasons=json.loads(str(z["reasons"])),
+                           targets=z["targets"].astype(np.float64), basis=z["basis"].astype(np.float64), reasons=json.loads(str(z["reasons"])),
                            key=str(z["key"]), info=json.loads(str(z["info"])))
     except InputError:
         raise
@@ -239,6 +279,45 @@ def _resolve_shapes(shapes, ict_dir) -> dict:
         if n not in ICT_ARKIT_SHAPES:
             raise InputError(f"shapes: {n!r} is not an ARKit blendshape name")
     return load_ict_displacements([n for n in names if n not in ARKIT_OUT_OF_REACH], ict_dir=ict_dir)
+
+
+def _bounds(M: int) -> tuple[np.ndarray, np.ndarray]:
+    from ..expressions import JAW_U_MAX, JAW_V_MAX
+
+    return np.r_[np.zeros(M), 0.0, -JAW_V_MAX], np.r_[np.ones(M), JAW_U_MAX, JAW_V_MAX]
+
+
+def _bounded_step(B: np.ndarray, effort: float, r: np.ndarray, x0: np.ndarray) -> np.ndarray:
+    """d minimising |B d - r|^2 + |reg (x0 + d)|^2 with lo <= x0 + d <= hi (the jaw's unit in the
+    effort term: 0.1 rad)."""
+    from scipy.optimize import lsq_linear
+
+    M = B.shape[1] - 2
+    lo, hi = _bounds(M)
+    reg = effort * np.diag(np.r_[np.ones(M), 10.0, 10.0])
+    A = np.vstack([B, reg])
+    b = np.r_[r, -reg @ x0]
+    return lsq_linear(A, b, bounds=(np.minimum(lo - x0, 0.0), np.maximum(hi - x0, 0.0) + 1e-12), method="bvls").x
+
+
+def _chord(statics, B, effort, x, target, rounds):
+    """Static chord refinement from controls x (M + 2,) towards target FDPs (K, 3) [m]: the
+    converged static shape at x, its residual, a bounded correction through B; a round that does
+    not lower the FDP RMS ends it. Returns (best x, FDP RMS [m] per evaluation)."""
+    lo, hi = _bounds(B.shape[1] - 2)
+    M = B.shape[1] - 2
+    P = statics(x[:M], x[M:])
+    err = float(np.sqrt(np.mean(np.sum((P - target) ** 2, axis=1))))
+    hist = [err]
+    for _ in range(rounds):
+        x1 = np.clip(x + _bounded_step(B, effort, (target - P).ravel(), x), lo, hi)
+        P1 = statics(x1[:M], x1[M:])
+        e1 = float(np.sqrt(np.mean(np.sum((P1 - target) ** 2, axis=1))))
+        hist.append(e1)
+        if e1 >= err:
+            break
+        x, P, err = x1, P1, e1
+    return x, hist
 
 
 class _Statics:
@@ -292,10 +371,7 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
     Raises:
         InputError: bad arguments, unknown shape names, a cache file that is not a table.
     """
-    from scipy.optimize import lsq_linear
-
     from ..core.checks import check_int, check_number
-    from ..expressions import JAW_U_MAX, JAW_V_MAX
     from ..importers.ict_arkit import displacements_digest, transfer_ict_displacements
 
     if not hasattr(sim, "fr") or not hasattr(sim, "muscle_names"):
@@ -327,7 +403,7 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
     M = len(sim.muscle_names)
     zero_a = np.zeros(M)
     rest = statics(zero_a, (0.0, 0.0))
-    total = M + 2 + len(D_ict)
+    total = M + 2 + len([n for n in D_ict if n not in ARKIT_OUT_OF_REACH])
     done = 0
 
     def tick(name):
@@ -344,25 +420,24 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
                                         report=rep) if D_ict else {}
     # 2. the linear model: one static probe per control
     cols = []
-    for m in range(M):
+    todo = [n for n in T_head if n not in ARKIT_OUT_OF_REACH]
+    for m in range(M if todo else 0):  # no probes when there is nothing to solve
         a = zero_a.copy()
         a[m] = 1.0
         cols.append((statics(a, (0.0, 0.0)) - rest).ravel())
         tick(sim.muscle_names[m])
-    cols.append((statics(zero_a, (JAW_PROBE, 0.0)) - rest).ravel() / JAW_PROBE)
-    tick("jaw_open")
-    cols.append((statics(zero_a, (0.0, JAW_SIDE_PROBE)) - rest).ravel() / JAW_SIDE_PROBE)
-    tick("jaw_side")
+    if todo:
+        cols.append((statics(zero_a, (JAW_PROBE, 0.0)) - rest).ravel() / JAW_PROBE)
+        tick("jaw_open")
+        cols.append((statics(zero_a, (0.0, JAW_SIDE_PROBE)) - rest).ravel() / JAW_SIDE_PROBE)
+        tick("jaw_side")
+    else:
+        cols = [np.zeros(rest.size)] * (M + 2)
     B = np.stack(cols, 1)
-    lo = np.r_[np.zeros(M), 0.0, -JAW_V_MAX]
-    hi = np.r_[np.ones(M), JAW_U_MAX, JAW_V_MAX]
-    # effort in metres per unit control; the jaw angles' unit is 0.1 rad
-    reg = effort * np.diag(np.r_[np.ones(M), 10.0, 10.0])
+    lo, hi = _bounds(M)
 
-    def solve(r, x0):  # min |B d - r|^2 + |reg (x0 + d)|^2, lo <= x0 + d <= hi
-        A = np.vstack([B, reg])
-        b = np.r_[r, -reg @ x0]
-        return lsq_linear(A, b, bounds=(lo - x0, hi - x0 + 1e-12), method="bvls").x
+    def solve(r, x0):
+        return _bounded_step(B, effort, r, x0)
 
     n = len(ARKIT_NAMES)
     acts = np.zeros((n, M), np.float32)
@@ -374,10 +449,9 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
     reasons = {k: v for k, v in ARKIT_OUT_OF_REACH.items()}
     per_shape, linear = {}, {}
     for i, name in enumerate(ARKIT_NAMES):
-        if name in T_head:
+        if name in T_head:  # and the linear model's bounded fit alone (no statics): also for the shapes out of reach
             targets[i] = T_head[name]
             size[i] = float(np.sqrt(np.mean(np.sum(T_head[name] ** 2, axis=1))))
-        if name in T_head:  # the linear model's bounded fit alone (no statics): also for the shapes out of reach
             xl = np.clip(solve(T_head[name].ravel(), np.zeros(M + 2)), lo, hi)
             linear[name] = round(float(np.sqrt(np.mean(np.sum((B @ xl - T_head[name].ravel()).reshape(-1, 3) ** 2,
                                                                 axis=1)))) * 1e3, 3)
@@ -387,31 +461,20 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
             reasons[name] = "no ICT-FaceKit shape data found (see facewarp.ict_shape_dirs)"
             continue
         t = T_head[name]
-        x = np.clip(solve(t.ravel(), np.zeros(M + 2)), lo, hi)
-        P = statics(x[:M], x[M:])
-        err = float(np.sqrt(np.mean(np.sum((P - rest - t) ** 2, axis=1))))
-        hist = [err]
-        for _ in range(refine):
-            r = (rest + t - P).ravel()
-            x1 = np.clip(x + solve(r, x), lo, hi)
-            P1 = statics(x1[:M], x1[M:])
-            e1 = float(np.sqrt(np.mean(np.sum((P1 - rest - t) ** 2, axis=1))))
-            hist.append(e1)
-            if e1 >= err:
-                break
-            x, P, err = x1, P1, e1
-        acts[i], jaws[i], solved[i], residual[i] = x[:M], x[M:], True, err
+        x, hist = _chord(statics, B, effort, np.clip(solve(t.ravel(), np.zeros(M + 2)), lo, hi), rest + t, refine)
+        acts[i], jaws[i], solved[i], residual[i] = x[:M], x[M:], True, min(hist)
         per_shape[name] = [round(h * 1e3, 3) for h in hist]
         tick(name)
     sim.reset()
-    info = {"settings": settings, "transfer": {k: v for k, v in rep.items() if k != "warp_fdp_residual_m"},
+    info = {"settings": settings, "rig_key": rig_key(sim),
+            "transfer": {k: v for k, v in rep.items() if k != "warp_fdp_residual_m"},
             "statics": statics.count, "static_frames": statics.frames, "static_seconds": round(statics.seconds, 1),
             "build_seconds": round(time.perf_counter() - t0, 1), "residual_history_mm": per_shape,
             "linear_model_residual_mm": linear,
             "from_cache": False}
     table = ArkitTable(names=tuple(ARKIT_NAMES), muscle_names=list(sim.muscle_names), activations=acts, jaw=jaws,
                        solved=solved, residual_m=residual, target_rms_m=size, fdp_ids=fdp_ids,
-                       rest_fdp=rest, targets=targets, reasons=reasons, key=key, info=info)
+                       rest_fdp=rest, targets=targets, basis=B, reasons=reasons, key=key, info=info)
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
         table.save(cache / ARKIT_TABLE_FILE)
