@@ -123,3 +123,18 @@ def test_bad_inputs(ict, sim, tmp_path):
                      (np.full(52, np.nan), "weights")):
         with pytest.raises(fw.InputError, match=msg):
             t.controls(bad)
+
+
+def test_docs_list_the_shapes_out_of_reach():
+    """docs/concepts/arkit.md's table is fw.ARKIT_OUT_OF_REACH: every name with its reason."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "concepts" / "arkit.md").read_text()
+    rows = [r for r in text.splitlines() if r.startswith("| `")]
+    listed = {}
+    for r in rows:
+        names, reason = r.strip("|").split("|")[:2]
+        for n in names.split(","):
+            listed[n.strip().strip("`")] = reason.strip()
+    assert listed == fw.ARKIT_OUT_OF_REACH
+    assert set(fw.ARKIT_OUT_OF_REACH) <= set(fw.ARKIT_NAMES)
