@@ -36,11 +36,10 @@ def test_transfer_identity_and_scaling(ict):
     """On the ICT neutral itself (its own FDPs as the head's), the transfer gives the ICT
     displacement back at the ICT vertices; on a copy scaled by 1.1 and moved, the displacement
     is scaled by 1.1 (the head's proportions), not copied."""
-    from facewarp._src.importers.ict_arkit import ict_landmarks
-
     D = fw.load_ict_displacements(["mouthSmileLeft", "jawOpen"], ict_dir=ict)
     assert set(D) == {"mouthSmileLeft", "jawOpen"}
-    V, F, lm = ict_landmarks(ict)
+    V = fw.load_mesh(ict / "generic_neutral_mesh.obj", units="cm").vertices[: fw.ICT_SKIN_VERTICES]
+    lm = {k: V[i] for k, i in {**fw.ICT_FDP_VERTICES, **fw.ICT_INNER_LIP_VERTICES}.items()}
     pick = np.array([5708, 6213, 966, 4163, 3000, 1507])  # lip corners, chin, a lid, cheek, eye corner
     out = fw.transfer_ict_displacements(D, V[pick], lm, ict_dir=ict)
     for n in D:
