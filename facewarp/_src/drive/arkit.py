@@ -13,9 +13,10 @@ displacement. Then the controls are solved by a static inverse:
    per unit control, (3 K, M + 2));
 2. a bounded least-squares solve, ``min |B x - t|^2 + effort^2 |x|^2`` with the activations in
    [0, 1], the opening in [0, 60 deg] and the side angle in +-5 deg (``scipy.optimize.lsq_linear``);
-3. ``refine`` rounds of the chord method: the simulator's converged static shape at ``x``, its FDP
-   residual against the target, and the same bounded solve for the correction (a round that
-   does not lower the residual is dropped).
+3. ``refine`` rounds of a quasi-Newton refinement: the simulator's converged static shape at ``x``,
+   its FDP residual against the target, and the same bounded solve for the correction, the model
+   updated by Broyden's rank-one rule after each step (a step that does not lower the residual
+   is not taken).
 
 The residual left (FDP RMS over the head FDPs) is stored per shape. The shapes the muscle model
 has no means for (:data:`ARKIT_OUT_OF_REACH`: gaze, tongue, jaw thrust, cheek puffing, the lips sealed
@@ -104,6 +105,8 @@ class ArkitTable:
         fdp_ids: The K head FDP ids the targets are given at.
         rest_fdp: (K, 3) float64 [m]: those FDPs of the static rest shape, head frame.
         targets: (52, K, 3) float64 [m]: each shape's FDP displacement on this head (zero where no data).
+        reached: (52, K, 3) float64 [m]: the FDP displacement of the converged static face at
+            each shape's controls (zero where not solved).
         basis: (3 K, M + 2) float64: the linear model, FDP displacement [m] per unit control
             (activation; jaw opening and side per rad), from the static probes.
         reasons: ARKit name -> why its entry is zero (out of reach, or no data).
@@ -121,6 +124,7 @@ class ArkitTable:
     fdp_ids: list
     rest_fdp: np.ndarray
     targets: np.ndarray
+    reached: np.ndarray
     basis: np.ndarray
     reasons: dict = field(default_factory=dict)
     key: str = ""
@@ -162,18 +166,18 @@ class ArkitTable:
         W = self._weights(weights)
         return self.rest_fdp[None] + np.einsum("ts,skd->tkd", W, self.targets)
 
-    def refine(self, sim, weights, *, rounds: int = 2, tol: float = 2e-5, max_frames: int = 40):
-        """One frame's controls refined against its blended target by the static chord method
+    def refine(self, sim, weights, *, rounds: int = 3, tol: float = 2e-5, max_frames: int = 40):
+        """One frame's controls refined against its blended target by the static quasi-Newton method
         (converged static shapes of ``sim``, corrections from :attr:`basis`; see the module docstring).
 
         Args:
             sim: The :class:`~facewarp.FaceSimulator` of this table's head (reset and stepped; left reset).
             weights: (52,) float in [0, 1].
-            rounds: Refinement rounds (0..10); a round that does not lower the residual ends it.
+            rounds: Refinement rounds (0..10).
 
         Returns:
-            (activations (M,) float32, jaw (2,) float32 [rad], FDP RMS residual [m] per round, list
-            starting with the blended controls').
+            (activations (M,) float32, jaw (2,) float32 [rad], FDP RMS residual [m] per static
+            evaluation, a list starting with the blended controls'; the controls returned are the best's).
         """
         from ..core.checks import check_int
 
@@ -186,7 +190,7 @@ class ArkitTable:
         a, j = self.controls(W)
         statics = _Statics(sim, _head_fdps(sim.fr)[1], tol, max_frames)
         target = self.targets_for(W)[0]
-        x, res = _chord(statics, self.basis, self._effort(), np.r_[a[0], j[0]].astype(np.float64), target, rounds)
+        x, res, _ = _refine_static(statics, self.basis, self._effort(), np.r_[a[0], j[0]].astype(np.float64), target, rounds)
         sim.reset()
         return x[:-2].astype(np.float32), x[-2:].astype(np.float32), res
 
@@ -211,7 +215,7 @@ class ArkitTable:
                             activations=self.activations, jaw=self.jaw, solved=self.solved,
                             residual_m=self.residual_m, target_rms_m=self.target_rms_m,
                             fdp_ids=np.array(self.fdp_ids), rest_fdp=self.rest_fdp, targets=self.targets,
-                            basis=self.basis,
+                            reached=self.reached, basis=self.basis,
                             reasons=np.array(json.dumps(self.reasons)), key=np.array(self.key),
                             info=np.array(json.dumps(self.info)), version=np.array(_VERSION))
         os.replace(tmp, path)
@@ -234,7 +238,8 @@ def load_arkit_table(path) -> ArkitTable:
                            solved=z["solved"].astype(bool), residual_m=z["residual_m"].astype(np.float64),
                            target_rms_m=z["target_rms_m"].astype(np.float64),
                            fdp_ids=[str(n) for n in z["fdp_ids"]], rest_fdp=z["rest_fdp"].astype(np.float64),
-                           targets=z["targets"].astype(np.float64), basis=z["basis"].astype(np.float64), reasons=json.loads(str(z["reasons"])),
+                           targets=z["targets"].astype(np.float64), reached=z["reached"].astype(np.float64),
+                           basis=z["basis"].astype(np.float64), reasons=json.loads(str(z["reasons"])),
                            key=str(z["key"]), info=json.loads(str(z["info"])))
     except InputError:
         raise
@@ -259,9 +264,8 @@ def _fdp_of(fr, idx, V) -> np.ndarray:
 def _resolve_shapes(shapes, ict_dir) -> dict:
     from ..importers.ict_arkit import ICT_ARKIT_SHAPES, load_ict_displacements
 
-    if shapes is None:
-        names = [n for n in ARKIT_NAMES if n not in ARKIT_OUT_OF_REACH]
-        return load_ict_displacements(names, ict_dir=ict_dir)
+    if shapes is None:  # all, those out of reach too (their targets are kept, not solved)
+        return load_ict_displacements(ARKIT_NAMES, ict_dir=ict_dir)
     if isinstance(shapes, dict):
         out = {}
         for n, D in shapes.items():
@@ -278,7 +282,7 @@ def _resolve_shapes(shapes, ict_dir) -> dict:
     for n in names:
         if n not in ICT_ARKIT_SHAPES:
             raise InputError(f"shapes: {n!r} is not an ARKit blendshape name")
-    return load_ict_displacements([n for n in names if n not in ARKIT_OUT_OF_REACH], ict_dir=ict_dir)
+    return load_ict_displacements(names, ict_dir=ict_dir)
 
 
 def _bounds(M: int) -> tuple[np.ndarray, np.ndarray]:
@@ -300,24 +304,30 @@ def _bounded_step(B: np.ndarray, effort: float, r: np.ndarray, x0: np.ndarray) -
     return lsq_linear(A, b, bounds=(np.minimum(lo - x0, 0.0), np.maximum(hi - x0, 0.0) + 1e-12), method="bvls").x
 
 
-def _chord(statics, B, effort, x, target, rounds):
-    """Static chord refinement from controls x (M + 2,) towards target FDPs (K, 3) [m]: the
-    converged static shape at x, its residual, a bounded correction through B; a round that does
-    not lower the FDP RMS ends it. Returns (best x, FDP RMS [m] per evaluation)."""
+def _refine_static(statics, B, effort, x, target, rounds):
+    """Static refinement from controls x (M + 2,) towards target FDPs (K, 3) [m]: the converged
+    static shape at x, its residual, a bounded correction through the linear model, which each
+    round updates by Broyden's rank-one rule with the step it saw (the response is not linear); a
+    step that does not lower the FDP RMS is not taken (the next one starts from the corrected
+    model). Returns (best x, FDP RMS [m] per evaluation, the FDPs (K, 3) [m] at the best x)."""
     lo, hi = _bounds(B.shape[1] - 2)
     M = B.shape[1] - 2
+    B = B.copy()
     P = statics(x[:M], x[M:])
     err = float(np.sqrt(np.mean(np.sum((P - target) ** 2, axis=1))))
     hist = [err]
     for _ in range(rounds):
         x1 = np.clip(x + _bounded_step(B, effort, (target - P).ravel(), x), lo, hi)
+        dx = x1 - x
+        if not np.any(np.abs(dx) > 1e-6):
+            break
         P1 = statics(x1[:M], x1[M:])
         e1 = float(np.sqrt(np.mean(np.sum((P1 - target) ** 2, axis=1))))
         hist.append(e1)
-        if e1 >= err:
-            break
-        x, P, err = x1, P1, e1
-    return x, hist
+        B += np.outer((P1 - P).ravel() - B @ dx, dx) / float(dx @ dx)
+        if e1 < err:  # else stay, with the model corrected by what the step showed
+            x, P, err = x1, P1, e1
+    return x, hist, P
 
 
 class _Statics:
@@ -349,7 +359,7 @@ class _Statics:
         return _fdp_of(sim.fr, self.idx, prev)
 
 
-def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, effort: float = 1e-3,
+def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 3, effort: float = 1e-3,
                 tol: float = 2e-5, max_frames: int = 40, progress=None, rebuild: bool = False) -> ArkitTable:
     """The :class:`ArkitTable` of ``sim``'s head (see the module docstring); cached.
 
@@ -362,7 +372,7 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
         cache: A folder (the head's build folder): ``arkit_table.npz`` there is read when its key
             matches and written after a build. None: no cache.
         ict_dir: A folder searched first for the ICT-FaceKit OBJs.
-        refine: Rounds of the static chord refinement (0..10).
+        refine: Rounds of the static refinement (0..10).
         effort: Weight of the controls' size in the least squares [m per unit control].
         tol, max_frames: Convergence of each static shape (:func:`~facewarp.static_surface`).
         progress: Optional ``progress(done, total, name)``.
@@ -446,6 +456,7 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
     residual = np.full(n, np.nan)
     size = np.full(n, np.nan)
     targets = np.zeros((n, len(fdp_ids), 3))
+    reached = np.zeros((n, len(fdp_ids), 3))
     reasons = {k: v for k, v in ARKIT_OUT_OF_REACH.items()}
     per_shape, linear = {}, {}
     for i, name in enumerate(ARKIT_NAMES):
@@ -461,8 +472,9 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
             reasons[name] = "no ICT-FaceKit shape data found (see facewarp.ict_shape_dirs)"
             continue
         t = T_head[name]
-        x, hist = _chord(statics, B, effort, np.clip(solve(t.ravel(), np.zeros(M + 2)), lo, hi), rest + t, refine)
+        x, hist, P = _refine_static(statics, B, effort, np.clip(solve(t.ravel(), np.zeros(M + 2)), lo, hi), rest + t, refine)
         acts[i], jaws[i], solved[i], residual[i] = x[:M], x[M:], True, min(hist)
+        reached[i] = P - rest
         per_shape[name] = [round(h * 1e3, 3) for h in hist]
         tick(name)
     sim.reset()
@@ -474,7 +486,7 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
             "from_cache": False}
     table = ArkitTable(names=tuple(ARKIT_NAMES), muscle_names=list(sim.muscle_names), activations=acts, jaw=jaws,
                        solved=solved, residual_m=residual, target_rms_m=size, fdp_ids=fdp_ids,
-                       rest_fdp=rest, targets=targets, basis=B, reasons=reasons, key=key, info=info)
+                       rest_fdp=rest, targets=targets, reached=reached, basis=B, reasons=reasons, key=key, info=info)
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
         table.save(cache / ARKIT_TABLE_FILE)
