@@ -46,7 +46,8 @@ import numpy as np
 from ..core.errors import InputError
 from .tracks import ARKIT_NAMES
 
-__all__ = ["ARKIT_TABLE_FILE", "ArkitTable", "JAW_PROBE", "JAW_SIDE_PROBE", "ARKIT_OUT_OF_REACH", "arkit_table",
+__all__ = ["ARKIT_TABLE_FILE", "ArkitTable", "JAW_PROBE", "JAW_SIDE_PROBE", "ARKIT_OUT_OF_REACH", "arkit_table", "drive_arkit",
+           "head_rotation_matrix",
            "load_arkit_table"]
 
 ARKIT_TABLE_FILE = "arkit_table.npz"
@@ -491,3 +492,116 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 3, 
         cache.mkdir(parents=True, exist_ok=True)
         table.save(cache / ARKIT_TABLE_FILE)
     return table
+
+
+# ---------------------------------------------------------------------- driving
+def head_rotation_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    """The head's rotation (3, 3) float64 from ARKit's HeadYaw, HeadPitch, HeadRoll [rad]:
+    ``R = Ry(yaw) Rx(pitch) Rz(roll)`` in the head frame (y up, +z forward; yaw about y, pitch about
+    x, roll about z)."""
+    cy, sy, cp, sp, cr, sr = (math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch), math.cos(roll),
+                              math.sin(roll))
+    Ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
+    Rz = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
+    return Ry @ Rx @ Rz
+
+
+def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, refine: bool = False,
+                mode: str = "offline", unreachable_limit: float = 2e-3, **options):
+    """Play an :class:`~facewarp.ArkitTrack` on ``sim`` through its head's :class:`ArkitTable`
+    (what :func:`~facewarp.drive` does for an ArkitTrack).
+
+    Each frame's weights become controls by :meth:`ArkitTable.controls` (blend in activation
+    space, clamp); with ``refine=True`` the frame is instead tracked by a :class:`~facewarp.Tracker`
+    towards its blended target FDPs (:meth:`ArkitTable.targets_for`), starting from the previous
+    frame. The track's head rotation, when it has one, drives :meth:`~facewarp.FaceSimulator.set_head_pose`
+    (:func:`head_rotation_matrix`, no translation). The per-frame error is each head FDP's distance
+    from its blended target (head frame).
+
+    Returns:
+        A :class:`~facewarp.DriveResult` (``names``: the table's FDP ids; ``head_poses``: (T, 4, 4)
+        when the track has head rotation).
+    """
+    from ..core.checks import check_number
+    from ..sim.play import PlayStats, _as_sink
+    from .inverse import DriveResult, Tracker
+
+    if not isinstance(table, ArkitTable):
+        raise InputError("table: an ArkitTrack is driven through the head's ARKit table "
+                         f"(fw.arkit_table(sim, cache=BUILD)), got {type(table).__name__}")
+    if list(table.muscle_names) != list(sim.muscle_names) or table.key_rig != rig_key(sim):
+        raise InputError("table: built for another head (or solver) than this simulator's; "
+                         "build it with fw.arkit_table(sim, cache=BUILD)")
+    if abs(track.fps - sim.fps) > 1e-6 * sim.fps:
+        raise InputError(f"track: {track.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
+                         f"make the FaceSimulator with fps={track.fps:g}")
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(k, frame_count), got {type(progress).__name__}")
+    if not isinstance(refine, (bool, np.bool_)):
+        raise InputError(f"refine: expected True or False, got {refine!r}")
+    if options and not refine:
+        raise InputError(f"{sorted(options)[0]}: a Tracker option, only with refine=True")
+    unreachable_limit = check_number("unreachable_limit", unreachable_limit, low=0.0, low_open=True)
+    nf = track.frames
+    A, J = table.controls(track.weights)
+    targets = table.targets_for(track.weights)
+    poses = None
+    if track.head_rotation is not None:
+        poses = np.tile(np.eye(4), (nf, 1, 1))
+        for k, (y, p, r) in enumerate(track.head_rotation):
+            poses[k, :3, :3] = head_rotation_matrix(y, p, r)
+    sinks = [_as_sink(s) for s in sinks]
+    _, idx = _head_fdps(sim.fr)
+    tracker = Tracker(sim, table.fdp_ids, mode=mode, **options) if refine else None
+    sim.reset()
+    if tracker is not None:
+        tracker.reset_tracking()
+    for s in sinks:
+        s.start(sim, nf)
+    M = len(sim.muscle_names)
+    acts = np.zeros((nf, M), np.float32)
+    jaw = np.zeros((nf, 2), np.float32)
+    err = np.zeros((nf, len(table.fdp_ids)))
+    t0 = time.perf_counter()
+    stepping = 0.0
+    for k in range(nf):
+        s0 = time.perf_counter()
+        if poses is not None:
+            sim.set_head_pose(poses[k, :3, :3], np.zeros(3))
+        if tracker is None:
+            sim.set_activations(A[k])
+            sim.set_jaw(float(J[k, 0]), float(J[k, 1]))
+            sim.step()
+            acts[k], jaw[k] = sim.activations, sim.jaw_angles
+        else:
+            acts[k], jaw[k] = tracker.update(targets[k])
+        stepping += time.perf_counter() - s0
+        err[k] = np.linalg.norm(_fdp_of(sim.fr, idx, sim.surface(frame="head")) - targets[k], axis=1)
+        for s in sinks:
+            s.frame(sim, k, k / track.fps)
+        if progress:
+            progress(k, nf)
+    wall = time.perf_counter() - t0
+    stepping = max(stepping, 1e-9)
+    rms = np.sqrt(np.mean(err**2, axis=1))
+    notes = [f"{n}: out of reach ({table.reasons[n]}); weight up to {track.weights[:, i].max():.2f}"
+             for i, n in enumerate(table.names) if n in table.reasons and track.weights[:, i].max() > 0]
+    bad = np.where(err > unreachable_limit)
+    for i in np.unique(bad[1]):
+        fr_k = bad[0][bad[1] == i]
+        notes.append(f"point {table.fdp_ids[i]}: {len(fr_k)} frame(s) off by more than "
+                     f"{unreachable_limit * 1e3:g} mm (worst {err[:, i].max() * 1e3:.2f} mm at frame "
+                     f"{int(np.argmax(err[:, i]))})")
+    steps = tracker.stats.steps if tracker is not None else nf
+    stats = PlayStats(frames=nf, seconds=nf / track.fps, wall_s=wall, simulation_wall_s=stepping,
+                      frames_per_second=nf / stepping, steps_per_second=steps * sim.substeps / stepping,
+                      realtime_factor=nf / track.fps / stepping, substeps=int(sim.substeps), dt_s=float(sim.dt),
+                      device=str(sim.device), jaw="arkit table", frame_stats=sim.stats.as_dict(), mujoco_events=[])
+    for s in sinks:
+        s.finish(sim, stats)
+    return DriveResult(fps=track.fps, names=list(table.fdp_ids), muscle_names=list(sim.muscle_names),
+                       activations=acts, jaw=jaw, error=err, rms=rms, unreachable=notes, seconds=stepping,
+                       frames_per_second=nf / stepping, mode="arkit-tracker" if refine else "arkit-table",
+                       stats=tracker.stats.as_dict() if tracker is not None else {"frames": nf},
+                       head_poses=poses)
