@@ -46,9 +46,8 @@ import numpy as np
 from ..core.errors import InputError
 from .tracks import ARKIT_NAMES
 
-__all__ = ["ARKIT_TABLE_FILE", "ArkitTable", "JAW_PROBE", "JAW_SIDE_PROBE", "ARKIT_OUT_OF_REACH", "arkit_table", "drive_arkit",
-           "head_rotation_matrix",
-           "load_arkit_table"]
+__all__ = ["ARKIT_OUT_OF_REACH", "ARKIT_TABLE_FILE", "ArkitTable", "JAW_PROBE", "JAW_SIDE_PROBE", "arkit_table",
+           "drive_arkit", "head_rotation_matrix", "load_arkit_table"]
 
 ARKIT_TABLE_FILE = "arkit_table.npz"
 _VERSION = 1
