@@ -304,6 +304,9 @@ def main(argv=None) -> int:
                     best_sec[k] = min(best_sec[k], drive(batch, timelines, args.frames, 3))
                     if rnd == 0:
                         print(f"N={n}, {k} streams: {best_sec[k] / args.frames * 1e3:.1f} ms/frame", flush=True)
+                        row["partial_ms_per_frame_by_streams"] = {str(q): best_sec[q] / args.frames * 1e3
+                                                                  for q in stream_counts if np.isfinite(best_sec[q])}
+                        write()  # kept if a later step runs out of time or memory
                 if fdp_batch is None:
                     fdp_batch = np.stack([batch.fdp_points(i) for i in range(min(n, 4))])
                     st = batch.status
@@ -317,6 +320,7 @@ def main(argv=None) -> int:
                     nsec = min(nsec, drive(heads, timelines, nf, 3, naive=True))
                     if fdp_naive is None:
                         fdp_naive = np.stack([heads[i].fdp_points() for i in range(min(n, 4))])
+            row.pop("partial_ms_per_frame_by_streams", None)
             row["by_streams"] = {str(k): {"warmup_seconds": warm_sec[k], "ms_per_frame": best_sec[k] / args.frames * 1e3,
                                           "head_frames_per_second": n * args.frames / best_sec[k]} for k in stream_counts}
             best = min(row["by_streams"], key=lambda k: row["by_streams"][k]["ms_per_frame"])
