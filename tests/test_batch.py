@@ -31,7 +31,8 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
     heads = [a, b, a]
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     batch = fw.FaceBatch(heads, device=device, placements=(np.stack([np.eye(3), R, np.eye(3)]),
-                                                            np.array([[0, 0, 0], [1.0, 0, 0], [0, 2.0, 0]])))
+                                                            np.array([[0, 0, 0], [1.0, 0, 0], [0, 2.0, 0]])),
+                         streams=2)  # CUDA: two groups of heads, each a graph on its own stream (the CPU ignores it)
     alone = [fw.FaceSimulator(fr, device=device) for fr in (a, b)]
     for k in range(1, FRAMES + 1):
         es = [_controls(fr, k) for fr in heads]
