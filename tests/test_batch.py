@@ -148,14 +148,25 @@ def test_batch_simulate_cli(build_dir, tmp_path, capsys):
     b = str(build_dir)
     capsys.readouterr()
     assert main(["--json", "batch", "simulate", b, b, "--per-head", str(per), "--seconds", "0.2", "--jaw", "mujoco",
+                 "--stage", "crowd.usda",
                  "--out", str(tmp_path / "o")]) == 0
     import json
 
     rep = json.loads(capsys.readouterr().out)
     assert rep["heads"] == 2 and rep["ok"] == 2 and rep["frames"] == 7 and rep["jaw"] == "mujoco" and rep["head_frames_per_second"] > 0
     assert [r["expression"] for r in rep["rows"]] == ["smile", "laugh"]
-    for f in ("head_00.usdc", "head_01.usdc", "report.json"):
+    for f in ("head_00.usdc", "head_01.usdc", "report.json", "crowd.usda"):
         assert (tmp_path / "o" / f).is_file(), f
+    from pxr import Usd, UsdGeom
+
+    st = Usd.Stage.Open(str(tmp_path / "o" / "crowd.usda"))  # the crowd: both heads, referenced, placed apart
+    skins = [UsdGeom.Mesh(st.GetPrimAtPath(f"/Crowd/head_0{i}/Skin")) for i in range(2)]
+    assert all(s_ for s_ in skins)
+    x = [UsdGeom.Xformable(st.GetPrimAtPath(f"/Crowd/head_0{i}")).ComputeLocalToWorldTransform(0).ExtractTranslation()[0]
+         for i in range(2)]
+    assert x[1] - x[0] > 0.1
+    n_frames = len(skins[0].GetPointsAttr().GetTimeSamples())
+    assert n_frames == 7
     # bad input: one line, exit 2, nothing written
     per.write_text('{"heads": ["smile"]}')
     assert main(["batch", "simulate", b, b, "--per-head", str(per), "--out", str(tmp_path / "o2")]) == 2
