@@ -39,6 +39,10 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
         es[2] = fw.Expression("quiet", {}, 0.0, 0.0)  # head 2: the same rig as head 0, other controls
         batch.set_activations(es)
         batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
+        c, s_ = np.cos(0.003 * k), np.sin(0.003 * k)  # head 1 nods and rises: the loads of a moving head
+        Rk, tk = np.array([[1.0, 0, 0], [0, c, -s_], [0, s_, c]]), np.array([0.0, 0.0005 * k, 0.0])
+        batch.set_head_pose(np.stack([np.eye(3), Rk, np.eye(3)]), np.stack([np.zeros(3), tk, np.zeros(3)]))
+        alone[1].set_head_pose(Rk, tk)
         batch.step()
         for sim, e in zip(alone, es):
             sim.set_activations(e)
@@ -51,6 +55,8 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
     assert np.abs(batch.positions(2) - a.nodes).max() < 1e-4  # head 2 kept its rest: no cross-talk
     # placements apply at read-out: head 1's FDPs are its alone FDPs rotated and shifted
     np.testing.assert_allclose(batch.fdp_points(1), alone[1].fdp_points() @ R.T + [1.0, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(batch.positions(1, frame="world"), (alone[1].positions() @ Rk.T + tk) @ R.T + [1.0, 0, 0],
+                               atol=1e-6)
     np.testing.assert_allclose(batch.surface(0), alone[0].surface(), atol=1e-6)
     st = batch.status
     assert [s["ok"] for s in st] == [True] * 3 and st[1]["frames"] == FRAMES

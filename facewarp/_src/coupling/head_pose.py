@@ -88,6 +88,12 @@ class HeadPose:
         """Whether the head sits at the rest pose and has never moved."""
         return not self._hist and np.array_equal(self.R, np.eye(3)) and not self.t.any()
 
+    @property
+    def still(self) -> bool:
+        """Whether every recorded pose and the target are the rest pose: no load at all (the
+        inertial and gravity-change forces are exactly 0), so none need be computed."""
+        return all(not t.any() and np.array_equal(R, np.eye(3)) for R, t in [*self._hist, (self.R, self.t)])
+
     def set(self, R, t) -> None:
         """The pose [R (3, 3), t (3,) m] at the end of the next frame."""
         self.R, self.t = check_pose(R, t)
