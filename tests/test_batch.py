@@ -37,7 +37,10 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
     for k in range(1, FRAMES + 1):
         es = [_controls(fr, k) for fr in heads]
         es[2] = fw.Expression("quiet", {}, 0.0, 0.0)  # head 2: the same rig as head 0, other controls
-        batch.set_activations(es)
+        if k % 2:  # a list of expressions, or one (N, M) array
+            batch.set_activations(es)
+        else:
+            batch.set_activations(np.stack([h.activation_vector(e) for h, e in zip(batch.heads, es)]))
         batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
         c, s_ = np.cos(0.003 * k), np.sin(0.003 * k)  # head 1 nods and rises: the loads of a moving head
         Rk, tk = np.array([[1.0, 0, 0], [0, c, -s_], [0, s_, c]]), np.array([0.0, 0.0005 * k, 0.0])
@@ -107,6 +110,10 @@ def test_bad_inputs_are_input_errors(rigs):
         batch.set_activations([{}, {"no_such_muscle": 1.0}])
     with pytest.raises(fw.InputError, match="angles"):
         batch.set_jaw(np.zeros((2, 3)))
+    with pytest.raises(fw.InputError, match="head 1"):
+        batch.set_activations(np.stack([np.zeros(len(a.rig.names)), np.full(len(a.rig.names), 1.5)]))
+    with pytest.raises(fw.InputError, match="angles of head 0"):
+        batch.set_jaw(np.array([[2.0, 0.0], [0.0, 0.0]]))
     with pytest.raises(fw.InputError, match="head"):
         batch.surface(2)
     with pytest.raises(fw.InputError, match="heads"):
