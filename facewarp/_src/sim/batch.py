@@ -199,6 +199,7 @@ class FaceBatch:
         wp.load_module(kr, device=self.device)  # its kernel is captured in the frame's graph: loaded before
         self._graphs: dict[tuple, list] = {}
         self._use_graph = all(h.stepper.use_graph for h in self.heads)
+        self._host_keys = [[k for k in _SOLVER_HOST_STATE if hasattr(h.solver, k)] for h in self.heads]
         ms = {len(h.fr.rig.names) for h in self.heads}
         self._same_m = ms.pop() if len(ms) == 1 else None  # one muscle count: (N, M) activations checked at once
         self._stream_pool: list = []
@@ -444,7 +445,7 @@ class FaceBatch:
                 host[c, o + m:o + m + 2] = (1 - w) * h._j + w * h._target_j
         for i in live:  # the host part of the rollback's save (the CPU solvers' history), before the frame
             g, solver = self.heads[i].frame_guard, self.heads[i].solver
-            g._host_state = {k: _copy_host(getattr(solver, k)) for k in _SOLVER_HOST_STATE if hasattr(solver, k)}
+            g._host_state = {k: _copy_host(getattr(solver, k)) for k in self._host_keys[i]}
         groups = [g.tolist() for g in np.array_split(np.asarray(live), min(self._streams, len(live)))]
         key = (tuple(live), n, dt, len(groups))
         self._raised: dict[int, str] = {}  # before a capture: _piece reads it
