@@ -268,3 +268,20 @@ def test_replicate_refuses_what_it_cannot_merge(rigs):
         b = ModelBuilder()
         b.add_builder(tissue)
         b.add_builder(ModelBuilder(V, T, damping_rate=3.0))
+
+
+def test_substeps_ramp_in_pieces_as_alone(rigs):
+    """Several substeps per frame: the controls ramp in pieces, each piece one upload for all heads."""
+    a, _ = rigs
+    batch = fw.FaceBatch(a, 2, substeps=3)
+    alone = fw.FaceSimulator(a, substeps=3)
+    for k in range(1, 4):
+        e = _controls(a, 3 * k)
+        batch.set_activations([e, e])
+        batch.set_jaw(np.array([[e.jaw_u, e.jaw_v]] * 2))
+        batch.step()
+        alone.set_activations(e)
+        alone.set_jaw(e.jaw_u, e.jaw_v)
+        alone.step()
+    for i in range(2):
+        np.testing.assert_allclose(batch.positions(i), alone.positions(), atol=1e-6, rtol=0)
