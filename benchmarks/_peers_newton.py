@@ -7,7 +7,7 @@
 Called by :mod:`benchmarks.peers` in a separate virtual environment (Newton may pin another Warp
 than facewarp's); imports numpy, warp and newton only, never facewarp.
 
-``PROBLEM.npz`` (written by ``benchmarks.peers.export_problem``; SI units):
+``PROBLEM.npz`` (written by ``benchmarks._peer_problem.export_problem``; SI units):
 
 * ``nodes`` (n, 3) [m] rest positions, ``tets`` (k, 4) int, ``mass`` (n,) [kg] (0 for pinned
   nodes), ``k_mu``, ``k_lambda`` (k,) [Pa] Lame parameters per tet, ``k_damp`` (k,) [Pa s];

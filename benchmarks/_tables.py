@@ -547,7 +547,14 @@ def batch_scaling(r: Results) -> str:
         fig = doc["figures"]
         for row in fig.get("rows", []):
             if "head_frames_per_second" not in row:
-                rows.append([doc["device"], str(row["n"]), row.get("error", "not measured")[:60], *["-"] * 7])
+                part = row.get("partial_ms_per_frame_by_streams") or {}
+                if part:  # the batch timed, the run stopped after (time or memory): its numbers, marked partial
+                    k = min(part, key=part.get)
+                    rows.append([doc["device"], f"{row['n']:,}", f"{part[k]:.1f} (partial)",
+                                 f"{row['n'] * 1e3 / part[k]:,.0f}", k, "-", "-", "-", "-",
+                                 f"{row['gpu_memory_per_head_mb']:.1f}" if "gpu_memory_per_head_mb" in row else "-"])
+                else:
+                    rows.append([doc["device"], str(row["n"]), row.get("error", "not measured")[:60], *["-"] * 7])
                 continue
             mem = row.get("gpu_memory_per_head_mb")
             newton = row.get("newton_vbd", {})
