@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from benchmarks._common import save
-from benchmarks.soak import control_stream
+from benchmarks._streams import control_stream
 
 THREADS = 1
 
