@@ -85,6 +85,10 @@ _NAMES = {
     "SolverDeviceNewtonPCG": "physics.solvers.newton_pcg", "IncrementalPotential": "physics.solvers.incremental",
     "MaterialPhysical": "physics.materials",
     "MarkerTrack": "drive.tracks", "ArkitTrack": "drive.tracks", "ARKIT_NAMES": "drive.tracks",
+    # performance files in and out, rigid head motion out of a take
+    "load_markers": "drive.formats", "load_arkit": "drive.formats", "save_markers_json": "drive.formats",
+    "save_livelink_csv": "drive.formats", "markers_from_frames": "drive.formats",
+    "remove_head_motion": "drive.rigid", "HeadMotion": "drive.rigid", "STABLE_POINTS": "drive.rigid",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
@@ -151,6 +155,9 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.physics.muscle_stage import MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
     from ._src.drive.tracks import ARKIT_NAMES, ArkitTrack, MarkerTrack
+    from ._src.drive.formats import (load_arkit, load_markers, markers_from_frames, save_livelink_csv,
+                                     save_markers_json)
+    from ._src.drive.rigid import STABLE_POINTS, HeadMotion, remove_head_motion
     from ._src.physics.solvers.base import SolverStage
     from ._src.physics.solvers.host_implicit import SolverHostImplicit
     from ._src.physics.solvers.implicit import SolverImplicit
