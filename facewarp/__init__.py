@@ -89,6 +89,10 @@ _NAMES = {
     "load_markers": "drive.formats", "load_arkit": "drive.formats", "save_markers_json": "drive.formats",
     "save_livelink_csv": "drive.formats", "markers_from_frames": "drive.formats",
     "remove_head_motion": "drive.rigid", "HeadMotion": "drive.rigid", "STABLE_POINTS": "drive.rigid",
+    "ArkitTable": "drive.arkit", "arkit_table": "drive.arkit", "load_arkit_table": "drive.arkit",
+    "ARKIT_OUT_OF_REACH": "drive.arkit", "ICT_ARKIT_SHAPES": "importers.ict_arkit",
+    "load_ict_displacements": "importers.ict_arkit", "transfer_ict_displacements": "importers.ict_arkit",
+    "ict_shape_dirs": "importers.ict_arkit",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
@@ -158,6 +162,9 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.drive.formats import (load_arkit, load_markers, markers_from_frames, save_livelink_csv,
                                      save_markers_json)
     from ._src.drive.rigid import STABLE_POINTS, HeadMotion, remove_head_motion
+    from ._src.drive.arkit import ARKIT_OUT_OF_REACH, ArkitTable, arkit_table, load_arkit_table
+    from ._src.importers.ict_arkit import (ICT_ARKIT_SHAPES, ict_shape_dirs, load_ict_displacements,
+                                           transfer_ict_displacements)
     from ._src.physics.solvers.base import SolverStage
     from ._src.physics.solvers.host_implicit import SolverHostImplicit
     from ._src.physics.solvers.implicit import SolverImplicit
