@@ -47,7 +47,11 @@ MAX_DRIVE_FRAMES = 100_000
 """Most frames one ``drive`` run keeps in memory (as ``simulate``'s :data:`MAX_FRAMES`)."""
 
 PICTURE_FRAMES = 3
-"""Frames shown in ``drive.png``: the first, the one whose targets moved most, the last."""
+"""Frames shown in ``drive.png``: the first, the one whose targets moved most, the last (the middle
+one when these coincide)."""
+
+CROSS_M = 0.003
+"""Half the size [m] of the cross that marks a simulated point in ``drive.png``."""
 
 
 def load_performance(*, markers=None, arkit=None, mediapipe=None, map=None, units=None,  # noqa: A002
@@ -109,16 +113,25 @@ def _picture(path: Path, frames, names, targets, device: str) -> None:
     sim_pts = _simulated_points(frames, names)
     T = len(targets)
     moved = np.nan_to_num(np.linalg.norm(targets - targets[:1], axis=2), nan=0.0).max(axis=1)
-    picks = sorted({0, int(np.argmax(moved)), T - 1})[:PICTURE_FRAMES]
+    picks = {0, int(np.argmax(moved)), T - 1}
+    if len(picks) < PICTURE_FRAMES and T > 2:
+        picks.add(T // 2)
+    picks = sorted(picks)
+    blue = (0.1, 0.25, 0.85)
     tiles = []
     for k in picks:
         ok = np.isfinite(targets[k]).all(axis=1)
-        P = np.concatenate([targets[k][ok], sim_pts[k]])
-        colors = np.concatenate([np.tile([0.85, 0.1, 0.1], (int(ok.sum()), 1)), np.tile([0.1, 0.25, 0.85], (len(names), 1))])
-        tiles.append(render_mesh(frames.points[k], frames.faces, points=P, point_color=colors, width=320, height=360,
-                                 depth_tolerance=0.004, device=device))
+        crosses = []
+        for p in sim_pts[k] + (0.0, 0.0, CROSS_M):  # a cross at each simulated point, lifted off the skin
+            for d in ((CROSS_M, 0.0, 0.0), (0.0, CROSS_M, 0.0)):
+                crosses.append((np.array([p - d, p + d]), blue))
+        tiles.append(render_mesh(frames.points[k], frames.faces, points=targets[k][ok], point_color=(0.85, 0.1, 0.1),
+                                 extra_meshes=[(V[k], F, (0.85, 0.85, 0.8)) for V, F in frames.parts.values()],
+                                 point_radius=4.0, polylines=crosses, line_width=2.5, width=360, height=400,
+                                 depth_tolerance=0.004, frame_points=np.concatenate([targets[k][ok], sim_pts[k]]),
+                                 device=device))
     save_png(path, np.concatenate(tiles, axis=1),
-             title="frames " + ", ".join(str(k) for k in picks) + ": targets red, simulated blue")
+             title="frames " + ", ".join(str(k) for k in picks) + ": targets red dots, simulated blue crosses")
 
 
 def _activation_picture(path: Path, times, muscles, A, J) -> None:
@@ -127,7 +140,10 @@ def _activation_picture(path: Path, times, muscles, A, J) -> None:
     top = [int(i) for i in np.argsort(-peak)[:4] if peak[i] > 0]
     series = {muscles[i]: A[:, i] for i in top}
     series["jaw opening / 30 deg"] = J[:, 0] / np.radians(30.0)
-    line_chart(path, times, series, title="activations", xlabel="time [s]", ylabel="activation")
+    end = float(times[-1]) if len(times) > 1 else 1.0
+    ticks = np.linspace(0.0, end, min(len(times), 6))
+    line_chart(path, times, series, title="activations", xlabel="time [s]", ylabel="activation",
+               xticks=np.round(ticks, 3))
 
 
 def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=None, units=None,  # noqa: A002
@@ -186,16 +202,22 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         make_out_dir(out)
     anim = UsdAnimation(usd_path, sim)
     sinks = [s for s in (keep, anim) if s is not None]
+    poses = None
+    if motion is not None:  # the removed poses as 4x4 maps rest -> take (scale in the 3x3 block)
+        poses = np.tile(np.eye(4), (motion.frames, 1, 1))
+        poses[:, :3, :3] = motion.scale[:, None, None] * motion.rotation
+        poses[:, :3, 3] = motion.translation
     with anim:
-        result = drive(sim, track, table=table, sinks=sinks, progress=progress)
+        result = drive(sim, track, table=table, sinks=sinks, progress=progress,
+                       **({"head_poses": poses} if poses is not None else {}))
     A = np.asarray(result.activations, dtype=np.float64)
     J = np.asarray(result.jaw, dtype=np.float64)
     times = np.arange(len(A)) / track.fps
     rep = {
         "build": str(build), "source": track.source, "kind": "markers" if isinstance(track, MarkerTrack) else "arkit",
-        "frames": int(len(A)), "fps": track.fps, "device": sim.device if hasattr(sim, "device") else device,
-        "muscles": list(sim.muscle_names), "notes": notes + list(getattr(result, "unreachable", []) or []),
-        "seconds": None, "files": [],
+        "frames": int(len(A)), "fps": track.fps, "device": str(sim.device),
+        "muscles": list(sim.muscle_names), "notes": notes + list(result.unreachable),
+        "frames_per_second": float(result.frames_per_second), "seconds": None, "files": [],
     }
     report_full = dict(rep)
     if isinstance(track, MarkerTrack):
