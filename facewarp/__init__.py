@@ -93,6 +93,7 @@ _NAMES = {
     "ARKIT_OUT_OF_REACH": "drive.arkit", "ICT_ARKIT_SHAPES": "importers.ict_arkit",
     "load_ict_displacements": "importers.ict_arkit", "transfer_ict_displacements": "importers.ict_arkit",
     "ict_shape_dirs": "importers.ict_arkit",
+    "Tracker": "drive.inverse", "drive": "drive.inverse", "DriveResult": "drive.inverse",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
@@ -158,6 +159,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.physics.muscle_rig import MuscleRig
     from ._src.physics.muscle_stage import MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
+    from ._src.drive.inverse import DriveResult, Tracker, drive
     from ._src.drive.tracks import ARKIT_NAMES, ArkitTrack, MarkerTrack
     from ._src.drive.formats import (load_arkit, load_markers, markers_from_frames, save_livelink_csv,
                                      save_markers_json)
