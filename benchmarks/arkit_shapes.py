@@ -7,11 +7,12 @@ drawn from the run's seed, which is new every run unless ``--seed``) is made int
 default template adapted to it and built (``benchmarks/_ict.py: adapted_identity``; ``--root``
 keeps and reuses the folders). Its ARKit table is built (``fw.arkit_table``: every ICT ARKit shape
 transferred onto the head's FDPs, scaled to its proportions, then solved by static probes, bounded
-least squares and ``--refine`` chord rounds with the simulator in the loop).
+least squares and ``--refine`` quasi-Newton rounds with the simulator in the loop).
 
 Per shape: the FDP RMS residual over the head FDPs of the converged static face at the solved
 controls against the transferred target, the target's own RMS, the linear model's residual, and
-the controls used. The reachable set (smile, frown, brow raise / lower, jaw open, pucker, funnel,
+the controls used; the same over the FDPs the target moves by more than 1 mm, and the worst FDP.
+The reachable set (smile, frown, brow raise / lower, jaw open, pucker, funnel,
 cheek raise, squint, blink) is judged against FDP RMS <= 1.5 mm; the shapes out of reach are
 listed with the reason. Random blends (2-4 solved shapes, weights 0.3-1) are played through
 ``ArkitTable.controls`` (blend in activation space, clamp) and then refined
@@ -53,8 +54,8 @@ def main(argv=None) -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--identity", type=int, default=None, help="ICT identity 0..9 (default: random)")
-    ap.add_argument("--blends", type=int, default=6)
-    ap.add_argument("--refine", type=int, default=2)
+    ap.add_argument("--blends", type=int, default=8)
+    ap.add_argument("--refine", type=int, default=3)
     ap.add_argument("--root", type=Path, default=None, help="keep / reuse the adapt and build folders here")
     ap.add_argument("--seed", type=int, default=None, help="default: new every run")
     args = ap.parse_args(argv)
@@ -86,6 +87,13 @@ def main(argv=None) -> None:
                "linear_model_residual_mm": table.info["linear_model_residual_mm"].get(name)}
         if table.solved[i]:
             row["residual_rms_mm"] = round(table.residual_m[i] * mm, 3)
+            err = np.linalg.norm(table.reached[i] - table.targets[i], axis=1)
+            moving = np.linalg.norm(table.targets[i], axis=1) > 1e-3
+            row["residual_max_mm"] = round(float(err.max()) * mm, 2)
+            row["worst_fdp"] = table.fdp_ids[int(np.argmax(err))]
+            row["moving_fdps"] = int(moving.sum())
+            row["moving_fdp_residual_rms_mm"] = round(float(np.sqrt(np.mean(err[moving] ** 2))) * mm, 3) \
+                if moving.any() else None
             row["history_mm"] = table.info["residual_history_mm"].get(name)
             row["activations"] = {m: round(float(a), 3) for m, a in zip(table.muscle_names, table.activations[i])
                                   if a > 0.01}

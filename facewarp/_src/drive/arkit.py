@@ -13,9 +13,10 @@ displacement. Then the controls are solved by a static inverse:
    per unit control, (3 K, M + 2));
 2. a bounded least-squares solve, ``min |B x - t|^2 + effort^2 |x|^2`` with the activations in
    [0, 1], the opening in [0, 60 deg] and the side angle in +-5 deg (``scipy.optimize.lsq_linear``);
-3. ``refine`` rounds of the chord method: the simulator's converged static shape at ``x``, its FDP
-   residual against the target, and the same bounded solve for the correction (a round that
-   does not lower the residual is dropped).
+3. ``refine`` rounds of a quasi-Newton refinement: the simulator's converged static shape at ``x``,
+   its FDP residual against the target, and the same bounded solve for the correction, the model
+   updated by Broyden's rank-one rule after each step (a step that does not lower the residual
+   is not taken).
 
 The residual left (FDP RMS over the head FDPs) is stored per shape. The shapes the muscle model
 has no means for (:data:`ARKIT_OUT_OF_REACH`: gaze, tongue, jaw thrust, cheek puffing, the lips sealed
@@ -45,8 +46,8 @@ import numpy as np
 from ..core.errors import InputError
 from .tracks import ARKIT_NAMES
 
-__all__ = ["ARKIT_TABLE_FILE", "ArkitTable", "JAW_PROBE", "JAW_SIDE_PROBE", "ARKIT_OUT_OF_REACH", "arkit_table",
-           "load_arkit_table"]
+__all__ = ["ARKIT_OUT_OF_REACH", "ARKIT_TABLE_FILE", "ArkitTable", "JAW_PROBE", "JAW_SIDE_PROBE", "arkit_table",
+           "drive_arkit", "head_rotation_matrix", "load_arkit_table"]
 
 ARKIT_TABLE_FILE = "arkit_table.npz"
 _VERSION = 1
@@ -104,6 +105,8 @@ class ArkitTable:
         fdp_ids: The K head FDP ids the targets are given at.
         rest_fdp: (K, 3) float64 [m]: those FDPs of the static rest shape, head frame.
         targets: (52, K, 3) float64 [m]: each shape's FDP displacement on this head (zero where no data).
+        reached: (52, K, 3) float64 [m]: the FDP displacement of the converged static face at
+            each shape's controls (zero where not solved).
         basis: (3 K, M + 2) float64: the linear model, FDP displacement [m] per unit control
             (activation; jaw opening and side per rad), from the static probes.
         reasons: ARKit name -> why its entry is zero (out of reach, or no data).
@@ -121,6 +124,7 @@ class ArkitTable:
     fdp_ids: list
     rest_fdp: np.ndarray
     targets: np.ndarray
+    reached: np.ndarray
     basis: np.ndarray
     reasons: dict = field(default_factory=dict)
     key: str = ""
@@ -162,18 +166,18 @@ class ArkitTable:
         W = self._weights(weights)
         return self.rest_fdp[None] + np.einsum("ts,skd->tkd", W, self.targets)
 
-    def refine(self, sim, weights, *, rounds: int = 2, tol: float = 2e-5, max_frames: int = 40):
-        """One frame's controls refined against its blended target by the static chord method
+    def refine(self, sim, weights, *, rounds: int = 3, tol: float = 2e-5, max_frames: int = 40):
+        """One frame's controls refined against its blended target by the static quasi-Newton method
         (converged static shapes of ``sim``, corrections from :attr:`basis`; see the module docstring).
 
         Args:
             sim: The :class:`~facewarp.FaceSimulator` of this table's head (reset and stepped; left reset).
             weights: (52,) float in [0, 1].
-            rounds: Refinement rounds (0..10); a round that does not lower the residual ends it.
+            rounds: Refinement rounds (0..10).
 
         Returns:
-            (activations (M,) float32, jaw (2,) float32 [rad], FDP RMS residual [m] per round, list
-            starting with the blended controls').
+            (activations (M,) float32, jaw (2,) float32 [rad], FDP RMS residual [m] per static
+            evaluation, a list starting with the blended controls'; the controls returned are the best's).
         """
         from ..core.checks import check_int
 
@@ -186,7 +190,7 @@ class ArkitTable:
         a, j = self.controls(W)
         statics = _Statics(sim, _head_fdps(sim.fr)[1], tol, max_frames)
         target = self.targets_for(W)[0]
-        x, res = _chord(statics, self.basis, self._effort(), np.r_[a[0], j[0]].astype(np.float64), target, rounds)
+        x, res, _ = _refine_static(statics, self.basis, self._effort(), np.r_[a[0], j[0]].astype(np.float64), target, rounds)
         sim.reset()
         return x[:-2].astype(np.float32), x[-2:].astype(np.float32), res
 
@@ -211,7 +215,7 @@ class ArkitTable:
                             activations=self.activations, jaw=self.jaw, solved=self.solved,
                             residual_m=self.residual_m, target_rms_m=self.target_rms_m,
                             fdp_ids=np.array(self.fdp_ids), rest_fdp=self.rest_fdp, targets=self.targets,
-                            basis=self.basis,
+                            reached=self.reached, basis=self.basis,
                             reasons=np.array(json.dumps(self.reasons)), key=np.array(self.key),
                             info=np.array(json.dumps(self.info)), version=np.array(_VERSION))
         os.replace(tmp, path)
@@ -234,7 +238,8 @@ def load_arkit_table(path) -> ArkitTable:
                            solved=z["solved"].astype(bool), residual_m=z["residual_m"].astype(np.float64),
                            target_rms_m=z["target_rms_m"].astype(np.float64),
                            fdp_ids=[str(n) for n in z["fdp_ids"]], rest_fdp=z["rest_fdp"].astype(np.float64),
-                           targets=z["targets"].astype(np.float64), basis=z["basis"].astype(np.float64), reasons=json.loads(str(z["reasons"])),
+                           targets=z["targets"].astype(np.float64), reached=z["reached"].astype(np.float64),
+                           basis=z["basis"].astype(np.float64), reasons=json.loads(str(z["reasons"])),
                            key=str(z["key"]), info=json.loads(str(z["info"])))
     except InputError:
         raise
@@ -259,9 +264,8 @@ def _fdp_of(fr, idx, V) -> np.ndarray:
 def _resolve_shapes(shapes, ict_dir) -> dict:
     from ..importers.ict_arkit import ICT_ARKIT_SHAPES, load_ict_displacements
 
-    if shapes is None:
-        names = [n for n in ARKIT_NAMES if n not in ARKIT_OUT_OF_REACH]
-        return load_ict_displacements(names, ict_dir=ict_dir)
+    if shapes is None:  # all, those out of reach too (their targets are kept, not solved)
+        return load_ict_displacements(ARKIT_NAMES, ict_dir=ict_dir)
     if isinstance(shapes, dict):
         out = {}
         for n, D in shapes.items():
@@ -278,7 +282,7 @@ def _resolve_shapes(shapes, ict_dir) -> dict:
     for n in names:
         if n not in ICT_ARKIT_SHAPES:
             raise InputError(f"shapes: {n!r} is not an ARKit blendshape name")
-    return load_ict_displacements([n for n in names if n not in ARKIT_OUT_OF_REACH], ict_dir=ict_dir)
+    return load_ict_displacements(names, ict_dir=ict_dir)
 
 
 def _bounds(M: int) -> tuple[np.ndarray, np.ndarray]:
@@ -300,24 +304,30 @@ def _bounded_step(B: np.ndarray, effort: float, r: np.ndarray, x0: np.ndarray) -
     return lsq_linear(A, b, bounds=(np.minimum(lo - x0, 0.0), np.maximum(hi - x0, 0.0) + 1e-12), method="bvls").x
 
 
-def _chord(statics, B, effort, x, target, rounds):
-    """Static chord refinement from controls x (M + 2,) towards target FDPs (K, 3) [m]: the
-    converged static shape at x, its residual, a bounded correction through B; a round that does
-    not lower the FDP RMS ends it. Returns (best x, FDP RMS [m] per evaluation)."""
+def _refine_static(statics, B, effort, x, target, rounds):
+    """Static refinement from controls x (M + 2,) towards target FDPs (K, 3) [m]: the converged
+    static shape at x, its residual, a bounded correction through the linear model, which each
+    round updates by Broyden's rank-one rule with the step it saw (the response is not linear); a
+    step that does not lower the FDP RMS is not taken (the next one starts from the corrected
+    model). Returns (best x, FDP RMS [m] per evaluation, the FDPs (K, 3) [m] at the best x)."""
     lo, hi = _bounds(B.shape[1] - 2)
     M = B.shape[1] - 2
+    B = B.copy()
     P = statics(x[:M], x[M:])
     err = float(np.sqrt(np.mean(np.sum((P - target) ** 2, axis=1))))
     hist = [err]
     for _ in range(rounds):
         x1 = np.clip(x + _bounded_step(B, effort, (target - P).ravel(), x), lo, hi)
+        dx = x1 - x
+        if not np.any(np.abs(dx) > 1e-6):
+            break
         P1 = statics(x1[:M], x1[M:])
         e1 = float(np.sqrt(np.mean(np.sum((P1 - target) ** 2, axis=1))))
         hist.append(e1)
-        if e1 >= err:
-            break
-        x, P, err = x1, P1, e1
-    return x, hist
+        B += np.outer((P1 - P).ravel() - B @ dx, dx) / float(dx @ dx)
+        if e1 < err:  # else stay, with the model corrected by what the step showed
+            x, P, err = x1, P1, e1
+    return x, hist, P
 
 
 class _Statics:
@@ -349,7 +359,7 @@ class _Statics:
         return _fdp_of(sim.fr, self.idx, prev)
 
 
-def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, effort: float = 1e-3,
+def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 3, effort: float = 1e-3,
                 tol: float = 2e-5, max_frames: int = 40, progress=None, rebuild: bool = False) -> ArkitTable:
     """The :class:`ArkitTable` of ``sim``'s head (see the module docstring); cached.
 
@@ -362,7 +372,7 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
         cache: A folder (the head's build folder): ``arkit_table.npz`` there is read when its key
             matches and written after a build. None: no cache.
         ict_dir: A folder searched first for the ICT-FaceKit OBJs.
-        refine: Rounds of the static chord refinement (0..10).
+        refine: Rounds of the static refinement (0..10).
         effort: Weight of the controls' size in the least squares [m per unit control].
         tol, max_frames: Convergence of each static shape (:func:`~facewarp.static_surface`).
         progress: Optional ``progress(done, total, name)``.
@@ -446,6 +456,7 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
     residual = np.full(n, np.nan)
     size = np.full(n, np.nan)
     targets = np.zeros((n, len(fdp_ids), 3))
+    reached = np.zeros((n, len(fdp_ids), 3))
     reasons = {k: v for k, v in ARKIT_OUT_OF_REACH.items()}
     per_shape, linear = {}, {}
     for i, name in enumerate(ARKIT_NAMES):
@@ -461,8 +472,9 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
             reasons[name] = "no ICT-FaceKit shape data found (see facewarp.ict_shape_dirs)"
             continue
         t = T_head[name]
-        x, hist = _chord(statics, B, effort, np.clip(solve(t.ravel(), np.zeros(M + 2)), lo, hi), rest + t, refine)
+        x, hist, P = _refine_static(statics, B, effort, np.clip(solve(t.ravel(), np.zeros(M + 2)), lo, hi), rest + t, refine)
         acts[i], jaws[i], solved[i], residual[i] = x[:M], x[M:], True, min(hist)
+        reached[i] = P - rest
         per_shape[name] = [round(h * 1e3, 3) for h in hist]
         tick(name)
     sim.reset()
@@ -474,8 +486,121 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 2, 
             "from_cache": False}
     table = ArkitTable(names=tuple(ARKIT_NAMES), muscle_names=list(sim.muscle_names), activations=acts, jaw=jaws,
                        solved=solved, residual_m=residual, target_rms_m=size, fdp_ids=fdp_ids,
-                       rest_fdp=rest, targets=targets, basis=B, reasons=reasons, key=key, info=info)
+                       rest_fdp=rest, targets=targets, reached=reached, basis=B, reasons=reasons, key=key, info=info)
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
         table.save(cache / ARKIT_TABLE_FILE)
     return table
+
+
+# ---------------------------------------------------------------------- driving
+def head_rotation_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    """The head's rotation (3, 3) float64 from ARKit's HeadYaw, HeadPitch, HeadRoll [rad]:
+    ``R = Ry(yaw) Rx(pitch) Rz(roll)`` in the head frame (y up, +z forward; yaw about y, pitch about
+    x, roll about z)."""
+    cy, sy, cp, sp, cr, sr = (math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch), math.cos(roll),
+                              math.sin(roll))
+    Ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
+    Rz = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
+    return Ry @ Rx @ Rz
+
+
+def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, refine: bool = False,
+                mode: str = "offline", unreachable_limit: float = 2e-3, **options):
+    """Play an :class:`~facewarp.ArkitTrack` on ``sim`` through its head's :class:`ArkitTable`
+    (what :func:`~facewarp.drive` does for an ArkitTrack).
+
+    Each frame's weights become controls by :meth:`ArkitTable.controls` (blend in activation
+    space, clamp); with ``refine=True`` the frame is instead tracked by a :class:`~facewarp.Tracker`
+    towards its blended target FDPs (:meth:`ArkitTable.targets_for`), starting from the previous
+    frame. The track's head rotation, when it has one, drives :meth:`~facewarp.FaceSimulator.set_head_pose`
+    (:func:`head_rotation_matrix`, no translation). The per-frame error is each head FDP's distance
+    from its blended target (head frame).
+
+    Returns:
+        A :class:`~facewarp.DriveResult` (``names``: the table's FDP ids; ``head_poses``: (T, 4, 4)
+        when the track has head rotation).
+    """
+    from ..core.checks import check_number
+    from ..sim.play import PlayStats, _as_sink
+    from .inverse import DriveResult, Tracker
+
+    if not isinstance(table, ArkitTable):
+        raise InputError("table: an ArkitTrack is driven through the head's ARKit table "
+                         f"(fw.arkit_table(sim, cache=BUILD)), got {type(table).__name__}")
+    if list(table.muscle_names) != list(sim.muscle_names) or table.key_rig != rig_key(sim):
+        raise InputError("table: built for another head (or solver) than this simulator's; "
+                         "build it with fw.arkit_table(sim, cache=BUILD)")
+    if abs(track.fps - sim.fps) > 1e-6 * sim.fps:
+        raise InputError(f"track: {track.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
+                         f"make the FaceSimulator with fps={track.fps:g}")
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(k, frame_count), got {type(progress).__name__}")
+    if not isinstance(refine, (bool, np.bool_)):
+        raise InputError(f"refine: expected True or False, got {refine!r}")
+    if options and not refine:
+        raise InputError(f"{sorted(options)[0]}: a Tracker option, only with refine=True")
+    unreachable_limit = check_number("unreachable_limit", unreachable_limit, low=0.0, low_open=True)
+    nf = track.frames
+    A, J = table.controls(track.weights)
+    targets = table.targets_for(track.weights)
+    poses = None
+    if track.head_rotation is not None:
+        poses = np.tile(np.eye(4), (nf, 1, 1))
+        for k, (y, p, r) in enumerate(track.head_rotation):
+            poses[k, :3, :3] = head_rotation_matrix(y, p, r)
+    sinks = [_as_sink(s) for s in sinks]
+    _, idx = _head_fdps(sim.fr)
+    tracker = Tracker(sim, table.fdp_ids, mode=mode, **options) if refine else None
+    sim.reset()
+    if tracker is not None:
+        tracker.reset_tracking()
+    for s in sinks:
+        s.start(sim, nf)
+    M = len(sim.muscle_names)
+    acts = np.zeros((nf, M), np.float32)
+    jaw = np.zeros((nf, 2), np.float32)
+    err = np.zeros((nf, len(table.fdp_ids)))
+    t0 = time.perf_counter()
+    stepping = 0.0
+    for k in range(nf):
+        s0 = time.perf_counter()
+        if poses is not None:
+            sim.set_head_pose(poses[k, :3, :3], np.zeros(3))
+        if tracker is None:
+            sim.set_activations(A[k])
+            sim.set_jaw(float(J[k, 0]), float(J[k, 1]))
+            sim.step()
+            acts[k], jaw[k] = sim.activations, sim.jaw_angles
+        else:
+            acts[k], jaw[k] = tracker.update(targets[k])
+        stepping += time.perf_counter() - s0
+        err[k] = np.linalg.norm(_fdp_of(sim.fr, idx, sim.surface(frame="head")) - targets[k], axis=1)
+        for s in sinks:
+            s.frame(sim, k, k / track.fps)
+        if progress:
+            progress(k, nf)
+    wall = time.perf_counter() - t0
+    stepping = max(stepping, 1e-9)
+    rms = np.sqrt(np.mean(err**2, axis=1))
+    notes = [f"{n}: out of reach ({table.reasons[n]}); weight up to {track.weights[:, i].max():.2f}"
+             for i, n in enumerate(table.names) if n in table.reasons and track.weights[:, i].max() > 0]
+    bad = np.where(err > unreachable_limit)
+    for i in np.unique(bad[1]):
+        fr_k = bad[0][bad[1] == i]
+        notes.append(f"point {table.fdp_ids[i]}: {len(fr_k)} frame(s) off by more than "
+                     f"{unreachable_limit * 1e3:g} mm (worst {err[:, i].max() * 1e3:.2f} mm at frame "
+                     f"{int(np.argmax(err[:, i]))})")
+    steps = tracker.stats.steps if tracker is not None else nf
+    stats = PlayStats(frames=nf, seconds=nf / track.fps, wall_s=wall, simulation_wall_s=stepping,
+                      frames_per_second=nf / stepping, steps_per_second=steps * sim.substeps / stepping,
+                      realtime_factor=nf / track.fps / stepping, substeps=int(sim.substeps), dt_s=float(sim.dt),
+                      device=str(sim.device), jaw="arkit table", frame_stats=sim.stats.as_dict(), mujoco_events=[])
+    for s in sinks:
+        s.finish(sim, stats)
+    return DriveResult(fps=track.fps, names=list(table.fdp_ids), muscle_names=list(sim.muscle_names),
+                       activations=acts, jaw=jaw, error=err, rms=rms, unreachable=notes, seconds=stepping,
+                       frames_per_second=nf / stepping, mode="arkit-tracker" if refine else "arkit-table",
+                       stats=tracker.stats.as_dict() if tracker is not None else {"frames": nf},
+                       head_poses=poses)

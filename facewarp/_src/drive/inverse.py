@@ -343,7 +343,10 @@ def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offli
     Args:
         sim: The :class:`~facewarp.FaceSimulator` (implicit solver), at the track's frame rate.
         track: A :class:`~facewarp.MarkerTrack` (points in the head's frame, NaN where missing).
-        table: For an :class:`~facewarp.ArkitTrack`: the head's ARKit table (not yet wired: refused).
+        table: For an :class:`~facewarp.ArkitTrack`: the head's :class:`~facewarp.ArkitTable`
+            (:func:`~facewarp.arkit_table`); the track is then played through it
+            (:func:`.arkit.drive_arkit`: ``refine=True`` tracks each frame towards its blended
+            target FDPs, the other keywords as here; the head rotation drives the head pose).
         sinks: :class:`~facewarp.Sink` objects or callables ``f(sim, k, t)``, called after each frame.
         progress: Optional ``progress(k, frame_count)`` after each frame.
         mode: ``"offline"`` or ``"realtime"`` (:class:`Tracker`).
@@ -364,8 +367,12 @@ def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offli
     if not isinstance(sim, FaceSimulator):
         raise InputError(f"sim: expected a facewarp FaceSimulator, got {type(sim).__name__}")
     if isinstance(track, ArkitTrack):
-        raise InputError("track: an ArkitTrack needs the head's ARKit table, which this build does not have yet; "
-                         "give a MarkerTrack")
+        from .arkit import drive_arkit
+
+        if head_poses is not None:
+            raise InputError("head_poses: not for an ArkitTrack (its head_rotation drives the head pose)")
+        return drive_arkit(sim, track, table, sinks=sinks, progress=progress, mode=mode,
+                           unreachable_limit=unreachable_limit, **options)
     if not isinstance(track, MarkerTrack):
         raise InputError(f"track: expected a facewarp MarkerTrack, got {type(track).__name__}")
     if table is not None:
