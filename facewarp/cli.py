@@ -119,8 +119,8 @@ class _Progress:
 class _FrameBar:
     """A tqdm bar on stderr over simulated frames, made at the first frame (the count is known then)."""
 
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
+    def __init__(self, enabled: bool, *, desc: str = "simulate", unit: str = "frame"):
+        self.enabled, self.desc, self.unit = enabled, desc, unit
         self.bar = None
 
     def __call__(self, k: int, n: int):
@@ -130,7 +130,7 @@ class _FrameBar:
         if self.bar is None:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=n, desc="simulate", unit="frame", file=sys.stderr, disable=None, leave=False)
+            self.bar = tqdm(total=n, desc=self.desc, unit=self.unit, file=sys.stderr, disable=None, leave=False)
         self.bar.update(1)
 
     def close(self):
@@ -495,19 +495,25 @@ def cmd_drive(args):
     from ._src.jobs.drive import drive_files
 
     bar = _FrameBar(not args.json)
+    table_bar = _FrameBar(not args.json, desc="ARKit table (once per build)", unit="shape")
     try:
         rep = drive_files(args.build, args.out, markers=args.markers, arkit=args.arkit, mediapipe=args.mediapipe,
                           map=args.map, units=args.units, fps=args.fps, rigid=not args.no_rigid, device=args.device,
-                          progress=bar)
+                          progress=bar, table_progress=lambda done, total, name: table_bar(done, total))
     finally:
+        table_bar.close()
         bar.close()
     lines = [f"drove {args.build} from {rep['source']} ({rep['kind']}): {rep['frames']} frames at {rep['fps']:g} fps "
              f"in {rep['seconds']:.1f} s on {rep['device']}"]
     e = rep.get("error_mm")
     if e and e.get("rms") is not None:
         worst = max(((v, k) for k, v in e["per_point_rms"].items() if v is not None), default=(None, None))
-        lines.append(f"  distance simulated to target: RMS {e['rms']:.2f} mm, max {e['max']:.2f} mm"
+        what = "simulated to target" if rep["kind"] == "markers" else "head FDPs to the blended ARKit targets"
+        lines.append(f"  distance {what}: RMS {e['rms']:.2f} mm, max {e['max']:.2f} mm"
                      + (f" (worst point {worst[1]}: RMS {worst[0]:.2f} mm)" if worst[1] is not None else ""))
+    if rep.get("table"):
+        lines.append(f"  ARKit table {rep['table']['file']}" + (" (cached)" if rep["table"]["from_cache"] else
+                                                                 " (built now, cached for later runs)"))
     hm = rep.get("head_motion")
     if hm:
         lines.append(f"  head motion removed by a fit of {len(hm['stable_points'])} stable points"

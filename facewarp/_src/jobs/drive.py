@@ -18,7 +18,6 @@ output is the USD animation alone.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import time
@@ -30,6 +29,7 @@ from ..core.errors import InputError
 from ..core.fileio import atomic_write, write_json
 from ..core.limits import MAX_FPS, check_memory, estimate_sim_bytes
 from ..drive.formats import _VERTEX, load_arkit, load_markers
+from ..drive.arkit import ARKIT_TABLE_FILE
 from ..drive.rigid import STABLE_POINTS, remove_head_motion
 from ..drive.tracks import ArkitTrack, MarkerTrack
 from ..physics.face_rig import load_face_rig
@@ -41,7 +41,10 @@ from ..sim.simulator import FaceSimulator
 from .animation import USD_SUFFIXES, UsdAnimation, check_usd_path
 from .checks import check_out_dir, make_out_dir
 
-__all__ = ["MAX_DRIVE_FRAMES", "drive_files", "load_performance"]
+__all__ = ["MAX_DRIVE_FRAMES", "USD_NAME", "drive_files", "load_performance"]
+
+USD_NAME = "animation.usdc"
+"""The USD animation ``drive`` writes into its output folder."""
 
 MAX_DRIVE_FRAMES = 100_000
 """Most frames one ``drive`` run keeps in memory (as ``simulate``'s :data:`MAX_FRAMES`)."""
@@ -147,7 +150,7 @@ def _activation_picture(path: Path, times, muscles, A, J) -> None:
 
 
 def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=None, units=None,  # noqa: A002
-                fps=None, rigid: bool = True, device: str = "cpu", progress=None) -> dict:
+                fps=None, rigid: bool = True, device: str = "cpu", progress=None, table_progress=None) -> dict:
     """Drive the face of a ``build`` output from a performance file and write the results.
 
     Args:
@@ -162,6 +165,8 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
             taken as already in the head's frame, and the report says so).
         device: Warp device.
         progress: ``f(k, n)`` per frame.
+        table_progress: ``f(done, total, name)`` while the head's ARKit table is built (the first
+            ARKit run on a build: minutes; later runs read ``arkit_table.npz`` from the build folder).
 
     Returns:
         The report (what ``report.json`` holds, less the per-frame arrays).
@@ -175,6 +180,7 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     if not usd_out and track.frames > MAX_DRIVE_FRAMES:
         raise InputError(f"{track.source}: {track.frames} frames, more than {MAX_DRIVE_FRAMES} per run")
     fr = load_face_rig(build)
+    fr_dir = Path(build) if Path(build).is_dir() else Path(build).parent
     check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), track.frames, len(fr.head_vertices)),
                  f"{track.source}: {track.frames} frames of a head of {len(fr.nodes)} nodes")
     motion = None
@@ -193,11 +199,12 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     if isinstance(track, ArkitTrack):
         from ..drive.arkit import arkit_table
 
-        table = arkit_table(sim, cache=Path(build) if Path(build).is_dir() else Path(build).parent)
+        step = table_progress or (lambda done, total, name: None)
+        table = arkit_table(sim, cache=fr_dir, progress=step)
     from ..drive.inverse import drive
 
     keep = None if usd_out else FrameRecorder()
-    usd_path = out if usd_out else out / "animation.usdc"
+    usd_path = out if usd_out else out / USD_NAME
     if not usd_out:
         make_out_dir(out)
     anim = UsdAnimation(usd_path, sim)
@@ -213,29 +220,34 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     A = np.asarray(result.activations, dtype=np.float64)
     J = np.asarray(result.jaw, dtype=np.float64)
     times = np.arange(len(A)) / track.fps
+    names = list(result.names)
+    err = np.asarray(result.error, dtype=np.float64)
+    ok = np.isfinite(err)
     rep = {
         "build": str(build), "source": track.source, "kind": "markers" if isinstance(track, MarkerTrack) else "arkit",
-        "frames": int(len(A)), "fps": track.fps, "device": str(sim.device),
-        "muscles": list(sim.muscle_names), "notes": notes + list(result.unreachable),
-        "frames_per_second": float(result.frames_per_second), "seconds": None, "files": [],
+        "frames": int(len(A)), "fps": track.fps, "device": str(sim.device), "mode": result.mode,
+        "frames_per_second": float(result.frames_per_second), "muscles": list(sim.muscle_names),
+        "points": names,
+        "error_mm": {"rms": float(np.sqrt(np.mean(err[ok] ** 2)) * 1e3) if ok.any() else None,
+                     "max": float(err[ok].max() * 1e3) if ok.any() else None,
+                     "per_point_rms": {n: (float(np.sqrt(np.nanmean(err[:, k] ** 2)) * 1e3) if ok[:, k].any() else None)
+                                       for k, n in enumerate(names)}},
+        "notes": notes + list(result.unreachable), "seconds": None, "files": [],
     }
+    if isinstance(track, ArkitTrack):
+        rep["error_is"] = "distance of each head FDP from its blended ARKit target (the table's shapes, head frame)"
+        rep["out_of_reach"] = table.out_of_reach()
+        rep["table"] = {"file": str(fr_dir / ARKIT_TABLE_FILE), "from_cache": bool(table.info.get("from_cache"))}
     report_full = dict(rep)
-    if isinstance(track, MarkerTrack):
-        err = np.asarray(result.error, dtype=np.float64)
-        ok = np.isfinite(err)
-        rep["points"] = list(track.names)
-        rep["error_mm"] = {"rms": float(np.sqrt(np.mean(err[ok] ** 2)) * 1e3) if ok.any() else None,
-                           "max": float(err[ok].max() * 1e3) if ok.any() else None,
-                           "per_point_rms": {n: (float(np.sqrt(np.nanmean(err[:, k] ** 2)) * 1e3)
-                                                 if ok[:, k].any() else None) for k, n in enumerate(track.names)}}
-        report_full.update(rep)
-        report_full["error_per_frame_mm"] = [[None if not np.isfinite(v) else round(float(v) * 1e3, 4) for v in row]
-                                             for row in err]
+    report_full["error_per_frame_mm"] = [[None if not np.isfinite(v) else round(float(v) * 1e3, 4) for v in row]
+                                         for row in err]
     if motion is not None:
         rep["head_motion"] = {"stable_points": list(motion.points), "frames_held": int(motion.held.sum())}
         report_full["head_motion"] = motion.to_dict()
-    if isinstance(track, ArkitTrack) and table is not None and hasattr(table, "out_of_reach"):
-        rep["out_of_reach"] = report_full["out_of_reach"] = table.out_of_reach()
+    elif result.head_poses is not None:  # ARKit's head rotation, played as the head pose
+        R = np.asarray(result.head_poses)[:, :3, :3]
+        report_full["head_motion"] = {"yaw_pitch_roll_deg": np.round(np.degrees(track.head_rotation), 3).tolist(),
+                                      "rotation": np.round(R, 6).tolist()}
     if usd_out:
         rep["files"] = [str(out)]
     else:
@@ -243,10 +255,16 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         save_frames_npz(out / "frames.npz", frames)
         _write_activations_csv(out / "activations.csv", times, list(sim.muscle_names), A, J)
         _activation_picture(out / "activations.png", times, list(sim.muscle_names), A, J)
-        written = [out / "activations.csv", out / "frames.npz", usd_path, out / "report.json", out / "activations.png"]
         if isinstance(track, MarkerTrack):
-            _picture(out / "drive.png", frames, track.names, track.positions, device)
-            written.append(out / "drive.png")
+            targets = track.positions
+        else:  # the blended target FDPs, moved by the head pose as the simulated face was
+            targets = table.targets_for(track.weights)
+            if result.head_poses is not None:
+                H = np.asarray(result.head_poses)
+                targets = np.einsum("tij,tkj->tki", H[:, :3, :3], targets) + H[:, None, :3, 3]
+        _picture(out / "drive.png", frames, names, targets, device)
+        written = [out / "activations.csv", out / "frames.npz", usd_path, out / "report.json", out / "drive.png",
+                   out / "activations.png"]
         rep["files"] = report_full["files"] = [str(w) for w in written]
     rep["seconds"] = report_full["seconds"] = round(time.perf_counter() - t0, 3)
     if not usd_out:
