@@ -518,7 +518,10 @@ def cmd_drive(args):
     if hm:
         lines.append(f"  head motion removed by a fit of {len(hm['stable_points'])} stable points"
                      + (f" ({hm['frames_held']} frames held the pose before them)" if hm["frames_held"] else ""))
-    lines += [f"  note: {n}" for n in rep.get("notes", [])[:8]]
+    notes = rep.get("notes", [])
+    lines += [f"  note: {n}" for n in notes[:6]]
+    if len(notes) > 6:
+        lines.append(f"  ... {len(notes) - 6} more notes in report.json")
     lines.append("  wrote " + ", ".join(rep["files"]))
     _emit(args, rep, lines)
 
