@@ -70,10 +70,24 @@ def test_drive_markers_end_to_end(built, take, tmp_path, capsys):
     zyg = [i for i, n in enumerate(rep["muscles"]) if n.startswith("zygomatic_major")]
     assert A[-1, zyg].max() > 0.1, A[-1]
     assert rep["error_mm"]["rms"] < 2.0, rep["error_mm"]
+    # a USD file alone, from a CSV of the same take in metres with a frame column
+    csv_path = tmp_path / "take.csv"
+    P = truth.positions
+    lines = ["frame," + ",".join(f"{n}_{a}" for n in NAMES for a in "xyz")]
+    lines += [f"{t}," + ",".join(repr(float(v)) for v in P[t].reshape(-1)) for t in range(T)]
+    csv_path.write_text("\n".join(lines) + "\n")
+    usd = tmp_path / "alone.usda"
+    code = main(["--json", "drive", str(built), "--markers", str(csv_path), "--fps", "30", "--out", str(usd)])
+    o, err = capsys.readouterr()
+    assert code == 0, err
+    rep = json.loads(o)
+    assert rep["files"] == [str(usd)] and usd.is_file() and rep["frames"] == T
+    assert "#usda" in usd.read_text()[:20]
 
 
 @pytest.mark.parametrize("case", ["empty", "truncated", "nan", "columns", "units", "vertex", "map_with_arkit",
-                                  "two_inputs", "no_input", "missing", "mediapipe_csv"])
+                                  "two_inputs", "no_input", "missing", "mediapipe_csv", "arkit_empty", "arkit_columns",
+                                  "mediapipe_truncated", "no_build"])
 def test_drive_bad_input(built, take, tmp_path, capsys, case):
     path, _ = take
     bad = tmp_path / "bad.json"
@@ -106,6 +120,17 @@ def test_drive_bad_input(built, take, tmp_path, capsys, case):
         bad = tmp_path / "nothing.json"
     elif case == "mediapipe_csv":
         argv = ["drive", str(built), "--mediapipe", str(tmp_path / "x.csv")]
+    elif case == "arkit_empty":
+        (tmp_path / "x.csv").write_text("")
+        argv = ["drive", str(built), "--arkit", str(tmp_path / "x.csv")]
+    elif case == "arkit_columns":
+        (tmp_path / "x.csv").write_text("Timecode,BlendShapeCount,EyeBlinkLeft\n00:00:00:00.000,1,0.5\n")
+        argv = ["drive", str(built), "--arkit", str(tmp_path / "x.csv")]
+    elif case == "mediapipe_truncated":
+        (tmp_path / "x.json").write_text('[{"timestamp_ms": 0, "face_blendshapes": [[{"category_name": "_neu')
+        argv = ["drive", str(built), "--mediapipe", str(tmp_path / "x.json")]
+    elif case == "no_build":
+        argv = ["drive", str(tmp_path), "--markers", str(path)]
     out = tmp_path / "o"
     argv = (argv or ["drive", str(built), "--markers", str(bad)]) + ["--out", str(out)]
     code = main(argv)
