@@ -297,14 +297,18 @@ def test_mediapipe_frame_without_face_holds(tmp_path):
     np.testing.assert_array_equal(tr.weights[4], tr.weights[3])
 
 
+def _scores(frame, score):
+    return dict(frame, face_blendshapes=[[dict(c, score=score) for c in frame["face_blendshapes"][0]]])
+
+
 @pytest.mark.parametrize("edit, words", [
     (lambda F: [], ["expected a list of frames"]),
     (lambda F: [dict(F[0], face_blendshapes=[F[0]["face_blendshapes"][0][:30]])] + F[1:], ["no category", "missing"]),
     (lambda F: [dict(F[0], face_blendshapes=[F[0]["face_blendshapes"][0] + [{"category_name": "eyeRoll", "score": 0}]])]
      + F[1:], ["unknown category 'eyeRoll'"]),
-    (lambda F: F[:2] + [dict(F[2], face_blendshapes=[[dict(c, score=1.5) for c in F[2]["face_blendshapes"][0]]])] + F[3:],
+    (lambda F: F[:2] + [_scores(F[2], 1.5)] + F[3:],
      ["frame 2", "outside [0, 1]"]),
-    (lambda F: F[:2] + [dict(F[2], face_blendshapes=[[dict(c, score="x") for c in F[2]["face_blendshapes"][0]]])] + F[3:],
+    (lambda F: F[:2] + [_scores(F[2], "x")] + F[3:],
      ["frame 2", "must be a number"]),
     (lambda F: [dict(f, face_blendshapes=[]) for f in F], ["no frame has a face"]),
     (lambda F: F[::-1], ["do not increase"]),

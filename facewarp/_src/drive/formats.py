@@ -366,7 +366,8 @@ def _markers_csv(path: Path, text: str):
         base = trio[0][:-2]
         want = [f"{base}_{a}" for a in "xyz"]
         if not trio[0].lower().endswith("_x") or [c.lower() for c in trio] != [w.lower() for w in want]:
-            raise InputError(f"{path}: columns {', '.join(trio)}: expected {', '.join(want) if base else 'NAME_x, NAME_y, NAME_z'}")
+            expected = ", ".join(want) if base else "NAME_x, NAME_y, NAME_z"
+            raise InputError(f"{path}: columns {', '.join(trio)}: expected {expected}")
         if base in labels:
             raise InputError(f"{path}: marker {base!r} appears twice")
         labels.append(base)
