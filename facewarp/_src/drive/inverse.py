@@ -126,6 +126,8 @@ class Tracker:
             this RMS [m] (default 1e-4).
         refresh_every: A fresh sensitivity every this many frames (default 10 offline, 60 real-time).
         refresh_tolerance: ... or when a step misses its prediction by more than this RMS [m] (default 3e-4).
+        corrections: Iterations of a fresh sensitivity towards the exact tangent (default 1 offline,
+            0 real-time; :func:`.sensitivity.step_sensitivity`).
 
     Raises:
         InputError: a bad argument (one line naming it), unknown point names (all named).
@@ -133,7 +135,8 @@ class Tracker:
 
     def __init__(self, sim, points, *, mode: str = "offline", smoothness: float = 0.02, effort: float = 1e-3,
                  robust: str = "huber", robust_scale: float = 2e-3, refine: int | None = None,
-                 refine_tolerance: float = 1e-4, refresh_every: int | None = None, refresh_tolerance: float = 3e-4):
+                 refine_tolerance: float = 1e-4, refresh_every: int | None = None, refresh_tolerance: float = 3e-4,
+                 corrections: int | None = None):
         from ..sim.simulator import FaceSimulator
 
         if not isinstance(sim, FaceSimulator):
@@ -153,6 +156,8 @@ class Tracker:
         self.refresh_every = check_int("refresh_every", (10 if offline else 60) if refresh_every is None
                                        else refresh_every, low=1, high=1_000_000)
         self.refresh_tolerance = check_number("refresh_tolerance", refresh_tolerance, low=0.0)
+        self.corrections = check_int("corrections", (1 if offline else 0) if corrections is None else corrections,
+                                     low=0, high=10)
         self.sim = sim
         self.readout = PointReadout(sim.fr, points)
         self.names = list(self.readout.names)
@@ -186,18 +191,45 @@ class Tracker:
         """The simulated points now [m], shape (K, 3), float64, head frame."""
         return self.readout.points(self.sim.positions(), self.sim.jaw_angles)
 
-    def _jacobian(self, start, u, X) -> np.ndarray:
+    def _jacobian(self, start, u, X, corrections=None) -> np.ndarray:
         t0 = time.perf_counter()
+        corrections = self.corrections if corrections is None else corrections
         a, j = (u * self._scale)[:self.M], (u * self._scale)[self.M:]
         solve = None
         if self.mode == "realtime":
             solve = getattr(self.sim.solver, "_solve0", None)  # the solver's own factorisation, when it has one
-        dX, _ = step_sensitivity(self.sim, start, a.astype(np.float32), j.astype(np.float32), X, solve=solve)
+        dX, _ = step_sensitivity(self.sim, start, a.astype(np.float32), j.astype(np.float32), X, solve=solve,
+                                  corrections=corrections)
         J = self.readout.jacobian(dX, j) * self._scale[None, :]
         self.stats.jacobians += 1
         self.stats.jacobian_seconds += time.perf_counter() - t0
         self._since = 0
         return J
+
+    def sensitivity(self, activations, jaw) -> np.ndarray:
+        """Step the simulator one frame to the controls and return how the points move per unit
+        of each control at the step's solution (:func:`.sensitivity.step_sensitivity`).
+
+        Args:
+            activations: (M,) in [0, 1] (as :meth:`~facewarp.FaceSimulator.set_activations`).
+            jaw: (opening, side) [rad] (as :meth:`~facewarp.FaceSimulator.set_jaw`).
+
+        The sensitivity is taken with two corrections towards the exact tangent (:func:`.sensitivity.step_sensitivity`).
+
+        Returns:
+            (K, 3, M + 2) float64: dp/da [m per unit activation] for the M muscles, then dp/d(opening)
+            and dp/d(side) [m/rad].
+        """
+        sim = self.sim
+        a = sim.activation_vector(activations)
+        j = check_array("jaw", jaw, shape=(2,))
+        sim.set_jaw(float(j[0]), float(j[1]))
+        self._snap.save()
+        sim.set_activations(a)
+        sim.step()
+        u = np.r_[sim.activations, sim.jaw_angles].astype(np.float64) / self._scale
+        J = self._jacobian(self._snap.start, u, sim.positions(), corrections=2) / self._scale[None, :]
+        return J.reshape(self.count, 3, self.M + 2)
 
     # ------------------------------------------------------------------------------ the solve
     def _lsq(self, J, p_b, u_b, u_prev, targets, visible) -> np.ndarray:

@@ -171,7 +171,7 @@ def _factorize(A, backend: str):
     return factor(A, backend)
 
 
-def step_sensitivity(sim, start, activations, jaw, X, *, solve=None) -> np.ndarray:
+def step_sensitivity(sim, start, activations, jaw, X, *, solve=None, corrections: int = 0) -> np.ndarray:
     """dx/du of one implicit step of ``sim`` from the State ``start`` to its solution ``X`` at the
     controls (``activations``, ``jaw``) (module doc).
 
@@ -181,6 +181,9 @@ def step_sensitivity(sim, start, activations, jaw, X, *, solve=None) -> np.ndarr
         activations: (M,) the step's activations; jaw: (2,) [rad] its jaw angles.
         X: The step's solution [m], (p, 3) float64 (the simulator's positions after the step).
         solve: A factorisation of the step's Hessian to reuse (``b -> H^-1 b``); default: made here.
+        corrections: Iterations towards the exact tangent: the PSD Hessian lacks the negative
+            curvature of the element energies, so each correction takes the gradient's finite
+            difference along the current ``(dx/du, e_u)`` and back-substitutes its residual again.
 
     Returns:
         ``(dX, solve)``: dX (M + 2, p, 3) float64 [m per unit activation, m per rad], and the
@@ -206,7 +209,7 @@ def step_sensitivity(sim, start, activations, jaw, X, *, solve=None) -> np.ndarr
     scratch = _scratch_state(sim)
     X = np.asarray(X, np.float64)
 
-    def grad_at(u):
+    def grad_at(u, X=X):
         scratch.assign(start)
         sim.control.activations.assign(u[:M].astype(np.float32))
         sim.control.jaw_angles.assign(u[M:].astype(np.float32))
@@ -238,12 +241,34 @@ def step_sensitivity(sim, start, activations, jaw, X, *, solve=None) -> np.ndarr
             dg = (g - g0) / step
             d = -np.asarray(solve(dg.ravel())).reshape(-1, 3)
             d[fixed] = (x[fixed] - x0[fixed]) / step
+            if corrections:  # towards the exact tangent: H_psd preconditions the true dg/dx
+                d = _correct(lambda v: (grad_at(u, X + step * v)[0] - g0) / step, solve, d, fixed, corrections)
             dX[i] = d
     finally:
         wp.copy(solver.targets, saved_targets)
         wp.copy(sim.control.activations, saved_a)
         wp.copy(sim.control.jaw_angles, saved_j)
     return dX, solve
+
+
+def _correct(residual, solve, d, fixed, corrections: int) -> np.ndarray:
+    """Preconditioned fixed-point iterations ``d <- d - H^-1 r(d)`` on the tangent equation's residual
+    ``r(d)`` (the gradient's change along ``(d, e_u)``), keeping the ``d`` of the smallest residual
+    (the PSD Hessian may over-correct a soft mode: an iteration that does not lower it ends them)."""
+    best, r_best = d, None
+    for k in range(corrections + 1):
+        r = residual(d)
+        r[fixed] = 0.0
+        nr = float(np.linalg.norm(r))
+        if r_best is not None and not nr < r_best:
+            return best
+        best, r_best = d, nr
+        if k == corrections:
+            break
+        dd = -np.asarray(solve(r.ravel())).reshape(-1, 3)
+        dd[fixed] = 0.0
+        d = d + dd
+    return best
 
 
 def _scratch_state(sim):

@@ -1,0 +1,170 @@
+"""The inverse solve of issue 24: ``fw.Tracker`` and ``fw.drive`` (activations and jaw from skin points).
+
+Small level-0 cases, a few frames each: the step's sensitivity against finite differences of full
+simulated steps, a round trip (controls simulated, their FDPs fed back, the face recovered), missing
+points and outliers, bad inputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import facewarp as fw
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return fw.build_face(fw.default_template(0))
+
+
+@pytest.fixture(scope="module")
+def fdps(rig):
+    return [str(k) for k in rig.fdp_ids]
+
+
+def _smooth_controls(rng, frames: int, muscles: int):
+    """Smooth random activations (a few muscles, piecewise linear through random knots) and jaw angles."""
+    knots = np.linspace(0, frames - 1, 3)
+    t = np.arange(frames)
+    on = rng.choice(muscles, size=6, replace=False)
+    A = np.zeros((frames, muscles))
+    for m in on:
+        A[:, m] = np.interp(t, knots, np.r_[0.0, rng.uniform(0.1, 0.6, 2)])
+    J = np.c_[np.interp(t, knots, np.r_[0.0, rng.uniform(0.02, 0.25, 2)]),
+              np.interp(t, knots, np.r_[0.0, rng.uniform(-0.04, 0.04, 2)])]
+    return A.astype(np.float32), J
+
+
+def _simulate(rig, A, J):
+    """The reference run through the public simulator: per frame the FDPs and the whole skin."""
+    sim = fw.FaceSimulator(rig)
+    P, S = [], []
+    for a, j in zip(A, J):
+        sim.set_activations(a)
+        sim.set_jaw(*j)
+        sim.step()
+        P.append(sim.fdp_points())
+        S.append(sim.surface())
+    return np.array(P), np.array(S)
+
+
+def test_sensitivity_matches_finite_differences(rig, fdps):
+    # the solver's sensitivity of one step (a factorised Hessian, one back-substitution per control)
+    # against full simulated steps from the same start with one control moved
+    sim = fw.FaceSimulator(rig, tolerance=1e-6)
+    tr = fw.Tracker(sim, fdps)
+    a0 = np.zeros(27, np.float32)
+    a0[[0, 12, 24]] = 0.3
+    j0 = np.array([0.12, 0.01])
+
+    def start():
+        sim.reset()
+        sim.set_activations(a0)
+        sim.set_jaw(*j0)
+        sim.step()
+
+    start()
+    a1, j1 = a0.copy(), j0.copy()
+    a1[[0, 12, 24]] = 0.4
+    j1[0] = 0.15
+    S = tr.sensitivity(a1, j1)  # (K, 3, 29)
+    p1 = sim.fdp_points()
+    assert np.allclose(p1, tr.current_points(), atol=1e-6)
+    u1 = np.r_[a1, j1]
+    for i, h in ((0, 0.03), (4, 0.03), (12, -0.03), (24, 0.03), (27, 0.005), (28, 0.005)):
+        u = u1.copy()
+        u[i] += h
+        start()
+        sim.set_activations(u[:27].astype(np.float32))
+        sim.set_jaw(*u[27:])
+        sim.step()
+        fd = (sim.fdp_points() - p1) / h
+        err = np.linalg.norm(S[:, :, i] - fd) / np.linalg.norm(fd)
+        cos = float(np.sum(S[:, :, i] * fd) / np.linalg.norm(S[:, :, i]) / np.linalg.norm(fd))
+        assert err < 0.15 and cos > 0.99, f"control {i}: relative error {err:.3f}, cosine {cos:.4f}"
+
+
+def test_round_trip_recovers_the_face(rig, fdps):
+    rng = np.random.default_rng()  # a new case each run
+    A, J = _smooth_controls(rng, 12, 27)
+    P, S = _simulate(rig, A, J)
+    sim = fw.FaceSimulator(rig)
+    rec = fw.FrameRecorder()
+    res = fw.drive(sim, fw.MarkerTrack(30.0, fdps, P, "round trip"), sinks=(rec,))
+    assert res.activations.shape == (12, 27) and res.jaw.shape == (12, 2) and res.error.shape == (12, 84)
+    assert res.activations.min() >= 0 and res.activations.max() <= 1
+    skin = np.sqrt(((rec.frames.points - S) ** 2).sum(-1).mean(-1))
+    assert res.rms.max() < 5e-4, f"FDP RMS per frame [mm]: {np.round(res.rms * 1e3, 3)}"
+    assert skin.max() < 5e-4, f"skin RMS per frame [mm]: {np.round(skin * 1e3, 3)}"
+    np.testing.assert_allclose(rec.frames.activations, res.activations)
+
+
+def test_missing_points_and_outliers(rig, fdps):
+    rng = np.random.default_rng()
+    A, J = _smooth_controls(rng, 10, 27)
+    P, S = _simulate(rig, A, J)
+    T = P.astype(np.float64) + rng.normal(0, 5e-4, P.shape)
+    T[rng.uniform(size=T.shape[:2]) < 0.3] = np.nan  # 30 % dropped per frame
+    out = rng.uniform(size=T.shape[:2]) < 0.05  # 5 % off by 2 cm
+    d = rng.normal(size=T.shape)
+    T[out] += 0.02 * (d / np.linalg.norm(d, axis=2, keepdims=True))[out]
+    T[3:8, 5] = np.nan  # one marker lost for a stretch
+    sim = fw.FaceSimulator(rig)
+    rec = fw.FrameRecorder()
+    res = fw.drive(sim, fw.MarkerTrack(30.0, fdps, T, "noisy"), sinks=(rec,))
+    assert np.isnan(res.error[3:8, 5]).all()
+    skin = np.sqrt(((rec.frames.points - S) ** 2).sum(-1).mean(-1))
+    assert skin.max() < 2e-3, f"skin RMS per frame [mm]: {np.round(skin * 1e3, 3)}"
+    jump = np.linalg.norm(np.diff(rec.frames.fdp_points - P, axis=0), axis=2).max()
+    assert jump < 2e-3, f"largest jump of an FDP's error between frames {jump * 1e3:.2f} mm"
+
+
+def test_tracker_update_steps_the_simulator(rig):
+    sim = fw.FaceSimulator(rig)
+    tr = fw.Tracker(sim, ["2.1", "8.3", "v100"], mode="realtime")
+    target = tr.current_points()
+    a, j = tr.update(target)
+    assert a.shape == (27,) and a.dtype == np.float32 and j.shape == (2,)
+    np.testing.assert_array_equal(a, sim.activations)
+    assert abs(sim.time - 1 / 30) < 1e-9
+    assert np.nanmax(tr.last_error) < 2e-4  # the rest is its own best match
+    a, j = tr.update(np.full((3, 3), np.nan))  # nothing present: the controls hold
+    np.testing.assert_allclose(a, sim.activations)
+
+
+@pytest.mark.parametrize("kwargs, msg", [
+    (dict(points=["2.1", "99.9", "vx"]), "'99.9', 'vx'"),
+    (dict(points=["2.1", "2.1"]), "more than once"),
+    (dict(points="2.1"), "points"),
+    (dict(points=["2.1"], mode="fast"), "mode"),
+    (dict(points=["2.1"], smoothness=-1), "smoothness"),
+    (dict(points=["2.1"], robust="cauchy"), "robust"),
+])
+def test_tracker_rejects_bad_arguments(rig, kwargs, msg):
+    sim = fw.FaceSimulator(rig)
+    with pytest.raises(fw.InputError, match=msg) as e:
+        fw.Tracker(sim, **kwargs)
+    assert "\n" not in str(e.value)
+
+
+def test_drive_rejects_bad_inputs(rig):
+    sim = fw.FaceSimulator(rig)
+    track = fw.MarkerTrack(30.0, ["2.1"], np.zeros((2, 1, 3)))
+    with pytest.raises(fw.InputError, match="sim"):
+        fw.drive("sim", track)
+    with pytest.raises(fw.InputError, match="track"):
+        fw.drive(sim, np.zeros((2, 1, 3)))
+    with pytest.raises(fw.InputError, match="fps=25"):
+        fw.drive(sim, fw.MarkerTrack(25.0, ["2.1"], np.zeros((2, 1, 3))))
+    with pytest.raises(fw.InputError, match="points"):
+        fw.drive(sim, fw.MarkerTrack(30.0, ["nose"], np.zeros((2, 1, 3))))
+    with pytest.raises(fw.InputError, match="sinks"):
+        fw.drive(sim, track, sinks=(3,))
+    tr = fw.Tracker(sim, ["2.1"])
+    with pytest.raises(fw.InputError, match="targets"):
+        tr.update(np.zeros((2, 3)))
+    with pytest.raises(fw.InputError, match="targets"):
+        tr.update(np.full((1, 3), np.inf))
+    with pytest.raises(fw.InputError, match="implicit"):
+        fw.Tracker(fw.FaceSimulator(rig, solver="verlet"), ["2.1"])
