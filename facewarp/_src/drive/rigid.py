@@ -7,8 +7,10 @@ Stable points (:data:`STABLE_POINTS`, MPEG-4 FDPs that sit on skin over bone and
 the model moves much): the forehead at the hairline (11.1, 11.2, 11.3), the nose bridge (9.6, 9.7
 upper edge of the nose bone, 9.12 its middle lower edge) and the ear roots (10.9, 10.10 upper and
 10.7, 10.8 lower contact of ear and face). Brows, eye corners, cheeks and anything on the lips or
-jaw move with the expression and are left out. A take may name its own stable set (``points=``),
-e.g. head-band markers given as ``v<index>`` vertices.
+jaw move with the expression and are left out. A stable point that still moves with the face in
+a frame (the nose bridge under a strong brow, a slipped marker) is dropped from that frame's fit
+(:data:`OUTLIER_FLOOR_M`). A take may name its own stable set (``points=``), e.g. head-band
+markers given as ``v<index>`` vertices.
 """
 
 from __future__ import annotations
@@ -22,10 +24,15 @@ from ..core.errors import InputError
 from ..geometry.similarity import fit_similarity, point_spread
 from .tracks import MarkerTrack
 
-__all__ = ["STABLE_POINTS", "HeadMotion", "remove_head_motion"]
+__all__ = ["OUTLIER_FLOOR_M", "STABLE_POINTS", "HeadMotion", "remove_head_motion"]
 
 STABLE_POINTS = ("11.1", "11.2", "11.3", "9.6", "9.7", "9.12", "10.9", "10.10", "10.7", "10.8")
 """FDPs that move with the skull only: forehead (hairline), nose bridge, ear roots."""
+
+OUTLIER_FLOOR_M = 0.5e-3
+"""A stable point whose distance after a frame's fit exceeds both this [m] and three times the
+median distance is left out and the fit made again (twice at most, three points kept): skin over
+the nose bone follows a strong brow a millimetre or so, and one marker may slip."""
 
 MIN_SPREAD_M = 0.01
 """The stable points present in a frame must spread at least this far [m] in two directions (a
@@ -41,8 +48,9 @@ class HeadMotion:
         rotation: (T, 3, 3) float64, proper rotations.
         translation: (T, 3) float64 [m].
         scale: (T,) float64 (1 for a rigid fit; else the take's size over the head's).
-        residual: (T,) float64 [m], RMS distance of the stable points after the fit (NaN where held).
-        used: (T,) int64, how many stable points each frame's fit used (0 where held).
+        residual: (T,) float64 [m], RMS distance of the stable points the fit kept (NaN where held).
+        used: (T,) int64, how many stable points each frame's fit kept (0 where held; fewer than
+            present where some moved with the face, :data:`OUTLIER_FLOOR_M`).
         held: (T,) bool, frames with fewer than three well spread stable points, which keep the
             pose of the frame before (the first good frame's for the frames before it).
         points: The stable point names the fit looked for.
@@ -124,10 +132,18 @@ def remove_head_motion(track: MarkerTrack, rest, *, points=None, scale: bool = T
         ok = np.isfinite(X).all(axis=1)
         if ok.sum() < 3 or point_spread(Q[ok])[1] < MIN_SPREAD_M:
             continue
-        S = fit_similarity(Q[ok], X[ok], with_scale=scale)
+        keep = np.nonzero(ok)[0]
+        S = fit_similarity(Q[keep], X[keep], with_scale=scale)
+        for _ in range(2):  # leave out the points that moved with the face (OUTLIER_FLOOR_M), fit again
+            d = np.linalg.norm(S.apply(Q[keep]) - X[keep], axis=1)
+            out = d > max(OUTLIER_FLOOR_M, 3.0 * float(np.median(d)))
+            if not out.any() or len(keep) - out.sum() < 3 or point_spread(Q[keep[~out]])[1] < MIN_SPREAD_M:
+                break
+            keep = keep[~out]
+            S = fit_similarity(Q[keep], X[keep], with_scale=scale)
         R[f], t[f], s[f] = S.rotation, S.translation, S.scale
-        res[f] = float(np.sqrt(np.mean(np.sum((S.apply(Q[ok]) - X[ok]) ** 2, axis=1))))
-        used[f] = int(ok.sum())
+        res[f] = float(np.sqrt(np.mean(np.sum((S.apply(Q[keep]) - X[keep]) ** 2, axis=1))))
+        used[f] = len(keep)
         held[f] = False
     if held.all():
         raise InputError(f"{track.source or 'track'}: no frame has three stable points ({', '.join(points)}) present "
