@@ -4,6 +4,7 @@ random rigid motions brought back to the head's frame."""
 
 import json
 import warnings
+import zlib
 
 import numpy as np
 import pytest
@@ -435,3 +436,62 @@ def test_rigid_needs_stable_points():
     tight = {n: np.array([0.0, 0.0, 0.001 * i]) for i, n in enumerate(names)}
     tr2 = fw.MarkerTrack(30, names, np.array([[tight[n] for n in names]] * 2))
     _one_line_error(lambda: fw.remove_head_motion(tr2, tight, points=names[:4]), "no frame has three stable points")
+
+
+# ----------------------------------------------------------------------------- random damage
+DAMAGED_FILES = 40
+
+
+def _damaged(data: bytes, rng) -> bytes:
+    kind = rng.integers(4)
+    i = int(rng.integers(1, len(data)))
+    if kind == 0:
+        return data[:i]  # truncated
+    if kind == 1:
+        return data[:i] + data[i + int(rng.integers(1, 40)):]  # a piece cut out
+    if kind == 2:
+        return data[:i] + bytes([int(rng.integers(32, 127))]) + data[i + 1:]  # one character changed
+    return data[:i] + b",nan" + data[i:]  # a stray cell
+
+
+@pytest.mark.parametrize("fmt", ["markers_json", "markers_csv", "livelink", "mediapipe", "c3d"])
+def test_damaged_files_load_or_fail_in_one_line(tmp_path, fmt):
+    """Valid files damaged at random: each loads, or fails with one InputError line naming it."""
+    rng = np.random.default_rng(zlib.crc32(fmt.encode()))
+    src = tmp_path / "src"
+    src.mkdir()
+    if fmt == "markers_json":
+        good = fw.save_markers_json(_track(T=6), src / "t.json")
+        load = fw.load_markers
+    elif fmt == "markers_csv":
+        good = src / "t.csv"
+        _write_csv(good, _track(T=6))
+        load = lambda p: fw.load_markers(p, units="mm")  # noqa: E731
+    elif fmt == "livelink":
+        good = fw.save_livelink_csv(_arkit(T=40), src / "t.csv")
+        load = fw.load_arkit
+    elif fmt == "mediapipe":
+        good = src / "t.json"
+        good.write_text(json.dumps(_mediapipe(T=3)))
+        load = fw.load_arkit
+    else:
+        c3d = pytest.importorskip("c3d")
+        tr = _track(T=4, names=["2.1", "8.3", "8.4"], missing=False)
+        w = c3d.Writer(point_rate=60.0)
+        w.add_frames([(np.c_[tr.positions[t] * 1e3, np.zeros((3, 2))].astype(np.float32), np.zeros((0, 0)))
+                      for t in range(4)])
+        w.set_point_labels(["2.1", "8.3", "8.4"])
+        good = src / "t.c3d"
+        with open(good, "wb") as f, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            w.write(f)
+        load = fw.load_markers
+    data = good.read_bytes()
+    load(good)
+    for n in range(DAMAGED_FILES):
+        p = tmp_path / f"d{n}{good.suffix}"
+        p.write_bytes(_damaged(data, rng))
+        try:
+            load(p)
+        except fw.InputError as e:
+            assert "\n" not in str(e) and str(e).startswith(str(p)), str(e)

@@ -159,7 +159,8 @@ def _check_span(path: Path, P: np.ndarray, units: str) -> None:
         raise InputError(f"{path}: no marker is present in any frame")
     lo = np.where(ok[..., None], P, np.inf).min(axis=1)
     hi = np.where(ok[..., None], P, -np.inf).max(axis=1)
-    span = np.where(ok.any(axis=1), np.linalg.norm(hi - lo, axis=1), np.nan)
+    with np.errstate(over="ignore", invalid="ignore"):  # a number near 1e308 in the file: an infinite span
+        span = np.where(ok.any(axis=1), np.linalg.norm(hi - lo, axis=1), np.nan)
     big = np.nanmax(span)
     if big > MAX_HEAD_SPAN_M:
         raise InputError(f"{path}: one frame's markers span {big:.3g} m, more than a head ({MAX_HEAD_SPAN_M:g} m); "
