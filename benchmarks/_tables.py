@@ -532,6 +532,38 @@ def _preset_summary(p: dict) -> str:
 # ------------------------------------------------------------------ README
 
 
+@table("batch")
+def batch_scaling(r: Results) -> str:
+    """FaceBatch scaling per device (``batch_*.json`` of ``python -m benchmarks batch``): per N the batch,
+    the naive loop of separate simulators, one Model of N tissues and Newton VBD."""
+
+    def hfs(d) -> str:
+        v = (d or {}).get("head_frames_per_second")
+        return f"{v:,.0f}" if v is not None else "-"
+
+    rows = []
+    for name in r.glob("batch_*"):
+        doc = r.doc(name)
+        fig = doc["figures"]
+        for row in fig.get("rows", []):
+            if "head_frames_per_second" not in row:
+                rows.append([doc["device"], str(row["n"]), row.get("error", "not measured")[:60], *["-"] * 7])
+                continue
+            mem = row.get("gpu_memory_per_head_mb")
+            newton = row.get("newton_vbd", {})
+            rows.append([doc["device"], f"{row['n']:,}", f"{row['ms_per_frame']:.1f}", hfs(row), str(row.get("streams", 1)),
+                         hfs(row.get("naive")),
+                         f"{row['speedup_over_naive']:.2f}x" if "speedup_over_naive" in row else "-",
+                         hfs(row.get("one_model_tissue")),
+                         hfs(newton) if "head_frames_per_second" in newton else ("skipped" if newton.get("skipped")
+                                                                                or not newton else "error"),
+                         f"{mem:.1f}" if mem is not None else "-"])
+    if not rows:
+        return "(no batch result committed yet: python -m benchmarks batch)"
+    return _rows_md(["device", "N", "ms / frame", "head-frames / s", "streams", "naive loop", "batch / naive",
+                     "one Model, tissue only", "Newton VBD", "GPU MB / head"], rows)
+
+
 def render(name: str, results: Results | None = None) -> str:
     """The Markdown of table ``name``."""
     if name not in TABLES:

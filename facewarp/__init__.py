@@ -8,7 +8,7 @@ The pipeline, in the order data flows (thesis chapters 4-6):
 3. anatomy: :func:`build_anatomy` (skin tetrahedra, Bezier muscles), or :func:`build_face`
    which also packs the solver inputs (:class:`FaceRig`);
 4. simulation: :class:`FaceSimulator` (``set_activations``, ``set_jaw``, ``step``, ``reset``,
-   ``surface``, ``fdp``) and expressions (:func:`preset`, :class:`Timeline`, ...);
+   ``surface``, ``fdp``), :class:`FaceBatch` (N heads stepped together) and expressions (:func:`preset`, :class:`Timeline`, ...);
 5. output: :func:`play` (a timeline on a simulator, each frame to sinks: :class:`FrameRecorder`
    -> :class:`Frames`, :class:`UsdAnimation`), :func:`save_frames_npz`, pictures (:func:`render_mesh`, ...), and
    the ``usd_export`` package.
@@ -74,6 +74,8 @@ _NAMES = {
     "FaceRig": "physics.face_rig", "build_face": "anatomy.rig", "face_rig_from_anatomy": "anatomy.rig",
     "load_face_rig": "physics.face_rig", "save_face_rig": "physics.face_rig",
     "FaceSimulator": "sim.simulator", "Frames": "sim.simulator", "save_frames_npz": "sim.simulator",
+    # many heads, each its own person, stepped together
+    "FaceBatch": "sim.batch",
     # one playback path: a timeline played on a simulator, each frame handed to sinks
     "play": "sim.play", "FrameRecorder": "sim.play", "PlayStats": "sim.play", "Sink": "sim.play",
     # USD animations streamed while simulating (a sink of play)
@@ -178,6 +180,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.present.strips import render_strip
     from ._src.present.template import render_previews
     from ._src.sim.play import FrameRecorder, PlayStats, Sink, play
+    from ._src.sim.batch import FaceBatch
     from ._src.sim.simulator import FaceSimulator, Frames, save_frames_npz
     from ._src.template.files import load_template_dir, save_template
     from ._src.template.head import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, Template, default_template

@@ -1,8 +1,10 @@
 """`facewarp batch run`: a fleet of scans in local processes and on a local Ray of 2 workers.
 
 Tiny synthetic scans (4,000 triangles), one refinement level, adapt + build (simulate for one scan,
-0.1 s): a broken scan in the batch, a re-run that skips finished work (a renamed copy is known by
-its content), --retry-failed, a killed worker retried then failed, Ctrl-C semantics of the manifest.
+0.1 s; the rig of two muscles for another): a broken scan in the batch, a re-run that skips finished
+work (a renamed copy is known by its content), --retry-failed, a killed worker retried then failed,
+Ctrl-C semantics of the manifest, the device the physics steps get with --gpus-per-task (a GPU
+mocked: Warp's device count locally, a stand-in ``ray`` module for Ray).
 """
 
 from __future__ import annotations
@@ -10,6 +12,8 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+import sys
+import types
 
 import pytest
 
@@ -135,6 +139,11 @@ def test_errors(scans, tmp_path, capsys):
         ([scans / "good1.obj", "--manifest", scans / "x.json"], "not both"),
         ([tmp_path / "missing.obj"], "no such file"),
         ([scans / "good1.obj", "--steps", "adapt,bake"], "--steps"),
+        ([scans / "good1.obj", "--steps", "rig,"], "--steps"),
+        ([scans / "good1.obj", "--steps", "build,rigs"], "--steps"),
+        ([scans / "good1.obj", "--rig-formats", "fbx"], "--rig-formats"),
+        ([scans / "good1.obj", "--rig-inbetweens", "9"], "--rig-inbetweens"),
+        ([scans / "good1.obj", "--steps", "rig"], "rig needs build done first"),  # a fresh DIR has no build
         ([scans / "good1.obj", "--max-retries", "-1"], "--max-retries"),
     ):
         code = main(["batch", "run", *map(str, argv), "--out", str(tmp_path / "o")])
@@ -144,6 +153,152 @@ def test_errors(scans, tmp_path, capsys):
     bad.write_text(json.dumps({"scans": [{"scan": "nowhere.obj"}]}))
     assert main(["batch", "run", "--manifest", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "scans[0]" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+RIG = ["--rig-muscles", "zygomatic_major_L,zygomatic_major_R"]  # two muscle shapes (+ the jaw's): a quick bake
+
+
+def test_rig_step_after_build_then_skipped_when_done(first, scans, capsys):
+    rep = _run(capsys, scans / "good2.obj", "--out", first, "--steps", "adapt,build,rig", "--levels", "1", *RIG,
+               "--rig-formats", "usda,glb", "--workers", "1")
+    assert rep["tasks_run"] == 1 and rep["tasks_kept"] == 2 and rep["done"] == 1
+    e = _manifest(first)["good2"]
+    r = e["steps"]["rig"]
+    assert r["status"] == "done" and r["error"] is None and r["attempts"] == 1 and r["device"] == "cpu"
+    assert r["seconds"] > 0 and r["worker"]["pid"] > 0 and r["worker"]["host"]
+    assert r["params"] == {"formats": ["usda", "glb"], "inbetweens": 0, "muscles": RIG[1].split(",")}
+    folder = first / e["folder"] / "rig"
+    assert sorted(p.name for p in folder.iterdir()) == ["report.json", "rig.glb", "rig.usda"]
+    assert sorted(r["outputs"]) == sorted(str((folder / n).relative_to(first)) for n in ("report.json", "rig.glb",
+                                                                                           "rig.usda"))
+    assert (folder / "rig.glb").read_bytes()[:4] == b"glTF" and (folder / "rig.usda").read_text().startswith("#usda")
+    job = json.loads((folder / "report.json").read_text())  # the rig job's own report, its figures in the summary
+    assert job["targets"] == 3 and job["muscles"] == 2 and job["files"] == [str(folder / "rig.usda"),
+                                                                            str(folder / "rig.glb")]
+    assert r["summary"]["rig_targets"] == 3 and r["summary"]["rig_animation_frames"] == job["frames"] > 1
+    assert r["summary"]["rig_files"] == ["rig.usda", "rig.glb"]
+    row = rep["rows"][0]
+    assert row["rig_targets"] == 3 and row["rig_s"] > 0 and row["status"] == "done"
+    # again, the rig step alone: it finds the build in the manifest and keeps the rig (formats in any order);
+    # the broken scan has no build: its rig is skipped with the one-line reason, the batch goes on
+    before = e["steps"]
+    rep = _run(capsys, scans / "good2.obj", scans / "broken.obj", "--out", first, "--steps", "rig", *RIG,
+               "--rig-formats", "glb,usda")
+    assert rep["tasks_run"] == 0 and rep["tasks_kept"] == 1
+    m = _manifest(first)
+    assert m["good2"]["steps"] == before
+    assert m["broken"]["steps"]["rig"]["status"] == "skipped"
+    assert m["broken"]["steps"]["rig"]["error"] == "needs build done first (add it to --steps)"
+    assert m["broken"]["steps"]["adapt"]["status"] == "failed"  # as recorded
+    # the broken scan alone: nothing can run; one line, the manifest untouched
+    text = (first / "manifest.json").read_text()
+    assert main(["batch", "run", str(scans / "broken.obj"), "--out", str(first), "--steps", "rig"]) == 2
+    err = capsys.readouterr().err
+    assert "rig needs build done first" in err and "add build to --steps" in err and len(err.strip().splitlines()) == 1
+    assert (first / "manifest.json").read_text() == text
+
+
+@pytest.mark.parametrize("gpus_per_task, cuda, want", [(None, 1, "cpu"), ("0", 1, "cpu"), ("1", 0, "cpu"),
+                                                       ("1", 1, "cuda")])
+def test_local_physics_steps_device(first, tmp_path, capsys, monkeypatch, gpus_per_task, cuda, want):
+    """With --gpus-per-task > 0 and a GPU here (mocked: Warp's device count), the rig step's worker
+    gets cuda; otherwise --device. This box has no GPU: the step then fails on cuda, one line. The
+    CPU cases find good2's rig of the test above done and keep it (the choice shows in the executor)."""
+    import warp
+
+    monkeypatch.setattr(warp, "get_cuda_device_count", lambda: cuda)
+    out = tmp_path / "out"
+    shutil.copytree(first, out)
+    scan = _manifest(out)["good2"]["inputs"]["scan"]["path"]
+    formats = "glb" if want == "cuda" else "usda,glb"  # cuda: options not run before, so the step runs
+    argv = [scan, "--out", out, "--steps", "adapt,build,rig", "--levels", "1", *RIG, "--rig-formats", formats,
+            "--workers", "1"]
+    rep = _run(capsys, *argv, *(["--gpus-per-task", gpus_per_task] if gpus_per_task else []))
+    assert ("simulate and rig on cuda" in rep["executor"]) == (want == "cuda")
+    r = _manifest(out)["good2"]["steps"]
+    assert r["rig"]["device"] == want and r["adapt"]["device"] == r["build"]["device"] == "cpu"
+    if want == "cuda":
+        assert rep["tasks_run"] == 1 and r["rig"]["status"] == "failed" and "cuda" in r["rig"]["error"]
+    else:
+        assert r["rig"]["status"] == "done"
+
+
+class _Ref:
+    """A stand-in object reference (hashable, as Ray's are)."""
+
+    def __init__(self, record: dict):
+        self.record = record
+
+
+class _FakeRay(types.ModuleType):
+    """A stand-in ``ray``: a cluster of 2 CPUs and ``gpus`` GPUs; a task is recorded (its options and
+    its task dict) and reported done at once."""
+
+    def __init__(self, gpus: float):
+        super().__init__("ray")
+        self.gpus, self.submitted, self._up = gpus, [], False
+        self.exceptions = types.SimpleNamespace(WorkerCrashedError=type("WorkerCrashedError", (Exception,), {}),
+                                                NodeDiedError=type("NodeDiedError", (Exception,), {}),
+                                                RayError=type("RayError", (Exception,), {}))
+
+    def is_initialized(self):
+        return self._up
+
+    def init(self, **kw):
+        self._up = True
+
+    def shutdown(self):
+        self._up = False
+
+    def cluster_resources(self):
+        return {"CPU": 2.0, "GPU": float(self.gpus)}
+
+    def remote(self, **kw):
+        ray = self
+
+        class Remote:
+            def __init__(self, fn, opts=None):
+                self.fn, self.opts = fn, opts or {}
+
+            def options(self, **opts):
+                return Remote(self.fn, opts)
+
+            def remote(self, task):
+                ray.submitted.append((task["step"], task["device"], self.opts))
+                return _Ref({"status": "done", "error": None, "outputs": [], "summary": {}, "device": task["device"],
+                             "seconds": 0.0, "worker": None})
+
+        return lambda fn: Remote(fn)
+
+    def wait(self, refs, num_returns=1, timeout=None):
+        return refs[:num_returns], refs[num_returns:]
+
+    def get(self, ref):
+        return ref.record
+
+    def cancel(self, ref, force=False):
+        pass
+
+
+@pytest.mark.parametrize("gpus, flag, want, num_gpus", [(1, None, "cuda", 1.0), (1, "0.25", "cuda", 0.25),
+                                                          (1, "0", "cpu", None), (0, None, "cpu", None),
+                                                          (0, "1", "cpu", None)])
+def test_ray_physics_steps_device(scans, tmp_path, capsys, monkeypatch, gpus, flag, want, num_gpus):
+    """On Ray, simulate and rig ask for num_gpus and get device cuda when the cluster has a GPU;
+    adapt and build are CPU tasks."""
+    ray = _FakeRay(gpus)
+    monkeypatch.setitem(sys.modules, "ray", ray)
+    argv = [scans / "good1.obj", "--out", tmp_path / "out", "--steps", "adapt,build,simulate,rig", "--ray"]
+    rep = _run(capsys, *argv, *(["--gpus-per-task", flag] if flag else []))
+    assert rep["done"] == 1 and rep["tasks_run"] == 4
+    got = {step: (dev, opts) for step, dev, opts in ray.submitted}
+    assert list(got) == ["adapt", "build", "simulate", "rig"]
+    for step in ("adapt", "build"):
+        assert got[step] == ("cpu", {"num_cpus": 1})
+    for step in ("simulate", "rig"):
+        assert got[step] == (want, {"num_cpus": 1, **({"num_gpus": num_gpus} if num_gpus else {})})
+    assert _manifest(tmp_path / "out")["good1"]["steps"]["rig"]["device"] == want
 
 
 def test_ray_local_two_workers(scans, tmp_path, capsys, monkeypatch):

@@ -267,6 +267,14 @@ class MujocoJaw:
     def exchange(self) -> None:
         """Skin side of one frame: take the MuJoCo angles and head pose, step the skin, and hand
         MuJoCo the skin's torque with its linearisation (no MuJoCo step)."""
+        ang = self.exchange_begin()
+        self.sim.step()
+        self.exchange_end(ang)
+
+    def exchange_begin(self) -> np.ndarray:
+        """The first half of :meth:`exchange`: MuJoCo's angles and head pose set on the simulator
+        (not stepped); returns the angles [rad] (open, side). :class:`~facewarp.FaceBatch`'s MuJoCo
+        jaws step every head's skin together between the halves."""
         mj = self.mj
         mj.mj_kinematics(self.model, self.data)
         pose = self.head_pose()
@@ -274,7 +282,11 @@ class MujocoJaw:
             self.sim.set_head_pose(*pose)
         ang = self.angles()
         self.sim.set_jaw(min(max(ang[0], 0.0), math.radians(60.0)), float(np.clip(ang[1], -math.radians(5), math.radians(5))))
-        self.sim.step()
+        return ang
+
+    def exchange_end(self, ang) -> None:
+        """The second half of :meth:`exchange`, after the skin stepped at angles ``ang``: the
+        skin's torque and its linearisation handed to MuJoCo."""
         tau, k_bound = self.skin_forces(ang)
         k = self.stiffness.copy()  # keep the last estimate while the jaw does not move
         if self._last is not None:
@@ -327,6 +339,10 @@ class MujocoJaw:
         """One frame: :meth:`exchange`, then MuJoCo steps until its clock reaches the frame's end
         (the frame need not be a whole number of MuJoCo steps; the remainder carries over)."""
         self.exchange()
+        self.mujoco_frame()
+
+    def mujoco_frame(self) -> None:
+        """MuJoCo's part of :meth:`step`: its steps until its clock reaches the frame's end."""
         self._clock += self.frame_dt
         h = float(self.model.opt.timestep)
         while self._elapsed + 0.5 * h < self._clock:

@@ -1,8 +1,9 @@
 """``facewarp batch run``: every scan through the chosen steps, in local processes or as Ray tasks.
 
-The plan: per scan a chain of steps (adapt -> build -> simulate, those chosen). A step is a task
-(:func:`~facewarp._src.fleet.tasks.run_step`); when it is done the scan's next step is submitted,
-when it fails the scan's remaining steps are recorded ``skipped``. The loop keeps ``capacity``
+The plan: per scan a chain of steps (adapt -> build -> simulate -> rig, those chosen; simulate and
+rig both read the build). A step is a task (:func:`~facewarp._src.fleet.tasks.run_step`); when it
+is done the scan's next step is submitted, when it fails the scan's steps that read its output are
+recorded ``skipped`` (a failed simulation does not stop the rig). The loop keeps ``capacity``
 tasks in flight (the local workers, or the Ray cluster's CPUs), records every finished task in the
 manifest (rewritten atomically each time) and moves one progress bar.
 
@@ -14,9 +15,14 @@ every ten times its own write time for a large batch) and at the end. Ctrl-C kil
 tasks, leaves the finished ones and a valid manifest, writes the reports and raises
 :class:`KeyboardInterrupt`.
 
-Outputs in ``out``: ``manifest.json``, ``scans/NAME-KEY12/{adapt,build,simulate}/`` (each the
-folder its job writes), ``report.json`` and ``report.csv`` (one row per scan: the adaptation's
-errors, the anatomy's quality, the simulation's speed, the status and error).
+A step not chosen must be done from an earlier run for the steps that read it (``--steps rig``
+finds the build in the manifest); a scan without it gets the step ``skipped`` with the one-line
+reason, and when no scan has it the batch stops before it starts (:class:`InputError`, one line).
+
+Outputs in ``out``: ``manifest.json``, ``scans/NAME-KEY12/{adapt,build,simulate,rig}/`` (each the
+folder its job writes; ``rig/rig.usdc``, ``rig/rig.glb``, ``rig/report.json``), ``report.json``
+and ``report.csv`` (one row per scan: the adaptation's errors, the anatomy's quality, the
+simulation's speed, the rig's shapes, the status and error).
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from pathlib import Path
 
 from ..core.errors import InputError
 from ..core.fileio import atomic_write, write_json
-from .manifest import STEPS, Manifest, ScanInput, plain
+from .manifest import NEEDS, STEPS, Manifest, ScanInput, depends, plain
 
 __all__ = ["REPORT_COLUMNS", "run_batch", "write_reports"]
 
@@ -38,17 +44,40 @@ REPORT_COLUMNS = (
     "name", "key", "scan", "status", "failed_step", "error",
     "adapt_s", "distance_median_mm", "distance_rms_mm", "distance_p95_mm", "folds", "stretch_rms_percent",
     "build_s", "tet_count", "inverted_count", "min_dihedral_deg", "muscle_count",
-    "simulate_s", "frames", "frames_per_second", "realtime_factor", "worker_peak_rss_mib",
+    "simulate_s", "frames", "frames_per_second", "realtime_factor",
+    "rig_s", "rig_targets", "rig_bake_frames_max", "worker_peak_rss_mib",
 )
 """Columns of ``report.csv`` (and keys of each row of ``report.json``), seconds per step in ``*_s``."""
 
 
-def _params(step: str, *, levels, expression, seconds, fps, jaw) -> dict:
+RIG_FORMATS = ("usdc", "usda", "glb")
+"""Files the ``rig`` step can write (one bake, each format a file ``rig/rig.FORMAT``)."""
+
+
+def _params(step: str, *, levels, expression, seconds, fps, jaw, rig_formats, rig_inbetweens, rig_muscles) -> dict:
     if step == "adapt":
         return {"levels": levels}
     if step == "build":
         return {"layers": 1}
+    if step == "rig":
+        return {"formats": list(rig_formats), "inbetweens": int(rig_inbetweens),
+                "muscles": None if rig_muscles is None else list(rig_muscles)}
     return {"expression": expression, "seconds": float(seconds), "fps": float(fps), "jaw": jaw}
+
+
+def _rig_options(formats, inbetweens, muscles):
+    """The rig step's options checked, formats in :data:`RIG_FORMATS` order (the same set is the same step)."""
+    formats = [formats] if isinstance(formats, str) else list(formats)
+    bad = [f for f in formats if f not in RIG_FORMATS]
+    if not formats or bad:
+        raise InputError(f"rig_formats: expected some of {', '.join(RIG_FORMATS)}, got {formats!r}")
+    if not (isinstance(inbetweens, int) and not isinstance(inbetweens, bool) and 0 <= inbetweens <= 8):
+        raise InputError(f"rig_inbetweens: expected a whole number 0..8, got {inbetweens!r}")
+    if muscles is not None:
+        muscles = [muscles] if isinstance(muscles, str) else list(muscles)
+        if not muscles or not all(isinstance(m, str) and m for m in muscles):
+            raise InputError(f"rig_muscles: expected muscle names, got {muscles!r}")
+    return [f for f in RIG_FORMATS if f in formats], inbetweens, muscles
 
 
 class _Bar:
@@ -90,24 +119,32 @@ class _Saver:
             self.dirty, self.last, self.cost = False, time.perf_counter(), time.perf_counter() - now
 
 
-def run_batch(scans: list[ScanInput], out, *, steps=STEPS, expression: str = "smile", seconds: float = 2.0,
-              fps: float = 30.0, levels: int | None = 2, jaw: str = "mujoco", device: str = "cpu",
-              ray: str | None = None, workers: int | None = None, gpus_per_task: float | None = None,
+def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate"), expression: str = "smile",
+              seconds: float = 2.0, fps: float = 30.0, levels: int | None = 2, jaw: str = "mujoco", rig_formats=("usdc", "glb"),
+              rig_inbetweens: int = 0, rig_muscles=None, device: str = "cpu", ray: str | None = None,
+              workers: int | None = None, gpus_per_task: float | None = None,
               max_retries: int = 2, retry_failed: bool = False, progress: bool = True) -> dict:
     """Run ``scans`` through ``steps`` into the folder ``out``; returns the batch summary.
 
     Args:
         scans: The scans (:class:`ScanInput`); two with the same content are one.
         out: The batch folder (created; a manifest already in it is continued).
-        steps: Some of ``adapt``, ``build``, ``simulate`` (run in that order per scan; a step not
-            chosen must be done already from an earlier run for a later one to run).
+        steps: Some of ``adapt``, ``build``, ``simulate``, ``rig`` (run in that order per scan;
+            simulate and rig read the build; a step not chosen must be done already from an earlier
+            run for the steps that read it to run; default adapt, build, simulate).
         expression, seconds, fps, jaw: What ``simulate`` plays (:func:`~facewarp._src.jobs.face.simulate_files`).
         levels: ``adapt``'s refinement levels.
-        device: Warp device of the local workers (Ray: adapt and build on the CPU, simulate on a GPU
-            when ``gpus_per_task`` > 0 and the cluster has one).
+        rig_formats: The files of the ``rig`` step (:func:`~facewarp._src.jobs.rig.rig_files`),
+            some of ``usdc``, ``usda`` (UsdSkel), ``glb`` (glTF); one bake written in each.
+        rig_inbetweens: In-between shapes per muscle, 0..8.
+        rig_muscles: Muscle names to bake (default all).
+        device: Warp device of the local workers (Ray: adapt and build on the CPU, simulate and rig
+            on a GPU when ``gpus_per_task`` > 0 and the cluster has one).
         ray: None (local processes), ``"local"`` (a local Ray started here) or a cluster address.
         workers: Local processes (default: the usable cores), or the Ray CPUs to start / tasks in flight.
-        gpus_per_task: GPUs per simulate task on Ray (default 1 when the cluster has a GPU, else 0).
+        gpus_per_task: GPUs per simulate or rig task (Ray: default 1 when the cluster has a GPU, else 0;
+            local processes: > 0 runs those two steps on ``cuda`` when this machine has a CUDA device,
+            default ``device``).
         max_retries: Retries of a task whose worker died, >= 0.
         retry_failed: Run the steps that failed in an earlier run again.
         progress: Show the bar on stderr (when it is a terminal).
@@ -127,51 +164,64 @@ def run_batch(scans: list[ScanInput], out, *, steps=STEPS, expression: str = "sm
         raise InputError(f"out {out}: exists and is not a folder")
     if not (isinstance(max_retries, int) and max_retries >= 0):
         raise InputError(f"max_retries: expected a whole number >= 0, got {max_retries!r}")
+    rig_formats, rig_inbetweens, rig_muscles = _rig_options(rig_formats, rig_inbetweens, rig_muscles)
     manifest = Manifest(out)
     keys: list[str] = []
     for s in scans:
         k = manifest.add(s)
         if k not in keys:
             keys.append(k)
+    params = {s: _params(s, levels=levels, expression=expression, seconds=seconds, fps=fps, jaw=jaw,
+                         rig_formats=rig_formats, rig_inbetweens=rig_inbetweens, rig_muscles=rig_muscles)
+              for s in STEPS}
+
+    # the plan: per scan the chosen steps still to run, the first one ready now
+    todo: dict[str, list[str]] = {}
+    missing: dict[str, tuple[str, str]] = {}  # scan -> (step, the step it reads: not chosen, not done before)
+    kept = failed_kept = 0
+    for key in keys:
+        chain: list[str] = []
+        blocked: dict[str, str | None] = {}  # step -> the reason its readers are skipped (None: left as recorded)
+        for s in steps:
+            rec = manifest.step(key, s)
+            same = (rec is not None and rec.get("params") == params[s]
+                    and not any(depends(s, c) for c in chain))  # its input is made again: so is it
+            above = next((b for b in blocked if depends(s, b)), None)
+            need = NEEDS[s]
+            if same and rec["status"] == "done" and (manifest.folder(key) / s).is_dir():
+                kept += 1
+            elif above is not None:  # what it reads failed before or is missing
+                blocked[s] = blocked[above]
+                if blocked[s] is not None:
+                    manifest.set_step(key, s, {"status": "skipped", "params": params[s], "error": blocked[s]})
+            elif same and rec["status"] == "failed" and not retry_failed:
+                failed_kept += 1
+                blocked[s] = None  # the scan stays failed at this step; the steps reading it stay as recorded
+            elif need is not None and need not in chain and not (
+                    (manifest.step(key, need) or {}).get("status") == "done"
+                    and (manifest.folder(key) / need).is_dir()):
+                failed = (manifest.step(key, need) or {}).get("status") == "failed"
+                blocked[s] = f"{need} failed" if failed else f"needs {need} done first (add it to --steps)"
+                missing.setdefault(key, (s, need))
+                manifest.set_step(key, s, {"status": "skipped", "params": params[s], "error": blocked[s]})
+            else:
+                chain.append(s)
+        if chain:
+            todo[key] = chain
+    if not todo and len(missing) == len(keys):  # nothing can run: say so before writing anything
+        s, need = missing[keys[0]]
+        raise InputError(f"--steps {','.join(steps)}: {s} needs {need} done first, and no scan has it done in "
+                         f"{manifest.path} (add {need} to --steps)")
     try:
         manifest.save()
     except OSError as e:
         raise InputError(f"out {out}: cannot write the manifest ({e.strerror or e})") from None
-    params = {s: _params(s, levels=levels, expression=expression, seconds=seconds, fps=fps, jaw=jaw) for s in STEPS}
-
-    # the plan: per scan the chosen steps still to run, the first one ready now
-    todo: dict[str, list[str]] = {}
-    kept = failed_kept = 0
-    for key in keys:
-        chain: list[str] = []
-        for s in steps:
-            rec = manifest.step(key, s)
-            same = rec is not None and rec.get("params") == params[s] and not chain
-            if same and rec["status"] == "done" and (manifest.folder(key) / s).is_dir():
-                kept += 1
-            elif same and rec["status"] == "failed" and not retry_failed:
-                failed_kept += 1
-                break  # the scan stays failed at this step; its later steps stay as recorded
-            else:
-                chain.append(s)
-        if chain:
-            before = STEPS[STEPS.index(chain[0]) - 1] if chain[0] != "adapt" else None
-            if before and before not in steps:
-                rec = manifest.step(key, before)
-                if rec is None or rec["status"] != "done" or not (manifest.folder(key) / before).is_dir():
-                    for s in chain:
-                        manifest.set_step(key, s, {"status": "skipped", "params": params[s],
-                                                   "error": f"needs {before} done first (add it to --steps)"})
-                    chain = []
-        if chain:
-            todo[key] = chain
-    manifest.save()
 
     if ray is None:
         from .executors import LocalExecutor
 
         n = workers or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-        executor = LocalExecutor(n)
+        executor = LocalExecutor(n, gpus_per_task=gpus_per_task)
     else:
         from .executors import RayExecutor
 
@@ -202,18 +252,19 @@ def run_batch(scans: list[ScanInput], out, *, steps=STEPS, expression: str = "sm
         chain.pop(0)
         if record["status"] == "done":
             counts["done"] += 1
-            for later in STEPS[STEPS.index(step) + 1:]:  # made from the old output: no longer valid
-                if later not in chain:
+            for later in STEPS:  # made from the old output: no longer valid
+                if depends(later, step) and later not in chain:
                     manifest.scans[key]["steps"].pop(later, None)
-            if chain:
-                ready.append(key)
-            else:
-                del todo[key]
         else:
             counts["failed"] += 1
-            for s in chain:
+            readers = [s for s in chain if depends(s, step)]
+            for s in readers:
                 manifest.set_step(key, s, {"status": "skipped", "params": params[s], "error": f"{step} failed"})
-            bar.show(counts["done"], counts["failed"], len(inflight), advance=len(chain))
+            chain[:] = [s for s in chain if s not in readers]  # a failed simulation does not stop the rig
+            bar.show(counts["done"], counts["failed"], len(inflight), advance=len(readers))
+        if chain:
+            ready.append(key)
+        else:
             del todo[key]
         saver.changed()
 

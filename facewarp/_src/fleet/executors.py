@@ -7,10 +7,13 @@ finished ones, each with its record or the one-line reason its worker died) and 
 - :class:`LocalExecutor`: ``workers`` processes (``spawn``), each a one-process
   :class:`concurrent.futures.ProcessPoolExecutor`, so a worker that dies (killed, out of memory)
   breaks only its own pool: that task is known, its slot gets a fresh process and the batch loop
-  retries the task (``retries_inside`` False).
+  retries the task (``retries_inside`` False). The steps run on the batch's ``device``, except
+  that with ``gpus_per_task`` > 0 on a machine with a CUDA device the physics steps (simulate,
+  rig) run on ``cuda`` (the workers share it).
 - :class:`RayExecutor`: :func:`~facewarp._src.fleet.tasks.run_step` as a Ray task, adapt and build
-  with ``num_cpus=1``, simulate with ``num_gpus=F`` when the cluster has GPUs; Ray retries a task
-  whose worker died up to ``max_retries`` times (``retries_inside`` True) and reports it failed after.
+  with ``num_cpus=1``, simulate and rig with ``num_gpus=F`` and ``device="cuda"`` when the cluster
+  has GPUs; Ray retries a task whose worker died up to ``max_retries`` times (``retries_inside``
+  True) and reports it failed after.
 """
 
 from __future__ import annotations
@@ -21,19 +24,32 @@ import os
 import signal
 
 from ..core.errors import InputError
+from .manifest import GPU_STEPS
 from .tasks import init_worker, run_step
 
-__all__ = ["LocalExecutor", "RayExecutor"]
+__all__ = ["LocalExecutor", "RayExecutor", "cuda_device_count"]
+
+
+def cuda_device_count() -> int:
+    """CUDA devices Warp sees on this machine (0 without a GPU or a driver)."""
+    from ..core.warp import get_warp
+
+    try:
+        return int(get_warp().get_cuda_device_count())
+    except Exception:  # no driver, a broken CUDA install: no GPU for the batch
+        return 0
 
 
 class LocalExecutor:
-    """``workers`` local worker processes (spawn start method)."""
+    """``workers`` local worker processes (spawn start method); ``gpus_per_task`` > 0: simulate and
+    rig on ``cuda`` when this machine has a CUDA device."""
 
     retries_inside = False
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int, *, gpus_per_task: float | None = None):
         self.capacity = int(workers)
-        self.description = f"local processes ({self.capacity})"
+        self.gpu = bool(gpus_per_task) and cuda_device_count() > 0
+        self.description = f"local processes ({self.capacity}" + (", simulate and rig on cuda)" if self.gpu else ")")
         self._ctx = multiprocessing.get_context("spawn")
         self._free: list[cf.ProcessPoolExecutor] = []
         self._busy: dict[cf.Future, tuple[cf.ProcessPoolExecutor, int]] = {}
@@ -53,7 +69,8 @@ class LocalExecutor:
         return fut
 
     def device(self, step: str, device: str) -> str:
-        return device
+        """The batch's device; the physics steps on ``cuda`` when a GPU was asked for and is here."""
+        return "cuda" if self.gpu and step in GPU_STEPS else device
 
     def wait(self, handles, timeout: float) -> list[tuple[object, dict | None, str | None]]:
         """(handle, record, None) per finished task, or (handle, None, why) when its worker died."""
@@ -118,17 +135,18 @@ class RayExecutor:
         if gpus_per_task > 0:  # enough simulations in flight to fill the GPUs as well as the CPUs
             self.capacity = max(self.capacity, int(gpus / gpus_per_task))
         self.description = (f"Ray {'local' if address is None else address} ({cpus} CPUs, {gpus:g} GPUs"
-                            + (f", {gpus_per_task:g} GPU per simulation" if gpus_per_task else "") + ")")
+                            + (f", {gpus_per_task:g} GPU per simulate or rig task" if gpus_per_task else "") + ")")
         self.max_retries = int(max_retries)
         self._remote = ray.remote(max_retries=self.max_retries, retry_exceptions=False)(run_step)
         self._refs: dict = {}
 
     def device(self, step: str, device: str) -> str:
-        """Adapt and build are CPU tasks; simulate runs on the task's GPU when one was asked for."""
-        return "cuda" if step == "simulate" and self.gpus_per_task > 0 else "cpu"
+        """Adapt and build are CPU tasks; simulate and rig run on the task's GPU when one was asked for
+        (Ray sets the worker's ``CUDA_VISIBLE_DEVICES``, so ``cuda`` is that GPU)."""
+        return "cuda" if step in GPU_STEPS and self.gpus_per_task > 0 else "cpu"
 
     def submit(self, task: dict):
-        if task["step"] == "simulate" and self.gpus_per_task > 0:
+        if task["step"] in GPU_STEPS and self.gpus_per_task > 0:
             opts = {"num_cpus": 1, "num_gpus": self.gpus_per_task}
         else:
             opts = {"num_cpus": 1}

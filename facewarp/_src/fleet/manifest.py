@@ -33,10 +33,27 @@ from pathlib import Path
 from ..core.errors import InputError
 from ..core.fileio import write_json
 
-__all__ = ["STEPS", "Manifest", "ScanInput", "file_record", "plain", "read_input_list", "scans_from_paths"]
+__all__ = ["GPU_STEPS", "NEEDS", "STEPS", "Manifest", "ScanInput", "depends", "file_record", "plain", "read_input_list",
+           "scans_from_paths"]
 
-STEPS = ("adapt", "build", "simulate")
-"""The per-scan steps, in order; each reads the output of the one before."""
+STEPS = ("adapt", "build", "simulate", "rig")
+"""The per-scan steps, in the order they run per scan."""
+
+NEEDS = {"adapt": None, "build": "adapt", "simulate": "build", "rig": "build"}
+"""The step whose output each step reads: ``simulate`` and ``rig`` both read the ``build``."""
+
+GPU_STEPS = ("simulate", "rig")
+"""The physics steps (a simulation, the rig's bake), which run on a GPU where the batch has one."""
+
+
+def depends(step: str, on: str) -> bool:
+    """Whether ``step`` reads (directly or through others) the output of ``on``."""
+    s = NEEDS[step]
+    while s is not None:
+        if s == on:
+            return True
+        s = NEEDS[s]
+    return False
 
 FORMAT = 1
 """Version of the manifest layout."""

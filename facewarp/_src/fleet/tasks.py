@@ -1,12 +1,13 @@
 """One step of one scan, as run in a worker process (a local process or a Ray worker).
 
 :func:`run_step` calls the job of the step (:func:`~facewarp._src.jobs.adapt.adapt_files`,
-:func:`~facewarp._src.jobs.face.build_files`, :func:`~facewarp._src.jobs.face.simulate_files`)
-on the scan's folder: it writes into ``FOLDER/.STEP.partial`` and renames that to ``FOLDER/STEP``
-only when the job succeeded, so a step's folder is either complete or absent. An error of the
-scan (a bad file, a failed adaptation) is returned as the one-line error of a ``failed`` record and
-never raised: a bad scan does not stop the batch, and Ray does not retry it. Only the death of the
-worker process itself (killed, out of memory) reaches the caller, which retries the step.
+:func:`~facewarp._src.jobs.face.build_files`, :func:`~facewarp._src.jobs.face.simulate_files`,
+:func:`~facewarp._src.jobs.rig.rig_files`) on the scan's folder: it writes into
+``FOLDER/.STEP.partial`` and renames that to ``FOLDER/STEP`` only when the job succeeded, so a
+step's folder is either complete or absent. An error of the scan (a bad file, a failed
+adaptation) is returned as the one-line error of a ``failed`` record and never raised: a bad
+scan does not stop the batch, and Ray does not retry it. Only the death of the worker process
+itself (killed, out of memory) reaches the caller, which retries the step.
 
 The task and its result are plain dicts (they cross process and machine boundaries).
 """
@@ -119,6 +120,11 @@ def step_summary(step: str, rep: dict) -> dict:
     if step == "build":
         return {k: rep.get(k) for k in ("tet_count", "inverted_count", "min_dihedral_deg", "muscle_count",
                                          "conforming")}
+    if step == "rig":  # own names: "frames" is the simulation's in report.json
+        return {"rig_targets": rep.get("targets"), "rig_inbetweens": rep.get("inbetweens"),
+                "rig_vertices": rep.get("vertices"), "rig_animation_frames": rep.get("frames"),
+                "rig_bake_frames_max": rep.get("bake_frames_max"),
+                "rig_files": [Path(f).name for f in rep.get("files", [])]}
     return {k: rep.get(k) for k in ("expression", "frames", "frames_per_second", "realtime_factor",
                                      "steps_per_second", "device", "nodes", "tets")}
 
@@ -145,18 +151,32 @@ def _run_job(task: dict, tmp: Path) -> dict:
         rep["files"] = [str(folder / step / Path(f).name) for f in rep.get("files", [])]
         write_json(tmp / "report.json", plain(rep))
         return rep
+    if step == "rig":
+        from ..core.fileio import write_json
+        from ..jobs.rig import rig_files
+        from .manifest import plain
+
+        tmp.mkdir(parents=True)
+        rep = rig_files(folder / "build", [tmp / f"rig.{f}" for f in p["formats"]], inbetweens=p.get("inbetweens", 0),
+                        muscles=p.get("muscles"), device=device)
+        rep["file"] = str(folder / step / Path(rep["file"]).name)
+        rep["files"] = [str(folder / step / Path(f).name) for f in rep["files"]]
+        rep["device"] = device
+        write_json(tmp / "report.json", plain(rep))
+        return rep
     raise ValueError(f"unknown step {step!r}")
 
 
 def run_step(task: dict) -> dict:
     """Run one step of one scan; returns its manifest record.
 
-    ``task``: ``step`` (adapt, build or simulate), ``name``, ``folder`` (the scan's output folder),
+    ``task``: ``step`` (adapt, build, simulate or rig), ``name``, ``folder`` (the scan's output folder),
     ``out`` (the batch folder), ``scan``, ``landmarks`` (or None), ``units``, ``params`` (the
     step's options) and ``device``. The record: ``status`` (``done`` or ``failed``), ``error`` (one
-    line or None), ``outputs`` (files relative to ``out``), ``seconds`` (wall), ``cpu_seconds``
-    (user + system CPU time of the worker during the step), ``worker`` (pid, host,
-    peak resident memory of the worker process [MiB]) and ``summary`` (:func:`step_summary`).
+    line or None), ``outputs`` (files relative to ``out``), ``device`` (the Warp device it was given),
+    ``seconds`` (wall), ``cpu_seconds`` (user + system CPU time of the worker during the step),
+    ``worker`` (pid, host, peak resident memory of the worker process [MiB]) and ``summary``
+    (:func:`step_summary`).
     """
     t0, c0 = time.perf_counter(), _cpu_seconds()
     step, folder, out = task["step"], Path(task["folder"]), Path(task["out"])
@@ -164,7 +184,7 @@ def run_step(task: dict) -> dict:
     if kill and kill == f"{task['name']}:{step}":
         os.kill(os.getpid(), signal.SIGKILL)
     final, tmp = folder / step, folder / f".{step}.partial"
-    record = {"status": "failed", "error": None, "outputs": [], "summary": {}}
+    record = {"status": "failed", "error": None, "outputs": [], "summary": {}, "device": task.get("device", "cpu")}
     try:
         if tmp.exists():
             shutil.rmtree(tmp)

@@ -51,7 +51,7 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
 
     Args:
         build: A ``facewarp build`` output folder (``face_rig.npz``).
-        out: The rig file; its folder must exist.
+        out: The rig file, or a list of them (one bake written in each format); their folders must exist.
         shapes: One of :data:`RIG_SHAPES`.
         inbetweens: In-between shapes per muscle (0..8).
         muscles: Optional muscle names to bake (default all).
@@ -61,11 +61,15 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
     from ..physics.face_rig import load_face_rig
     from ..present.looks import head_camera, head_looks
 
-    out = Path(out)
-    if out.suffix.lower() not in RIG_SUFFIXES:
-        raise InputError(f"--out: {str(out)!r} has extension {out.suffix!r}; expected one of {', '.join(RIG_SUFFIXES)}")
-    if out.is_dir() or not out.parent.is_dir():
-        raise InputError(f"--out: {str(out)!r} is a folder or its folder does not exist")
+    outs = [Path(o) for o in out] if isinstance(out, (list, tuple)) else [Path(out)]
+    if not outs:
+        raise InputError("--out: no rig file given")
+    for out in outs:
+        if out.suffix.lower() not in RIG_SUFFIXES:
+            raise InputError(f"--out: {str(out)!r} has extension {out.suffix!r}; expected one of "
+                             f"{', '.join(RIG_SUFFIXES)}")
+        if out.is_dir() or not out.parent.is_dir():
+            raise InputError(f"--out: {str(out)!r} is a folder or its folder does not exist")
     if shapes not in RIG_SHAPES:
         raise InputError(f"--shapes: {shapes!r} is not available; expected one of {', '.join(RIG_SHAPES)} "
                          "(ARKit shapes need the data-driven activation table)")
@@ -79,13 +83,15 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
     frames = demo_frames(fr, rig)
     looks = head_looks(fr)
     camera = head_camera(fr)
-    if out.suffix.lower() == ".glb":
-        from ..bake.gltf import write_glb
+    for out in outs:
+        if out.suffix.lower() == ".glb":
+            from ..bake.gltf import write_glb
 
-        write_glb(out, rig, frames=frames, looks=looks)
-    else:
-        _write_usd(out, rig, frames, looks, camera)
-    return {"file": str(out), "targets": len(rig.names), "muscles": len(rig.muscle_names),
+            write_glb(out, rig, frames=frames, looks=looks)
+        else:
+            _write_usd(out, rig, frames, looks, camera)
+    return {"file": str(outs[0]), "files": [str(o) for o in outs], "targets": len(rig.names),
+            "muscles": len(rig.muscle_names),
             "inbetweens": int(inbetweens), "vertices": int(len(rig.rest)), "frames": len(frames),
             "seconds": frames[-1][0], "jaw_angle_rad": rig.jaw_angle,
             "bake_frames_max": int(max(max(v) for v in rig.bake_frames.values()))}

@@ -192,6 +192,30 @@ def sheet_areas(V, T, layer) -> np.ndarray:
     return np.bincount(B.ravel(), weights=np.repeat(a / 3.0, 3), minlength=n)
 
 
+def _xforms(xforms, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations (count, 3, 3) and translations (count, 3) [m] of :meth:`ModelBuilder.replicate`'s ``xforms``."""
+    R, t = np.broadcast_to(np.eye(3), (count, 3, 3)).copy(), np.zeros((count, 3))
+    if xforms is None:
+        return R, t
+    items = list(xforms) if not isinstance(xforms, np.ndarray) else list(xforms)
+    if len(items) != count:
+        raise InputError(f"xforms: expected {count} transforms (one per copy), got {len(items)}")
+    for i, x in enumerate(items):
+        if isinstance(x, (tuple, list)) and len(x) == 2:
+            r, tt = np.asarray(x[0], np.float64), np.asarray(x[1], np.float64)
+        else:
+            m = np.asarray(x, np.float64)
+            if m.shape != (4, 4):
+                raise InputError(f"xforms[{i}]: expected (R, t) or a 4 x 4 transform, got shape {m.shape}")
+            r, tt = m[:3, :3], m[:3, 3]
+        if r.shape != (3, 3) or tt.shape != (3,) or not (np.isfinite(r).all() and np.isfinite(tt).all()):
+            raise InputError(f"xforms[{i}]: expected a finite rotation (3, 3) and translation (3,)")
+        if np.abs(r @ r.T - np.eye(3)).max() > 1e-6 or np.linalg.det(r) < 0:
+            raise InputError(f"xforms[{i}]: not a rotation (R R^T = I, det R = +1)")
+        R[i], t[i] = r, tt
+    return R, t
+
+
 def node_jaw_amounts(fr) -> np.ndarray:
     """Eq. 6.4.9 jaw amount of every tet node of a face rig (:class:`~facewarp.FaceRig`), shape (p,), float64: that of the head vertex the
     node lies on or under (sheets are stored one after another, node ``l * q + i`` below outer
@@ -329,10 +353,10 @@ class ModelBuilder:
         (the class doc lists the arguments and the attributes it sets).
 
         Raises:
-            InputError: as the class doc, or a second head (one head per builder for now).
+            InputError: as the class doc, or a second head (more heads: :meth:`add_builder`).
         """
         if self.head_count:
-            raise InputError("add_tissue: this builder has its head already (one head per builder)")
+            raise InputError("add_tissue: this builder has its head already (one head per builder; append more heads with add_builder)")
         mat = material if isinstance(material, (MaterialThesis, MaterialPhysical)) else material_profile(
             "thesis" if material is None else material)
         physical = isinstance(mat, MaterialPhysical)
@@ -702,6 +726,101 @@ class ModelBuilder:
     def vertex_count(self) -> int:
         return len(self.vertices)
 
+    # ------------------------------------------------------------------------------ more heads
+    _HEAD_FIELDS = ("vertices", "tets", "layer", "fixed", "held", "mass", "vertex_area", "vertex_volume",
+                    "hold_stiffness", "edges", "tet_edge_index", "tet_face_index", "edge_rest_lengths", "edge_class",
+                    "edge_k0", "edge_damping_coef", "faces", "face_rest_areas", "face_k", "face_damping_coef",
+                    "tet_rest_volumes", "tet_k", "tet_damping_coef", "tet_rest_inverse", "tet_shear_k",
+                    "tet_shear_damping")
+
+    def _has_stages(self) -> bool:
+        return bool(self.muscle_rig is not None or len(self.support_nodes) or self.jaw is not None
+                    or self.contact_geometry is not None or len(self.carry_nodes))
+
+    def add_builder(self, other: ModelBuilder, xform=None) -> None:
+        """Append the heads of ``other`` (after Newton's ``ModelBuilder.add_builder``): its nodes,
+        elements and materials, every index shifted by this builder's counts, its rest shape placed
+        by ``xform``; the per-head ranges of the finalized :class:`Model` (``head_node_start``, ...)
+        say which rows are whose. Rest lengths, areas, volumes and rest inverses are measured again
+        on the placed (float32) positions, so each head's rest state stays an equilibrium.
+
+        What is appended today is the tissue (tet mesh, material, fixed and held nodes): one Model of N
+        tissues is stepped by one solver. Heads with muscles, supports, a jaw or contact are refused:
+        their stages take one jaw per Model; step such heads together with :class:`~facewarp.FaceBatch`
+        (one Model per head, one graph per frame).
+
+        Args:
+            other: A builder with at least one head (``add_tissue``, or an earlier ``add_builder``).
+            xform: Where the appended heads go: ``(R, t)`` (a rotation (3, 3) and a translation (3,)
+                [m]) or a 4 x 4 rigid transform; ``x -> R x + t``. Default: as they are.
+
+        Raises:
+            InputError: ``other`` not a builder or without a head, heads with stages, another
+                damping rate, or a bad ``xform``.
+        """
+        self.replicate(other, 1, xforms=None if xform is None else [xform])
+
+    def replicate(self, builder: ModelBuilder, count: int, xforms=None) -> None:
+        """Append ``count`` copies of ``builder``'s heads (:meth:`add_builder`), copy ``i`` placed by
+        ``xforms[i]`` (a list of ``(R, t)`` or 4 x 4 transforms, or an array (count, 4, 4); default all
+        in place). One concatenation for all copies.
+
+        Raises:
+            InputError: as :meth:`add_builder`, or a bad ``count`` / ``xforms``.
+        """
+        if not isinstance(builder, ModelBuilder):
+            raise InputError(f"builder: expected a ModelBuilder, got {type(builder).__name__}")
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 1 <= count <= 1_000_000:
+            raise InputError(f"count: expected a whole number 1..1000000, got {count!r}")
+        if not builder.head_count:
+            raise InputError("builder: it has no head yet (add_tissue or add_face first)")
+        if builder._has_stages() or self._has_stages():
+            raise InputError("add_builder: heads with muscles, supports, a jaw or contact cannot share one Model yet "
+                             "(their stages take one jaw per Model); step them together with facewarp.FaceBatch")
+        if self.head_count and not np.isclose(self.damping_rate, builder.damping_rate, rtol=1e-6):
+            raise InputError(f"add_builder: damping rate {builder.damping_rate:g} 1/s differs from this model's "
+                             f"{self.damping_rate:g} 1/s (one rate per Model)")
+        R, t = _xforms(xforms, int(count))
+        parts = [[getattr(self, f)] for f in self._HEAD_FIELDS] if self.head_count else [[] for _ in self._HEAD_FIELDS]
+        ranges = self._head_ranges() if self.head_count else {k: [0] for k in ("node", "edge", "face", "tet")}
+        n0, e0, f0, t0 = (int(ranges[k][-1]) for k in ("node", "edge", "face", "tet"))
+        nb, eb, fb, tb = builder.vertex_count, len(builder.edges), len(builder.faces), len(builder.tets)
+        other = builder._head_ranges()
+        T = builder.tets
+        for c in range(int(count)):
+            V = builder.vertices @ R[c].T + t[c]
+            V32 = V.astype(np.float32).astype(np.float64)
+            E, Fc = builder.edges, builder.faces
+            x0, x1, x2, x3 = (V32[T[:, k]] for k in range(4))
+            vol = np.einsum("ij,ij->i", x1 - x0, np.cross(x2 - x0, x3 - x0)) / 6.0
+            Dm = np.stack([V32[T[:, k]] - V32[T[:, 0]] for k in (1, 2, 3)], axis=2)
+            geo = {"vertices": V, "edge_rest_lengths": np.linalg.norm(V32[E[:, 1]] - V32[E[:, 0]], axis=1),
+                   "face_rest_areas": 0.5 * np.linalg.norm(np.cross(V32[Fc[:, 1]] - V32[Fc[:, 0]],
+                                                                    V32[Fc[:, 2]] - V32[Fc[:, 0]]), axis=1),
+                   "tet_rest_volumes": vol, "tet_rest_inverse": np.linalg.inv(Dm)}
+            shift = {"tets": n0, "edges": n0, "faces": n0, "tet_edge_index": e0, "tet_face_index": f0}
+            for lst, f in zip(parts, self._HEAD_FIELDS):
+                a = geo[f] if f in geo else getattr(builder, f)
+                lst.append(a + shift[f] if f in shift else a)
+            for k, off in (("node", n0), ("edge", e0), ("face", f0), ("tet", t0)):
+                ranges[k] = list(ranges[k]) + [int(off) + int(v) for v in other[k][1:]]
+            n0, e0, f0, t0 = n0 + nb, e0 + eb, f0 + fb, t0 + tb
+        for lst, f in zip(parts, self._HEAD_FIELDS):
+            setattr(self, f, np.concatenate(lst, axis=0))
+        if not self.head_count:
+            self.material, self.damping_rate = builder.material, builder.damping_rate
+            self.stiffness_damping, self.edge_damping = builder.stiffness_damping, builder.edge_damping
+        self.head_count += int(count) * builder.head_count
+        self._ranges = {k: np.asarray(v, np.int64) for k, v in ranges.items()}
+
+    def _head_ranges(self) -> dict:
+        """Each head's first node, edge, face and tet and the ends (host, int64)."""
+        r = getattr(self, "_ranges", None)
+        if r is not None and int(r["node"][-1]) == self.vertex_count:
+            return r
+        return {"node": np.array([0, self.vertex_count]), "edge": np.array([0, len(self.edges)]),
+                "face": np.array([0, len(self.faces)]), "tet": np.array([0, len(self.tets)])}
+
     def finalize(self, device=None) -> Model:
         """Copy the model onto ``device`` (a Warp device or its name; None: Warp's default): every
         device array of what is simulated, made here in one place: the tissue, and the stages'
@@ -781,6 +900,12 @@ class ModelBuilder:
             ("head_face_start", len(self.faces)), ("head_tet_start", len(self.tets)),
             ("head_muscle_start", self.muscle_count), ("head_ctrl_start", P), ("head_attachment_start", K),
             ("head_support_start", len(self.support_nodes)), ("head_carry_start", len(self.carry_nodes)))}
+        if self.head_count > 1:  # add_builder / replicate: tissue heads, no stage rows
+            hr = self._head_ranges()
+            for k in ("node", "edge", "face", "tet"):
+                ranges[f"head_{k}_start"] = np.asarray(hr[k], np.int64)
+            for k in ("muscle", "ctrl", "attachment", "support", "carry"):
+                ranges[f"head_{k}_start"] = np.zeros(self.head_count + 1, np.int64)
         g = self.contact_geometry
         return dict(
             head_count=self.head_count,

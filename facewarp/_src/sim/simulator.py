@@ -62,7 +62,7 @@ class FaceSimulator:
                  iterations: int | None = None, tolerance: float | None = None, method: str | None = None,
                  solver_options: dict | None = None, support_stiffness: float | None = None,
                  edge_damping: float | None = None, mass_scaling: bool = True, contact: bool = True,
-                 contact_modulus: float | None = None):
+                 contact_modulus: float | None = None, _builder=None):
         device = check_simulator_args(fr, device=device, solver=solver, solvers=SOLVERS, dt=dt, substeps=substeps,
                                       fps=fps, iterations=iterations, tolerance=tolerance, method=method,
                                       solver_options=solver_options, support_stiffness=support_stiffness,
@@ -71,7 +71,7 @@ class FaceSimulator:
         b = build_face(fr, device=device, solver=solver, material=material, fps=fps, dt=dt, substeps=substeps,
                        iterations=iterations, tolerance=tolerance, method=method, solver_options=solver_options,
                        support_stiffness=support_stiffness, edge_damping=edge_damping, mass_scaling=mass_scaling,
-                       contact=contact, contact_modulus=contact_modulus)
+                       contact=contact, contact_modulus=contact_modulus, builder=_builder)
         self.fr, self.fps, self.solver_name, self.material = fr, float(fps), solver, b["material"]
         self.builder, self.model, self.solver = b["builder"], b["model"], b["solver"]
         self.substeps, self.dt, self.added_mass_fraction = b["substeps"], b["dt"], b["added_mass_fraction"]
@@ -142,15 +142,24 @@ class FaceSimulator:
         (a bad ``dt``, a head jump) or SimulationError (a NaN, an inverted tet at the retry bound)."""
         n = self.substeps if dt is None else check_step_count(dt, self.dt)
         t0 = time.perf_counter()
+        self._frame_loads(n)
+        step_frame(self, n, self._a, self._target_a, self._j, self._target_j)  # checked, rolled back if it fails
+        self._frame_done(n)
+        self.step_seconds += time.perf_counter() - t0
+
+    def _frame_loads(self, n: int) -> None:
+        """Before a frame of ``n`` substeps: the loads of the head's accelerating frame (a jump
+        beyond a head's motion is an InputError, nothing changed). :class:`~facewarp.FaceBatch` shares it."""
         if not self._pose.identity:  # the head rides a moving body: loads of the accelerating frame
-            self._pose.check_motion(n * self.dt)  # a jump beyond a head's motion is refused, nothing changed
+            self._pose.check_motion(n * self.dt)
             f = self._pose.node_forces(self.positions(), self.builder.mass, n * self.dt)
             self.control.external_force.assign(f.astype(np.float32))
-        step_frame(self, n, self._a, self._target_a, self._j, self._target_j)  # checked, rolled back if it fails
+
+    def _frame_done(self, n: int) -> None:
+        """After a frame of ``n`` substeps was taken: the controls reached, the pose and the clock advanced."""
         self._a, self._j = self._target_a.copy(), self._target_j.copy()
         self._pose.advance()
         self._steps_taken += n
-        self.step_seconds += time.perf_counter() - t0
 
     def advance(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``1 / fps`` with the current controls."""

@@ -33,7 +33,7 @@ def face_stages(model) -> dict:
 
 def build_face(fr, *, device, solver: str, material, fps: float, dt=None, substeps=None, iterations=None,
                tolerance=None, method=None, solver_options=None, support_stiffness=None, edge_damping=None,
-               mass_scaling: bool = True, contact: bool = True, contact_modulus=None) -> dict:
+               mass_scaling: bool = True, contact: bool = True, contact_modulus=None, builder=None) -> dict:
     """A face rig made into a simulation, one way down (the arguments checked by the simulator first): one
     :class:`~facewarp._src.physics.model.ModelBuilder` (``add_face``: every stiffness), its
     ``finalize`` (every device array of what is simulated, the rest State and the Control), the
@@ -45,6 +45,11 @@ def build_face(fr, *, device, solver: str, material, fps: float, dt=None, subste
     Frame timing: the implicit solver one step per frame (or ``substeps``, or as many as ``dt``
     needs), the Verlet reference its stable step
     (:meth:`~facewarp._src.physics.model.ModelBuilder.explicit_step`, which may scale masses).
+
+    ``builder``: a :class:`~facewarp._src.physics.model.ModelBuilder` already made by ``add_face``
+    of ``fr`` with these arguments, shared (read only) by the heads of a
+    :class:`~facewarp.FaceBatch` that play one rig (the implicit solver only: the Verlet
+    reference scales the builder's masses); default a new one.
 
     Returns:
         A dict: ``material``, ``builder``, ``model``, ``substeps``, ``dt`` [s],
@@ -60,9 +65,10 @@ def build_face(fr, *, device, solver: str, material, fps: float, dt=None, subste
     from ..physics.solvers.verlet import SolverVerlet
 
     mat = material_profile(material)
-    builder = ModelBuilder()
-    builder.add_face(fr, material=mat, edge_damping=edge_damping, support_stiffness=support_stiffness,
-                     contact=contact, contact_modulus=contact_modulus, mass_scaling=mass_scaling)
+    if builder is None or solver == "verlet":
+        builder = ModelBuilder()
+        builder.add_face(fr, material=mat, edge_damping=edge_damping, support_stiffness=support_stiffness,
+                         contact=contact, contact_modulus=contact_modulus, mass_scaling=mass_scaling)
     frame_dt = 1.0 / fps
     if solver == "verlet":
         n, step, added = builder.explicit_step(frame_dt, dt=dt, substeps=substeps, mass_scaling=mass_scaling)

@@ -29,6 +29,29 @@ __all__ = ["IncrementalPotential"]
 wp = get_warp()  # the kernel modules above import Warp already
 
 
+_PATTERNS: dict = {}
+_PATTERN_CACHE = 8
+
+
+def _block_pattern(code, n: int):
+    """The Hessian's block pattern of the block codes ``row * n + col`` (k,), int64: the distinct
+    blocks ascending (b,) and each block's slots grouped (start (b + 1,), order (k,)). Heads of one
+    topology (:class:`~facewarp.FaceBatch`) have the same codes: the last few patterns are kept,
+    known by the codes' hash (the sort is most of a head's set-up)."""
+    import hashlib
+
+    key = (n, len(code), hashlib.blake2b(np.ascontiguousarray(code).tobytes(), digest_size=16).digest())
+    hit = _PATTERNS.get(key)
+    if hit is None:
+        uniq, inv = np.unique(code, return_inverse=True)
+        _, start, order = _group_indices(inv, np.arange(len(uniq)))
+        hit = (uniq, start, order)
+        if len(_PATTERNS) >= _PATTERN_CACHE:
+            _PATTERNS.pop(next(iter(_PATTERNS)))
+        _PATTERNS[key] = hit
+    return hit
+
+
 def _group_indices(keys, groups=None):
     """:func:`~facewarp._src.physics.model.group_indices` (the same CSR grouping), here so that the
     solver's construction reads the Model without calling back into it."""
@@ -151,9 +174,8 @@ class IncrementalPotential:
         rows, cols = np.concatenate(rows), np.concatenate(cols)
         self._block_offsets = np.cumsum([0, 4 * len(E), 9 * len(F), 16 * len(T), n, self.pool.count])
         code = rows * n + cols
-        uniq, inv = np.unique(code, return_inverse=True)
+        uniq, start, order = _block_pattern(code, n)
         nb = len(uniq)
-        _, start, order = _group_indices(inv, np.arange(nb))
         brow, bcol = uniq // n, uniq % n
         self.block_count = nb
         self.bsr_offsets = np.searchsorted(brow, np.arange(n + 1)).astype(np.int32)

@@ -1,0 +1,368 @@
+"""Many heads on one device: FaceBatch throughput against N separate simulators and Newton VBD, N = 1 .. 4,000.
+
+    python -m benchmarks batch [--device cpu|cuda] [--sizes 1,10,100,1000,4000] [--max-n N]
+                               [--heads default,identity000] [--preset laugh] [--frames 20]
+                               [--naive-max 1000] [--level 0] [--name batch_cuda]
+
+For each N: a :class:`facewarp.FaceBatch` of N level-0 heads (mixed identities, cycling through
+``--heads``: the default head and ICT-FaceKit identities adapted and built on first use, kept in
+``$FACEWARP_BENCH_HEADS``; an identity that cannot be made is replaced by the default head scaled
+anisotropically, and the JSON says so), the ``--preset`` (default laugh, with its jaw opening)
+over ``--frames`` frames after two warm-up frames (compilation, graph capture), at the default
+adaptive accuracy (the best of ``--repeats`` runs from rest), once per ``--streams`` count (FaceBatch's groups of heads on their own CUDA
+streams; the best is the row's figure). Reported: head-frames per second, ms per frame, GPU memory per head (Warp's
+memory pool before and after the batch was made), construction seconds, and the frames'
+sub-stepping; the naive baseline (the same heads' :class:`facewarp.FaceSimulator` objects
+stepped one after another, each its own graph per frame) for N <= ``--naive-max`` with the FDPs
+of both compared (the same answer); Newton's ``SolverVBD`` on the same tets replicated N times
+(benchmarks/peers.py's problem) when ``newton`` is importable, else a note; and the same tissue
+replicated N times in ONE facewarp Model (``ModelBuilder.replicate``, one implicit solver),
+Newton's like-for-like and the cost of a merged face Model. On the CPU the
+figure of merit is one frame of 4 heads against one head's frame (target <= 4x).
+
+Each N is caught on its own (out of memory ends the sweep; the JSON keeps what was measured)
+and the JSON is rewritten after every N: benchmarks/results/<name>.json (default
+``batch_<device>``) and a PNG scaling plot beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import time
+import traceback
+from dataclasses import replace
+
+import numpy as np
+
+from benchmarks._common import RESULTS, case_face, save
+
+THREADS = 1
+
+
+def scaled_head(level: int = 0, scale=(1.06, 0.95, 1.03)):
+    """The default head stretched anisotropically (another rest shape, the same topology): a stand-in identity."""
+    import facewarp as fw
+
+    t = fw.default_template(level)
+    s = np.asarray(scale, np.float64)
+    parts = {k: (V * s, F) for k, (V, F) in t.parts.items()}
+    return fw.build_face(replace(t, vertices=t.vertices * s, condyles=t.condyles * s, parts=parts))
+
+
+def make_rigs(specs: list[str], level: int) -> tuple[list, list[str], list[str]]:
+    """The face rigs of the head specs (``default``, ``identityNNN``, ``scaled``, a build folder)."""
+    rigs, names, notes = [], [], []
+    for spec in specs:
+        try:
+            fr = scaled_head(level) if spec == "scaled" else case_face(spec, level)
+            names.append(spec)
+        except Exception as e:  # no ICT data, or the adaptation failed here: a stand-in identity
+            notes.append(f"{spec}: not available ({type(e).__name__}: {e}); the scaled default head instead")
+            fr, spec = scaled_head(level), "scaled"
+            names.append(spec)
+        rigs.append(fr)
+    return rigs, names, notes
+
+
+def mem_used(device: str) -> int | None:
+    import warp as wp
+
+    if not device.startswith("cuda"):
+        return None
+    try:
+        wp.synchronize_device(device)
+        return int(wp.get_mempool_used_mem_current(device))
+    except Exception:
+        return None
+
+
+def drive(batch_or_heads, timelines, frames: int, start: int, *, naive: bool = False) -> float:
+    """Frames ``start .. start + frames - 1`` of the timelines; returns the wall seconds (synchronised)."""
+    import warp as wp
+
+    heads = batch_or_heads if naive else batch_or_heads.heads
+    fps = heads[0].fps
+    t0 = time.perf_counter()
+    for k in range(start, start + frames):
+        es = [tl.sample(k / fps) for tl in timelines]
+        if naive:
+            for h, e in zip(heads, es):
+                h.set_activations(e)
+                h.set_jaw(e.jaw_u, e.jaw_v)
+                h.step()
+        else:
+            batch_or_heads.set_activations(es)
+            batch_or_heads.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
+            batch_or_heads.step()
+    wp.synchronize()
+    return time.perf_counter() - t0
+
+
+def newton_replicated(problem: dict, n: int, device: str, frames: int, substeps: int = 10, iterations: int = 10):
+    """Newton's SolverVBD on the peer problem's tets replicated ``n`` times: seconds per frame, or why not."""
+    try:
+        import newton
+        import warp as wp
+    except Exception as e:
+        return {"skipped": f"newton not importable here ({type(e).__name__}: {e}); pip install newton to compare"}
+    try:
+        from benchmarks._peers_newton import PARTICLE_RADIUS
+
+        nodes, tets = problem["nodes"], problem["tets"]
+        one = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+        for i in range(len(nodes)):
+            one.add_particle(wp.vec3(*nodes[i]), wp.vec3(0.0), float(problem["mass"][i]), radius=PARTICLE_RADIUS)
+        for t, mu, lam, kd in zip(tets, problem["k_mu"], problem["k_lambda"], problem["k_damp"]):
+            one.add_tetrahedron(int(t[0]), int(t[1]), int(t[2]), int(t[3]), float(mu), float(lam), float(kd))
+        b = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+        b.replicate(one, n)
+        b.color()
+        with wp.ScopedDevice(device):
+            model = b.finalize(device=device)
+            model.particle_grid = None
+            model.particle_max_radius = 0.0
+            s = newton.solvers.SolverVBD(model, iterations=iterations, particle_enable_self_contact=False,
+                                         particle_enable_tile_solve=False)
+            s0, s1 = model.state(), model.state()
+            force = np.tile(np.asarray(problem["force"], np.float32), (n, 1))
+            f = wp.array(force, dtype=wp.vec3, device=device)
+            dt = 1.0 / 30.0 / substeps
+
+            def frame(s0, s1):
+                for _ in range(substeps):
+                    s0.clear_forces()
+                    wp.copy(s0.particle_f, f)
+                    s.step(s0, s1, None, None, dt)
+                    s0, s1 = s1, s0
+                return s0, s1
+
+            s0, s1 = frame(s0, s1)  # warm-up
+            wp.synchronize()
+            t0 = time.perf_counter()
+            for _ in range(frames):
+                s0, s1 = frame(s0, s1)
+            wp.synchronize()
+            sec = (time.perf_counter() - t0) / frames
+        return {"seconds_per_frame": sec, "head_frames_per_second": n / sec, "substeps": substeps,
+                "iterations": iterations, "newton_version": newton.__version__,
+                "note": "tissue only (the peer problem's dead load in place of the muscles, no jaw, no contact)"}
+    except Exception as e:
+        return {"error": f"{type(e).__name__}: {e}"}
+
+
+def facewarp_replicated(problem: dict, n: int, device: str, frames: int) -> dict:
+    """The peer problem's tissue (tets, pinned nodes, the dead load; no muscles, jaw or contact)
+    replicated ``n`` times in ONE Model (ModelBuilder.replicate) and stepped by one implicit
+    solver: the like-for-like of Newton VBD's replicate, and what a merged face Model would cost."""
+    import warp as wp
+
+    from facewarp.physics import MaterialPhysical, ModelBuilder, SolverImplicit
+
+    one = ModelBuilder(problem["nodes"], problem["tets"], layer=problem["layer"], fixed=problem["pinned"],
+                       material=MaterialPhysical())
+    big = ModelBuilder()
+    big.replicate(one, n)
+    m = big.finalize(device)
+    solver = SolverImplicit(m, tolerance=3e-5)
+    st, sc, ctl = m.state(), m.state(), m.control()
+    ctl.external_force.assign(np.tile(np.asarray(problem["force"], np.float32), (n, 1)))
+    dt = 1.0 / 30.0
+
+    def two():
+        solver.step(st, sc, ctl, dt)
+        solver.step(sc, st, ctl, dt)
+
+    graph = None
+    if m.device.is_cuda and (not getattr(solver, "adaptive", False) or wp.is_conditional_graph_supported()):
+        with wp.ScopedCapture(device=m.device) as cap:
+            two()
+        graph = cap.graph
+    run = (lambda: wp.capture_launch(graph)) if graph is not None else two
+    run()  # warm-up
+    wp.synchronize()
+    pairs = max(1, frames // 2)
+    t0 = time.perf_counter()
+    for _ in range(pairs):
+        run()
+    wp.synchronize()
+    sec = (time.perf_counter() - t0) / (2 * pairs)
+    X = st.positions.numpy()
+    return {"seconds_per_frame": sec, "head_frames_per_second": n / sec, "method": solver.method,
+            "finite": bool(np.isfinite(X).all()),
+            "note": "tissue only in one Model (the peer problem: pinned nodes and the dead load), one solver, "
+                    "global convergence"}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--sizes", default=None, help="comma list of N (default cuda 1,10,100,1000,4000; cpu 1,4)")
+    ap.add_argument("--max-n", type=int, default=None, help="skip sizes above this")
+    ap.add_argument("--heads", default="default,identity000", help="head specs cycled over the batch")
+    ap.add_argument("--preset", default="laugh")
+    ap.add_argument("--frames", type=int, default=20, help="timed frames per N (after 2 warm-up frames)")
+    ap.add_argument("--naive-max", type=int, default=1000, help="largest N of the naive loop")
+    ap.add_argument("--naive-frames", type=int, default=None, help="timed frames of the naive loop (default --frames)")
+    ap.add_argument("--level", type=int, default=0)
+    ap.add_argument("--repeats", type=int, default=None,
+                    help="timed runs per configuration, the best kept (default cpu 3: a shared box; cuda 1)")
+    ap.add_argument("--streams", default=None,
+                    help="comma list of FaceBatch stream counts to time per N (default cuda 1,8,32; cpu 1)")
+    ap.add_argument("--no-peers", action="store_true", help="skip Newton VBD and the one-Model tissue rows")
+    ap.add_argument("--one-model-max", type=int, default=4000, help="largest N of the one-Model tissue row")
+    ap.add_argument("--name", default=None, help="result name (default batch_<device>)")
+    ap.add_argument("--append", action="store_true",
+                    help="keep the rows of an earlier result of this name for the sizes not run now")
+    args = ap.parse_args(argv)
+    import facewarp as fw
+    import warp as wp
+
+    device = args.device
+    cuda = device.startswith("cuda")
+    sizes = [int(s) for s in (args.sizes or ("1,10,100,1000,4000" if cuda else "1,4")).split(",") if s.strip()]
+    if args.max_n is not None:
+        sizes = [n for n in sizes if n <= args.max_n]
+    stream_counts = [int(k) for k in (args.streams or ("1,8,32" if cuda else "1")).split(",") if k.strip()]
+    repeats = max(1, args.repeats or (1 if cuda else 3))
+    name = args.name or f"batch_{'cuda' if cuda else 'cpu'}"
+    rigs, specs, notes = make_rigs([s.strip() for s in args.heads.split(",") if s.strip()], args.level)
+    tl = fw.timeline_for(args.preset, attack=0.3, hold=10.0, release=0.3, start=0.0)
+    problem = None
+    import importlib.util
+
+    have_newton = importlib.util.find_spec("newton") is not None
+    if args.no_peers:
+        notes.append("Newton VBD and the one-Model tissue not run (--no-peers)")
+    else:
+        if not have_newton:
+            notes.append("Newton VBD skipped: the newton package is not installed here (pip install newton)")
+        try:
+            from benchmarks.peers import export_problem
+
+            problem = export_problem(rigs[0], args.preset)
+        except Exception as e:
+            notes.append(f"peer problem not exported: {type(e).__name__}: {e}")
+    figures = {"device": device, "level": args.level, "repeats": repeats, "heads": specs, "preset": args.preset, "frames": args.frames,
+               "tets_per_head": [int(len(fr.tets)) for fr in rigs], "notes": notes, "rows": []}
+    naive_frames = args.naive_frames or args.frames
+    if args.append and (RESULTS / f"{name}.json").is_file():
+        from benchmarks._common import load
+
+        old = load(name)["figures"].get("rows", [])
+        figures["rows"] = [r for r in old if r.get("n") not in sizes]
+
+    def write():
+        path = save(name, figures, device=device)
+        rows = [r for r in figures["rows"] if "head_frames_per_second" in r]
+        if rows:
+            from facewarp.render import line_chart
+
+            x = [r["n"] for r in rows]
+            series = {"FaceBatch": [r["head_frames_per_second"] for r in rows],
+                      "naive loop": [r.get("naive", {}).get("head_frames_per_second", np.nan) for r in rows]}
+            for key, label in (("one_model_tissue", "facewarp one Model (tissue only)"),
+                               ("newton_vbd", "Newton VBD (tissue only)")):
+                v = [r.get(key, {}).get("head_frames_per_second", np.nan) for r in rows]
+                if np.isfinite(v).any():
+                    series[label] = v
+            line_chart(RESULTS / f"{name}.png", np.log10(x), series, log_y=True,
+                       title=f"head-frames/s on {device}, level {args.level}, {args.preset}",
+                       xlabel="log10 N heads", ylabel="head-frames / s", width=640, height=400)
+        return path
+
+    for n in sizes:
+        row = {"n": n}
+        figures["rows"].append(row)
+        figures["rows"].sort(key=lambda r: r["n"])
+        batch = None
+        try:
+            m0 = mem_used(device)
+            t0 = time.perf_counter()
+            head_rigs = [rigs[i % len(rigs)] for i in range(n)]
+            batch = fw.FaceBatch(head_rigs, device=device)
+            row["build_seconds"] = time.perf_counter() - t0
+            m1 = mem_used(device)
+            if m0 is not None and m1 is not None:
+                row["gpu_memory_per_head_mb"] = (m1 - m0) / n / 2**20
+            timelines = [tl.for_head(fr) for fr in head_rigs]
+            row["by_streams"] = {}
+            for k in stream_counts:  # the same frames from rest with each stream count (best of --repeats)
+                batch.streams = k
+                sec = np.inf
+                for _ in range(repeats):
+                    batch.reset()
+                    warm = drive(batch, timelines, 2, 1)
+                    sec = min(sec, drive(batch, timelines, args.frames, 3))
+                row["by_streams"][str(k)] = {"warmup_seconds": warm, "ms_per_frame": sec / args.frames * 1e3,
+                                             "head_frames_per_second": n * args.frames / sec}
+                print(f"N={n}, {k} streams: {sec / args.frames * 1e3:.1f} ms/frame", flush=True)
+            best = min(row["by_streams"], key=lambda k: row["by_streams"][k]["ms_per_frame"])
+            row["streams"] = int(best)
+            row.update({k: v for k, v in row["by_streams"][best].items()})
+            if str(stream_counts[-1]) != best:  # the FDPs below from the best configuration's run
+                batch.streams = int(best)
+                batch.reset()
+                drive(batch, timelines, args.frames + 2, 1)
+            st = batch.status
+            row["failed_heads"] = [s["head"] for s in st if not s["ok"]]
+            row["substepped_frames"] = int(sum(s["substepped_frames"] for s in st))
+            fdp_batch = np.stack([batch.fdp_points(i) for i in range(min(n, 4))])
+            print(f"N={n}: {row['ms_per_frame']:.1f} ms/frame, {row['head_frames_per_second']:.0f} head-frames/s "
+                  f"(build {row['build_seconds']:.1f} s)", flush=True)
+            if n <= args.naive_max:
+                heads = batch.heads
+                nf = min(naive_frames, args.frames)
+                nsec = np.inf
+                for _ in range(repeats):
+                    for h in heads:
+                        h.reset()
+                    drive(heads, timelines, 2, 1, naive=True)
+                    nsec = min(nsec, drive(heads, timelines, nf, 3, naive=True))
+                row["naive"] = {"frames": nf, "ms_per_frame": nsec / nf * 1e3, "head_frames_per_second": n * nf / nsec}
+                row["speedup_over_naive"] = row["head_frames_per_second"] / row["naive"]["head_frames_per_second"]
+                if nf == args.frames:  # the same frames: the same answer
+                    fdp_naive = np.stack([heads[i].fdp_points() for i in range(min(n, 4))])
+                    row["naive"]["max_fdp_difference_m"] = float(np.abs(fdp_naive - fdp_batch).max())
+                print(f"  naive: {row['naive']['ms_per_frame']:.1f} ms/frame ({row['speedup_over_naive']:.2f}x)",
+                      flush=True)
+        except Exception as e:
+            row["error"] = f"{type(e).__name__}: {' '.join(str(e).split())[:300]}"
+            row["traceback"] = traceback.format_exc(limit=4)[-1500:]
+            print(f"N={n}: {row['error']}", flush=True)
+            batch = None
+            gc.collect()
+            write()
+            if "memory" in row["error"].lower() or "alloc" in row["error"].lower():
+                break
+            continue
+        finally:
+            batch = None
+            gc.collect()
+            if cuda:
+                try:
+                    wp.synchronize_device(device)
+                except Exception:
+                    pass
+        if problem is not None and n <= args.one_model_max:
+            try:
+                row["one_model_tissue"] = facewarp_replicated(problem, n, device, min(args.frames, 10))
+                print(f"  one Model of {n} tissues: {row['one_model_tissue']['seconds_per_frame'] * 1e3:.1f} ms/frame",
+                      flush=True)
+            except Exception as e:
+                row["one_model_tissue"] = {"error": f"{type(e).__name__}: {' '.join(str(e).split())[:300]}"}
+            gc.collect()
+        if problem is not None and have_newton:
+            row["newton_vbd"] = newton_replicated(problem, n, device, min(args.frames, 10))
+        write()
+    one = next((r for r in figures["rows"] if r["n"] == 1 and "ms_per_frame" in r), None)
+    four = next((r for r in figures["rows"] if r["n"] == 4 and "ms_per_frame" in r), None)
+    if one and four:
+        figures["frame_ratio_4_heads_to_1"] = four["ms_per_frame"] / one["ms_per_frame"]
+        print(f"one frame of 4 heads: {figures['frame_ratio_4_heads_to_1']:.2f}x one head's frame")
+    print("wrote", write())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
