@@ -4,15 +4,18 @@ target skin points, with the physics in the loop (issue 24).
 Each frame is one simulated step of the :class:`~facewarp.FaceSimulator`. Its 29 controls ``u``
 (27 activations in [0, 1], the jaw's opening 0..60 deg and side +-5 deg) minimise
 
-    sum_k w_k |p_k(u) - p*_k|^2 / s^2  +  smoothness |u - u_prev|^2  +  effort |a|^2
+    sum_k w_k |p_k(u) - p*_k|^2 / s^2  +  smoothness sum_k |J_k (u - u_ref)|^2 / s^2  +  effort |a|^2
 
-(``p_k`` the simulated points, ``p*_k`` the targets, ``s`` = 1 mm; jaw angles measured in units
-of their range, so every control spans about 1) within the bounds, by bounded Gauss-Newton on
-the step's linearisation ``p(u) ~ p_b + J (u - u_b)`` (:func:`scipy.optimize.lsq_linear`; 29
-unknowns). ``J`` is the solver's own sensitivity (:func:`.sensitivity.step_sensitivity`: the
-step's Hessian factorised once, one back-substitution per control) mapped through the linear
-read-out (:class:`.sensitivity.PointReadout`). The weights ``w_k`` are 0 for missing points (NaN)
-and Huber weights otherwise (iteratively reweighted), so outliers pull little.
+(``p_k`` the simulated points, ``p*_k`` the targets, ``s`` = 1 mm; the smoothness is the motion
+of all K points away from the controls' motion continued, ``u_ref = 2 u_prev - u_prev2``, so a
+steady motion has no lag, noise is held and a point seen alone cannot drag the muscles it watches;
+jaw angles in units of their range, so every control spans about 1) within the bounds, by
+bounded Gauss-Newton on the step's linearisation ``p(u) ~ p_b + J (u - u_b)``
+(:func:`scipy.optimize.lsq_linear`; 29 unknowns). ``J`` is the solver's own sensitivity
+(:func:`.sensitivity.step_sensitivity`: the step's Hessian factorised once, one back-substitution
+per control) mapped through the linear read-out (:class:`.sensitivity.PointReadout`). The
+weights ``w_k`` are 0 for missing points (NaN) and robust otherwise (Cauchy weights, iteratively
+reweighted from the residuals of no change on), so an outlier centimetres off pulls next to nothing.
 
 ``J`` is reused across frames: after every step the change the step showed updates it
 (Broyden's rank-one update on the predicted vs simulated points), and it is computed afresh
@@ -40,7 +43,16 @@ MODES = ("offline", "realtime")
 """Tracker modes: ``offline`` (frames re-taken until the step matches its prediction) and
 ``realtime`` (one step per frame, nothing re-taken)."""
 
+ROBUST = ("cauchy", "huber", "none")
+"""Point weights of :class:`Tracker` (iteratively reweighted least squares)."""
+
+FIRST_FRAME_REFINE = 8
+"""Re-takes of a tracker's first frame at most (both modes): a take may start far from the
+simulator's state (an expression held at frame 0), and the linearisation at rest reaches it in steps."""
+
 _SCALE = 1e-3  # [m] the point residual's unit in the objective (1 mm)
+_REJECT = 5.0  # Cauchy weights are cut to 0 beyond this many scales (a point 2 cm off pulls nothing at all)
+_CONTROL_SMOOTHNESS = 0.05  # weight of |u - u_prev|^2 beside the point-space smoothness (what no point sees)
 
 
 def _jaw_range() -> np.ndarray:
@@ -116,16 +128,24 @@ class Tracker:
         points: The K point names: FDP ids (``"2.1"``) or head vertices ``"v<index>"``.
         mode: ``"offline"`` (default: frames re-taken while the prediction misses) or ``"realtime"``
             (each frame one step; with a simulator made with ``iterations=1`` the fixed-cost live loop).
-        smoothness: Weight of ``|u - u_prev|^2`` (default 0.02; per unit activation, jaw in units of its range),
-            against point residuals in mm^2.
+        smoothness: Weight of the points' motion away from the motion continued, ``|J (u - u_ref)|^2`` over
+            all K points (default 0.05; module doc), against the residuals of the present points (both in mm^2): a point seen
+            alone cannot drag the muscles it watches far in one frame.
         effort: Weight of ``|a|^2`` (default 1e-3): among activations that fit equally, the smaller.
-        robust: ``"huber"`` (default) or ``"none"``: the point weights.
-        robust_scale: Huber threshold [m] (default 2e-3): points farther off than this pull with a force that no longer grows.
+        robust: The point weights (:data:`ROBUST`): ``"cauchy"`` (default: Cauchy weights
+            ``1 / (1 + (r / s)^2)`` from the residuals of no change on, 0 beyond ``5 s``, so a point centimetres
+            off pulls nothing),
+            ``"huber"`` (a point farther off than ``s`` pulls with a force that no longer grows) or ``"none"``.
+        robust_scale: ``s`` [m] (default 1e-3: twice the noise of good markers; 1.5 times the median
+            residual where that is larger, so a fast motion is not taken for outliers).
         refine: Re-takes of a frame at most (default 2 offline, 0 real-time).
         refine_tolerance: Re-take while the simulated points miss the prediction by more than
-            this RMS [m] (default 1e-4).
+            this RMS [m] (default 2e-4).
         refresh_every: A fresh sensitivity every this many frames (default 10 offline, 60 real-time).
-        refresh_tolerance: ... or when a step misses its prediction by more than this RMS [m] (default 3e-4).
+        refresh_tolerance: ... or when a step misses its prediction by more than this RMS [m] (default
+            5e-4 offline; never in real time, where a step of one solver iteration always lags its prediction).
+        momentum: The smoothness pulls towards ``u_prev + momentum (u_prev - u_prev2)`` (default 1: the
+            controls' motion continued, so a steady motion has no lag and noise is held; 0: towards ``u_prev``).
         corrections: Iterations of a fresh sensitivity towards the exact tangent (default 1 offline,
             0 real-time; :func:`.sensitivity.step_sensitivity`).
 
@@ -133,10 +153,10 @@ class Tracker:
         InputError: a bad argument (one line naming it), unknown point names (all named).
     """
 
-    def __init__(self, sim, points, *, mode: str = "offline", smoothness: float = 0.02, effort: float = 1e-3,
-                 robust: str = "huber", robust_scale: float = 2e-3, refine: int | None = None,
-                 refine_tolerance: float = 1e-4, refresh_every: int | None = None, refresh_tolerance: float = 3e-4,
-                 corrections: int | None = None):
+    def __init__(self, sim, points, *, mode: str = "offline", smoothness: float = 0.05, effort: float = 1e-3,
+                 robust: str = "cauchy", robust_scale: float = 1e-3, refine: int | None = None,
+                 refine_tolerance: float = 2e-4, refresh_every: int | None = None, refresh_tolerance: float | None = None,
+                 corrections: int | None = None, momentum: float = 1.0):
         from ..sim.simulator import FaceSimulator
 
         if not isinstance(sim, FaceSimulator):
@@ -147,7 +167,7 @@ class Tracker:
         self.mode = check_choice("mode", mode, MODES)
         self.smoothness = check_number("smoothness", smoothness, low=0.0)
         self.effort = check_number("effort", effort, low=0.0)
-        self.robust = check_choice("robust", robust, ("huber", "none"))
+        self.robust = check_choice("robust", robust, ROBUST)
         self.robust_scale = check_number("robust_scale", robust_scale, low=0.0, low_open=True)
         offline = self.mode == "offline"
         self.refine = check_int("refine", 2 if refine is None and offline else 0 if refine is None else refine,
@@ -155,7 +175,9 @@ class Tracker:
         self.refine_tolerance = check_number("refine_tolerance", refine_tolerance, low=0.0)
         self.refresh_every = check_int("refresh_every", (10 if offline else 60) if refresh_every is None
                                        else refresh_every, low=1, high=1_000_000)
-        self.refresh_tolerance = check_number("refresh_tolerance", refresh_tolerance, low=0.0)
+        self.refresh_tolerance = ((5e-4 if offline else np.inf) if refresh_tolerance is None
+                                  else check_number("refresh_tolerance", refresh_tolerance, low=0.0))
+        self.momentum = check_number("momentum", momentum, low=0.0, high=1.0)
         self.corrections = check_int("corrections", (1 if offline else 0) if corrections is None else corrections,
                                      low=0, high=10)
         self.sim = sim
@@ -173,6 +195,7 @@ class Tracker:
         """Forget the sensitivity and the statistics; the next :meth:`update` starts from the
         simulator's current state."""
         self._J = None  # (3K, M + 2) dp/du in control units
+        self._u_older = None  # the controls a frame before the current ones
         self._since = 0
         self._solve = None
         self.stats = TrackerStats()
@@ -232,7 +255,7 @@ class Tracker:
         return J.reshape(self.count, 3, self.M + 2)
 
     # ------------------------------------------------------------------------------ the solve
-    def _lsq(self, J, p_b, u_b, u_prev, targets, visible) -> np.ndarray:
+    def _lsq(self, J, p_b, u_b, u_ref, targets, visible) -> np.ndarray:
         """The bounded, reweighted least squares of one linearisation (module doc)."""
         from scipy.optimize import lsq_linear
 
@@ -240,24 +263,40 @@ class Tracker:
         rows = np.repeat(visible, 3)
         Jv = J[rows] / _SCALE
         r0 = (p_b - targets)[visible].ravel() / _SCALE  # residual at u_b [mm]
-        w = np.ones(int(visible.sum()))
-        s, e = np.sqrt(self.smoothness), np.sqrt(self.effort)
+        res0 = np.linalg.norm(r0.reshape(-1, 3), axis=1)
+        # the scale: robust_scale, or 1.5 x the median residual when the face moves fast (a far point is
+        # far compared with the others)
+        c = max(self.robust_scale / _SCALE, 1.5 * float(np.median(res0)))
+        # the first weights from the residuals of no change: a point centimetres off from the face
+        # as it is (an outlier, or one the face cannot follow) starts out weak and stays so
+        w = {"none": np.ones_like(res0), "huber": np.where(res0 <= c, 1.0, c / np.maximum(res0, 1e-30)),
+             "cauchy": (1.0 / (1.0 + (res0 / c) ** 2)) * (res0 <= _REJECT * c)}[self.robust]
+        e = np.sqrt(self.effort)
         E = np.zeros(n)
         E[:self.M] = e
-        A_reg = np.vstack([s * np.eye(n), np.diag(E)])
-        b_reg = np.r_[s * (u_prev - u_b), -E * u_b]  # in the increment du = u - u_b
+        # smoothness in point space: the motion of all K points away from the motion continued, |J (u - u_ref)|^2
+        # (as a 29 x 29 Cholesky factor), plus a little in control space for what no point sees
+        G = self.smoothness * (J.T @ J) / _SCALE**2 + _CONTROL_SMOOTHNESS * np.eye(n)
+        R = np.linalg.cholesky(G).T
+        A_reg = np.vstack([R, np.diag(E)])
+        b_reg = np.r_[R @ (u_ref - u_b), -E * u_b]  # in the increment du = u - u_b
         lo, hi = self._lo - u_b, self._hi - u_b
         lo, hi = np.minimum(lo, 0.0), np.maximum(hi, 0.0)  # u_b itself is feasible
         du = np.zeros(n)
-        for it in range(4 if self.robust == "huber" else 1):
+        rounds = {"none": (), "huber": ("huber",) * 4, "cauchy": ("cauchy",) * 5}[self.robust]
+        for it in range(len(rounds) + 1):
             sw = np.repeat(np.sqrt(w), 3)
             A = np.vstack([sw[:, None] * Jv, A_reg])
             b = np.r_[-sw * r0, b_reg]
             du = lsq_linear(A, b, bounds=(lo, hi), method="bvls").x
-            if self.robust != "huber":
+            if it == len(rounds):
                 break
-            res = np.linalg.norm((Jv @ du + r0).reshape(-1, 3), axis=1) * _SCALE
-            w_new = np.where(res <= self.robust_scale, 1.0, self.robust_scale / np.maximum(res, 1e-30))
+            res = np.linalg.norm((Jv @ du + r0).reshape(-1, 3), axis=1)
+            c = max(self.robust_scale / _SCALE, 1.5 * float(np.median(res)))  # the scale follows fast motion
+            if rounds[it] == "huber":
+                w_new = np.where(res <= c, 1.0, c / np.maximum(res, 1e-30))
+            else:  # redescending: a point far off beyond the scale stops pulling
+                w_new = (1.0 / (1.0 + (res / c) ** 2)) * (res <= _REJECT * c)
             if np.abs(w_new - w).max() < 1e-3:
                 break
             w = w_new
@@ -298,9 +337,15 @@ class Tracker:
         if self._J is None:  # the first frame: the sensitivity at the current state (at rest: an equilibrium)
             self._J = self._jacobian(snap.start, u_prev, sim.positions())
         u_b, p_b = u_prev, p_now
-        for attempt in range(self.refine + 1):
+        # the smoothness pulls towards the motion continued (constant velocity of the controls): no lag
+        # on a steady motion, and what noise would shake is held
+        older = u_prev if self._u_older is None else self._u_older
+        u_ref = np.clip(u_prev + self.momentum * (u_prev - older), self._lo, self._hi)
+        self._u_older = u_prev
+        refine = self.refine if self.stats.frames else max(self.refine, FIRST_FRAME_REFINE)  # a take may start mid-expression
+        for attempt in range(refine + 1):
             t0 = time.perf_counter()
-            u = self._lsq(self._J, p_b, u_b, u_prev, T, visible) if visible.any() else u_prev.copy()
+            u = self._lsq(self._J, p_b, u_b, u_ref, T, visible) if visible.any() else u_prev.copy()
             self.stats.solve_seconds += time.perf_counter() - t0
             p = self._step(u)
             miss = p - (p_b + (self._J @ (u - u_b)).reshape(-1, 3))
@@ -311,7 +356,7 @@ class Tracker:
             elif float(du @ du) > 1e-10:  # Broyden: the step's own change, along the controls that moved
                 self._J += np.outer(miss.ravel(), du) / float(du @ du)
                 self.stats.broyden_updates += 1
-            if attempt == self.refine or rms_miss <= self.refine_tolerance:
+            if attempt == refine or rms_miss <= self.refine_tolerance:
                 break
             snap.restore()  # take the frame again, linearised about the step just seen
             self.stats.refinements += 1
