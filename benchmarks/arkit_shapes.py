@@ -104,9 +104,12 @@ def main(argv=None) -> None:
     reach = {}
     for group, names in REACHABLE.items():
         res = [shapes[n].get("residual_rms_mm") for n in names]
+        mov = [shapes[n].get("moving_fdp_residual_rms_mm") for n in names]
         ok = all(r is not None and r <= TARGET_MM for r in res)
-        reach[group] = {"shapes": {n: r for n, r in zip(names, res)}, "ok": ok}
-        print(f"{group:12s} {res} {'ok' if ok else 'MISSED'}", flush=True)
+        reach[group] = {"shapes": {n: r for n, r in zip(names, res)}, "ok": ok,
+                        "moving_fdp_residual_rms_mm": {n: r for n, r in zip(names, mov)},
+                        "moving_ok": all(r is not None and r <= TARGET_MM for r in mov)}
+        print(f"{group:12s} {res} {'ok' if ok else 'MISSED'}; moving FDPs {mov}", flush=True)
     # random blends of solved shapes
     pool = [i for i in range(len(table.names)) if table.solved[i]]
     blends = []
@@ -131,6 +134,8 @@ def main(argv=None) -> None:
                   "static_seconds": table.info.get("static_seconds"), "settings": table.info.get("settings"),
                   "transfer": table.info.get("transfer"), "from_cache": table.info.get("from_cache")},
         "fdps": len(table.fdp_ids), "metric": "FDP RMS over the head FDPs of the converged static face [mm]",
+        "metric_moving": "the same over the FDPs the target moves by more than 1 mm (stricter: small local shapes "
+                         "such as a blink move few of the head FDPs, which the plain RMS dilutes)",
         "target_mm": TARGET_MM, "reachable": reach, "reachable_all_ok": all(r["ok"] for r in reach.values()),
         "solved_residual_mm": {"median": round(float(np.median(solved)), 3), "max": round(float(np.max(solved)), 3),
                                "count": len(solved)},

@@ -25,6 +25,16 @@ def sim():
     return fw.FaceSimulator(fw.build_face(fw.default_template(0)))
 
 
+SHAPES = ["jawOpen", "browInnerUp"]
+
+
+@pytest.fixture(scope="module")
+def built(ict, sim, tmp_path_factory):
+    """A small table (two shapes, one refinement round) and its cache folder."""
+    cache = tmp_path_factory.mktemp("arkit")
+    return fw.arkit_table(sim, shapes=SHAPES, cache=cache, ict_dir=ict, refine=1, max_frames=25), cache
+
+
 def _head_fdps(fr):
     idx = [i for i, p in enumerate(fr.fdp_part) if str(p) == "head"]
     V, F = np.asarray(fr.head_vertices, float), np.asarray(fr.head_faces)
@@ -65,10 +75,9 @@ def test_transfer_onto_template_head(ict, sim):
     assert max(rep["warp_fdp_residual_m"]) < 1e-9  # the warp interpolates the shared FDPs
 
 
-def test_table_build_cache_and_controls(ict, sim, tmp_path):
-    shapes = ["jawOpen", "browInnerUp"]
-    t = fw.arkit_table(sim, shapes=shapes, cache=tmp_path, ict_dir=ict, refine=1, max_frames=25)
-    assert (tmp_path / "arkit_table.npz").is_file() and not t.info["from_cache"]
+def test_table_build_cache_and_controls(ict, sim, built):
+    t, cache = built
+    assert (cache / "arkit_table.npz").is_file() and not t.info["from_cache"]
     i_jaw, i_brow, i_smile = (fw.ARKIT_NAMES.index(n) for n in ("jawOpen", "browInnerUp", "mouthSmileLeft"))
     assert t.solved[i_jaw] and t.solved[i_brow] and not t.solved[i_smile]
     assert "no ICT-FaceKit shape data" in t.reasons["mouthSmileLeft"]
@@ -78,7 +87,7 @@ def test_table_build_cache_and_controls(ict, sim, tmp_path):
     assert brow["frontalis_inner_L"] > 0.3 and brow["frontalis_inner_R"] > 0.3
     assert t.residual_m[i_brow] < 0.75 * t.target_rms_m[i_brow]  # closer than the rest face (residual = target)
     # the second call reads the cache (same key); another setting rebuilds
-    t2 = fw.arkit_table(sim, shapes=shapes, cache=tmp_path, ict_dir=ict, refine=1, max_frames=25)
+    t2 = fw.arkit_table(sim, shapes=SHAPES, cache=cache, ict_dir=ict, refine=1, max_frames=25)
     assert t2.info["from_cache"] and t2.key == t.key
     np.testing.assert_array_equal(t2.activations, t.activations)
     # weights -> controls: blend in activation space, clamp
@@ -95,6 +104,46 @@ def test_table_build_cache_and_controls(ict, sim, tmp_path):
     np.testing.assert_allclose(t2.targets_for(W[0])[0], t.rest_fdp + t.targets[i_jaw])
     a1, j1 = t2.controls(W[1])  # one frame (52,) works too
     np.testing.assert_array_equal(a1[0], A[1])
+    t3 = fw.load_arkit_table(cache)  # the file round trip
+    np.testing.assert_array_equal(t3.basis, t.basis)
+    np.testing.assert_array_equal(t3.reached, t.reached)
+    assert t3.reasons == t.reasons and t3.key == t.key
+
+
+def test_drive_arkit_track(sim, built):
+    """fw.drive plays an ArkitTrack through the table: the controls are the table's blend, the
+    head rotation drives the head pose, shapes out of reach are noted; refine=True tracks the
+    blended targets with fw.Tracker."""
+    t, _ = built
+    T = 6
+    W = np.zeros((T, 52))
+    W[:, fw.ARKIT_NAMES.index("jawOpen")] = np.linspace(0.0, 0.5, T)
+    W[:, fw.ARKIT_NAMES.index("browInnerUp")] = np.linspace(0.0, 1.0, T)
+    W[2:, fw.ARKIT_NAMES.index("eyeLookUpLeft")] = 0.5
+    rot = np.zeros((T, 3))
+    rot[:, 0] = np.linspace(0.0, 0.05, T)  # yaw
+    track = fw.ArkitTrack(30.0, W, rot, "test")
+    rec = fw.FrameRecorder()
+    r = fw.drive(sim, track, table=t, sinks=[rec])
+    A, J = t.controls(W)
+    np.testing.assert_allclose(r.activations, A, atol=1e-6)
+    np.testing.assert_allclose(r.jaw, J, atol=1e-6)
+    assert r.error.shape == (T, len(t.fdp_ids)) and np.isfinite(r.rms).all() and r.rms[0] < 1e-4
+    assert any(n.startswith("eyeLookUpLeft: out of reach") for n in r.unreachable)
+    R = sim.head_pose[0]
+    np.testing.assert_allclose(R, [[np.cos(0.05), 0, np.sin(0.05)], [0, 1, 0], [-np.sin(0.05), 0, np.cos(0.05)]],
+                               atol=1e-9)
+    np.testing.assert_allclose(r.head_poses[-1, :3, :3], R, atol=1e-12)
+    assert len(rec.points) == T
+    r2 = fw.drive(sim, fw.ArkitTrack(30.0, W[:3]), table=t, refine=True)
+    assert r2.mode == "arkit-tracker" and r2.activations.shape == (3, len(t.muscle_names))
+    assert np.isfinite(r2.rms).all() and r2.head_poses is None
+    with pytest.raises(fw.InputError, match="table: an ArkitTrack is driven through the head's ARKit table"):
+        fw.drive(sim, track)
+    with pytest.raises(fw.InputError, match="smoothness: a Tracker option, only with refine=True"):
+        fw.drive(sim, track, table=t, smoothness=0.1)
+    with pytest.raises(fw.InputError, match="track: 25 frames/s"):
+        fw.drive(sim, fw.ArkitTrack(25.0, W), table=t)
 
 
 def test_bad_inputs(ict, sim, tmp_path):
@@ -118,6 +167,8 @@ def test_bad_inputs(ict, sim, tmp_path):
         fw.load_ict_displacements(["jawOpen"], ict_dir=tmp_path)
     t = fw.arkit_table(sim, shapes=[], ict_dir=ict, max_frames=3)  # no shapes: every entry zero, with reasons
     assert not t.solved.any() and len(t.reasons) == 52
+    with pytest.raises(fw.InputError, match="sim: not the head"):
+        t.refine(fw.FaceSimulator(sim.fr, material="thesis"), np.zeros(52))
     for bad, msg in ((np.zeros((2, 51)), "weights"), (np.full(52, 1.5), r"weights: ARKit weights lie in \[0, 1\]"),
                      (np.full(52, np.nan), "weights")):
         with pytest.raises(fw.InputError, match=msg):
