@@ -87,6 +87,10 @@ _NAMES = {
     "SolverDeviceNewtonPCG": "physics.solvers.newton_pcg", "IncrementalPotential": "physics.solvers.incremental",
     "MaterialPhysical": "physics.materials",
     "MarkerTrack": "drive.tracks", "ArkitTrack": "drive.tracks", "ARKIT_NAMES": "drive.tracks",
+    # performance files in and out, rigid head motion out of a take
+    "load_markers": "drive.formats", "load_arkit": "drive.formats", "save_markers_json": "drive.formats",
+    "save_livelink_csv": "drive.formats", "markers_from_frames": "drive.formats",
+    "remove_head_motion": "drive.rigid", "HeadMotion": "drive.rigid", "STABLE_POINTS": "drive.rigid",
     "ArkitTable": "drive.arkit", "arkit_table": "drive.arkit", "load_arkit_table": "drive.arkit",
     "ARKIT_OUT_OF_REACH": "drive.arkit", "ICT_ARKIT_SHAPES": "importers.ict_arkit",
     "load_ict_displacements": "importers.ict_arkit", "transfer_ict_displacements": "importers.ict_arkit",
@@ -159,6 +163,9 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
     from ._src.drive.inverse import DriveResult, Tracker, drive
     from ._src.drive.tracks import ARKIT_NAMES, ArkitTrack, MarkerTrack
+    from ._src.drive.formats import (load_arkit, load_markers, markers_from_frames, save_livelink_csv,
+                                     save_markers_json)
+    from ._src.drive.rigid import STABLE_POINTS, HeadMotion, remove_head_motion
     from ._src.drive.arkit import ARKIT_OUT_OF_REACH, ArkitTable, arkit_table, load_arkit_table
     from ._src.importers.ict_arkit import (ICT_ARKIT_SHAPES, ict_shape_dirs, load_ict_displacements,
                                            transfer_ict_displacements)

@@ -119,8 +119,8 @@ class _Progress:
 class _FrameBar:
     """A tqdm bar on stderr over simulated frames, made at the first frame (the count is known then)."""
 
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
+    def __init__(self, enabled: bool, *, desc: str = "simulate", unit: str = "frame"):
+        self.enabled, self.desc, self.unit = enabled, desc, unit
         self.bar = None
 
     def __call__(self, k: int, n: int):
@@ -130,7 +130,7 @@ class _FrameBar:
         if self.bar is None:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=n, desc="simulate", unit="frame", file=sys.stderr, disable=None, leave=False)
+            self.bar = tqdm(total=n, desc=self.desc, unit=self.unit, file=sys.stderr, disable=None, leave=False)
         self.bar.update(1)
 
     def close(self):
@@ -491,6 +491,41 @@ def cmd_retarget(args):
              for h in rep["heads"]] + ["  wrote " + ", ".join(Path(f).name for f in rep["files"])])
 
 
+def cmd_drive(args):
+    from ._src.jobs.drive import drive_files
+
+    bar = _FrameBar(not args.json)
+    table_bar = _FrameBar(not args.json, desc="ARKit table (once per build)", unit="shape")
+    try:
+        rep = drive_files(args.build, args.out, markers=args.markers, arkit=args.arkit, mediapipe=args.mediapipe,
+                          map=args.map, units=args.units, fps=args.fps, rigid=not args.no_rigid, device=args.device,
+                          progress=bar, table_progress=lambda done, total, name: table_bar(done, total))
+    finally:
+        table_bar.close()
+        bar.close()
+    lines = [f"drove {args.build} from {rep['source']} ({rep['kind']}): {rep['frames']} frames at {rep['fps']:g} fps "
+             f"in {rep['seconds']:.1f} s on {rep['device']}"]
+    e = rep.get("error_mm")
+    if e and e.get("rms") is not None:
+        worst = max(((v, k) for k, v in e["per_point_rms"].items() if v is not None), default=(None, None))
+        what = "simulated to target" if rep["kind"] == "markers" else "head FDPs to the blended ARKit targets"
+        lines.append(f"  distance {what}: RMS {e['rms']:.2f} mm, max {e['max']:.2f} mm"
+                     + (f" (worst point {worst[1]}: RMS {worst[0]:.2f} mm)" if worst[1] is not None else ""))
+    if rep.get("table"):
+        lines.append(f"  ARKit table {rep['table']['file']}" + (" (cached)" if rep["table"]["from_cache"] else
+                                                                 " (built now, cached for later runs)"))
+    hm = rep.get("head_motion")
+    if hm:
+        lines.append(f"  head motion removed by a fit of {len(hm['stable_points'])} stable points"
+                     + (f" ({hm['frames_held']} frames held the pose before them)" if hm["frames_held"] else ""))
+    notes = rep.get("notes", [])
+    lines += [f"  note: {n}" for n in notes[:6]]
+    if len(notes) > 6:
+        lines.append(f"  ... {len(notes) - 6} more notes in report.json")
+    lines.append("  wrote " + ", ".join(rep["files"]))
+    _emit(args, rep, lines)
+
+
 # ----------------------------------------------------------------------------- batch
 def _steps(text: str) -> tuple[str, ...]:
     from ._src.fleet.manifest import STEPS as known
@@ -754,6 +789,36 @@ def build_parser() -> argparse.ArgumentParser:
                         "with --material thesis; the MuJoCo jaw couples it too, its stiff holds scaled to MuJoCo's step)")
     s.set_defaults(func=cmd_simulate)
 
+    dr = sub.add_parser(
+        "drive", help="drive a `build` output from data: muscle activations and jaw solved per frame from markers, "
+                      "or ARKit curves through the head's ARKit table",
+        epilog="Formats (docs: guides/driving): markers JSON {\"fps\": 30, \"units\": \"mm\", \"markers\": "
+               "{\"2.1\": [[x, y, z], null, ...], \"v123\": [...]}}; markers CSV: time (s) or frame column, then "
+               "NAME_x, NAME_y, NAME_z per marker; C3D (pip install 'facewarp[mocap]') with --map; points are FDP "
+               "ids or v<vertex index>. Live Link Face CSV (Timecode, BlendShapeCount, EyeBlinkLeft, ..., HeadYaw, "
+               "HeadPitch, HeadRoll, ...); MediaPipe Face Landmarker JSON [{\"timestamp_ms\": .., "
+               "\"face_blendshapes\": [[{\"category_name\": .., \"score\": ..}, ...]]}, ...]. Writes "
+               "DIR/activations.csv, frames.npz, animation.usdc, report.json, drive.png (markers), activations.png; "
+               "a .usd[a|c|z] --out is the animation alone.")
+    dr.add_argument("build", type=Path, metavar="BUILD", help="a `facewarp build` output folder")
+    src = dr.add_mutually_exclusive_group(required=True)
+    src.add_argument("--markers", type=Path, metavar="FILE", help="a marker take: .json, .csv or .c3d")
+    src.add_argument("--arkit", type=Path, metavar="FILE.csv", help="ARKit curves: a Live Link Face CSV")
+    src.add_argument("--mediapipe", type=Path, metavar="FILE.json", help="ARKit curves: MediaPipe Face Landmarker "
+                     "blendshapes")
+    dr.add_argument("--map", type=Path, metavar="MAP.json", help='marker labels to points: {"LBRO": "4.1", '
+                    '"CHIN": "2.1", "M12": "v966"}; labels not in it are left out')
+    dr.add_argument("--units", choices=["mm", "cm", "m"], default=None,
+                    help="units of the marker coordinates (CSV: default m; JSON and C3D say their own)")
+    dr.add_argument("--fps", type=_fps, metavar="F", default=None,
+                    help="frames per second, for files that do not carry it (a CSV with a frame column)")
+    dr.add_argument("--no-rigid", action="store_true",
+                    help="keep the take as it is (already in the head's frame): no fit of forehead, nose bridge and "
+                         "ear roots to remove head motion")
+    dr.add_argument("--out", required=True, type=Path, metavar="DIR|FILE.usd[a|c|z]",
+                    help="output folder, or a USD file (the animation alone)")
+    dr.set_defaults(func=cmd_drive)
+
     d = sub.add_parser("demo", help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "
                                     "the Fig. 6.16 sequence -> USD, MuJoCo head, pictures",
                        epilog="Writes DIR/animation.usdc, DIR/head.xml, DIR/scene.xml, DIR/report.json, DIR/adapted_head.png, "
@@ -929,7 +994,7 @@ def _output_targets(args) -> list[tuple[str, Path, str]]:
         return [("out", args.out, "dir")]
     if func is cmd_landmarks_detect:
         return [("out", args.out, "file")]
-    if func is cmd_simulate:
+    if func in (cmd_simulate, cmd_drive):
         usd = Path(args.out).suffix.lower() in (".usda", ".usdc", ".usdz")  # jobs.animation.USD_SUFFIXES
         return [("out", args.out, "file" if usd else "dir")]
     if func is cmd_morph:

@@ -12,8 +12,9 @@ _COLORS = [(31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189), (255, 
 
 
 def line_chart(path, x, series: dict, *, title: str = "", xlabel: str = "", ylabel: str = "",
-               log_y: bool = False, width: int = 720, height: int = 440) -> str:
-    """Plot ``series`` (name -> (k,) values) over ``x`` (k,) and save a PNG atomically."""
+               log_y: bool = False, width: int = 720, height: int = 440, xticks=None) -> str:
+    """Plot ``series`` (name -> (k,) values) over ``x`` (k,) and save a PNG atomically; ``xticks``:
+    the x values to mark (default: every x)."""
     from PIL import Image, ImageDraw, ImageFont
 
     x = np.asarray(x, dtype=np.float64)
@@ -42,7 +43,7 @@ def line_chart(path, x, series: dict, *, title: str = "", xlabel: str = "", ylab
         yy = height - B - (yv - lo) / (hi - lo) * (height - T - B)
         d.line([L - 4, yy, L, yy], fill=(0, 0, 0))
         d.text((4, yy - 6), f"{(10 ** yv if log_y else yv):.3g}", fill=(0, 0, 0), font=font)
-    for xv in x:
+    for xv in (x if xticks is None else np.asarray(xticks, dtype=np.float64)):
         xx = px(xv, 10**lo if log_y else lo)[0]
         d.line([xx, height - B, xx, height - B + 4], fill=(0, 0, 0))
         d.text((xx - 4, height - B + 6), f"{xv:g}", fill=(0, 0, 0), font=font)
