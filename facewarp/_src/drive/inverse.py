@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core.checks import check_array, check_choice, check_int, check_number
+from ..core.checks import check_array, check_bool, check_choice, check_int, check_number
 from ..core.errors import InputError
 from .sensitivity import PointReadout, step_sensitivity
 
@@ -146,6 +146,7 @@ class Tracker:
             5e-4 offline; never in real time, where a step of one solver iteration always lags its prediction).
         momentum: The smoothness pulls towards ``u_prev + momentum (u_prev - u_prev2)`` (default 1: the
             controls' motion continued, so a steady motion has no lag and noise is held; 0: towards ``u_prev``).
+        broyden: Update the sensitivity by what each step showed (default True).
         corrections: Iterations of a fresh sensitivity towards the exact tangent (default 1 offline,
             0 real-time; :func:`.sensitivity.step_sensitivity`).
 
@@ -156,7 +157,7 @@ class Tracker:
     def __init__(self, sim, points, *, mode: str = "offline", smoothness: float = 0.05, effort: float = 1e-3,
                  robust: str = "cauchy", robust_scale: float = 1e-3, refine: int | None = None,
                  refine_tolerance: float = 2e-4, refresh_every: int | None = None, refresh_tolerance: float | None = None,
-                 corrections: int | None = None, momentum: float = 1.0):
+                 corrections: int | None = None, momentum: float = 1.0, broyden: bool = True):
         from ..sim.simulator import FaceSimulator
 
         if not isinstance(sim, FaceSimulator):
@@ -178,6 +179,7 @@ class Tracker:
         self.refresh_tolerance = ((5e-4 if offline else np.inf) if refresh_tolerance is None
                                   else check_number("refresh_tolerance", refresh_tolerance, low=0.0))
         self.momentum = check_number("momentum", momentum, low=0.0, high=1.0)
+        self.broyden = check_bool("broyden", broyden)
         self.corrections = check_int("corrections", (1 if offline else 0) if corrections is None else corrections,
                                      low=0, high=10)
         self.sim = sim
@@ -353,7 +355,7 @@ class Tracker:
             du = u - u_b
             if rms_miss > self.refresh_tolerance or self._since + 1 >= self.refresh_every:
                 self._J = self._jacobian(snap.start, u, sim.positions())  # exact for this very step
-            elif float(du @ du) > 1e-10:  # Broyden: the step's own change, along the controls that moved
+            elif self.broyden and float(du @ du) > 1e-10:  # Broyden: the step's own change, along the controls that moved
                 self._J += np.outer(miss.ravel(), du) / float(du @ du)
                 self.stats.broyden_updates += 1
             if attempt == refine or rms_miss <= self.refine_tolerance:
