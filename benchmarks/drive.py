@@ -96,7 +96,8 @@ def _figures(fw, rig, res, rec, P, S) -> dict:
             "fdp_max_mm": float(fdp.max() * 1e3), "max_jump_fdp_mm": float(jump_fdp * 1e3),
             "max_jump_skin_mm": float(jump_skin * 1e3),
             "target_rms_mm_max": float(np.nanmax(res.rms) * 1e3),
-            "frames_per_second": float(res.frames_per_second), "realtime_factor": float(res.frames_per_second / res.fps),
+            "frames_per_second": float(res.frames_per_second),
+            "realtime_factor": float(res.frames_per_second / res.fps),
             "stats": res.stats, "unreachable_notes": len(res.unreachable)}
 
 
@@ -187,7 +188,8 @@ def main(argv=None) -> dict:
         "load_average_at_end": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
         "seed": seed, "complete": complete, "wall_s": time.perf_counter() - t0,
         "note": (f"takes of {args.seconds:g} s at {args.fps:g} fps (the issue's 10 s shortened to fit the shared "
-                 "2-core box, other jobs running beside: speeds are lower bounds); level 0 default head; CPU; the same random performance fed as 84 FDPs and as the 30 a tracker gives"),
+                 "2-core box, other jobs running beside: speeds are lower bounds); level 0 default head; CPU; "
+                 "the same random performance fed as 84 FDPs and as the 30 a tracker gives"),
         "targets": {"round_trip_rms_mm": 0.5, "offline_frames_per_second": 30, "realtime_frames_per_second": 60,
                     "robust_max_jump_mm": 2.0},
         "failures": sum(1 for r in rows for c in r["cases"].values() if c.get("failed")),
