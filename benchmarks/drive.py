@@ -14,6 +14,8 @@ whole skin per frame). Its points are fed back to :func:`facewarp.drive`:
   and the ``realtime`` mode (one solver iteration per frame, ``iterations=1``): per frame the RMS
   distance of the recovered FDPs (all 84, also where only 30 were fed) and of the whole skin from
   the ground truth, and the solve's frames per second (stepping included);
+* ``realtime_floor``: the one-iteration simulator driven by the true controls (what the
+  real-time mode's solver lag costs whatever the controls);
 * ``robust`` (offline, all 84): targets with 0.5 mm noise, 30 % of the points dropped per frame,
   5 % off by 2 cm, and one marker (the chin, 2.1) lost for the middle half of the take: whether it
   finished, the RMS figures, and the largest jump between frames of any FDP's / skin vertex's error.
@@ -94,7 +96,8 @@ def _figures(fw, rig, res, rec, P, S) -> dict:
             "fdp_max_mm": float(fdp.max() * 1e3), "max_jump_fdp_mm": float(jump_fdp * 1e3),
             "max_jump_skin_mm": float(jump_skin * 1e3),
             "target_rms_mm_max": float(np.nanmax(res.rms) * 1e3),
-            "frames_per_second": float(res.frames_per_second), "realtime_factor": float(res.frames_per_second / res.fps),
+            "frames_per_second": float(res.frames_per_second),
+            "realtime_factor": float(res.frames_per_second / res.fps),
             "stats": res.stats, "unreachable_notes": len(res.unreachable)}
 
 
@@ -140,6 +143,18 @@ def run_head(head: str, seconds: float, fps: float, rng) -> dict:
             r = drive_case(fw, rig, P[:, sel], [ids[i] for i in sel], P, S, fps=fps, mode=mode)
             row["cases"][f"{points}_{mode}"] = r
             print(head, points, mode, {k: v for k, v in r.items() if k != "stats"}, flush=True)
+    # the floor of the real-time mode: the one-iteration simulator driven by the true controls
+    sim = fw.FaceSimulator(rig, fps=fps, iterations=1)
+    Q = []
+    for a, j in zip(A, J):
+        sim.set_activations(a)
+        sim.set_jaw(*j)
+        sim.step()
+        Q.append(sim.fdp_points())
+    E = np.array(Q) - P
+    row["realtime_floor"] = {"fdp_rms_mm_max": float(np.sqrt((np.linalg.norm(E, axis=2) ** 2).mean(1)).max() * 1e3),
+                             "max_jump_fdp_mm": float(np.linalg.norm(np.diff(E, axis=0), axis=2).max() * 1e3)}
+    print(head, "realtime floor", row["realtime_floor"], flush=True)
     T = corrupt(rng, P, ids)
     r = drive_case(fw, rig, T, ids, P, S, fps=fps, mode="offline")
     row["cases"]["robust_offline"] = r
@@ -173,7 +188,8 @@ def main(argv=None) -> dict:
         "load_average_at_end": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
         "seed": seed, "complete": complete, "wall_s": time.perf_counter() - t0,
         "note": (f"takes of {args.seconds:g} s at {args.fps:g} fps (the issue's 10 s shortened to fit the shared "
-                 "2-core box, other jobs running beside: speeds are lower bounds); level 0 default head; CPU; the same random performance fed as 84 FDPs and as the 30 a tracker gives"),
+                 "2-core box, other jobs running beside: speeds are lower bounds); level 0 default head; CPU; "
+                 "the same random performance fed as 84 FDPs and as the 30 a tracker gives"),
         "targets": {"round_trip_rms_mm": 0.5, "offline_frames_per_second": 30, "realtime_frames_per_second": 60,
                     "robust_max_jump_mm": 2.0},
         "failures": sum(1 for r in rows for c in r["cases"].values() if c.get("failed")),

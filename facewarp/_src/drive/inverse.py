@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core.checks import check_array, check_choice, check_int, check_number
+from ..core.checks import check_array, check_bool, check_choice, check_int, check_number
 from ..core.errors import InputError
 from .sensitivity import PointReadout, step_sensitivity
 
@@ -129,8 +129,8 @@ class Tracker:
         mode: ``"offline"`` (default: frames re-taken while the prediction misses) or ``"realtime"``
             (each frame one step; with a simulator made with ``iterations=1`` the fixed-cost live loop).
         smoothness: Weight of the points' motion away from the motion continued, ``|J (u - u_ref)|^2`` over
-            all K points (default 0.05; module doc), against the residuals of the present points (both in mm^2): a point seen
-            alone cannot drag the muscles it watches far in one frame.
+            all K points (default 0.05; module doc), against the residuals of the present points (both in
+            mm^2): a point seen alone cannot drag the muscles it watches far in one frame.
         effort: Weight of ``|a|^2`` (default 1e-3): among activations that fit equally, the smaller.
         robust: The point weights (:data:`ROBUST`): ``"cauchy"`` (default: Cauchy weights
             ``1 / (1 + (r / s)^2)`` from the residuals of no change on, 0 beyond ``5 s``, so a point centimetres
@@ -146,6 +146,7 @@ class Tracker:
             5e-4 offline; never in real time, where a step of one solver iteration always lags its prediction).
         momentum: The smoothness pulls towards ``u_prev + momentum (u_prev - u_prev2)`` (default 1: the
             controls' motion continued, so a steady motion has no lag and noise is held; 0: towards ``u_prev``).
+        broyden: Update the sensitivity by what each step showed (default True).
         corrections: Iterations of a fresh sensitivity towards the exact tangent (default 1 offline,
             0 real-time; :func:`.sensitivity.step_sensitivity`).
 
@@ -155,8 +156,9 @@ class Tracker:
 
     def __init__(self, sim, points, *, mode: str = "offline", smoothness: float = 0.05, effort: float = 1e-3,
                  robust: str = "cauchy", robust_scale: float = 1e-3, refine: int | None = None,
-                 refine_tolerance: float = 2e-4, refresh_every: int | None = None, refresh_tolerance: float | None = None,
-                 corrections: int | None = None, momentum: float = 1.0):
+                 refine_tolerance: float = 2e-4, refresh_every: int | None = None,
+                 refresh_tolerance: float | None = None,
+                 corrections: int | None = None, momentum: float = 1.0, broyden: bool = True):
         from ..sim.simulator import FaceSimulator
 
         if not isinstance(sim, FaceSimulator):
@@ -178,6 +180,7 @@ class Tracker:
         self.refresh_tolerance = ((5e-4 if offline else np.inf) if refresh_tolerance is None
                                   else check_number("refresh_tolerance", refresh_tolerance, low=0.0))
         self.momentum = check_number("momentum", momentum, low=0.0, high=1.0)
+        self.broyden = check_bool("broyden", broyden)
         self.corrections = check_int("corrections", (1 if offline else 0) if corrections is None else corrections,
                                      low=0, high=10)
         self.sim = sim
@@ -342,7 +345,8 @@ class Tracker:
         older = u_prev if self._u_older is None else self._u_older
         u_ref = np.clip(u_prev + self.momentum * (u_prev - older), self._lo, self._hi)
         self._u_older = u_prev
-        refine = self.refine if self.stats.frames else max(self.refine, FIRST_FRAME_REFINE)  # a take may start mid-expression
+        # a take may start mid-expression: the first frame may be re-taken more often
+        refine = self.refine if self.stats.frames else max(self.refine, FIRST_FRAME_REFINE)
         for attempt in range(refine + 1):
             t0 = time.perf_counter()
             u = self._lsq(self._J, p_b, u_b, u_ref, T, visible) if visible.any() else u_prev.copy()
@@ -353,7 +357,8 @@ class Tracker:
             du = u - u_b
             if rms_miss > self.refresh_tolerance or self._since + 1 >= self.refresh_every:
                 self._J = self._jacobian(snap.start, u, sim.positions())  # exact for this very step
-            elif float(du @ du) > 1e-10:  # Broyden: the step's own change, along the controls that moved
+            elif self.broyden and float(du @ du) > 1e-10:
+                # Broyden: the step's own change, along the controls that moved
                 self._J += np.outer(miss.ravel(), du) / float(du @ du)
                 self.stats.broyden_updates += 1
             if attempt == refine or rms_miss <= self.refine_tolerance:
