@@ -81,8 +81,8 @@ def _synthetic_head(seed: int, root: Path):
     scan = fw.synthetic_scan(seed, level=0)
     case = root / f"synthetic{seed}"
     case.mkdir(parents=True, exist_ok=True)
-    fw.save_obj(case / "scan.obj", scan.vertices, scan.faces)
-    (case / "landmarks.json").write_text(json.dumps({k: np.asarray(v).tolist() for k, v in scan.landmarks.items()}))
+    fw.save_obj(case / "scan.obj", scan.vertices, scan.faces, units=scan.units)  # the scan's files in its units
+    fw.save_landmarks_json(case / "landmarks.json", scan.landmarks, units=scan.units)
     _cli("adapt", case / "scan.obj", "--landmarks", case / "landmarks.json", "--units", scan.units,
          "--out", case / "adapt")
     _cli("build", case / "adapt", "--out", case / "build")
