@@ -700,7 +700,7 @@ class ModelBuilder:
                 (:meth:`explicit_step` sets it from the step the explicit solver takes).
 
         Called again on a builder that has a face, it appends another head (its own rest shape,
-        material, muscles, jaw, supports and contact) to the same Model (:meth:`_append_face`): one
+        material, muscles, jaw, supports and contact) to the same Model (:meth:`add_faces`): one
         Model of N faces, each kernel launch covering every head's elements.
 
         Raises:
@@ -712,7 +712,7 @@ class ModelBuilder:
             sub = ModelBuilder()
             sub.add_face(fr, material=material, edge_damping=edge_damping, support_stiffness=support_stiffness,
                          contact=contact, contact_modulus=contact_modulus, mass_scaling=mass_scaling)
-            self._append_face(sub)
+            self._append_faces([sub])
             return
         mat = material if isinstance(material, (MaterialThesis, MaterialPhysical)) else material_profile(
             "physical" if material is None else material)
@@ -742,24 +742,50 @@ class ModelBuilder:
                     "jaw_amount", "carry_nodes", "carry_amount", "contact_stiffness", "glide_stiffness")
     _NODE_INDEX = ("support_nodes", "jaw_nodes", "carry_nodes")
 
-    def _append_face(self, sub: ModelBuilder) -> None:
-        """Append the one face of ``sub`` (a builder made by :meth:`add_face`) as a further head:
-        every array concatenated, node / element / muscle indices shifted by this builder's counts
-        (module doc of :class:`Model`'s per-head ranges); the per-head parts kept in ``_faces``
+    def add_faces(self, rigs, **options) -> None:
+        """:meth:`add_face` of every rig in ``rigs`` (a list of face rigs; ``options`` are
+        :meth:`add_face`'s keywords, the same for all), appended in one concatenation; a rig that
+        appears more than once is built once (its heads share the host geometry)."""
+        rigs = list(rigs)
+        if not rigs:
+            return
+        if not self.head_count:
+            self.add_face(rigs[0], **options)
+            rigs = rigs[1:]
+        built: dict[int, ModelBuilder] = {}
+        subs = []
+        for fr in rigs:
+            if id(fr) not in built:
+                sub = ModelBuilder()
+                sub.add_face(fr, **options)
+                built[id(fr)] = sub
+            subs.append(built[id(fr)])
+        self._append_faces(subs)
+
+    def _append_faces(self, subs: list) -> None:
+        """Append the one face of each builder in ``subs`` (made by :meth:`add_face`) as further
+        heads: every array concatenated, node / element / muscle indices shifted by the counts
+        before it (the per-head ranges of :class:`Model`); the per-head parts kept in ``_faces``
         for :meth:`finalize` (each head's jaw, muscle rig and contact geometry)."""
+        if not subs:
+            return
         faces = getattr(self, "_faces", None)
         if faces is None:
             if self.head_count != 1 or not self._has_stages():
                 raise InputError("add_face: this builder's heads are tissue only (add_tissue / replicate); add faces "
                                  "to an empty builder or to one made by add_face")
             faces = [copy.copy(self)]
-        if not np.isclose(sub.damping_rate, faces[0].damping_rate, rtol=1e-6):
-            raise InputError(f"add_face: head {len(faces)}'s damping rate {sub.damping_rate:g} 1/s differs from head "
-                             f"0's {faces[0].damping_rate:g} 1/s (one rate per Model: use one material profile)")
-        if (sub.contact_geometry is None) != (faces[0].contact_geometry is None):
-            raise InputError(f"add_face: head {len(faces)} {'has no' if sub.contact_geometry is None else 'has'} "
-                             "contact, head 0 the other way (one Model: all heads with contact or none)")
-        faces = faces + [sub]
+        for k, sub in enumerate(subs):
+            h = len(faces) + k
+            if sub.head_count != 1 or getattr(sub, "_faces", None) is not None:
+                raise InputError(f"add_face: head {h}: expected a builder of one face")
+            if not np.isclose(sub.damping_rate, faces[0].damping_rate, rtol=1e-6):
+                raise InputError(f"add_face: head {h}'s damping rate {sub.damping_rate:g} 1/s differs from head "
+                                 f"0's {faces[0].damping_rate:g} 1/s (one rate per Model: use one material profile)")
+            if (sub.contact_geometry is None) != (faces[0].contact_geometry is None):
+                raise InputError(f"add_face: head {h} {'has no' if sub.contact_geometry is None else 'has'} "
+                                 "contact, head 0 the other way (one Model: all heads with contact or none)")
+        faces = faces + list(subs)
         n_off = np.r_[0, np.cumsum([f.vertex_count for f in faces])].astype(np.int64)
         parts = {f: [] for f in self._HEAD_FIELDS}
         shift = {"tets": "node", "edges": "node", "faces": "node", "tet_edge_index": "edge", "tet_face_index": "face"}
