@@ -38,12 +38,12 @@ def _run(heads, batch, alone, quiet=()):
             sim.step()
 
 
-def test_one_face_model_is_the_face_simulator(rigs):
+def test_one_face_model_is_the_face_simulator(rigs, device):
     """A Model of one face (the model backend with N = 1) steps bit for bit as FaceSimulator."""
     a, _ = rigs
-    batch = fw.FaceBatch([a], device="cpu", backend="model")
+    batch = fw.FaceBatch([a], device=device, backend="model")
     assert batch.backend == "model" and batch.model.head_count == 1
-    alone = [fw.FaceSimulator(a, device="cpu")]
+    alone = [fw.FaceSimulator(a, device=device)]
     _run([a], batch, alone)
     assert np.array_equal(batch.positions(0), alone[0].positions())
     np.testing.assert_array_equal(batch.fdp_points(0), alone[0].fdp_points())
@@ -98,14 +98,14 @@ def test_model_batch_same_answer_without_contact(rigs):
     assert np.abs(batch.positions(1) - b.nodes).max() > 1e-3  # the others kept their state
 
 
-def test_model_batch_with_contact_close_to_alone(rigs):
+def test_model_batch_with_contact_close_to_alone(rigs, device):
     """With contact: each head's lips and teeth are in one mesh per surface, every head shifted to
     its own cell of the query space; the shift rounds the query coordinates at float32 (~3e-8 m),
     which the iterative solver carries up to about its tolerance (3e-5 m): within 1e-4 m of alone."""
     a, b = rigs
     heads = [a, b]
-    batch = fw.FaceBatch(heads, device="cpu", backend="model")
-    alone = [fw.FaceSimulator(fr, device="cpu") for fr in heads]
+    batch = fw.FaceBatch(heads, device=device, backend="model")
+    alone = [fw.FaceSimulator(fr, device=device) for fr in heads]
     _run(heads, batch, alone)
     for i, sim in enumerate(alone):
         np.testing.assert_allclose(batch.positions(i), sim.positions(), atol=1e-4, rtol=0, err_msg=f"head {i}")
@@ -124,6 +124,10 @@ def test_model_backend_refuses_what_it_cannot_step(rigs):
     batch.set_head_pose(np.eye(3), np.zeros(3))  # at rest: fine
     with pytest.raises(fw.InputError, match="MuJoCo"):
         batch.use_mujoco_jaws("head.xml")
+    M = len(a.rig.names)
+    with pytest.raises(fw.InputError, match="head 1"):
+        batch.set_activations(np.r_[np.zeros((1, M)), np.full((1, M), 1.5)])
+    batch.set_activations(np.full((2, M), 0.25))  # an (N, M) array: checked at once
     assert type(fw.FaceBatch([a], device="cpu")).__name__ == "FaceBatch"  # auto on the CPU: a Model per head
     builder = fw.ModelBuilder()
     builder.add_face(a)

@@ -1746,8 +1746,12 @@ class ContactArrays:
         kgs = list(glide_stiffness) if multi else [glide_stiffness]
         jaws = list(jaw) if multi else [jaw]
         offs = np.zeros(1, np.int64) if node_offsets is None else np.asarray(node_offsets, np.int64)
-        heads = []
+        heads, seen = [], {}
         for h in range(H):
+            key = (id(geos[h]), id(Xs[h]), id(kns[h]), id(kgs[h]))  # heads of one rig: computed once
+            if key in seen:
+                heads.append(seen[key])
+                continue
             X = np.asarray(Xs[h], np.float64)
             kn = np.asarray(kns[h], np.float64)
             if kn.shape != (len(X),) or not (np.isfinite(kn).all() and (kn >= 0).all()):
@@ -1757,6 +1761,7 @@ class ContactArrays:
                 raise InputError(f"glide_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
             heads.append(_contact_head(geos[h], X, kn, kg, gap, lips=lips, teeth=teeth, eyes=eyes, lids=lids,
                                        ties=ties))
+            seen[key] = heads[-1]
         g = geos[0]
         self.geometry = g
         self.geometries = geos

@@ -166,6 +166,16 @@ class FaceBatchModel(FaceBatch):
         if isinstance(activations, np.ndarray):
             if activations.ndim != 2 or activations.shape[0] != self.count:
                 raise InputError(f"activations: expected shape ({self.count}, M), got {activations.shape}")
+            M = {len(fr.rig.names) for fr in self.rigs}
+            if M == {activations.shape[1]}:  # one muscle count: checked at once (no per-head host work)
+                a = np.asarray(activations, np.float64)
+                bad = np.argwhere(~np.isfinite(a) | (a < 0.0) | (a > 1.0))
+                if len(bad):
+                    i, k = (int(v) for v in bad[0])
+                    raise InputError(f"activations of head {i}: {self.rigs[i].rig.names[k]} is {a[i, k]!r}, "
+                                     "expected a value in [0, 1]")
+                self._target_a = list(a.astype(np.float32))
+                return
             rows = list(activations)
         elif isinstance(activations, (list, tuple)):
             if len(activations) != self.count:
