@@ -828,7 +828,11 @@ class ModelBuilder:
         if self.contact_geometry is not None:  # every contact spring a node can carry at once (the lids' too)
             from .solvers.verlet import contact_stiffness_bound
 
-            extra += contact_stiffness_bound(self.contact_geometry, self.contact_stiffness, self.glide_stiffness)
+            if isinstance(self.contact_geometry, list):  # N faces: each head's own
+                extra += np.concatenate([contact_stiffness_bound(f.contact_geometry, f.contact_stiffness,
+                                                                 f.glide_stiffness) for f in self._faces])
+            else:
+                extra += contact_stiffness_bound(self.contact_geometry, self.contact_stiffness, self.glide_stiffness)
         return extra
 
     def explicit_step(self, frame_dt: float, *, dt: float | None = None, substeps: int | None = None,
