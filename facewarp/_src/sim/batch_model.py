@@ -197,6 +197,14 @@ class FaceBatchModel(FaceBatch):
         a = check_array("angles", angles, shape=(self.count,)) if np.ndim(angles) == 1 else check_array(
             "angles", angles, shape=(self.count, 2))
         a = np.asarray(a, np.float64).reshape(self.count, -1)
+        if a.shape[1] == 1:
+            a = np.concatenate([a, np.zeros_like(a)], axis=1)
+        from ..expressions import JAW_U_MAX, JAW_V_MAX
+
+        ok = (a[:, 0] >= -1e-9) & (a[:, 0] <= JAW_U_MAX + 1e-9) & (np.abs(a[:, 1]) <= JAW_V_MAX + 1e-9)
+        if ok.all():  # every head in range: jaw_vector's conversion for all at once (row by row below otherwise)
+            self._target_j = np.stack([np.maximum(a[:, 0], 0.0), a[:, 1]], 1).astype(np.float32)
+            return
         out = np.zeros((self.count, 2), np.float32)
         for i in range(self.count):
             try:
