@@ -545,7 +545,8 @@ def cmd_batch_simulate(args):
     bar = _FrameBar(not args.json)
     try:
         rep = batch_simulate_files(args.builds, args.expression, args.out, per_head=args.per_head,
-                                   seconds=args.seconds, fps=args.fps, device=args.device, jaw=args.jaw, progress=bar)
+                                   seconds=args.seconds, fps=args.fps, device=args.device, jaw=args.jaw, stage=args.stage,
+                                   progress=bar)
     finally:
         bar.close()
     width = max(len(Path(r["build"]).name) for r in rep["rows"])
@@ -558,7 +559,8 @@ def cmd_batch_simulate(args):
                      + (f" ({r['substepped_frames']} frames sub-stepped)" if r["substepped_frames"] else ""))
     if len(rep["rows"]) > 50:
         lines.append(f"  ... {len(rep['rows']) - 50} more in report.json")
-    lines.append(f"  wrote {len(rep['files']) - 1} USD files and report.json in {args.out}")
+    lines.append(f"  wrote {len(rep['files']) - 1} USD files and report.json in {args.out}"
+                 + (f" ({args.stage}: every head in one stage)" if args.stage else ""))
     _emit(args, rep, lines)
 
 
@@ -840,6 +842,8 @@ def build_parser() -> argparse.ArgumentParser:
     bs.add_argument("--jaw", choices=["kinematic", "mujoco"], default="kinematic",
                     help="kinematic (default: Eq. 6.4.9 angles, inside the batched step) or mujoco (each build's "
                          "head.xml hinge body two-way coupled, one CPU MuJoCo per head stepped in a loop)")
+    bs.add_argument("--stage", metavar="FILE.usda|FILE.usdc",
+                    help="also DIR/FILE: one stage with every head as /Crowd/head_KK (referencing its file), side by side")
     bs.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     bs.set_defaults(func=cmd_batch_simulate)
     return p

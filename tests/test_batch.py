@@ -37,8 +37,15 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
     for k in range(1, FRAMES + 1):
         es = [_controls(fr, k) for fr in heads]
         es[2] = fw.Expression("quiet", {}, 0.0, 0.0)  # head 2: the same rig as head 0, other controls
-        batch.set_activations(es)
+        if k % 2:  # a list of expressions, or one (N, M) array
+            batch.set_activations(es)
+        else:
+            batch.set_activations(np.stack([h.activation_vector(e) for h, e in zip(batch.heads, es)]))
         batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
+        c, s_ = np.cos(0.003 * k), np.sin(0.003 * k)  # head 1 nods and rises: the loads of a moving head
+        Rk, tk = np.array([[1.0, 0, 0], [0, c, -s_], [0, s_, c]]), np.array([0.0, 0.0005 * k, 0.0])
+        batch.set_head_pose(np.stack([np.eye(3), Rk, np.eye(3)]), np.stack([np.zeros(3), tk, np.zeros(3)]))
+        alone[1].set_head_pose(Rk, tk)
         batch.step()
         for sim, e in zip(alone, es):
             sim.set_activations(e)
@@ -51,6 +58,8 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
     assert np.abs(batch.positions(2) - a.nodes).max() < 1e-4  # head 2 kept its rest: no cross-talk
     # placements apply at read-out: head 1's FDPs are its alone FDPs rotated and shifted
     np.testing.assert_allclose(batch.fdp_points(1), alone[1].fdp_points() @ R.T + [1.0, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(batch.positions(1, frame="world"), (alone[1].positions() @ Rk.T + tk) @ R.T + [1.0, 0, 0],
+                               atol=1e-6)
     np.testing.assert_allclose(batch.surface(0), alone[0].surface(), atol=1e-6)
     st = batch.status
     assert [s["ok"] for s in st] == [True] * 3 and st[1]["frames"] == FRAMES
@@ -101,6 +110,10 @@ def test_bad_inputs_are_input_errors(rigs):
         batch.set_activations([{}, {"no_such_muscle": 1.0}])
     with pytest.raises(fw.InputError, match="angles"):
         batch.set_jaw(np.zeros((2, 3)))
+    with pytest.raises(fw.InputError, match="head 1"):
+        batch.set_activations(np.stack([np.zeros(len(a.rig.names)), np.full(len(a.rig.names), 1.5)]))
+    with pytest.raises(fw.InputError, match="angles of head 0"):
+        batch.set_jaw(np.array([[2.0, 0.0], [0.0, 0.0]]))
     with pytest.raises(fw.InputError, match="head"):
         batch.surface(2)
     with pytest.raises(fw.InputError, match="heads"):
@@ -148,14 +161,25 @@ def test_batch_simulate_cli(build_dir, tmp_path, capsys):
     b = str(build_dir)
     capsys.readouterr()
     assert main(["--json", "batch", "simulate", b, b, "--per-head", str(per), "--seconds", "0.2", "--jaw", "mujoco",
+                 "--stage", "crowd.usda",
                  "--out", str(tmp_path / "o")]) == 0
     import json
 
     rep = json.loads(capsys.readouterr().out)
     assert rep["heads"] == 2 and rep["ok"] == 2 and rep["frames"] == 7 and rep["jaw"] == "mujoco" and rep["head_frames_per_second"] > 0
     assert [r["expression"] for r in rep["rows"]] == ["smile", "laugh"]
-    for f in ("head_00.usdc", "head_01.usdc", "report.json"):
+    for f in ("head_00.usdc", "head_01.usdc", "report.json", "crowd.usda"):
         assert (tmp_path / "o" / f).is_file(), f
+    from pxr import Usd, UsdGeom
+
+    st = Usd.Stage.Open(str(tmp_path / "o" / "crowd.usda"))  # the crowd: both heads, referenced, placed apart
+    skins = [UsdGeom.Mesh(st.GetPrimAtPath(f"/Crowd/head_0{i}/Skin")) for i in range(2)]
+    assert all(s_ for s_ in skins)
+    x = [UsdGeom.Xformable(st.GetPrimAtPath(f"/Crowd/head_0{i}")).ComputeLocalToWorldTransform(0).ExtractTranslation()[0]
+         for i in range(2)]
+    assert x[1] - x[0] > 0.1
+    n_frames = len(skins[0].GetPointsAttr().GetTimeSamples())
+    assert n_frames == 7
     # bad input: one line, exit 2, nothing written
     per.write_text('{"heads": ["smile"]}')
     assert main(["batch", "simulate", b, b, "--per-head", str(per), "--out", str(tmp_path / "o2")]) == 2
@@ -244,3 +268,20 @@ def test_replicate_refuses_what_it_cannot_merge(rigs):
         b = ModelBuilder()
         b.add_builder(tissue)
         b.add_builder(ModelBuilder(V, T, damping_rate=3.0))
+
+
+def test_substeps_ramp_in_pieces_as_alone(rigs):
+    """Several substeps per frame: the controls ramp in pieces, each piece one upload for all heads."""
+    a, _ = rigs
+    batch = fw.FaceBatch(a, 2, substeps=3)
+    alone = fw.FaceSimulator(a, substeps=3)
+    for k in range(1, 4):
+        e = _controls(a, 3 * k)
+        batch.set_activations([e, e])
+        batch.set_jaw(np.array([[e.jaw_u, e.jaw_v]] * 2))
+        batch.step()
+        alone.set_activations(e)
+        alone.set_jaw(e.jaw_u, e.jaw_v)
+        alone.step()
+    for i in range(2):
+        np.testing.assert_allclose(batch.positions(i), alone.positions(), atol=1e-6, rtol=0)

@@ -48,6 +48,9 @@ Animation (:class:`AnimationWriter`, read back with :func:`read_animation`)
     column-vector matrix ``p' = M @ p`` (pass ``M.T``). It maps the part's rest mesh to its pose in
     the head's frame. A matrix with a translation in its last column is refused.
 
+Many heads in one stage (:func:`write_crowd_stage`)
+    ``/Crowd/<name>`` per head: an Xform with its placement referencing the head's own animation file.
+
 Static meshes (:func:`write_meshes_usd`)
     Triangle meshes as ``/Head/<name>`` with optional time-sampled points, used by the CLI.
 
@@ -65,7 +68,7 @@ from ._arrays import UsdExportError
 from ._reader import read_animation, validate_usd
 from ._skel import write_skel_rig
 from ._writer import AnimationWriter, part_prim_name
-from .stage import write_meshes_usd
+from .stage import write_crowd_stage, write_meshes_usd
 
 __all__ = ["AnimationWriter", "UsdExportError", "part_prim_name", "read_animation", "validate_usd",
-           "write_meshes_usd", "write_skel_rig"]
+           "write_crowd_stage", "write_meshes_usd", "write_skel_rig"]

@@ -82,15 +82,24 @@ class HeadPose:
         self.R = np.eye(3)
         self.t = np.zeros(3)
         self._hist: list[tuple[np.ndarray, np.ndarray]] = []  # poses at the ends of past frames
+        self._moved = False  # a pose other than the rest pose was set since the reset
 
     @property
     def identity(self) -> bool:
         """Whether the head sits at the rest pose and has never moved."""
         return not self._hist and np.array_equal(self.R, np.eye(3)) and not self.t.any()
 
+    @property
+    def still(self) -> bool:
+        """Whether every recorded pose and the target are the rest pose: no load at all (the
+        inertial and gravity-change forces are exactly 0), so none need be computed."""
+        return not self._moved
+
     def set(self, R, t) -> None:
         """The pose [R (3, 3), t (3,) m] at the end of the next frame."""
         self.R, self.t = check_pose(R, t)
+        if self.t.any() or not np.array_equal(self.R, np.eye(3)):
+            self._moved = True
 
     def advance(self) -> None:
         """Record the current pose as that of the frame just taken."""

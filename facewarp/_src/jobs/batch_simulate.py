@@ -59,7 +59,7 @@ def read_per_head(path, count: int) -> list[str]:
 
 
 def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds: float = 2.0, fps: float = 30.0,
-                         device: str = "cpu", jaw: str = "kinematic", progress=None) -> dict:
+                         device: str = "cpu", jaw: str = "kinematic", stage: str | None = None, progress=None) -> dict:
     """Play ``expression`` (or each head's own from ``per_head``) on every build folder of
     ``heads`` at once (:class:`~facewarp.FaceBatch`) and write ``out/head_KK.usdc`` and
     ``out/report.json``.
@@ -72,6 +72,9 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
         per_head: A ``--per-head`` file (:func:`read_per_head`), or None.
         seconds, fps: Length [s] and frames per second.
         device: Warp device.
+        stage: Also ``out/<stage>`` (a ``.usda`` / ``.usdc`` file name): one stage with every head as
+            ``/Crowd/head_KK``, referencing its file, the heads side by side along x
+            (:func:`usd_export.write_crowd_stage`).
         jaw: ``"kinematic"`` (default: Eq. 6.4.9, inside the batched step) or ``"mujoco"`` (each
             build's ``head.xml`` hinge body, one CPU MuJoCo per head: :meth:`~facewarp.FaceBatch.use_mujoco_jaws`).
         progress: Optional ``progress(k, frame_count)`` after each frame.
@@ -93,6 +96,8 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     for key, v, high in (("seconds", seconds, MAX_SECONDS), ("fps", fps, MAX_FPS)):
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and 0 < v <= high):
             raise InputError(f"{key}: expected a finite number > 0 and <= {high:g}, got {v!r}")
+    if stage is not None and (Path(stage).name != str(stage) or Path(stage).suffix not in (".usda", ".usdc")):
+        raise InputError(f"stage: expected a file name ending in .usda or .usdc (written in the output folder), got {stage!r}")
     if jaw not in ("kinematic", "mujoco"):
         raise InputError(f"jaw: expected kinematic or mujoco, got {jaw!r}")
     if jaw == "mujoco":
@@ -142,6 +147,17 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
             a.abort()
         raise
     stepping = max(stepping, 1e-9)
+    files = [str(out / n) for n in names]
+    if stage is not None:  # the heads side by side along x, a head's width and a third apart
+        from usd_export import write_crowd_stage
+
+        width = max(float(np.ptp(fr.head_vertices[:, 0])) for fr in rigs) * 1.3
+        placed = []
+        for i, n in enumerate(names):
+            M = np.eye(4)
+            M[3, 0] = (i - 0.5 * (len(names) - 1)) * width
+            placed.append((Path(n).stem, out / n, M))
+        files.append(str(write_crowd_stage(out / stage, placed)))
     status = batch.status
     rows = [{**s, "build": str(h), "expression": spec, "file": str(out / n)}
             for s, h, spec, n in zip(status, heads, specs, names)]
@@ -149,6 +165,6 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
            "frames": nf, "seconds": float(seconds), "fps": float(fps), "device": str(batch.device), "jaw": jaw,
            "build_seconds": build_s, "simulation_wall_s": stepping,
            "frames_per_second": (nf - 1) / stepping, "head_frames_per_second": (nf - 1) * len(heads) / stepping,
-           "rows": rows, "files": [str(out / n) for n in names] + [str(out / "report.json")]}
+           "rows": rows, "files": files + [str(out / "report.json")]}
     write_json(out / "report.json", rep)
     return rep

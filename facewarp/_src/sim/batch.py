@@ -223,6 +223,9 @@ class FaceBatch:
         wp.load_module(kr, device=self.device)  # its kernel is captured in the frame's graph: loaded before
         self._graphs: dict[tuple, list] = {}
         self._use_graph = all(h.stepper.use_graph for h in self.heads)
+        self._host_keys = [[k for k in _SOLVER_HOST_STATE if hasattr(h.solver, k)] for h in self.heads]
+        ms = {len(h.fr.rig.names) for h in self.heads}
+        self._same_m = ms.pop() if len(ms) == 1 else None  # one muscle count: (N, M) activations checked at once
         self._stream_pool: list = []
         self.streams = streams
         self.step_seconds = 0.0
@@ -294,6 +297,16 @@ class FaceBatch:
         if isinstance(activations, np.ndarray):
             if activations.ndim != 2 or activations.shape[0] != self.count:
                 raise InputError(f"activations: expected shape ({self.count}, M), got {activations.shape}")
+            if self._same_m is not None and activations.shape[1] == self._same_m:  # one check for all heads
+                A = np.asarray(activations, np.float64)
+                bad = np.argwhere(~np.isfinite(A) | (A < 0.0) | (A > 1.0))
+                if len(bad):
+                    i, j = (int(v) for v in bad[0])
+                    raise InputError(f"activations of head {i}: muscle {j} is {A[i, j]!r}, expected a value in [0, 1]")
+                A32 = A.astype(np.float32)
+                for h, a in zip(self.heads, A32):
+                    h._target_a = a
+                return
             rows = list(activations)
         elif isinstance(activations, (list, tuple)):
             if len(activations) != self.count:
@@ -321,6 +334,17 @@ class FaceBatch:
         a = check_array("angles", angles, shape=(self.count,)) if np.ndim(angles) == 1 else check_array(
             "angles", angles, shape=(self.count, 2))
         a = np.asarray(a, np.float64).reshape(self.count, -1)
+        if a.shape[1] == 1:
+            a = np.concatenate([a, np.zeros_like(a)], axis=1)
+        from ..expressions import JAW_U_MAX, JAW_V_MAX
+
+        ok = (a[:, 0] >= -1e-9) & (a[:, 0] <= JAW_U_MAX + 1e-9) & (np.abs(a[:, 1]) <= JAW_V_MAX + 1e-9)
+        if ok.all():  # every head in range: jaw_vector's conversion for all at once (row by row below otherwise)
+            J32 = np.stack([np.maximum(a[:, 0], 0.0), a[:, 1]], 1).astype(np.float32)
+            for i, h in enumerate(self.heads):
+                h._target_j = J32[i]
+            self._jaw_goal[:] = a
+            return
         targets = []
         for i in range(self.count):
             try:
@@ -445,7 +469,7 @@ class FaceBatch:
                 host[c, o + m:o + m + 2] = (1 - w) * h._j + w * h._target_j
         for i in live:  # the host part of the rollback's save (the CPU solvers' history), before the frame
             g, solver = self.heads[i].frame_guard, self.heads[i].solver
-            g._host_state = {k: _copy_host(getattr(solver, k)) for k in _SOLVER_HOST_STATE if hasattr(solver, k)}
+            g._host_state = {k: _copy_host(getattr(solver, k)) for k in self._host_keys[i]}
         groups = [g.tolist() for g in np.array_split(np.asarray(live), min(self._streams, len(live)))]
         key = (tuple(live), n, dt, len(groups))
         self._raised: dict[int, str] = {}  # before a capture: _piece reads it

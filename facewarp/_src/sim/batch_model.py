@@ -158,6 +158,11 @@ class FaceBatchModel(FaceBatch):
         """Muscle names of head ``head``, in the order of its activations."""
         return list(self.rigs[self._head(head)].rig.names)
 
+    def activation_vector(self, head: int, activations) -> np.ndarray:
+        """Head ``head``'s activations as the (M,) float32 array its rows of the Control take
+        (:meth:`FaceSimulator.activation_vector <facewarp.FaceSimulator.activation_vector>`)."""
+        return activation_vector(self.rigs[self._head(head)].rig.names, activations)
+
     def use_mujoco_jaws(self, mjcf) -> None:
         raise InputError("use_mujoco_jaws: the MuJoCo jaw takes one Model per head: use FaceBatch(..., backend='heads')")
 

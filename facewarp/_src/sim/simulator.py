@@ -128,6 +128,7 @@ class FaceSimulator:
         for a in (self.control.activations, self.control.jaw_angles, self.control.external_force):
             a.zero_()
         self._pose.reset()
+        self._loads_set = False
         self.solver.reset()
         self._a, self._j = np.zeros(len(self.fr.rig.names), np.float32), np.zeros(2, np.float32)
         self._target_a, self._target_j = self._a.copy(), self._j.copy()
@@ -150,10 +151,16 @@ class FaceSimulator:
     def _frame_loads(self, n: int) -> None:
         """Before a frame of ``n`` substeps: the loads of the head's accelerating frame (a jump
         beyond a head's motion is an InputError, nothing changed). :class:`~facewarp.FaceBatch` shares it."""
-        if not self._pose.identity:  # the head rides a moving body: loads of the accelerating frame
-            self._pose.check_motion(n * self.dt)
-            f = self._pose.node_forces(self.positions(), self.builder.mass, n * self.dt)
-            self.control.external_force.assign(f.astype(np.float32))
+        if self._pose.still:  # the head never left its rest pose: no load (none computed: no device read)
+            if self._loads_set:
+                self.control.external_force.zero_()
+                self._loads_set = False
+            return
+        # the head rides a moving body: loads of the accelerating frame
+        self._pose.check_motion(n * self.dt)
+        f = self._pose.node_forces(self.positions(), self.builder.mass, n * self.dt)
+        self.control.external_force.assign(f.astype(np.float32))
+        self._loads_set = True
 
     def _frame_done(self, n: int) -> None:
         """After a frame of ``n`` substeps was taken: the controls reached, the pose and the clock advanced."""
