@@ -78,14 +78,17 @@ def mem_used(device: str) -> int | None:
         return None
 
 
-def plan(heads, timelines, frames: int) -> list:
+def plan(batch, timelines, frames: int) -> list:
     """The controls of frames 0 .. frames: per frame the activations (N, M) float32 and jaw angles (N, 2)
-    [rad] of every head (the timelines sampled once, before any timing)."""
-    fps = heads[0].fps
+    [rad] of every head (the timelines sampled once, before any timing). ``batch``: a FaceBatch of either
+    backend (its heads' activation vectors)."""
+    fps = batch.fps
+    vec = ((lambda i, e: batch.heads[i].activation_vector(e)) if batch.backend == "heads"
+           else batch.activation_vector)
     out = [None]
     for k in range(1, frames + 1):
         es = [tl.sample(k / fps) for tl in timelines]
-        A = np.stack([h.activation_vector(e) for h, e in zip(heads, es)])
+        A = np.stack([vec(i, e) for i, e in enumerate(es)])
         J = np.array([[e.jaw_u, e.jaw_v] for e in es])
         out.append((A, J))
     return out
@@ -96,7 +99,7 @@ def drive(batch_or_heads, controls: list, frames: int, start: int, *, naive: boo
     seconds (synchronised)."""
     import warp as wp
 
-    heads = batch_or_heads if naive else batch_or_heads.heads
+    heads = batch_or_heads if naive else None  # the model backend has no per-head simulators
     t0 = time.perf_counter()
     for k in range(start, start + frames):
         A, J = controls[k]
@@ -226,6 +229,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-peers", action="store_true", help="skip Newton VBD and the one-Model tissue rows")
     ap.add_argument("--one-model-max", type=int, default=4000, help="largest N of the one-Model tissue row")
     ap.add_argument("--name", default=None, help="result name (default batch_<device>)")
+    ap.add_argument("--backend", default="heads", choices=("heads", "model"),
+                    help="FaceBatch backend: 'heads' (a Model per head, one graph) or 'model' (N faces in one Model); "
+                         "the result name gets '_model' for the latter")
     ap.add_argument("--append", action="store_true",
                     help="keep the rows of an earlier result of this name for the sizes not run now")
     args = ap.parse_args(argv)
@@ -238,8 +244,10 @@ def main(argv=None) -> int:
     if args.max_n is not None:
         sizes = [n for n in sizes if n <= args.max_n]
     stream_counts = [int(k) for k in (args.streams or ("1,8,32" if cuda else "1")).split(",") if k.strip()]
+    if args.backend == "model":
+        stream_counts = [1]  # one Model, one solver: no stream groups
     repeats = max(1, args.repeats or (1 if cuda else 3))
-    name = args.name or f"batch_{'cuda' if cuda else 'cpu'}"
+    name = args.name or f"batch_{'cuda' if cuda else 'cpu'}" + ("_model" if args.backend == "model" else "")
     rigs, specs, notes = make_rigs([s.strip() for s in args.heads.split(",") if s.strip()], args.level)
     tl = fw.timeline_for(args.preset, attack=0.3, hold=10.0, release=0.3, start=0.0)
     problem = None
@@ -257,7 +265,7 @@ def main(argv=None) -> int:
             problem = export_problem(rigs[0], args.preset)
         except Exception as e:
             notes.append(f"peer problem not exported: {type(e).__name__}: {e}")
-    figures = {"device": device, "level": args.level, "repeats": repeats, "heads": specs, "preset": args.preset, "frames": args.frames,
+    figures = {"device": device, "backend": args.backend, "level": args.level, "repeats": repeats, "heads": specs, "preset": args.preset, "frames": args.frames,
                "tets_per_head": [int(len(fr.tets)) for fr in rigs], "notes": notes, "rows": []}
     naive_frames = args.naive_frames or args.frames
     if args.append and (RESULTS / f"{name}.json").is_file():
@@ -294,13 +302,13 @@ def main(argv=None) -> int:
             m0 = mem_used(device)
             t0 = time.perf_counter()
             head_rigs = [rigs[i % len(rigs)] for i in range(n)]
-            batch = fw.FaceBatch(head_rigs, device=device)
+            batch = fw.FaceBatch(head_rigs, device=device, backend=args.backend)
             row["build_seconds"] = time.perf_counter() - t0
             m1 = mem_used(device)
             if m0 is not None and m1 is not None:
                 row["gpu_memory_per_head_mb"] = (m1 - m0) / n / 2**20
             timelines = [tl.for_head(fr) for fr in head_rigs]
-            controls = plan(batch.heads, timelines, args.frames + 2)
+            controls = plan(batch, timelines, args.frames + 2)
             # rounds: every stream count, then the naive loop, each from rest over the same frames; the best
             # round of each is kept (a shared box's load then falls on both alike)
             nf = min(naive_frames, args.frames)
@@ -327,7 +335,8 @@ def main(argv=None) -> int:
                     row["failed_heads"] = [s["head"] for s in st if not s["ok"]]
                     row["substepped_frames"] = int(sum(s["substepped_frames"] for s in st))
                 if naive:
-                    heads = batch.heads
+                    heads = (batch.heads if args.backend == "heads"
+                             else [fw.FaceSimulator(fr, device=device) for fr in head_rigs])
                     for h in heads:
                         h.reset()
                     drive(heads, controls, 2, 1, naive=True)

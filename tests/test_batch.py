@@ -32,7 +32,7 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     batch = fw.FaceBatch(heads, device=device, placements=(np.stack([np.eye(3), R, np.eye(3)]),
                                                             np.array([[0, 0, 0], [1.0, 0, 0], [0, 2.0, 0]])),
-                         streams=2)  # CUDA: two groups of heads, each a graph on its own stream (the CPU ignores it)
+                         streams=2, backend="heads")  # CUDA: two groups of heads, each a graph on its own stream (the CPU ignores it)
     alone = [fw.FaceSimulator(fr, device=device) for fr in (a, b)]
     for k in range(1, FRAMES + 1):
         es = [_controls(fr, k) for fr in heads]
@@ -71,7 +71,7 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
 
 def test_failing_head_is_frozen_and_reported(rigs, device):
     a, _ = rigs
-    batch = fw.FaceBatch(a, 2, device=device)
+    batch = fw.FaceBatch(a, 2, device=device, backend="heads")
     batch.heads[1].max_refinement = 0  # no retries for the poisoned head
     X = batch.heads[1].state.positions.numpy()
     X[5] = np.nan  # a NaN in head 1

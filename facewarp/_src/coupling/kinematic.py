@@ -51,7 +51,8 @@ class JawStage(_JawNodes):
         if self.count == 0:
             return
         get_warp().launch(self.km._jaw_targets, dim=self.count,
-                     inputs=[self.nodes, self.amounts, self.rest, self.pivot, self.u, self.v, control.jaw_angles],
+                     inputs=[self.nodes, self.amounts, self.rest, self.head, self.pivot, self.u, self.v,
+                             control.jaw_angles],
                      outputs=[targets], device=self.device)
 
 
@@ -83,7 +84,8 @@ class CarryStage(_JawNodes):
             return
         wp = get_warp()
         wp.launch(self.km._jaw_carry, dim=self.count,
-                  inputs=[self.nodes, self.amounts, self.pivot, self.u, self.v, control.jaw_angles, state_in.jaw_carry],
+                  inputs=[self.nodes, self.amounts, self.head, self.pivot, self.u, self.v, control.jaw_angles,
+                          state_in.jaw_carry],
                   outputs=[state_in.positions, state_in.prev_positions], device=self.device)
-        wp.launch(self.km._jaw_remember, dim=1, inputs=[control.jaw_angles], outputs=[state_in.jaw_carry],
+        wp.launch(self.km._jaw_remember, dim=self.head_count, inputs=[control.jaw_angles], outputs=[state_in.jaw_carry],
                   device=self.device)

@@ -115,7 +115,7 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    batch = FaceBatch(rigs, device=device, fps=fps)
+    batch = FaceBatch(rigs, device=device, fps=fps, backend="heads")  # its heads stream USD
     if jaw == "mujoco":
         batch.use_mujoco_jaws([h / "head.xml" for h in heads])
     build_s = time.perf_counter() - t0

@@ -343,7 +343,8 @@ class ContactStage:
         for s in self.surfaces:
             if s.rigid is not None and s.amount != 0.0:
                 wp.launch(self.kc._rigid_points, dim=len(s.rest),
-                          inputs=[s.rest, s.amount, self.pivot, self.u, self.v, control.jaw_angles],
+                          inputs=[s.rest, s.amounts, s.point_head, s.head_shift, self.pivot, self.u, self.v,
+                                  control.jaw_angles],
                           outputs=[s.points], device=self.device)
                 s.mesh.refit()
 
@@ -356,12 +357,13 @@ class ContactStage:
             if s.count == 0:
                 continue
             if s.follows is not None:
-                wp.launch(kc._gather_points, dim=len(s.follow), inputs=[s.follow, positions], outputs=[s.points],
-                          device=self.device)
+                wp.launch(kc._gather_points, dim=len(s.follow), inputs=[s.follow, s.point_head, s.head_shift, positions],
+                          outputs=[s.points], device=self.device)
                 s.mesh.refit()
             sp = s.springs
             wp.launch(kc._surface_contacts, dim=s.count,
-                      inputs=[s.mesh.id, s.reach, s.gap, int(s.follows is not None), s.nodes, s.k, positions],
+                      inputs=[s.mesh.id, s.reach, s.gap, int(s.follows is not None), s.nodes, s.k, s.node_head,
+                              s.head_shift, positions],
                       outputs=[sp.point, sp.axis, sp.stiffness], device=self.device)
         if self.tie_count:
             sp, st = self.lid_springs, self.tie_springs

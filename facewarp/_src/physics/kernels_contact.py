@@ -29,18 +29,23 @@ import warp as wp
 from .kernels_muscle import _jaw_move
 
 
-# Copy the nodes of a contact surface out of the tissue positions (the mesh's own points).
+# Copy the nodes of a contact surface out of the tissue positions (the mesh's own points), each
+# moved by its head's query shift (one mesh holds the surface of every head of a Model, each head
+# shifted to its own cell of the query space so that a head's nodes find only its own surface;
+# head 0's shift is 0: a one-head Model queries in place).
 @wp.kernel
 def _gather_points(
     # Model:
     nodes: wp.array(dtype=wp.int32),
+    point_head: wp.array(dtype=wp.int32),
+    head_shift: wp.array(dtype=wp.vec3),
     # State in:
     positions: wp.array(dtype=wp.vec3),
     # Out:
     points_out: wp.array(dtype=wp.vec3),
 ):
     i = wp.tid()
-    points_out[i] = positions[nodes[i]]
+    points_out[i] = positions[nodes[i]] + head_shift[point_head[i]]
 
 
 # A rigid part moved by the jaw with its Eq. 6.4.9 amount (1: the lower teeth; 0: the upper
@@ -49,17 +54,20 @@ def _gather_points(
 def _rigid_points(
     # Model:
     rest: wp.array(dtype=wp.vec3),
-    amount: float,
-    pivot: wp.vec3,
-    u_axis: wp.vec3,
-    v_axis: wp.vec3,
+    amount: wp.array(dtype=float),
+    point_head: wp.array(dtype=wp.int32),
+    head_shift: wp.array(dtype=wp.vec3),
+    pivot: wp.array(dtype=wp.vec3),
+    u_axis: wp.array(dtype=wp.vec3),
+    v_axis: wp.array(dtype=wp.vec3),
     # Control:
     jaw_angles: wp.array(dtype=float),
     # Out:
     points_out: wp.array(dtype=wp.vec3),
 ):
     i = wp.tid()
-    points_out[i] = _jaw_move(rest[i], amount, pivot, u_axis, v_axis, jaw_angles)
+    h = point_head[i]
+    points_out[i] = _jaw_move(rest[i], amount[i], pivot[h], u_axis[h], v_axis[h], jaw_angles, h) + head_shift[h]
 
 
 # Contact of each node with one closed, outward-oriented surface: the closest point p within
@@ -83,6 +91,8 @@ def _surface_contacts(
     mutual: int,
     nodes: wp.array(dtype=wp.int32),
     node_stiffness: wp.array(dtype=float),
+    node_head: wp.array(dtype=wp.int32),
+    head_shift: wp.array(dtype=wp.vec3),
     # State in:
     positions: wp.array(dtype=wp.vec3),
     # Out:
@@ -91,10 +101,12 @@ def _surface_contacts(
     stiffness_out: wp.array(dtype=float),
 ):
     k = wp.tid()
-    x = positions[nodes[k]]
+    x0 = positions[nodes[k]]
+    shift = head_shift[node_head[k]]
+    x = x0 + shift  # in the query space (see _gather_points)
     q = wp.mesh_query_point_sign_normal(mesh, x, reach)
     if not q.result:
-        point_out[k] = x
+        point_out[k] = x0
         axis_out[k] = wp.vec3(0.0, 0.0, 1.0)
         stiffness_out[k] = 0.0
         return
@@ -107,6 +119,7 @@ def _surface_contacts(
         a = d / l
         if inside:
             a = -a
+    p = p - shift  # back to the head's own frame
     if mutual != 0 and not inside and l < 2.0 * gap:
         point_out[k] = p + 0.5 * (l + gap) * a
     else:

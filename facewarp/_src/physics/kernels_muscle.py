@@ -49,9 +49,11 @@ def _rotate_about(p: wp.vec3, pivot: wp.vec3, axis: wp.vec3, angle: float):
 
 
 @wp.func
-def _jaw_move(p: wp.vec3, amount: float, pivot: wp.vec3, u_axis: wp.vec3, v_axis: wp.vec3, angles: wp.array(dtype=float)):
-    q = _rotate_about(p, pivot, u_axis, angles[0] * amount)
-    return _rotate_about(q, pivot, v_axis, angles[1] * amount)
+def _jaw_move(p: wp.vec3, amount: float, pivot: wp.vec3, u_axis: wp.vec3, v_axis: wp.vec3, angles: wp.array(dtype=float),
+              h: int):
+    # head h's jaw: its angles are angles[2 h], angles[2 h + 1] (Control.jaw_angles, (N, 2) flat)
+    q = _rotate_about(p, pivot, u_axis, angles[2 * h] * amount)
+    return _rotate_about(q, pivot, v_axis, angles[2 * h + 1] * amount)
 
 
 @wp.func
@@ -79,9 +81,10 @@ def _muscle_controls(
     muscle_center_normal: wp.array(dtype=wp.vec3),
     muscle_glide: wp.array(dtype=wp.int32),
     muscle_glide_center: wp.array(dtype=wp.vec3),
-    jaw_pivot: wp.vec3,
-    jaw_u: wp.vec3,
-    jaw_v: wp.vec3,
+    ctrl_head: wp.array(dtype=wp.int32),
+    jaw_pivot: wp.array(dtype=wp.vec3),
+    jaw_u: wp.array(dtype=wp.vec3),
+    jaw_v: wp.array(dtype=wp.vec3),
     # Control:
     activations: wp.array(dtype=float),
     jaw_angles: wp.array(dtype=float),
@@ -91,7 +94,11 @@ def _muscle_controls(
 ):
     p = wp.tid()
     m = ctrl_muscle[p]
-    x = _jaw_move(ctrl_rest[p], ctrl_jaw[p], jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    h = ctrl_head[p]
+    pv = jaw_pivot[h]
+    ju = jaw_u[h]
+    jv = jaw_v[h]
+    x = _jaw_move(ctrl_rest[p], ctrl_jaw[p], pv, ju, jv, jaw_angles, h)
     ctrl_jawed[p] = x
     a = _contraction(activations[muscle_activation[m]], muscle_contraction[m], muscle_saturation[m])
     piv = ctrl_pivot[p]
@@ -99,13 +106,13 @@ def _muscle_controls(
         ctrl_out[p] = x
         return
     if piv == -1:  # sphincter: toward the (jaw-moved) ring centre, or its plane (unit normal n)
-        target = _jaw_move(muscle_center[m], muscle_center_jaw[m], jaw_pivot, jaw_u, jaw_v, jaw_angles)
+        target = _jaw_move(muscle_center[m], muscle_center_jaw[m], pv, ju, jv, jaw_angles, h)
         n = muscle_center_normal[m]
         if wp.length(n) > 0.0:
-            n = _jaw_move(n, muscle_center_jaw[m], wp.vec3(0.0), jaw_u, jaw_v, jaw_angles)
+            n = _jaw_move(n, muscle_center_jaw[m], wp.vec3(0.0), ju, jv, jaw_angles, h)
             target = x - n * wp.dot(x - target, n)
     else:
-        target = _jaw_move(ctrl_rest[piv], ctrl_jaw[piv], jaw_pivot, jaw_u, jaw_v, jaw_angles)
+        target = _jaw_move(ctrl_rest[piv], ctrl_jaw[piv], pv, ju, jv, jaw_angles, h)
     y = x + a * (target - x)
     if muscle_glide[m] != 0:  # on the sphere about g through x (g on the cranium: no jaw)
         g = muscle_glide_center[m]
@@ -214,9 +221,10 @@ def _attachment_point(
     att_seg: wp.array(dtype=wp.int32),
     att_uv: wp.array(dtype=wp.vec2),
     att_jaw_shift: wp.array(dtype=float),
-    jaw_pivot: wp.vec3,
-    jaw_u: wp.vec3,
-    jaw_v: wp.vec3,
+    att_head: wp.array(dtype=wp.int32),
+    jaw_pivot: wp.array(dtype=wp.vec3),
+    jaw_u: wp.array(dtype=wp.vec3),
+    jaw_v: wp.array(dtype=wp.vec3),
     jaw_angles: wp.array(dtype=float),
     seg_center: wp.array(dtype=wp.vec3),
     seg_frame: wp.array(dtype=wp.mat33),
@@ -229,7 +237,8 @@ def _attachment_point(
     # the difference (a_node - a_muscle) theta is turned in, so the jaw alone strains no spring
     shift = att_jaw_shift[k]
     if shift != 0.0:
-        pm = _jaw_move(pm, shift, jaw_pivot, jaw_u, jaw_v, jaw_angles)
+        h = att_head[k]
+        pm = _jaw_move(pm, shift, jaw_pivot[h], jaw_u[h], jaw_v[h], jaw_angles, h)
     return pm
 
 
@@ -257,9 +266,10 @@ def _muscle_forces(
     att_stiffness: wp.array(dtype=float),
     att_jaw_shift: wp.array(dtype=float),
     att_across: wp.array(dtype=wp.int32),
-    jaw_pivot: wp.vec3,
-    jaw_u: wp.vec3,
-    jaw_v: wp.vec3,
+    att_head: wp.array(dtype=wp.int32),
+    jaw_pivot: wp.array(dtype=wp.vec3),
+    jaw_u: wp.array(dtype=wp.vec3),
+    jaw_v: wp.array(dtype=wp.vec3),
     # Control:
     jaw_angles: wp.array(dtype=float),
     # In:
@@ -274,7 +284,7 @@ def _muscle_forces(
 ):
     k = wp.tid()
     att_force_out[k] = wp.vec3(0.0)
-    pm = _attachment_point(k, att_seg, att_uv, att_jaw_shift, jaw_pivot, jaw_u, jaw_v, jaw_angles, seg_center,
+    pm = _attachment_point(k, att_seg, att_uv, att_jaw_shift, att_head, jaw_pivot, jaw_u, jaw_v, jaw_angles, seg_center,
                            seg_frame, seg_radii)
     att_point_out[k] = pm
     i = att_node[k]
@@ -305,9 +315,10 @@ def _muscle_springs(
     att_stiffness: wp.array(dtype=float),
     att_jaw_shift: wp.array(dtype=float),
     att_across: wp.array(dtype=wp.int32),
-    jaw_pivot: wp.vec3,
-    jaw_u: wp.vec3,
-    jaw_v: wp.vec3,
+    att_head: wp.array(dtype=wp.int32),
+    jaw_pivot: wp.array(dtype=wp.vec3),
+    jaw_u: wp.array(dtype=wp.vec3),
+    jaw_v: wp.array(dtype=wp.vec3),
     # Control:
     jaw_angles: wp.array(dtype=float),
     # In:
@@ -321,7 +332,7 @@ def _muscle_springs(
     spring_stiffness_out: wp.array(dtype=float),
 ):
     k = wp.tid()
-    pm = _attachment_point(k, att_seg, att_uv, att_jaw_shift, jaw_pivot, jaw_u, jaw_v, jaw_angles, seg_center,
+    pm = _attachment_point(k, att_seg, att_uv, att_jaw_shift, att_head, jaw_pivot, jaw_u, jaw_v, jaw_angles, seg_center,
                            seg_frame, seg_radii)
     att_point_out[k] = pm
     spring_stiffness_out[k] = att_stiffness[k] * _fibre_cosine(pm, positions_in[att_node[k]], seg_frame[att_seg[k]],
@@ -334,9 +345,10 @@ def _jaw_targets(
     jaw_node: wp.array(dtype=wp.int32),
     jaw_amount: wp.array(dtype=float),
     rest_positions: wp.array(dtype=wp.vec3),
-    jaw_pivot: wp.vec3,
-    jaw_u: wp.vec3,
-    jaw_v: wp.vec3,
+    jaw_head: wp.array(dtype=wp.int32),
+    jaw_pivot: wp.array(dtype=wp.vec3),
+    jaw_u: wp.array(dtype=wp.vec3),
+    jaw_v: wp.array(dtype=wp.vec3),
     # Control:
     jaw_angles: wp.array(dtype=float),
     # Out:
@@ -344,7 +356,8 @@ def _jaw_targets(
 ):
     k = wp.tid()
     i = jaw_node[k]
-    targets_out[i] = _jaw_move(rest_positions[i], jaw_amount[k], jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    h = jaw_head[k]
+    targets_out[i] = _jaw_move(rest_positions[i], jaw_amount[k], jaw_pivot[h], jaw_u[h], jaw_v[h], jaw_angles, h)
 
 
 # Sliding support of the inner sheet: the skin glides over the deeper tissue but does not sink
@@ -359,9 +372,10 @@ def _support_forces(
     support_jaw: wp.array(dtype=float),
     support_stiffness: wp.array(dtype=float),
     rest_positions: wp.array(dtype=wp.vec3),
-    jaw_pivot: wp.vec3,
-    jaw_u: wp.vec3,
-    jaw_v: wp.vec3,
+    support_head: wp.array(dtype=wp.int32),
+    jaw_pivot: wp.array(dtype=wp.vec3),
+    jaw_u: wp.array(dtype=wp.vec3),
+    jaw_v: wp.array(dtype=wp.vec3),
     # Control:
     jaw_angles: wp.array(dtype=float),
     # State in:
@@ -372,8 +386,9 @@ def _support_forces(
     k = wp.tid()
     i = support_node[k]
     a = support_jaw[k]
-    p0 = _jaw_move(rest_positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
-    n = _jaw_move(support_normal[k], a, wp.vec3(0.0), jaw_u, jaw_v, jaw_angles)
+    h = support_head[k]
+    p0 = _jaw_move(rest_positions[i], a, jaw_pivot[h], jaw_u[h], jaw_v[h], jaw_angles, h)
+    n = _jaw_move(support_normal[k], a, wp.vec3(0.0), jaw_u[h], jaw_v[h], jaw_angles, h)
     wp.atomic_add(forces_out, i, -support_stiffness[k] * wp.dot(positions_in[i] - p0, n) * n)
 
 
@@ -386,9 +401,10 @@ def _support_springs(
     support_normal: wp.array(dtype=wp.vec3),
     support_jaw: wp.array(dtype=float),
     rest_positions: wp.array(dtype=wp.vec3),
-    jaw_pivot: wp.vec3,
-    jaw_u: wp.vec3,
-    jaw_v: wp.vec3,
+    support_head: wp.array(dtype=wp.int32),
+    jaw_pivot: wp.array(dtype=wp.vec3),
+    jaw_u: wp.array(dtype=wp.vec3),
+    jaw_v: wp.array(dtype=wp.vec3),
     # Control:
     jaw_angles: wp.array(dtype=float),
     # Out:
@@ -398,15 +414,17 @@ def _support_springs(
     k = wp.tid()
     i = support_node[k]
     a = support_jaw[k]
-    point_out[k] = _jaw_move(rest_positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
-    axis_out[k] = _jaw_move(support_normal[k], a, wp.vec3(0.0), jaw_u, jaw_v, jaw_angles)
+    h = support_head[k]
+    point_out[k] = _jaw_move(rest_positions[i], a, jaw_pivot[h], jaw_u[h], jaw_v[h], jaw_angles, h)
+    axis_out[k] = _jaw_move(support_normal[k], a, wp.vec3(0.0), jaw_u[h], jaw_v[h], jaw_angles, h)
 
 
 @wp.func
-def _jaw_unmove(p: wp.vec3, amount: float, pivot: wp.vec3, u_axis: wp.vec3, v_axis: wp.vec3, angles: wp.array(dtype=float)):
+def _jaw_unmove(p: wp.vec3, amount: float, pivot: wp.vec3, u_axis: wp.vec3, v_axis: wp.vec3, angles: wp.array(dtype=float),
+                h: int):
     # inverse of _jaw_move: undo the v rotation, then the u rotation
-    q = _rotate_about(p, pivot, v_axis, -angles[1] * amount)
-    return _rotate_about(q, pivot, u_axis, -angles[0] * amount)
+    q = _rotate_about(p, pivot, v_axis, -angles[2 * h + 1] * amount)
+    return _rotate_about(q, pivot, u_axis, -angles[2 * h] * amount)
 
 
 @wp.kernel
@@ -414,9 +432,10 @@ def _jaw_carry(
     # Model:
     carry_node: wp.array(dtype=wp.int32),
     carry_jaw: wp.array(dtype=float),
-    jaw_pivot: wp.vec3,
-    jaw_u: wp.vec3,
-    jaw_v: wp.vec3,
+    carry_head: wp.array(dtype=wp.int32),
+    jaw_pivot: wp.array(dtype=wp.vec3),
+    jaw_u: wp.array(dtype=wp.vec3),
+    jaw_v: wp.array(dtype=wp.vec3),
     # Control:
     jaw_angles: wp.array(dtype=float),
     # Stage state (angles of the last substep):
@@ -425,19 +444,25 @@ def _jaw_carry(
     positions: wp.array(dtype=wp.vec3),
     prev_positions: wp.array(dtype=wp.vec3),
 ):
-    # Eq. 6.4.9 applied to the mass points: x <- J(a theta) J(a theta_prev)^-1 x
-    if jaw_angles[0] == jaw_prev[0] and jaw_angles[1] == jaw_prev[1]:
-        return
+    # Eq. 6.4.9 applied to the mass points: x <- J(a theta) J(a theta_prev)^-1 x (head h's jaw)
     k = wp.tid()
+    h = carry_head[k]
+    if jaw_angles[2 * h] == jaw_prev[2 * h] and jaw_angles[2 * h + 1] == jaw_prev[2 * h + 1]:
+        return
     i = carry_node[k]
     a = carry_jaw[k]
-    x = _jaw_unmove(positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_prev)
-    positions[i] = _jaw_move(x, a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
-    y = _jaw_unmove(prev_positions[i], a, jaw_pivot, jaw_u, jaw_v, jaw_prev)
-    prev_positions[i] = _jaw_move(y, a, jaw_pivot, jaw_u, jaw_v, jaw_angles)
+    pv = jaw_pivot[h]
+    ju = jaw_u[h]
+    jv = jaw_v[h]
+    x = _jaw_unmove(positions[i], a, pv, ju, jv, jaw_prev, h)
+    positions[i] = _jaw_move(x, a, pv, ju, jv, jaw_angles, h)
+    y = _jaw_unmove(prev_positions[i], a, pv, ju, jv, jaw_prev, h)
+    prev_positions[i] = _jaw_move(y, a, pv, ju, jv, jaw_angles, h)
 
 
 @wp.kernel
 def _jaw_remember(jaw_angles: wp.array(dtype=float), jaw_prev: wp.array(dtype=float)):
-    jaw_prev[0] = jaw_angles[0]
-    jaw_prev[1] = jaw_angles[1]
+    # one thread per head
+    h = wp.tid()
+    jaw_prev[2 * h] = jaw_angles[2 * h]
+    jaw_prev[2 * h + 1] = jaw_angles[2 * h + 1]

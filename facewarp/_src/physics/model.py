@@ -192,6 +192,56 @@ def sheet_areas(V, T, layer) -> np.ndarray:
     return np.bincount(B.ravel(), weights=np.repeat(a / 3.0, 3), minlength=n)
 
 
+def _merge_rigs(faces: list, node_offsets) -> tuple:
+    """The muscle rigs of several heads as one (:class:`~facewarp.MuscleRig`): rows concatenated,
+    indices shifted by the heads' counts (control points, muscles and activations, curves,
+    segments, anchors, nodes). Returns ``(rig or None, {"ctrl_head" (P,), "att_head" (K,),
+    "att_jaw_shift" (K,)})`` (each control point's and attachment's head; the attachments' jaw
+    shift, node amount less the muscle's, as one head's :class:`MuscleArrays` computes it)."""
+    from .muscle_rig import MuscleRig
+
+    rigs = [(h, f.muscle_rig, f.muscle_node_amount) for h, f in enumerate(faces) if f.muscle_rig is not None]
+    if not rigs:
+        return None, {}
+    cols = {k: [] for k in ("names", "activation_index", "contraction", "center", "center_jaw", "ctrl_rest",
+                            "ctrl_muscle", "ctrl_pivot", "ctrl_jaw", "curve_ctrl", "curve_weight", "seg_curve", "seg_t",
+                            "seg_rest_radii", "anchor_ctrl", "anchor_group", "anchor_passive", "att_node", "att_seg",
+                            "att_uv", "att_rest_length", "att_stiffness", "att_weight", "saturation", "center_normal",
+                            "glide", "glide_center")}
+    ctrl_head, att_head, shift = [], [], []
+    P0 = M0 = A0 = C0 = S0 = G0 = 0
+    for h, r, amount in rigs:
+        P, M, C, S, K = len(r.ctrl_rest), len(r.names), len(r.curve_ctrl), len(r.seg_curve), len(r.att_node)
+        cols["names"] += list(r.names)
+        cols["activation_index"].append(np.asarray(r.activation_index, np.int64) + A0)
+        for k in ("contraction", "center", "center_jaw", "ctrl_rest", "ctrl_jaw", "curve_weight", "seg_t",
+                  "seg_rest_radii", "anchor_passive", "att_uv", "att_rest_length", "att_stiffness", "saturation",
+                  "center_normal", "glide", "glide_center"):
+            cols[k].append(np.asarray(getattr(r, k)))
+        cols["att_weight"].append(np.asarray(r.att_weight, np.float64) if len(r.att_weight) else np.ones(K))
+        cols["ctrl_muscle"].append(np.asarray(r.ctrl_muscle, np.int64) + M0)
+        piv = np.asarray(r.ctrl_pivot, np.int64)
+        cols["ctrl_pivot"].append(np.where(piv >= 0, piv + P0, piv))
+        cols["curve_ctrl"].append(np.asarray(r.curve_ctrl, np.int64).reshape(-1, 3) + P0)
+        cols["seg_curve"].append(np.asarray(r.seg_curve, np.int64) + C0)
+        cols["anchor_ctrl"].append(np.asarray(r.anchor_ctrl, np.int64) + P0)
+        ag = np.asarray(r.anchor_group, np.int64)
+        cols["anchor_group"].append(ag + G0)
+        cols["att_node"].append(np.asarray(r.att_node, np.int64) + int(node_offsets[h]))
+        cols["att_seg"].append(np.asarray(r.att_seg, np.int64) + S0)
+        ctrl_head.append(np.full(P, h))
+        att_head.append(np.full(K, h))
+        shift.append(np.asarray(amount, np.float64)[r.att_node] - r.attachment_jaw() if amount is not None and K
+                     else np.zeros(K))
+        P0, M0, C0, S0 = P0 + P, M0 + M, C0 + C, S0 + S
+        A0 += M  # one activation per muscle (ModelBuilder.add_muscles' muscle_count)
+        G0 += int(ag.max()) + 1 if len(ag) else 0
+    cat = {k: (v if k == "names" else np.concatenate(v, axis=0)) for k, v in cols.items()}
+    rig = MuscleRig(**cat)
+    return rig, {"ctrl_head": np.concatenate(ctrl_head), "att_head": np.concatenate(att_head),
+                 "att_jaw_shift": np.concatenate(shift)}
+
+
 def _xforms(xforms, count: int) -> tuple[np.ndarray, np.ndarray]:
     """Rotations (count, 3, 3) and translations (count, 3) [m] of :meth:`ModelBuilder.replicate`'s ``xforms``."""
     R, t = np.broadcast_to(np.eye(3), (count, 3, 3)).copy(), np.zeros((count, 3))
@@ -649,9 +699,21 @@ class ModelBuilder:
                 the Verlet reference with (True) or without selective mass scaling
                 (:meth:`explicit_step` sets it from the step the explicit solver takes).
 
+        Called again on a builder that has a face, it appends another head (its own rest shape,
+        material, muscles, jaw, supports and contact) to the same Model (:meth:`add_faces`): one
+        Model of N faces, each kernel launch covering every head's elements.
+
         Raises:
-            InputError: bad values, or ``contact`` with a rig that has no contact geometry.
+            InputError: bad values, or ``contact`` with a rig that has no contact geometry; a
+                further face whose damping rate differs from the first's, or one added to a
+                builder of tissue-only heads.
         """
+        if self.head_count:
+            sub = ModelBuilder()
+            sub.add_face(fr, material=material, edge_damping=edge_damping, support_stiffness=support_stiffness,
+                         contact=contact, contact_modulus=contact_modulus, mass_scaling=mass_scaling)
+            self._append_faces([sub])
+            return
         mat = material if isinstance(material, (MaterialThesis, MaterialPhysical)) else material_profile(
             "physical" if material is None else material)
         physical = isinstance(mat, MaterialPhysical)
@@ -676,6 +738,86 @@ class ModelBuilder:
             dt_ref, _ = scale_masses(ref, quantile=MASS_SCALING_QUANTILE if mass_scaling else 0.0)
             self.damping_rate = mat.damping / dt_ref
 
+    _FACE_FIELDS = ("support_nodes", "support_normal", "support_amount", "support_stiffness", "jaw_nodes",
+                    "jaw_amount", "carry_nodes", "carry_amount", "contact_stiffness", "glide_stiffness")
+    _NODE_INDEX = ("support_nodes", "jaw_nodes", "carry_nodes")
+
+    def add_faces(self, rigs, **options) -> None:
+        """:meth:`add_face` of every rig in ``rigs`` (a list of face rigs; ``options`` are
+        :meth:`add_face`'s keywords, the same for all), appended in one concatenation; a rig that
+        appears more than once is built once (its heads share the host geometry)."""
+        rigs = list(rigs)
+        if not rigs:
+            return
+        if not self.head_count:
+            self.add_face(rigs[0], **options)
+            rigs = rigs[1:]
+        built: dict[int, ModelBuilder] = {}
+        subs = []
+        for fr in rigs:
+            if id(fr) not in built:
+                sub = ModelBuilder()
+                sub.add_face(fr, **options)
+                built[id(fr)] = sub
+            subs.append(built[id(fr)])
+        self._append_faces(subs)
+
+    def _append_faces(self, subs: list) -> None:
+        """Append the one face of each builder in ``subs`` (made by :meth:`add_face`) as further
+        heads: every array concatenated, node / element / muscle indices shifted by the counts
+        before it (the per-head ranges of :class:`Model`); the per-head parts kept in ``_faces``
+        for :meth:`finalize` (each head's jaw, muscle rig and contact geometry)."""
+        if not subs:
+            return
+        faces = getattr(self, "_faces", None)
+        if faces is None:
+            if self.head_count != 1 or not self._has_stages():
+                raise InputError("add_face: this builder's heads are tissue only (add_tissue / replicate); add faces "
+                                 "to an empty builder or to one made by add_face")
+            faces = [copy.copy(self)]
+        for k, sub in enumerate(subs):
+            h = len(faces) + k
+            if sub.head_count != 1 or getattr(sub, "_faces", None) is not None:
+                raise InputError(f"add_face: head {h}: expected a builder of one face")
+            if not np.isclose(sub.damping_rate, faces[0].damping_rate, rtol=1e-6):
+                raise InputError(f"add_face: head {h}'s damping rate {sub.damping_rate:g} 1/s differs from head "
+                                 f"0's {faces[0].damping_rate:g} 1/s (one rate per Model: use one material profile)")
+            if (sub.contact_geometry is None) != (faces[0].contact_geometry is None):
+                raise InputError(f"add_face: head {h} {'has no' if sub.contact_geometry is None else 'has'} "
+                                 "contact, head 0 the other way (one Model: all heads with contact or none)")
+        faces = faces + list(subs)
+        n_off = np.r_[0, np.cumsum([f.vertex_count for f in faces])].astype(np.int64)
+        parts = {f: [] for f in self._HEAD_FIELDS}
+        shift = {"tets": "node", "edges": "node", "faces": "node", "tet_edge_index": "edge", "tet_face_index": "face"}
+        ranges = {k: [0] for k in ("node", "edge", "face", "tet")}
+        for f in faces:
+            off = {k: int(ranges[k][-1]) for k in ranges}
+            for name in self._HEAD_FIELDS:
+                a = getattr(f, name)
+                parts[name].append(a + off[shift[name]] if name in shift else a)
+            for k, count in (("node", f.vertex_count), ("edge", len(f.edges)), ("face", len(f.faces)),
+                             ("tet", len(f.tets))):
+                ranges[k].append(off[k] + count)
+        for name in self._HEAD_FIELDS:
+            setattr(self, name, np.concatenate(parts[name], axis=0))
+        for name in self._FACE_FIELDS:
+            rows = []
+            for h, f in enumerate(faces):
+                a = getattr(f, name)
+                if a is None:
+                    a = np.zeros(f.vertex_count)
+                rows.append(a + n_off[h] if name in self._NODE_INDEX else a)
+            setattr(self, name, np.concatenate(rows, axis=0))
+        self._ranges = {k: np.asarray(v, np.int64) for k, v in ranges.items()}
+        self._faces = faces
+        self.head_count = len(faces)
+        self.jaw = [f.jaw for f in faces]
+        self.contact_geometry = None if faces[0].contact_geometry is None else [f.contact_geometry for f in faces]
+        self._support_k = self.support_stiffness
+        self.muscle_count = int(sum(f.muscle_count for f in faces))
+        self.muscle_rig, self._muscle_heads = _merge_rigs(faces, n_off)
+        self.muscle_node_amount = None
+
     def node_spring_stiffness(self) -> np.ndarray:
         """The springs the added stages put on each node [N/m], shape (vertex_count,), float64:
         supports, muscles and contact candidates (the explicit step's stability bound)."""
@@ -686,7 +828,11 @@ class ModelBuilder:
         if self.contact_geometry is not None:  # every contact spring a node can carry at once (the lids' too)
             from .solvers.verlet import contact_stiffness_bound
 
-            extra += contact_stiffness_bound(self.contact_geometry, self.contact_stiffness, self.glide_stiffness)
+            if isinstance(self.contact_geometry, list):  # N faces: each head's own
+                extra += np.concatenate([contact_stiffness_bound(f.contact_geometry, f.contact_stiffness,
+                                                                 f.glide_stiffness) for f in self._faces])
+            else:
+                extra += contact_stiffness_bound(self.contact_geometry, self.contact_stiffness, self.glide_stiffness)
         return extra
 
     def explicit_step(self, frame_dt: float, *, dt: float | None = None, substeps: int | None = None,
@@ -906,6 +1052,9 @@ class ModelBuilder:
                 ranges[f"head_{k}_start"] = np.asarray(hr[k], np.int64)
             for k in ("muscle", "ctrl", "attachment", "support", "carry"):
                 ranges[f"head_{k}_start"] = np.zeros(self.head_count + 1, np.int64)
+        faces = getattr(self, "_faces", None)
+        if faces is not None and len(faces) == self.head_count:  # add_face N times: every head's stage rows
+            return self._finalize_faces(wp, dev, f32, rest, derived, ranges)
         g = self.contact_geometry
         return dict(
             head_count=self.head_count,
@@ -925,6 +1074,61 @@ class ModelBuilder:
                 g, self.contact_stiffness, self.glide_stiffness, self.vertices, self.jaw,
                 ContactArrays(wp, self.vertices, self.contact_stiffness, dev, geometry=g,
                               glide_stiffness=self.glide_stiffness, jaw=self.jaw)),
+        )
+
+
+    def _finalize_faces(self, wp, dev, f32, rest, derived, ranges) -> dict:
+        """The stage fields of a Model of N faces (:meth:`add_face` N times): every head's rows in
+        one set of arrays, each row with its head (the kernels take that head's jaw and angles)."""
+        faces = self._faces
+        H = len(faces)
+        n_off = self._head_ranges()["node"]
+        for k in ("node", "edge", "face", "tet"):
+            ranges[f"head_{k}_start"] = np.asarray(self._head_ranges()[k], np.int64)
+
+        def starts(counts):
+            return np.r_[0, np.cumsum(counts)].astype(np.int64)
+
+        rig = self.muscle_rig
+        ranges["head_muscle_start"] = starts([f.muscle_count for f in faces])
+        ranges["head_ctrl_start"] = starts([0 if f.muscle_rig is None else len(f.muscle_rig.ctrl_rest) for f in faces])
+        ranges["head_attachment_start"] = starts([0 if f.muscle_rig is None else len(f.muscle_rig.att_node)
+                                                  for f in faces])
+        ranges["head_support_start"] = starts([len(f.support_nodes) for f in faces])
+        ranges["head_carry_start"] = starts([len(f.carry_nodes) for f in faces])
+        jaws = list(self.jaw)
+
+        def head_of(counts):
+            return np.repeat(np.arange(H), counts)
+
+        support_head = head_of([len(f.support_nodes) for f in faces])
+        jaw_head = head_of([len(f.jaw_nodes) for f in faces])
+        carry_head = head_of([len(f.carry_nodes) for f in faces])
+        P = 0 if rig is None else len(rig.ctrl_rest)
+        mh = self._muscle_heads
+        has_jaw = any(j is not None for j in jaws)
+        g = self.contact_geometry
+        return dict(
+            head_count=H,
+            **ranges,
+            muscles=None if rig is None else ModelMuscles(
+                rig, None, MuscleArrays(wp, rig, jaws, dev, None, *derived, ctrl_head=mh["ctrl_head"],
+                                        att_head=mh["att_head"], att_jaw_shift=mh["att_jaw_shift"])),
+            muscle_ctrl_rest=(f32(rig.ctrl_rest, wp.vec3) if P else wp.zeros(0, dtype=wp.vec3, device=dev)),
+            supports=ModelSupports(self.support_nodes, self.support_normal, self.support_amount,
+                                   self.support_stiffness,
+                                   SupportArrays(wp, jaws, self.support_nodes, self.support_normal,
+                                                 self.support_amount, self.support_stiffness, rest, dev,
+                                                 head=support_head)),
+            jaw=None if not has_jaw else ModelJaw(
+                jaws[0], self.jaw_nodes, self.jaw_amount, self.carry_nodes, self.carry_amount,
+                JawNodeArrays(wp, jaws, self.jaw_nodes, self.jaw_amount, dev, rest, head=jaw_head),
+                JawNodeArrays(wp, jaws, self.carry_nodes, self.carry_amount, dev, head=carry_head)),
+            contact=None if g is None else ModelContact(
+                g[0], self.contact_stiffness, self.glide_stiffness, self.vertices, jaws[0],
+                ContactArrays(wp, [f.vertices for f in faces], [f.contact_stiffness for f in faces], dev,
+                              geometry=list(g), glide_stiffness=[f.glide_stiffness for f in faces], jaw=jaws,
+                              node_offsets=n_off[:-1])),
         )
 
 
@@ -1049,7 +1253,7 @@ class Model:
             positions=wp.clone(self.rest_positions),
             prev_positions=wp.clone(self.rest_positions),
             muscle_ctrl=wp.clone(ctrl) if ctrl is not None else wp.zeros(0, dtype=wp.vec3, device=self.device),
-            jaw_carry=wp.zeros(2, dtype=float, device=self.device),
+            jaw_carry=wp.zeros(2 * self.head_count, dtype=float, device=self.device),
         )
 
     def control(self) -> Control:
@@ -1057,7 +1261,7 @@ class Model:
         wp = _warp()
         return Control(
             activations=wp.zeros(self.muscle_count, dtype=float, device=self.device),
-            jaw_angles=wp.zeros(2, dtype=float, device=self.device),
+            jaw_angles=wp.zeros(2 * self.head_count, dtype=float, device=self.device),
             external_force=wp.zeros(self.vertex_count, dtype=wp.vec3, device=self.device),
             cranium_velocity=wp.zeros(2, dtype=wp.vec3, device=self.device),
         )
@@ -1240,13 +1444,26 @@ class Springs:
 # (springs, ellipsoids, contact points): recomputed from State and Control before every use.
 
 
-def _jaw_axes(wp, jaw):
-    """The jaw's pivot [m] and unit axes as wp.vec3 (defaults without a jaw)."""
-    if jaw is None:
-        return wp.vec3(0.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0)
-    return (wp.vec3(float(jaw.pivot[0]), float(jaw.pivot[1]), float(jaw.pivot[2])),
-            wp.vec3(float(jaw.u_axis[0]), float(jaw.u_axis[1]), float(jaw.u_axis[2])),
-            wp.vec3(float(jaw.v_axis[0]), float(jaw.v_axis[1]), float(jaw.v_axis[2])))
+def _jaw_axes(wp, jaw, device):
+    """The jaws' pivots [m] and unit axes, one per head: three wp.array (H,) of wp.vec3 (``jaw``:
+    one joint or a list of H, each with ``pivot``, ``u_axis``, ``v_axis``; None: the defaults of
+    a head without a jaw)."""
+    jaws = list(jaw) if isinstance(jaw, (list, tuple)) else [jaw]
+    P = np.zeros((len(jaws), 3), np.float32)
+    U = np.tile(np.array([1.0, 0.0, 0.0], np.float32), (len(jaws), 1))
+    V = np.tile(np.array([0.0, 1.0, 0.0], np.float32), (len(jaws), 1))
+    for h, j in enumerate(jaws):
+        if j is not None:
+            P[h], U[h], V[h] = (np.asarray(a, np.float64).astype(np.float32) for a in (j.pivot, j.u_axis, j.v_axis))
+    return tuple(wp.array(a, dtype=wp.vec3, device=device) for a in (P, U, V))
+
+
+def _head_ids(wp, head, count: int, device):
+    """Each element's head (int32 device array (count,)); ``head`` None: all head 0."""
+    h = np.zeros(count, np.int32) if head is None else np.asarray(head, np.int32).reshape(-1)
+    if len(h) != count:
+        raise InputError(f"head: expected {count} head indices, got {len(h)}")
+    return wp.array(h, dtype=wp.int32, device=device)
 
 
 class MuscleArrays:
@@ -1272,7 +1489,7 @@ class MuscleArrays:
     """
 
     def __init__(self, wp, rig, jaw, device, node_amount, weighted_stiffness, attachment_jaw, attachment_across,
-                 curve_normals):
+                 curve_normals, *, ctrl_head=None, att_head=None, att_jaw_shift=None):
         f32 = lambda a, dt=float: wp.array(np.ascontiguousarray(a, dtype=np.float32), dtype=dt, device=device)  # noqa: E731
         i32 = lambda a, dt=wp.int32: wp.array(np.ascontiguousarray(a, dtype=np.int32), dtype=dt, device=device)  # noqa: E731
         self.rig = rig
@@ -1306,9 +1523,13 @@ class MuscleArrays:
         self.att_rest_length = f32(rig.att_rest_length)
         self.att_stiffness = f32(weighted_stiffness)
         shift = np.zeros(len(rig.att_node))
-        if node_amount is not None and len(rig.att_node):
+        if att_jaw_shift is not None:
+            shift = np.asarray(att_jaw_shift, np.float64)
+        elif node_amount is not None and len(rig.att_node):
             shift = np.asarray(node_amount, np.float64)[rig.att_node] - attachment_jaw
         self.att_jaw_shift = f32(shift)
+        self.ctrl_head = _head_ids(wp, ctrl_head, len(rig.ctrl_rest), device)
+        self.att_head = _head_ids(wp, att_head, len(rig.att_node), device)
         self.att_across = i32(attachment_across)
         nodes_u, n_start, order = group_indices(rig.att_node)
         self.att_nodes_unique = i32(nodes_u)
@@ -1325,7 +1546,7 @@ class MuscleArrays:
         self.spring_stiffness = wp.zeros(K, dtype=float, device=device)
         self.springs = Springs(node=self.att_node, point=self.att_point, stiffness=self.spring_stiffness,
                                rest_length=self.att_rest_length)
-        self.jaw_pivot, self.jaw_u, self.jaw_v = _jaw_axes(wp, jaw)
+        self.jaw_pivot, self.jaw_u, self.jaw_v = _jaw_axes(wp, jaw, device)
 
 
 class SupportArrays:
@@ -1337,9 +1558,10 @@ class SupportArrays:
     ``axis`` (s,) vec3 (the step's anchors [m] and axes) and ``springs`` over them.
     """
 
-    def __init__(self, wp, jaw, nodes, normals, amounts, stiffness, rest_positions, device):
+    def __init__(self, wp, jaw, nodes, normals, amounts, stiffness, rest_positions, device, head=None):
         self.device = device
         self.count = len(nodes)
+        self.head = _head_ids(wp, head, self.count, device)
         self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
         n = np.asarray(normals, np.float64).reshape(-1, 3)
         n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
@@ -1350,7 +1572,7 @@ class SupportArrays:
             raise InputError(f"support stiffness must be finite and >= 0 [N/m], got min {k.min() if len(k) else 0}")
         self.stiffness = wp.array(k.astype(np.float32), dtype=float, device=device)
         self.rest = rest_positions
-        self.pivot, self.u, self.v = _jaw_axes(wp, jaw)
+        self.pivot, self.u, self.v = _jaw_axes(wp, jaw, device)
         self.point = wp.zeros(self.count, dtype=wp.vec3, device=device)
         self.axis = wp.zeros(self.count, dtype=wp.vec3, device=device)
         self.springs = Springs(node=self.nodes, point=self.point, stiffness=self.stiffness, axis=self.axis)
@@ -1362,30 +1584,48 @@ class JawNodeArrays:
     ``amounts`` (j,) float32; ``pivot``, ``u``, ``v`` (wp.vec3: the jaw); ``rest`` (vertex_count,)
     vec3 [m] (the Model's rest positions, or None for the carry)."""
 
-    def __init__(self, wp, jaw, nodes, amounts, device, rest_positions=None):
+    def __init__(self, wp, jaw, nodes, amounts, device, rest_positions=None, head=None):
         self.device = device
         keep = np.asarray(amounts) > 0
         self.count = int(keep.sum())
         self.nodes = wp.array(np.asarray(nodes)[keep].astype(np.int32), dtype=wp.int32, device=device)
         self.amounts = wp.array(np.asarray(amounts)[keep].astype(np.float32), dtype=float, device=device)
-        self.pivot, self.u, self.v = _jaw_axes(wp, jaw)
+        self.head = _head_ids(wp, None if head is None else np.asarray(head).reshape(-1)[keep], self.count, device)
+        self.head_count = len(jaw) if isinstance(jaw, (list, tuple)) else 1
+        self.pivot, self.u, self.v = _jaw_axes(wp, jaw, device)
         self.rest = rest_positions
 
 
 class ContactSurface:
-    """Candidate nodes against one closed surface: its ``wp.Mesh`` and the nodes' springs (contact scratch)."""
+    """Candidate nodes against one closed surface: its ``wp.Mesh`` and the nodes' springs (contact scratch).
 
-    def __init__(self, wp, nodes, k, surface_points, faces, device, reach, gap, *, follows=None, rigid=None):
+    With several heads the surface of every head is one mesh: head h's points are moved by its
+    query shift ``head_shift[h]`` (``kernels_contact._gather_points``), so a node (moved by its
+    head's shift for the query) finds only its own head's surface; head 0's shift is 0."""
+
+    def __init__(self, wp, nodes, k, surface_points, faces, device, reach, gap, *, follows=None, rigid=None,
+                 node_head=None, point_head=None, head_shift=None):
         self.count = len(nodes)
         self.reach, self.gap = float(reach), float(gap)
         self.follows = follows  # node indices the surface points are (a lip), or None
-        self.rigid = rigid  # (rest points, jaw amount) of a rigid part, or None
+        self.rigid = rigid  # (rest points, jaw amount per point) of a rigid part, or None
         self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
         self.k = wp.array(np.asarray(k, np.float32), dtype=float, device=device)
-        self.points = wp.array(np.asarray(surface_points, np.float32), dtype=wp.vec3, device=device)
+        npt = len(surface_points)
+        ph = np.zeros(npt, np.int32) if point_head is None else np.asarray(point_head, np.int32)
+        shift = np.zeros((1, 3), np.float64) if head_shift is None else np.asarray(head_shift, np.float64)
+        self.node_head = _head_ids(wp, node_head, self.count, device)
+        self.point_head = _head_ids(wp, ph, npt, device)
+        self.head_shift = wp.array(shift.astype(np.float32), dtype=wp.vec3, device=device)
+        P = np.asarray(surface_points, np.float32)
+        if head_shift is not None and np.any(shift):  # the points in the query space (as the kernels move them)
+            P = (P + shift.astype(np.float32)[ph]).astype(np.float32)
+        self.points = wp.array(P, dtype=wp.vec3, device=device)
         if rigid is not None:
             self.rest = wp.array(np.asarray(rigid[0], np.float32), dtype=wp.vec3, device=device)
-            self.amount = float(rigid[1])
+            amt = np.broadcast_to(np.asarray(rigid[1], np.float64), (npt,))
+            self.amount = float(np.abs(amt).max(initial=0.0))  # 0: the part never moves
+            self.amounts = wp.array(amt.astype(np.float32), dtype=float, device=device)
         if follows is not None:
             self.follow = wp.array(np.asarray(follows, np.int32), dtype=wp.int32, device=device)
         self.mesh = wp.Mesh(points=self.points, indices=wp.array(np.asarray(faces, np.int32).ravel(), dtype=wp.int32,
@@ -1395,125 +1635,249 @@ class ContactSurface:
                                axis=wp.zeros(self.count, dtype=wp.vec3, device=device), one_sided=True)
 
 
+def _contact_head(g, X, kn, kg, gap, *, lips, teeth, eyes, lids, ties) -> dict:
+    """One head's contact on the host (float64, its own node indices): the surfaces' candidates,
+    the eyeball, glide, floor, lid and tie springs (:class:`ContactArrays`)."""
+    from . import contact as C
+
+    def stiff(nodes):
+        k = kn[nodes]
+        pos = k[k > 0]
+        return np.where(k > 0, k, np.median(pos) if len(pos) else 0.0)
+
+    out = {"surfaces": []}
+    if lips:
+        for S, nodes in zip(g.lip_faces, g.lip_nodes):
+            if len(S) == 0 or len(nodes) == 0:
+                continue
+            used, local = np.unique(S, return_inverse=True)
+            out["surfaces"].append(dict(kind="lip", nodes=np.asarray(nodes, np.int64), k=stiff(nodes), points=X[used],
+                                        faces=local.reshape(-1, 3), reach=C.LIP_REACH_M, follows=used))
+    if teeth:
+        for name, TV, TF, amount, nodes in g.teeth:
+            if len(nodes):
+                out["surfaces"].append(dict(kind=f"teeth:{name}", nodes=np.asarray(nodes, np.int64), k=stiff(nodes),
+                                            points=np.asarray(TV, np.float64), faces=np.asarray(TF),
+                                            reach=C.TEETH_REACH_M, amount=float(amount)))
+    glide = np.asarray(g.eye_glide, bool)
+    if len(glide) != len(g.eye_nodes):
+        glide = np.zeros(len(g.eye_nodes), bool)
+    en = np.asarray(g.eye_nodes, np.int64)
+    d_rest = np.linalg.norm(X[en] - g.eye_centers[g.eye_of_node], axis=1) if len(en) else np.zeros(0)
+    if eyes and len(en):
+        # a node inside the ball (or within the gap) at rest gets its rest distance less
+        # C.EYE_REST_SLACK_M: no force at rest, and it may not sink deeper
+        r = np.minimum(g.eye_radii[g.eye_of_node] + gap, d_rest - C.EYE_REST_SLACK_M)
+        out["eye"] = (en, g.eye_centers[g.eye_of_node], stiff(en), r)
+    if eyes and glide.any():
+        # the inner lid sheet glides on the eyeball: on its glide sphere (glide_spheres; about
+        # the eyeball's centre through its rest position where none is given), two-sided at
+        # the sliding support's stiffness, and it may not sink below that sphere (one-sided at
+        # its contact stiffness, C.EYE_REST_SLACK_M short of it); the contact above keeps it out
+        # of the ball
+        if len(g.glide_centers) == len(en) and len(g.glide_radii) == len(en):
+            gc, gr = np.asarray(g.glide_centers, np.float64), np.asarray(g.glide_radii, np.float64)
+        else:
+            gc, gr = g.eye_centers[g.eye_of_node], d_rest
+        out["glide"] = (en[glide], gc[glide], kg[en[glide]], gr[glide])
+        out["floor"] = (en[glide], gc[glide], stiff(en)[glide], (gr - C.EYE_REST_SLACK_M)[glide])
+    if lids and len(g.lid_nodes):
+        ln = np.asarray(g.lid_nodes, np.int64)
+        c, n = g.lid_planes[g.lid_plane, 0], g.lid_planes[g.lid_plane, 1]
+        a = g.lid_side[:, None] * n  # toward the node's own side
+        # the plane gap / 2 short of the fissure plane (the two margins stop gap apart; a
+        # node nearer at rest, with a geometry made for a smaller gap, keeps its rest distance)
+        r = np.minimum(0.5 * gap, np.einsum("ij,ij->i", X[ln] - c, a))
+        out["lid"] = (ln, c + r[:, None] * a, C.LID_STIFFNESS_RATIO * stiff(ln), a)
+        partner = np.asarray(g.lid_partner, np.int64)
+        if ties and len(partner) == len(ln) and len(g.lid_tangent) == len(ln) and (partner >= 0).any():
+            # margins that close meet point to point along the fissure (kernels_contact._lid_ties),
+            # held as firmly as the inner sheet on its support (the glide stiffness: the
+            # contact's stiffness there stalled the CPU L-BFGS on the level-1 head)
+            mate = np.maximum(partner, 0)
+            off = 0.5 * (X[ln] - X[ln[mate]])
+            above = np.einsum("ij,ij->i", X[ln] - c, a) - r  # from the node's spring plane at rest
+            out["ties"] = (partner, above + above[mate], off, kg[ln], np.asarray(g.lid_tangent, np.float64))
+    return out
+
+
+def _query_shifts(points: list, reach: float) -> np.ndarray:
+    """Each head's shift into its own cell of the contact query space [m], (H, 3), float64:
+    head h at cell (i, j, k) of a cube grid (head 0 at the origin, unshifted), the cells wider
+    than every head's contact points and twice the reach, so no head's query reaches another's."""
+    H = len(points)
+    if H == 1:
+        return np.zeros((1, 3))
+    allp = np.concatenate([np.asarray(p, np.float64).reshape(-1, 3) for p in points if len(p)] or [np.zeros((1, 3))])
+    lo, hi = allp.min(0), allp.max(0)
+    cell = float((hi - lo).max()) + 2.0 * reach + 0.01
+    side = int(np.ceil(H ** (1.0 / 3.0) - 1e-9))
+    h = np.arange(H)
+    return np.stack([h % side, (h // side) % side, h // (side * side)], 1) * cell
+
+
 class ContactArrays:
     """The contact on the device (:class:`~facewarp._src.physics.contact.ContactStage`'s arrays;
     the arguments are the stage's, with ``nodes`` the rest positions [m], (p, 3), and ``jaw`` the
-    joint the lower teeth turn with, or None).
+    joint the lower teeth turn with, or None). Several heads: ``nodes``, ``node_stiffness``,
+    ``geometry``, ``glide_stiffness`` and ``jaw`` lists of one per head, ``node_offsets`` (H,)
+    each head's first node in the Model (the heads' surfaces must be alike: the same lips and
+    teeth in the same order, e.g. heads of one template).
 
-    Model: ``geometry`` (the :class:`~facewarp._src.physics.contact.ContactGeometry`), ``pivot``,
-    ``u``, ``v`` (wp.vec3: the jaw); per obstacle surface a :class:`ContactSurface` in ``surfaces``
-    (its candidate nodes, stiffness [N/m], points [m] and ``wp.Mesh``); counts ``eye_count``,
-    ``glide_count``, ``lid_count``, ``tie_count``; the lid ties' ``tie_rest`` [m], ``tie_partner``,
-    ``tie_offset`` [m], ``tie_stiffness`` [N/m]. The spring sets (``eye_springs``, ``glide_springs``,
+    Model: ``geometry`` (the :class:`~facewarp._src.physics.contact.ContactGeometry`; the first
+    head's), ``pivot``, ``u``, ``v`` (wp.array (H,) of wp.vec3: the jaws); per obstacle surface a
+    :class:`ContactSurface` in ``surfaces`` (its candidate nodes, stiffness [N/m], points [m] and
+    ``wp.Mesh``, every head's in one); counts ``eye_count``, ``glide_count``, ``lid_count``,
+    ``tie_count``; the lid ties' ``tie_rest`` [m], ``tie_partner``, ``tie_offset`` [m],
+    ``tie_stiffness`` [N/m]. The spring sets (``eye_springs``, ``glide_springs``,
     ``floor_springs``, ``lid_springs``, ``tie_springs``; all in ``springs``): fixed nodes and
     stiffness, their points, axes and stiffness the detection's scratch.
     """
 
     def __init__(self, wp, nodes, node_stiffness, device, *, gap=None, lips=True, teeth=True, eyes=True, lids=True,
-                 ties=True, geometry=None, glide_stiffness=None, jaw=None):
+                 ties=True, geometry=None, glide_stiffness=None, jaw=None, node_offsets=None):
         from . import contact as C
 
         gap = C.CONTACT_GAP if gap is None else gap
         self.device = device
         if not (np.isfinite(gap) and gap >= 0.0):
             raise InputError(f"gap: expected a finite distance >= 0 [m], got {gap!r}")
-        X = np.asarray(nodes, np.float64)
-        kn = np.asarray(node_stiffness, np.float64)
-        if kn.shape != (len(X),) or not (np.isfinite(kn).all() and (kn >= 0).all()):
-            raise InputError(f"node_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
-        g = geometry
+        multi = isinstance(geometry, (list, tuple))
+        geos = list(geometry) if multi else [geometry]
+        H = len(geos)
+        Xs = list(nodes) if multi else [nodes]
+        kns = list(node_stiffness) if multi else [node_stiffness]
+        kgs = list(glide_stiffness) if multi else [glide_stiffness]
+        jaws = list(jaw) if multi else [jaw]
+        offs = np.zeros(1, np.int64) if node_offsets is None else np.asarray(node_offsets, np.int64)
+        heads, seen = [], {}
+        for h in range(H):
+            key = (id(geos[h]), id(Xs[h]), id(kns[h]), id(kgs[h]))  # heads of one rig: computed once
+            if key in seen:
+                heads.append(seen[key])
+                continue
+            X = np.asarray(Xs[h], np.float64)
+            kn = np.asarray(kns[h], np.float64)
+            if kn.shape != (len(X),) or not (np.isfinite(kn).all() and (kn >= 0).all()):
+                raise InputError(f"node_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
+            kg = kn if kgs[h] is None else np.asarray(kgs[h], np.float64)
+            if kg.shape != (len(X),) or not (np.isfinite(kg).all() and (kg >= 0).all()):
+                raise InputError(f"glide_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
+            heads.append(_contact_head(geos[h], X, kn, kg, gap, lips=lips, teeth=teeth, eyes=eyes, lids=lids,
+                                       ties=ties))
+            seen[key] = heads[-1]
+        g = geos[0]
         self.geometry = g
-        self.pivot, self.u, self.v = _jaw_axes(wp, jaw)
+        self.geometries = geos
+        self.pivot, self.u, self.v = _jaw_axes(wp, jaws if multi else jaw, device)
 
-        def stiff(nodes):
-            k = kn[nodes]
-            pos = k[k > 0]
-            return np.where(k > 0, k, np.median(pos) if len(pos) else 0.0)
-
+        # the surfaces: the k-th of every head in one mesh (the heads shifted apart for the queries)
+        kinds = [tuple(s["kind"] for s in hd["surfaces"]) for hd in heads]
+        if any(k != kinds[0] for k in kinds):
+            bad = next(h for h, k in enumerate(kinds) if k != kinds[0])
+            raise InputError(f"contact of head {bad}: its lip and teeth surfaces {list(kinds[bad])} differ from head "
+                             f"0's {list(kinds[0])}; heads of one Model need alike contact surfaces")
+        reach = max([s["reach"] for hd in heads for s in hd["surfaces"]] or [0.0])
+        shift = _query_shifts([np.concatenate([s["points"] for s in hd["surfaces"]] or [np.zeros((0, 3))])
+                               for hd in heads], reach)
+        self.head_shift = shift
         self.surfaces: list[ContactSurface] = []
-        if lips:
-            for S, nodes in zip(g.lip_faces, g.lip_nodes):
-                if len(S) == 0 or len(nodes) == 0:
-                    continue
-                used, local = np.unique(S, return_inverse=True)
-                self.surfaces.append(ContactSurface(wp, nodes, stiff(nodes), X[used], local.reshape(-1, 3), device,
-                                                 C.LIP_REACH_M, gap, follows=used))
-        if teeth:
-            for name, TV, TF, amount, nodes in g.teeth:
-                if len(nodes):
-                    self.surfaces.append(ContactSurface(wp, nodes, stiff(nodes), TV, TF, device, C.TEETH_REACH_M, gap,
-                                                     rigid=(TV, amount)))
+        for j in range(len(kinds[0])):
+            parts = [hd["surfaces"][j] for hd in heads]
+            s0 = parts[0]
+            pts, fcs, nds, ks, nh, ph, fol, amt = [], [], [], [], [], [], [], []
+            p0 = 0
+            for h, s in enumerate(parts):
+                npt = len(s["points"])
+                pts.append(s["points"])
+                fcs.append(np.asarray(s["faces"], np.int64) + p0)
+                nds.append(s["nodes"] + offs[h])
+                ks.append(s["k"])
+                nh.append(np.full(len(s["nodes"]), h))
+                ph.append(np.full(npt, h))
+                if s0["kind"] == "lip":
+                    fol.append(s["follows"] + offs[h])
+                else:
+                    amt.append(np.full(npt, s["amount"]))
+                p0 += npt
+            cat = np.concatenate
+            lip = s0["kind"] == "lip"
+            self.surfaces.append(ContactSurface(
+                wp, cat(nds), cat(ks), cat(pts), cat(fcs), device, s0["reach"], gap,
+                follows=cat(fol) if lip else None, rigid=None if lip else (cat(pts), cat(amt)),
+                node_head=cat(nh), point_head=cat(ph), head_shift=shift))
         sets = [s.springs for s in self.surfaces]
-        glide = np.asarray(g.eye_glide, bool)
-        if len(glide) != len(g.eye_nodes):
-            glide = np.zeros(len(g.eye_nodes), bool)
-        self.eye_count = len(g.eye_nodes) if eyes else 0
-        self.glide_count = int(glide.sum()) if eyes else 0
-        kg = kn if glide_stiffness is None else np.asarray(glide_stiffness, np.float64)
-        if kg.shape != (len(X),) or not (np.isfinite(kg).all() and (kg >= 0).all()):
-            raise InputError(f"glide_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
 
-        def eye_set(mine, r, k, one_sided, centers=None):
-            en = g.eye_nodes[mine]
-            c = g.eye_centers[g.eye_of_node[mine]] if centers is None else centers[mine]
+        def gather(key, n_items):
+            """The heads' rows of one set, node indices shifted; None when no head has it."""
+            rows = [(h, hd[key]) for h, hd in enumerate(heads) if key in hd]
+            if not rows:
+                return None
+            out = []
+            for i in range(n_items):
+                out.append(np.concatenate([r[i] + (offs[h] if i == 0 else 0) for h, r in rows]))
+            return out
+
+        def sphere_set(parts, one_sided):
+            en, c, k, r = parts
             return Springs(node=wp.array(en.astype(np.int32), dtype=wp.int32, device=device),
                            point=wp.array(c.astype(np.float32), dtype=wp.vec3, device=device),
                            stiffness=wp.array(k.astype(np.float32), dtype=float, device=device),
-                           rest_length=wp.array(r[mine].astype(np.float32), dtype=float, device=device),
+                           rest_length=wp.array(r.astype(np.float32), dtype=float, device=device),
                            one_sided=one_sided)
 
-        d_rest = np.linalg.norm(X[g.eye_nodes] - g.eye_centers[g.eye_of_node], axis=1)
+        eye, glide, floor = gather("eye", 4), gather("glide", 4), gather("floor", 4)
+        self.eye_count = 0 if eye is None else len(eye[0])
+        self.glide_count = 0 if glide is None else len(glide[0])
         if self.eye_count:
-            # a node inside the ball (or within the gap) at rest gets its rest distance less
-            # C.EYE_REST_SLACK_M: no force at rest, and it may not sink deeper
-            r = np.minimum(g.eye_radii[g.eye_of_node] + gap, d_rest - C.EYE_REST_SLACK_M)
-            every = np.ones(len(g.eye_nodes), bool)
-            self.eye_springs = eye_set(every, r, stiff(g.eye_nodes), True)
+            self.eye_springs = sphere_set(eye, True)
             sets.append(self.eye_springs)
         if self.glide_count:
-            # the inner lid sheet glides on the eyeball: on its glide sphere (glide_spheres; about
-            # the eyeball's centre through its rest position where none is given), two-sided at
-            # the sliding support's stiffness, and it may not sink below that sphere (one-sided at
-            # its contact stiffness, C.EYE_REST_SLACK_M short of it); the contact above keeps it out
-            # of the ball
-            if len(g.glide_centers) == len(g.eye_nodes) and len(g.glide_radii) == len(g.eye_nodes):
-                gc, gr = np.asarray(g.glide_centers, np.float64), np.asarray(g.glide_radii, np.float64)
-            else:
-                gc, gr = g.eye_centers[g.eye_of_node], d_rest
-            self.glide_springs = eye_set(glide, gr, kg[g.eye_nodes[glide]], False, gc)
-            self.floor_springs = eye_set(glide, gr - C.EYE_REST_SLACK_M, stiff(g.eye_nodes)[glide], True, gc)
+            self.glide_springs = sphere_set(glide, False)
+            self.floor_springs = sphere_set(floor, True)
             sets += [self.glide_springs, self.floor_springs]
-        self.lid_count = len(g.lid_nodes) if lids else 0
+        lid = gather("lid", 4)
+        self.lid_count = 0 if lid is None else len(lid[0])
         self.tie_count = 0
         if self.lid_count:
-            ln = g.lid_nodes
-            c, n = g.lid_planes[g.lid_plane, 0], g.lid_planes[g.lid_plane, 1]
-            a = g.lid_side[:, None] * n  # toward the node's own side
-            # the plane gap / 2 short of the fissure plane (the two margins stop gap apart; a
-            # node nearer at rest, with a geometry made for a smaller gap, keeps its rest distance)
-            r = np.minimum(0.5 * gap, np.einsum("ij,ij->i", X[ln] - c, a))
+            ln, point, k, a = lid
             self.lid_springs = Springs(
                 node=wp.array(ln.astype(np.int32), dtype=wp.int32, device=device),
-                point=wp.array((c + r[:, None] * a).astype(np.float32), dtype=wp.vec3, device=device),
-                stiffness=wp.array((C.LID_STIFFNESS_RATIO * stiff(ln)).astype(np.float32), dtype=float, device=device),
+                point=wp.array(point.astype(np.float32), dtype=wp.vec3, device=device),
+                stiffness=wp.array(k.astype(np.float32), dtype=float, device=device),
                 axis=wp.array(a.astype(np.float32), dtype=wp.vec3, device=device), one_sided=True)
             sets.append(self.lid_springs)
-            partner = np.asarray(g.lid_partner, np.int64)
-            if ties and len(partner) == len(ln) and len(g.lid_tangent) == len(ln) and (partner >= 0).any():
-                # margins that close meet point to point along the fissure (kernels_contact._lid_ties),
-                # held as firmly as the inner sheet on its support (the glide stiffness: the
-                # contact's stiffness there stalled the CPU L-BFGS on the level-1 head)
+            if any("ties" in hd for hd in heads):
+                # every head's lid rows, its partners shifted by its first lid row (none: no partner)
+                partner, rest, off, kt, tan = [], [], [], [], []
+                l0 = 0
+                for hd in heads:
+                    if "lid" not in hd:
+                        continue
+                    m = len(hd["lid"][0])
+                    if "ties" in hd:
+                        p, r, o, k_, t = hd["ties"]
+                        partner.append(np.where(p >= 0, p + l0, -1))
+                        rest += [r]
+                        off += [o]
+                        kt += [k_]
+                        tan += [t]
+                    else:
+                        partner.append(np.full(m, -1))
+                        rest += [np.zeros(m)]
+                        off += [np.zeros((m, 3))]
+                        kt += [np.zeros(m)]
+                        tan += [np.zeros((m, 3))]
+                    l0 += m
+                cat = np.concatenate
                 self.tie_count = self.lid_count
-                mate = np.maximum(partner, 0)
-                off = 0.5 * (X[ln] - X[ln[mate]])
-                above = np.einsum("ij,ij->i", X[ln] - c, a) - r  # from the node's spring plane at rest
-                self.tie_rest = wp.array((above + above[mate]).astype(np.float32), dtype=float, device=device)
-                self.tie_partner = wp.array(partner.astype(np.int32), dtype=wp.int32, device=device)
-                self.tie_offset = wp.array(off.astype(np.float32), dtype=wp.vec3, device=device)
-                self.tie_stiffness = wp.array(kg[ln].astype(np.float32), dtype=float, device=device)
+                self.tie_rest = wp.array(cat(rest).astype(np.float32), dtype=float, device=device)
+                self.tie_partner = wp.array(cat(partner).astype(np.int32), dtype=wp.int32, device=device)
+                self.tie_offset = wp.array(cat(off).astype(np.float32), dtype=wp.vec3, device=device)
+                self.tie_stiffness = wp.array(cat(kt).astype(np.float32), dtype=float, device=device)
                 self.tie_springs = Springs(
-                    node=self.lid_springs.node, point=wp.zeros(len(ln), dtype=wp.vec3, device=device),
-                    stiffness=wp.zeros(len(ln), dtype=float, device=device),
-                    axis=wp.array(np.asarray(g.lid_tangent, np.float32), dtype=wp.vec3, device=device))
+                    node=self.lid_springs.node, point=wp.zeros(self.lid_count, dtype=wp.vec3, device=device),
+                    stiffness=wp.zeros(self.lid_count, dtype=float, device=device),
+                    axis=wp.array(cat(tan).astype(np.float32), dtype=wp.vec3, device=device))
                 sets.append(self.tie_springs)
         self.springs = tuple(sets)

@@ -183,7 +183,8 @@ class MuscleStage:
         wp.launch(km._muscle_controls, dim=P,
                   inputs=[self.ctrl_rest, self.ctrl_muscle, self.ctrl_pivot, self.ctrl_jaw, self.muscle_activation,
                           self.muscle_contraction, self.muscle_saturation, self.muscle_center, self.muscle_center_jaw,
-                          self.muscle_center_normal, self.muscle_glide, self.muscle_glide_center, self.jaw_pivot,
+                          self.muscle_center_normal, self.muscle_glide, self.muscle_glide_center, self.ctrl_head,
+                          self.jaw_pivot,
                           self.jaw_u, self.jaw_v,
                           control.activations, control.jaw_angles],
                   outputs=[self.ctrl_jawed, self.ctrl_contracted], device=self.device)
@@ -205,7 +206,7 @@ class MuscleStage:
         if len(self.rig.att_node):
             wp.launch(self.km._muscle_forces, dim=len(self.rig.att_node),
                       inputs=[self.att_node, self.att_seg, self.att_uv, self.att_rest_length, self.att_stiffness,
-                              self.att_jaw_shift, self.att_across, self.jaw_pivot, self.jaw_u, self.jaw_v,
+                              self.att_jaw_shift, self.att_across, self.att_head, self.jaw_pivot, self.jaw_u, self.jaw_v,
                               control.jaw_angles,
                               self.seg_center, self.seg_frame, self.seg_radii, state_in.positions],
                       outputs=[self.att_point, self.att_force], device=self.device)
@@ -228,7 +229,7 @@ class MuscleStage:
         if len(self.rig.att_node):
             get_warp().launch(self.km._muscle_springs, dim=len(self.rig.att_node),
                               inputs=[self.att_node, self.att_seg, self.att_uv, self.att_stiffness,
-                                      self.att_jaw_shift, self.att_across, self.jaw_pivot, self.jaw_u, self.jaw_v,
+                                      self.att_jaw_shift, self.att_across, self.att_head, self.jaw_pivot, self.jaw_u, self.jaw_v,
                                       control.jaw_angles, self.seg_center, self.seg_frame, self.seg_radii,
                                       positions],
                               outputs=[self.att_point, self.spring_stiffness], device=self.device)
@@ -266,7 +267,7 @@ class SupportStage:
         if self.count == 0:
             return
         get_warp().launch(self.km._support_forces, dim=self.count,
-                     inputs=[self.nodes, self.normals, self.amounts, self.stiffness, self.rest, self.pivot, self.u,
+                     inputs=[self.nodes, self.normals, self.amounts, self.stiffness, self.rest, self.head, self.pivot, self.u,
                              self.v, control.jaw_angles, state_in.positions],
                      outputs=[forces], device=self.device)
 
@@ -275,6 +276,6 @@ class SupportStage:
         if self.count == 0:
             return
         get_warp().launch(self.km._support_springs, dim=self.count,
-                          inputs=[self.nodes, self.normals, self.amounts, self.rest, self.pivot, self.u, self.v,
+                          inputs=[self.nodes, self.normals, self.amounts, self.rest, self.head, self.pivot, self.u, self.v,
                                   control.jaw_angles],
                           outputs=[self.point, self.axis], device=self.device)

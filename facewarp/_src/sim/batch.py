@@ -72,7 +72,12 @@ from .readout import activation_vector, jaw_vector
 from .rollback import _SOLVER_HOST_STATE, _copy_host, step_frame
 from .simulator import FaceSimulator
 
-__all__ = ["MAX_BATCH_HEADS", "FaceBatch"]
+__all__ = ["BACKENDS", "MAX_BATCH_HEADS", "FaceBatch"]
+
+BACKENDS = ("auto", "model", "heads")
+"""How :class:`FaceBatch` holds its heads: ``"model"`` (N faces in one Model, one solver:
+:mod:`.batch_model`), ``"heads"`` (a Model, State and solver per head, all in one CUDA graph) or
+``"auto"`` (default: ``"model"`` on CUDA with the implicit solver, else ``"heads"``)."""
 
 MAX_BATCH_HEADS = 100_000
 """Largest number of heads of one :class:`FaceBatch`."""
@@ -139,6 +144,11 @@ class FaceBatch:
         streams: CUDA only: the heads split into this many groups, each group's frame one graph
             on its own stream, the groups run side by side (default 1: one graph for all heads;
             module doc). The CPU ignores it.
+        backend: :data:`BACKENDS`: ``"model"`` (every head in one Model, one solver; the fast path on
+            a GPU: :class:`~facewarp._src.sim.batch_model.FaceBatchModel`), ``"heads"`` (one
+            :class:`~facewarp.FaceSimulator` per head: any solver, moving head poses, the MuJoCo
+            jaw, per-head convergence) or ``"auto"`` (default: ``"model"`` on CUDA with the
+            implicit solver, else ``"heads"``).
         **options: :class:`~facewarp.FaceSimulator`'s keywords (``solver``, ``material``, ``dt``,
             ``substeps``, ``iterations``, ``tolerance``, ``method``, ``solver_options``,
             ``support_stiffness``, ``edge_damping``, ``mass_scaling``, ``contact``,
@@ -154,8 +164,22 @@ class FaceBatch:
         InputError: bad rigs, count, placements or simulator options.
     """
 
+    backend = "heads"
+
+    def __new__(cls, *args, backend: str = "auto", **kwargs):
+        # backend dispatch (batch_model.py): "model" = N faces in one Model; "heads" = a Model per head
+        check_choice("backend", backend, BACKENDS)
+        if cls is FaceBatch:
+            from .batch_model import FaceBatchModel, model_backend_reason
+
+            dev = str(kwargs.get("device", "cpu"))
+            auto = dev.startswith("cuda") and model_backend_reason(kwargs) is None
+            if backend == "model" or (backend == "auto" and auto):
+                return super().__new__(FaceBatchModel)
+        return super().__new__(cls)
+
     def __init__(self, rigs, count: int | None = None, *, device: str = "cpu", fps: float = 30.0,
-                 placements=None, streams: int = 1, **options):
+                 placements=None, streams: int = 1, backend: str = "auto", **options):
         bad = sorted(set(options) - set(_SIM_KEYS))
         if bad:
             raise InputError(f"{bad[0]}: not an option of FaceBatch (options: {', '.join(_SIM_KEYS)})")

@@ -116,7 +116,9 @@ class FrameStepper:
         self.device = state.positions.device
         self.chunks = int(chunks)
         self.na = int(control.activations.shape[0])
-        self.host = wp.zeros(self.chunks * (self.na + 2), dtype=float, device="cpu", pinned=bool(self.device.is_cuda))
+        self.nj = int(control.jaw_angles.shape[0])  # 2 per head
+        self.host = wp.zeros(self.chunks * (self.na + self.nj), dtype=float, device="cpu",
+                             pinned=bool(self.device.is_cuda))
         self.use_graph = bool(self.device.is_cuda) and (
             not getattr(solver, "adaptive", False) or wp.is_conditional_graph_supported())
         self.graphs: dict[tuple, object] = {}
@@ -124,18 +126,18 @@ class FrameStepper:
     def frame(self, n: int, a0, a1, j0, j1, h: float | None = None) -> None:
         """``n`` substeps of ``h`` [s] (default :attr:`dt`; the rollback's retries take shorter
         ones) with activations ramping from ``a0`` to ``a1`` (M,) and jaw angles from ``j0`` to
-        ``j1`` (2,) [rad], float32."""
+        ``j1`` (2,) [rad] (a Model of N heads: (N * M,) and (2 N,), head after head), float32."""
         wp = get_warp()
         chunks = max(1, min(n, self.chunks))
         bounds = np.linspace(0, n, chunks + 1).round().astype(int)
-        host, na = self.host.numpy(), self.na
+        host, na, nj = self.host.numpy(), self.na, self.nj
         for c in range(chunks):
-            w, o = (c + 1) / chunks, c * (na + 2)
+            w, o = (c + 1) / chunks, c * (na + nj)
             host[o:o + na] = (1 - w) * a0 + w * a1
-            host[o + na:o + na + 2] = (1 - w) * j0 + w * j1
+            host[o + na:o + na + nj] = (1 - w) * j0 + w * j1
             if na:
                 wp.copy(self.control.activations, self.host, src_offset=o, count=na)
-            wp.copy(self.control.jaw_angles, self.host, src_offset=o + na, count=2)
+            wp.copy(self.control.jaw_angles, self.host, src_offset=o + na, count=nj)
             self.substeps(int(bounds[c + 1] - bounds[c]), h)
 
     def substeps(self, n: int, h: float | None = None) -> None:

@@ -108,8 +108,10 @@ class SolverDeviceNewtonPCG(SolverImplicit):
                              " (SolverHostImplicit runs 'lbfgs' and 'newton')")
         super().__init__(model, stages=stages, tolerance=tolerance, max_iterations=max_iterations,
                          iterations=iterations, extrapolate=extrapolate)
-        if linear_iterations is None:
-            linear_iterations = default_linear_iterations(model.vertex_count)
+        if linear_iterations is None:  # a Model of N heads: its Hessian is N blocks, each conditioned as its head
+            starts = getattr(model, "head_node_start", None)
+            largest = int(np.diff(np.asarray(starts)).max()) if starts is not None and len(starts) > 1 else 0
+            linear_iterations = default_linear_iterations(largest or model.vertex_count)
         if not (isinstance(linear_iterations, (int, np.integer)) and linear_iterations >= 1):
             raise InputError(f"linear_iterations: expected a whole number >= 1, got {linear_iterations!r}")
         if not (isinstance(rounds, (int, np.integer)) and rounds >= 1):
