@@ -515,6 +515,8 @@ class FaceBatch:
                 continue
             if int(guard[i, 0]) != kt.GUARD_NONE:
                 problems[i] = "a NaN or an inverted tet"
+            elif not ratio[i] > -1.0e29:  # the volume kernel's mark of a non-finite position
+                problems[i] = "a NaN or non-finite position"
             elif not ratio[i] >= VOLUME_FLOOR:
                 problems[i] = f"a tet at {ratio[i]:.3g} of its rest volume"
             elif not getattr(h.solver, "last_converged", True):

@@ -154,7 +154,9 @@ def step_frame(sim, n: int, a0, a1, j0, j1) -> None:
         ratio = None
         if problem is None:
             ratio = guard.min_volume_ratio()
-            if not ratio >= VOLUME_FLOOR:
+            if not ratio > -1.0e29:  # the volume kernel's mark of a non-finite position
+                problem = "a NaN or non-finite node position"
+            elif not ratio >= VOLUME_FLOOR:
                 problem = f"a tet at {ratio:.3g} of its rest volume (floor {VOLUME_FLOOR:g})"
             elif not getattr(solver, "last_converged", True):
                 problem = "the step's solve did not converge"
