@@ -19,6 +19,16 @@ Every run draws new cases from a new seed (printed and stored; ``--seed`` repeat
   face vertices 0-9408 is exact. Its tangential part (the error's component in the truth's
   tangent plane) is reported too: it is what a distance-to-scan heat map cannot show.
 
+The user's path, ``facewarp adapt scan.obj --landmarks lm.json --units mm`` with the DEFAULT
+template (3,415 vertices), runs in a fresh process per case (wall and CPU seconds from process
+start to every file written). Its truth: each template vertex's place on the ICT neutral head
+(where facewarp puts it there with the true FDPs, found once per run) carried to the case's shape
+by the ICT model's own correspondence (same triangle and barycentric coordinates); E_v over the
+frontal vertices inside the ICT face area. Its peer: ``nricp_amberg`` with the same template,
+landmarks and calibration, timed in-process. E_v RMS per region (lips, eyes, nose, cheeks,
+forehead, jaw line; the ICT template's by its 68 landmarks, plus ears) says where the error sits.
+``--part K/N`` and ``--merge N`` split a run over N processes (same ``--seed``).
+
 Peers on the same cases in the same run: ``trimesh.registration.nricp_amberg`` (default
 settings, the same 12 landmarks, template pre-aligned by the same calibration, distance
 threshold 10 mm), and facewarp with the thesis's levels only (``refine="none"``).
@@ -316,6 +326,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-command", action="store_true", help="skip the `facewarp adapt` command with the default template")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--heat-maps", type=int, default=2, help="heat maps of the N worst cases")
+    ap.add_argument("--part", default=None, help="K/N: run only the cases i with i %% N == K and keep them in --part-dir")
+    ap.add_argument("--merge", type=int, default=0, help="N: gather the N parts from --part-dir and write the result")
+    ap.add_argument("--part-dir", default=None, help="folder of the parts (--part / --merge)")
     ap.add_argument("--name", default="adapt_unseen")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
@@ -339,7 +352,21 @@ def main(argv=None) -> int:
     import tempfile
 
     scratch = Path(tempfile.mkdtemp(prefix="adapt_unseen_"))
+    import pickle
+
+    part = tuple(int(x) for x in args.part.split("/")) if args.part else (0, 1)
+    if args.merge:
+        cases = []
+        for k in range(args.merge):
+            f = Path(args.part_dir) / f"part{k}.pkl"
+            if f.is_file():
+                with open(f, "rb") as fh:
+                    cases += pickle.load(fh)
+        cases.sort(key=lambda c: c["index"])
+        seeds = []
     for i, s in enumerate(seeds):
+        if i % part[1] != part[0]:
+            continue
         case = make_case(model, int(s))
         row = {"index": i, "case": case.info()}
         res, sec, cpu = run_facewarp(model, case)
@@ -362,10 +389,20 @@ def main(argv=None) -> int:
             stn, _, _ = error_stats(Vn, case, model.faces)
             row["nricp_amberg"] = {**stn, "seconds": secn, "cpu_seconds": cpun}
         cases.append(row)
+        if args.part:  # kept after every case: a run cut short still gives the cases it finished
+            Path(args.part_dir).mkdir(parents=True, exist_ok=True)
+            with open(Path(args.part_dir) / f"part{part[0]}.pkl", "wb") as fh:
+                pickle.dump(cases, fh)
         f = row["facewarp"]
         print(f"case {i} (seed {s}, scale {case.scale:.2f}): facewarp {f['seconds']:.2f} s E_v {f['E_v_median_mm']:.2f}/{f['E_v_rms_mm']:.2f}/{f['E_v_p95_mm']:.2f} mm"
               + "".join(f" | {m} {row[m]['seconds']:.2f} s {row[m]['E_v_median_mm']:.2f}/{row[m]['E_v_rms_mm']:.2f}/{row[m]['E_v_p95_mm']:.2f}"
                         for m in ("facewarp_levels_only", "nricp_amberg", "command", "nricp_amberg_template") if m in row), flush=True)
+    if args.part:
+        Path(args.part_dir).mkdir(parents=True, exist_ok=True)
+        with open(Path(args.part_dir) / f"part{part[0]}.pkl", "wb") as fh:
+            pickle.dump(cases, fh)
+        print(f"part {args.part}: {len(cases)} cases kept in {args.part_dir}")
+        return 0
     heat = []
     folder = out / "adapt_unseen"
     folder.mkdir(parents=True, exist_ok=True)
