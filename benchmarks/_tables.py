@@ -295,7 +295,7 @@ def measured(r: Results) -> str:
         speed = v.get("`facewarp adapt` (wall, process start included) vs nricp_amberg (in-process), same case", "")
         rows.append([f"`facewarp adapt` (default template, whole command in a fresh process) on the same {n_cases} unseen faces, "
                      "E_v against the ICT model's correspondence",
-                     f"E_v median / RMS {fit.split(':')[0]} on average (targets 1.0 / 1.5: "
+                     f"E_v median / RMS {fit.split(' mm')[0]} mm on average (targets 1.0 / 1.5: "
                      f"{'met' if ': met' in fit else 'NOT met'}); better than nricp_amberg with the same template on {wins}; "
                      f"{speed.split(' (CPU')[0]}",
                      "`adapt_unseen.md`"])
