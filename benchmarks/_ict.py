@@ -293,3 +293,97 @@ def adapted_identity(k: int, root: Path, *, fresh: bool = False) -> dict:
     t1 = time.perf_counter()
     cli("build", case / "adapt", "--out", case / "build")
     return {"dir": case, "report": report, "adapt_seconds": t1 - t0, "build_seconds": time.perf_counter() - t1}
+
+
+ICT_REGION_GROUPS = {"jaw line": range(0, 17), "brows": range(17, 27), "nose": range(27, 36), "eyes": range(36, 48),
+                     "lips": range(48, 68)}
+"""Regions of the ICT face by its 68 landmark vertices (iBUG order): a face vertex belongs to the
+group of its nearest landmark within 12 mm (lips 10 mm); "ears" are the vertices farther from
+the midline than the jaw line's ends + 5 mm; the rest is "other" (cheeks, forehead, temples)."""
+
+
+def ict_regions(model: ICTModel) -> np.ndarray:
+    """Region name per ICT head vertex (see :data:`ICT_REGION_GROUPS`), shape (11248,), str."""
+    from scipy.spatial import cKDTree
+
+    V0, mk = model.neutral, np.asarray(model.markers)
+    reg = np.full(len(V0), "other", dtype=object)
+    best = np.full(len(V0), np.inf)
+    for g, r in ICT_REGION_GROUPS.items():
+        d, _ = cKDTree(V0[mk[list(r)]]).query(V0)
+        sel = (d < (0.010 if g == "lips" else 0.012)) & (d < best)
+        reg[sel] = g
+        best[sel] = d[sel]
+    x_jaw = float(np.abs(V0[mk[[0, 16]], 0]).mean())
+    reg[(np.abs(V0[:, 0]) > x_jaw + 0.005) & (reg == "other")] = "ears"
+    return reg.astype(str)
+
+
+@dataclass
+class TemplateTruth:
+    """Where each vertex of the default template lies on the ICT head: the point where
+    facewarp puts it on the ICT neutral head (true FDPs), as a triangle and barycentric
+    coordinates. On a case, a template vertex's true place is the same surface point of the
+    case's shape; the figure is the consistency of the correspondence with the ICT model's own
+    (a convention: the map itself is facewarp's, fixed once per run).
+
+    Attributes:
+        vertices, faces: The template (level 0) [m], shapes (n, 3) float64 and (m, 3) int64.
+        landmarks: Its head FDPs [m] (the ICT_FDP ids).
+        face: ICT triangle per template vertex, shape (n,), int64.
+        bary: Barycentric coordinates, shape (n, 3), float64.
+        mask: Measured vertices: frontal and mapped inside the ICT face area, shape (n,), bool.
+        region: Template region name per vertex, shape (n,), str.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    landmarks: dict
+    face: np.ndarray
+    bary: np.ndarray
+    mask: np.ndarray
+    region: np.ndarray
+
+    def truth_scan_mm(self, model: ICTModel, case: Case) -> np.ndarray:
+        """True places of the template's vertices on the case, scan frame [mm], shape (n, 3)."""
+        X = np.einsum("kj,kjd->kd", self.bary, case.truth[model.faces[self.face]])
+        return case.to_scan_mm(X)
+
+
+def default_template_truth(model: ICTModel) -> TemplateTruth:
+    """The default template's vertices located on the ICT head (see :class:`TemplateTruth`)."""
+    from facewarp import REGIONS, MeshQuery, default_template
+    from facewarp.adaptation import adapt
+
+    t = default_template(0)
+    TV, TF = np.asarray(t.vertices), np.asarray(t.faces)
+    tl = {k: v for k, v in t.landmarks().items() if t.fdp[k][0] == "head" and k in ICT_FDP}
+    res = adapt(TV, TF, tl, model.neutral, model.faces, {f: model.neutral[i] for f, i in ICT_FDP.items()})
+    cp = MeshQuery(model.neutral, model.faces).closest_point(res.vertices_scan_frame)
+    inside = (cp.face >= 0) & (model.faces[np.maximum(cp.face, 0)] < FACE_VERTS).all(axis=1) & (cp.dist < 1e-3)
+    frontal = np.zeros(len(TV), bool)
+    frontal[np.unique(TF[np.asarray(t.frontal)])] = True
+    region = np.empty(len(TV), dtype=object)
+    for fi, r in enumerate(np.asarray(t.face_region)):
+        region[TF[fi]] = REGIONS[r]
+    return TemplateTruth(TV, TF, tl, np.maximum(cp.face, 0), cp.bary, inside & frontal, region.astype(str))
+
+
+TEMPLATE_REGION_GROUPS = {"lips": ("upper_lip", "lower_lip", "lip_corner_L", "lip_corner_R"),
+                          "eyes": ("eyelid_upper_L", "eyelid_upper_R", "eyelid_lower_L", "eyelid_lower_R"),
+                          "nose": ("nose",), "cheeks": ("cheek_L", "cheek_R"), "forehead": ("forehead",),
+                          "jaw line": ("chin", "bottom_face")}
+"""Groups of the default template's frontal regions in the per-region figures."""
+
+
+def region_rms(e: np.ndarray, labels: np.ndarray, groups: dict | None = None, mask: np.ndarray | None = None) -> dict:
+    """RMS of the per-vertex error ``e`` [mm] per region group (labels: a name per vertex;
+    groups: group -> label names, default one group per label), over ``mask``."""
+    m = np.ones(len(e), bool) if mask is None else mask
+    groups = groups or {str(k): (k,) for k in np.unique(labels[m])}
+    out = {}
+    for g, names in groups.items():
+        sel = m & np.isin(labels, names)
+        if sel.any():
+            out[g] = float(np.sqrt(np.mean(e[sel] ** 2)))
+    return out

@@ -288,6 +288,17 @@ def measured(r: Results) -> str:
                  f"{int(float(_verdict_number(v['speed-up over nricp'], r'([0-9.]+)x')))}x faster; "
                  f"{n_cases - met} of {n_cases} cases miss a per-case limit (forehead top, neck bottom)",  # typed: where
                  "`adapt_unseen.md`"])
+    cmd_keys = [k for k in v if k.startswith("`facewarp adapt`")]
+    if cmd_keys:
+        fit = v["`facewarp adapt` (default template): E_v median / RMS, mean over cases"]
+        wins = v.get("`facewarp adapt` better than nricp_amberg (default template; median and RMS) on", "")
+        speed = v.get("`facewarp adapt` (wall, process start included) vs nricp_amberg (in-process), same case", "")
+        rows.append([f"`facewarp adapt` (default template, whole command in a fresh process) on the same {n_cases} unseen faces, "
+                     "E_v against the ICT model's correspondence",
+                     f"E_v median / RMS {fit.split(' mm')[0]} mm on average (targets 1.0 / 1.5: "
+                     f"{'met' if ': met' in fit else 'NOT met'}); better than nricp_amberg with the same template on {wins}; "
+                     f"{speed.split(' (CPU')[0]}",
+                     "`adapt_unseen.md`"])
     ict = r["adapt_ict"]["cases"]
     ids = [c["identity"] for c in ict]
     rows.append([f"adaptation, ICT identities {min(ids):03d}-{max(ids):03d}",

@@ -19,6 +19,16 @@ Every run draws new cases from a new seed (printed and stored; ``--seed`` repeat
   face vertices 0-9408 is exact. Its tangential part (the error's component in the truth's
   tangent plane) is reported too: it is what a distance-to-scan heat map cannot show.
 
+The user's path, ``facewarp adapt scan.obj --landmarks lm.json --units mm`` with the DEFAULT
+template (3,415 vertices), runs in a fresh process per case (wall and CPU seconds from process
+start to every file written). Its truth: each template vertex's place on the ICT neutral head
+(where facewarp puts it there with the true FDPs, found once per run) carried to the case's shape
+by the ICT model's own correspondence (same triangle and barycentric coordinates); E_v over the
+frontal vertices inside the ICT face area. Its peer: ``nricp_amberg`` with the same template,
+landmarks and calibration, timed in-process. E_v RMS per region (lips, eyes, nose, cheeks,
+forehead, jaw line; the ICT template's by its 68 landmarks, plus ears) says where the error sits.
+``--part K/N`` and ``--merge N`` split a run over N processes (same ``--seed``).
+
 Peers on the same cases in the same run: ``trimesh.registration.nricp_amberg`` (default
 settings, the same 12 landmarks, template pre-aligned by the same calibration, distance
 threshold 10 mm), and facewarp with the thesis's levels only (``refine="none"``).
@@ -45,7 +55,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from benchmarks._common import RESULTS, add_case_args, load, machine_line, save  # noqa: E402
-from benchmarks._ict import ICT_FDP, Case, ICTModel, error_stats, ict_dir, load_model, make_case  # noqa: E402
+from benchmarks._ict import (ICT_FDP, TEMPLATE_REGION_GROUPS, Case, ICTModel, TemplateTruth,  # noqa: E402
+                             default_template_truth, error_stats, ict_dir, ict_regions, load_model, make_case, region_rms)
 TARGETS = {"median_mm": 1.0, "rms_mm": 1.5, "p95_mm": 3.0, "beat_nricp_fraction": 0.9}
 
 
@@ -94,6 +105,65 @@ def run_detected(model: ICTModel, case: Case) -> tuple[dict, dict]:
     return det, {**st, "seconds": sec, "cpu_seconds": cpu}
 
 
+def _stats(e: np.ndarray) -> dict:
+    return {"E_v_median_mm": float(np.median(e)), "E_v_rms_mm": float(np.sqrt(np.mean(e**2))),
+            "E_v_p95_mm": float(np.percentile(e, 95)), "E_v_max_mm": float(e.max())}
+
+
+def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path) -> tuple[dict, np.ndarray]:
+    """``facewarp adapt scan.obj --landmarks lm.json --units mm`` (the default template) in a
+    fresh process: wall and CPU seconds from process start to files written, E_v of the
+    template's measured vertices against their true places (scan frame, mm)."""
+    import json
+    import resource
+    import subprocess
+
+    from facewarp.geometry import load_mesh, save_obj
+
+    tmp.mkdir(parents=True, exist_ok=True)
+    save_obj(tmp / "scan.obj", case.scan_V_mm * 1e-3, case.scan_F, units="mm")
+    (tmp / "lm.json").write_text(json.dumps({k: np.asarray(v).tolist() for k, v in case.landmarks_mm.items()}))
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "facewarp", "adapt", str(tmp / "scan.obj"), "--landmarks", str(tmp / "lm.json"),
+           "--units", "mm", "--out", str(tmp / "out")]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        raise SystemExit(f"facewarp adapt failed ({r.returncode}): {r.stderr.strip()[-400:]}")
+    V = load_mesh(tmp / "out" / "adapted_scan_frame.obj", units="mm").vertices * 1e3
+    e = np.linalg.norm(V - truth.truth_scan_mm(model, case), axis=1)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {**_stats(e[truth.mask]), "seconds": wall, "cpu_seconds": cpu,
+            "regions_rms_mm": region_rms(e, truth.region, TEMPLATE_REGION_GROUPS, truth.mask)}, e
+
+
+def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case) -> tuple[dict, np.ndarray]:
+    """nricp_amberg with the default template (the same 12 landmarks as surface points, 10 mm
+    threshold, pre-aligned by facewarp's calibration); in-process seconds (no process start)."""
+    import trimesh
+    from trimesh.registration import nricp_amberg
+
+    from facewarp import MeshQuery
+    from facewarp.adaptation import calibrate
+
+    ids = list(truth.landmarks)
+    sl = {k: case.landmarks_mm[k] * 1e-3 for k in ids}
+    T = calibrate(sl, truth.landmarks).transform
+    t0, c0 = time.perf_counter(), time.process_time()
+    cpl = MeshQuery(truth.vertices, truth.faces).closest_point(np.array([truth.landmarks[k] for k in ids]))
+    out = nricp_amberg(trimesh.Trimesh(truth.vertices * 1e3, truth.faces, process=False),
+                       trimesh.Trimesh(T.apply(case.scan_V_mm * 1e-3) * 1e3, case.scan_F, process=False),
+                       source_landmarks=(cpl.face, cpl.bary), target_positions=T.apply(np.array([sl[k] for k in ids])) * 1e3,
+                       distance_threshold=10.0)
+    sec, cpu = time.perf_counter() - t0, time.process_time() - c0
+    e = np.linalg.norm(T.inverse().apply(np.asarray(out) * 1e-3) * 1e3 - truth.truth_scan_mm(model, case), axis=1)
+    return {**_stats(e[truth.mask]), "seconds": sec, "cpu_seconds": cpu,
+            "regions_rms_mm": region_rms(e, truth.region, TEMPLATE_REGION_GROUPS, truth.mask)}, e
+
+
 def heat_map(path: Path, V_mm: np.ndarray, faces: np.ndarray, values_mm: np.ndarray, title: str, vmax: float = 5.0) -> None:
     """Front and side pictures of the truth-frame head coloured by a per-vertex error [mm]."""
     from facewarp.render import colormap, render_mesh, save_png
@@ -117,6 +187,7 @@ def summarise(rows: list) -> dict:
 def write_markdown(result: dict, path: Path, doc: dict) -> None:
     T = result["targets"]
     methods = [m for m in ("facewarp", "nricp_amberg", "facewarp_levels_only", "facewarp_detected") if m in result["summary"]]
+    allm = [m for m in (*methods, "command", "nricp_amberg_template") if m in result["summary"]]
     lines = [
         "# Adaptation on unseen faces (random ICT identities, any pose)",
         "",
@@ -142,12 +213,46 @@ def write_markdown(result: dict, path: Path, doc: dict) -> None:
         lines.append(f"| {c['index']} | {c['case']['seed']} | {c['case']['scale']:.2f} | " + " | ".join(cells) + " |")
     lines += ["", "Aggregate (mean over cases of each per-case figure; worst case in brackets):", "",
               "| method | E_v median [mm] | E_v RMS [mm] | E_v p95 [mm] | tangential RMS [mm] | time [s] | CPU [s] |", "|---|---|---|---|---|---|---|"]
-    for m in methods:
+    for m in allm:
         s = result["summary"][m]
         lines.append(
             f"| {m} | {s['E_v_median_mm']['mean']:.2f} ({s['E_v_median_mm']['worst']:.2f}) | {s['E_v_rms_mm']['mean']:.2f} ({s['E_v_rms_mm']['worst']:.2f}) | "
-            f"{s['E_v_p95_mm']['mean']:.2f} ({s['E_v_p95_mm']['worst']:.2f}) | {s['tangential_rms_mm']['mean']:.2f} | {s['seconds']['mean']:.2f} | {s['cpu_seconds']['mean']:.2f} |"
+            f"{s['E_v_p95_mm']['mean']:.2f} ({s['E_v_p95_mm']['worst']:.2f}) | {s['tangential_rms_mm']['mean'] if 'tangential_rms_mm' in s else float('nan'):.2f} | {s['seconds']['mean']:.2f} | {s['cpu_seconds']['mean']:.2f} |"
         )
+    cmd = [c for c in result["cases"] if "command" in c]
+    if cmd:
+        lines += ["", "## The `facewarp adapt` command with the default template", "",
+                  "`facewarp adapt scan.obj --landmarks lm.json --units mm` (the default template, 3,415 vertices) in a fresh",
+                  "process per case: wall and CPU seconds from process start to every file written (OBJ, glTF, report, pictures).",
+                  "Truth: each template vertex's place on the ICT neutral head (where facewarp puts it there with the true FDPs,",
+                  "fixed once per run) carried to the case's shape by the ICT model's own correspondence (same triangle,",
+                  "same barycentric coordinates); E_v over the frontal vertices inside the ICT face area, scan frame, mm.",
+                  "Peer: `nricp_amberg` with the same template, landmarks and calibration, timed in-process (its process",
+                  "start and file reading not counted).", "",
+                  "| case | command median / RMS / p95 [mm] | wall s | CPU s | nricp median / RMS / p95 [mm] | nricp s | speed-up (wall) | "
+                  + " | ".join(f"{g} RMS" for g in TEMPLATE_REGION_GROUPS) + " |",
+                  "|---|---|---|---|---|---|---|" + "---|" * len(TEMPLATE_REGION_GROUPS)]
+        for c in cmd:
+            a, n = c["command"], c.get("nricp_amberg_template")
+            nr = (f"{n['E_v_median_mm']:.2f} / {n['E_v_rms_mm']:.2f} / {n['E_v_p95_mm']:.2f} | {n['seconds']:.1f} | "
+                  f"{n['seconds'] / a['seconds']:.1f}x") if n else " | | "
+            lines.append(f"| {c['index']} | {a['E_v_median_mm']:.2f} / {a['E_v_rms_mm']:.2f} / {a['E_v_p95_mm']:.2f} | {a['seconds']:.2f} | "
+                         f"{a['cpu_seconds']:.2f} | {nr} | " + " | ".join(f"{a['regions_rms_mm'].get(g, float('nan')):.2f}" for g in TEMPLATE_REGION_GROUPS) + " |")
+    regs = [c["facewarp"].get("regions_rms_mm") for c in result["cases"] if c["facewarp"].get("regions_rms_mm")]
+    if regs:
+        names = list(regs[0])
+        lines += ["", "Where the error sits (E_v RMS per region [mm], mean over cases; ICT regions by its 68 landmarks, template",
+                  "regions by its own labels):", "", "| template | " + " | ".join(names) + " |", "|---|" + "---|" * len(names),
+                  "| ICT neutral (library) | " + " | ".join(f"{np.mean([r[g] for r in regs if g in r]):.2f}" for g in names) + " |"]
+        if cmd:
+            lines += ["", "| template | " + " | ".join(TEMPLATE_REGION_GROUPS) + " |", "|---|" + "---|" * len(TEMPLATE_REGION_GROUPS),
+                      "| default (`facewarp adapt`) | " + " | ".join(
+                          f"{np.mean([c['command']['regions_rms_mm'][g] for c in cmd if g in c['command']['regions_rms_mm']]):.2f}"
+                          for g in TEMPLATE_REGION_GROUPS) + " |"]
+            if "nricp_amberg_template" in cmd[0]:
+                lines.append("| default (nricp_amberg) | " + " | ".join(
+                    f"{np.mean([c['nricp_amberg_template']['regions_rms_mm'][g] for c in cmd if g in c['nricp_amberg_template']['regions_rms_mm']]):.2f}"
+                    for g in TEMPLATE_REGION_GROUPS) + " |")
     v = result["verdict"]
     lines += ["", "Verdict:", ""] + [f"- {k}: {val}" for k, val in v.items()]
     if result.get("heat_maps"):
@@ -182,6 +287,24 @@ def verdict(cases: list) -> dict:
         out["adaptation with detected vs true landmarks (E_v RMS ratio)"] = (
             f"median {np.median(ratio):.3f}, worst {max(ratio):.3f} (target <= 1.10; within 10 % on "
             f"{sum(r <= 1.1 for r in ratio)}/{len(ratio)} cases)")
+    cmd = [c for c in cases if "command" in c]
+    if cmd:
+        med = float(np.mean([c["command"]["E_v_median_mm"] for c in cmd]))
+        rms = float(np.mean([c["command"]["E_v_rms_mm"] for c in cmd]))
+        out["`facewarp adapt` (default template): E_v median / RMS, mean over cases"] = (
+            f"{med:.2f} / {rms:.2f} mm (targets {TARGETS['median_mm']} / {TARGETS['rms_mm']}): "
+            + ("met" if med <= TARGETS["median_mm"] and rms <= TARGETS["rms_mm"] else "NOT met")
+            + f"; worst case {max(c['command']['E_v_median_mm'] for c in cmd):.2f} / {max(c['command']['E_v_rms_mm'] for c in cmd):.2f} mm")
+        peer = [c for c in cmd if "nricp_amberg_template" in c]
+        if peer:
+            wins = sum(c["command"]["E_v_rms_mm"] < c["nricp_amberg_template"]["E_v_rms_mm"]
+                       and c["command"]["E_v_median_mm"] < c["nricp_amberg_template"]["E_v_median_mm"] for c in peer)
+            sp = [c["nricp_amberg_template"]["seconds"] / c["command"]["seconds"] for c in peer]
+            spc = [c["nricp_amberg_template"]["cpu_seconds"] / c["command"]["cpu_seconds"] for c in peer]
+            out["`facewarp adapt` better than nricp_amberg (default template; median and RMS) on"] = f"{wins}/{len(peer)} cases"
+            out["`facewarp adapt` (wall, process start included) vs nricp_amberg (in-process), same case"] = (
+                f"{np.mean(sp):.1f}x faster on average, slowest case {min(sp):.1f}x, >= 5x on {sum(x >= 5 for x in sp)}/{len(sp)} cases "
+                f"(CPU seconds: {np.mean(spc):.1f}x on average, slowest {min(spc):.1f}x; target 5x)")
     both = [c for c in cases if "nricp_amberg" in c]
     if both:
         wins = sum(c["facewarp"]["E_v_rms_mm"] < c["nricp_amberg"]["E_v_rms_mm"] and c["facewarp"]["E_v_median_mm"] < c["nricp_amberg"]["E_v_median_mm"] for c in both)
@@ -200,8 +323,12 @@ def main(argv=None) -> int:
     add_case_args(ap, seed=None)
     ap.add_argument("--no-peers", action="store_true", help="skip nricp_amberg and the levels-only run")
     ap.add_argument("--no-detect", action="store_true", help="skip the automatic landmarks")
+    ap.add_argument("--no-command", action="store_true", help="skip the `facewarp adapt` command with the default template")
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--heat-maps", type=int, default=3, help="heat maps of the N worst cases")
+    ap.add_argument("--heat-maps", type=int, default=2, help="heat maps of the N worst cases")
+    ap.add_argument("--part", default=None, help="K/N: run only the cases i with i %% N == K and keep them in --part-dir")
+    ap.add_argument("--merge", type=int, default=0, help="N: gather the N parts from --part-dir and write the result")
+    ap.add_argument("--part-dir", default=None, help="folder of the parts (--part / --merge)")
     ap.add_argument("--name", default="adapt_unseen")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
@@ -218,14 +345,40 @@ def main(argv=None) -> int:
     seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=args.cases)
     cases = []
     out = Path(args.out)
+    from benchmarks._ict import FACE_VERTS
+
+    ict_reg = ict_regions(model)
+    truth = None if args.no_command else default_template_truth(model)
+    import tempfile
+
+    scratch = Path(tempfile.mkdtemp(prefix="adapt_unseen_"))
+    import pickle
+
+    part = tuple(int(x) for x in args.part.split("/")) if args.part else (0, 1)
+    if args.merge:
+        cases = []
+        for k in range(args.merge):
+            f = Path(args.part_dir) / f"part{k}.pkl"
+            if f.is_file():
+                with open(f, "rb") as fh:
+                    cases += pickle.load(fh)
+        cases.sort(key=lambda c: c["index"])
+        seeds = []
     for i, s in enumerate(seeds):
+        if i % part[1] != part[0]:
+            continue
         case = make_case(model, int(s))
         row = {"index": i, "case": case.info()}
         res, sec, cpu = run_facewarp(model, case)
         st, e, tang = error_stats(res.vertices_scan_frame * 1e3, case, model.faces)
         row["facewarp"] = {**st, "seconds": sec, "cpu_seconds": cpu, "levels": [r.to_dict() for r in res.levels],
-                           "refine": res.refine}
+                           "refine": res.refine, "regions_rms_mm": region_rms(e[:FACE_VERTS], ict_reg[:FACE_VERTS])}
         row["_e"] = (e, tang)
+        if truth is not None:
+            row["command"], ec = run_command(truth, model, case, scratch / f"case{i:02d}")
+            row["_ec"] = ec
+            if not args.no_peers:
+                row["nricp_amberg_template"], _ = run_nricp_template(truth, model, case)
         if not args.no_detect:
             row["detect"], row["facewarp_detected"] = run_detected(model, case)
         if not args.no_peers:
@@ -236,23 +389,49 @@ def main(argv=None) -> int:
             stn, _, _ = error_stats(Vn, case, model.faces)
             row["nricp_amberg"] = {**stn, "seconds": secn, "cpu_seconds": cpun}
         cases.append(row)
+        if args.part:  # kept after every case: a run cut short still gives the cases it finished
+            Path(args.part_dir).mkdir(parents=True, exist_ok=True)
+            with open(Path(args.part_dir) / f"part{part[0]}.pkl", "wb") as fh:
+                pickle.dump(cases, fh)
         f = row["facewarp"]
         print(f"case {i} (seed {s}, scale {case.scale:.2f}): facewarp {f['seconds']:.2f} s E_v {f['E_v_median_mm']:.2f}/{f['E_v_rms_mm']:.2f}/{f['E_v_p95_mm']:.2f} mm"
               + "".join(f" | {m} {row[m]['seconds']:.2f} s {row[m]['E_v_median_mm']:.2f}/{row[m]['E_v_rms_mm']:.2f}/{row[m]['E_v_p95_mm']:.2f}"
-                        for m in ("facewarp_levels_only", "nricp_amberg") if m in row), flush=True)
+                        for m in ("facewarp_levels_only", "nricp_amberg", "command", "nricp_amberg_template") if m in row), flush=True)
+    if args.part:
+        Path(args.part_dir).mkdir(parents=True, exist_ok=True)
+        with open(Path(args.part_dir) / f"part{part[0]}.pkl", "wb") as fh:
+            pickle.dump(cases, fh)
+        print(f"part {args.part}: {len(cases)} cases kept in {args.part_dir}")
+        return 0
     heat = []
+    folder = out / "adapt_unseen"
+    folder.mkdir(parents=True, exist_ok=True)
+    for old in folder.glob("case*.png"):
+        old.unlink()
     worst = sorted(cases, key=lambda c: -c["facewarp"]["E_v_rms_mm"])[: args.heat_maps]
     for c in worst:
         e, tang = c["_e"]
         case = make_case(model, c["case"]["seed"])
         for name, val in (("total", e), ("tangential", tang)):
-            p = out / "adapt_unseen" / f"case{c['index']:02d}_{name}.png"
-            p.parent.mkdir(parents=True, exist_ok=True)
+            p = folder / f"case{c['index']:02d}_{name}.png"
             heat_map(p, case.truth * 1e3, model.faces, val, f"case {c['index']} (seed {c['case']['seed']}): {name} E_v, truth frame")
             heat.append(str(p.relative_to(out)))
+    if truth is not None:
+        for c in sorted(cases, key=lambda c: -c["command"]["E_v_rms_mm"])[: args.heat_maps]:
+            case = make_case(model, c["case"]["seed"])
+            X = np.einsum("kj,kjd->kd", truth.bary, case.truth[model.faces[truth.face]])
+            p = folder / f"case{c['index']:02d}_command.png"
+            heat_map(p, X * 1e3, truth.faces, np.where(truth.mask, c["_ec"], 0.0),
+                     f"case {c['index']}: E_v of `facewarp adapt` (default template), truth frame")
+            heat.append(str(p.relative_to(out)))
+    import shutil
+
+    shutil.rmtree(scratch, ignore_errors=True)
     for c in cases:
         c.pop("_e")
-    methods = [m for m in ("facewarp", "facewarp_detected", "facewarp_levels_only", "nricp_amberg") if m in cases[0]]
+        c.pop("_ec", None)
+    methods = [m for m in ("facewarp", "facewarp_detected", "facewarp_levels_only", "nricp_amberg", "command",
+                           "nricp_amberg_template") if m in cases[0]]
     result = {"seed": seed, "threads": args.threads, "targets": TARGETS, "cases": cases,
               "summary": {m: summarise([c[m] for c in cases]) for m in methods}, "verdict": verdict(cases), "heat_maps": heat}
     out.mkdir(parents=True, exist_ok=True)

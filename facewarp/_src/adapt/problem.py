@@ -93,8 +93,8 @@ class AdaptOptions:
     refine: str = "field+land"
     field_centers: int = 150
     field_samples: int = 2000
-    field_stiffness: tuple = (7e-4, 7e-5)
-    field_iterations: int = 3
+    field_stiffness: tuple = (7e-3, 7e-4, 7e-5)
+    field_iterations: int = 6
     field_fdp_weight: float = 10.0
     land_smoothing: float = 0.5
     land_iterations: int = 3

@@ -431,9 +431,83 @@ def _internal_specs(parts_mm) -> dict[str, tuple[str, np.ndarray]]:
     return out
 
 
-# ----------------------------------------------------------------------------- assembly
+# ----------------------------------------------------------------------------- disk cache
+def _source_key(level: int) -> str:
+    """A hash of everything the built template depends on: the source of ``template/`` and
+    ``geometry/``, the NumPy version and the level."""
+    import hashlib
+    from pathlib import Path
+
+    h = hashlib.sha256(f"{level} {np.__version__} 1".encode())
+    root = Path(__file__).resolve().parent
+    for folder in (root, root.parent / "geometry"):
+        for f in sorted(folder.glob("*.py")):
+            h.update(f.name.encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()[:20]
+
+
+def _cache_file(level: int):
+    """``$FACEWARP_CACHE_DIR`` (default ``~/.cache/facewarp``; ``off``: no cache) / template file."""
+    import os
+    from pathlib import Path
+
+    d = os.environ.get("FACEWARP_CACHE_DIR", "")
+    if d.lower() in ("off", "0", "none"):
+        return None
+    root = Path(d) if d else Path(os.environ.get("XDG_CACHE_HOME", "") or Path.home() / ".cache") / "facewarp"
+    return root / f"template_L{level}_{_source_key(level)}.npz"
+
+
+def _to_arrays(t: Template) -> dict:
+    ids = list(t.fdp)
+    out = {name: getattr(t, name) for name in ("vertices", "faces", "face_region", "frontal", "thickness", "skull_depth",
+                                                "condyles", "uv", "face_uv")}
+    out.update(level=np.int64(t.level), thickness_factor=np.float64(t.thickness_factor), fdp_ids=np.array(ids),
+               fdp_part=np.array([t.fdp[k][0] for k in ids]), fdp_face=np.concatenate([t.fdp[k][1].face for k in ids]),
+               fdp_bary=np.concatenate([t.fdp[k][1].bary for k in ids]), part_names=np.array(list(t.parts)))
+    for k, (PV, PF) in t.parts.items():
+        out[f"part_V_{k}"], out[f"part_F_{k}"] = PV, PF
+    return out
+
+
+def _from_arrays(z) -> Template:
+    fdp = {str(k): (str(p), SurfacePoints(z["fdp_face"][i:i + 1], z["fdp_bary"][i:i + 1]))
+           for i, (k, p) in enumerate(zip(z["fdp_ids"], z["fdp_part"]))}
+    parts = {str(k): (z[f"part_V_{k}"], z[f"part_F_{k}"]) for k in z["part_names"]}
+    return Template(vertices=z["vertices"], faces=z["faces"], face_region=z["face_region"], frontal=z["frontal"],
+                    thickness=z["thickness"], skull_depth=z["skull_depth"], condyles=z["condyles"], fdp=fdp, parts=parts,
+                    level=int(z["level"]), thickness_factor=float(z["thickness_factor"]), uv=z["uv"], face_uv=z["face_uv"])
+
+
 @functools.lru_cache(maxsize=4)
 def _build(level: int) -> Template:
+    """The template of ``level``: from the disk cache when its source key matches (building
+    takes ~1 s at level 0, reading it ~10 ms), else built and written there (best effort: a
+    cache that cannot be written is skipped)."""
+    import os
+
+    path = _cache_file(level)
+    if path is not None and path.is_file():
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                return _from_arrays(z)
+        except (OSError, ValueError, KeyError):
+            pass
+    t = _build_template(level)
+    if path is not None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+            np.savez(tmp, **_to_arrays(t))
+            os.replace(tmp, path)
+        except OSError:
+            pass
+    return t
+
+
+# ----------------------------------------------------------------------------- assembly
+def _build_template(level: int) -> Template:
     head = S.HeadShape()
     raw = build_raw_head(level, head)
     V_mm, F = raw.vertices, raw.faces
