@@ -262,5 +262,5 @@ def test_constructor_checks(tmp_path, change, message):
 
 def test_public_names():
     assert set(usd_export.__all__) == {"AnimationWriter", "UsdExportError", "part_prim_name", "read_animation",
-                                       "validate_usd", "write_meshes_usd", "write_skel_rig"}
+                                       "validate_usd", "write_crowd_stage", "write_meshes_usd", "write_skel_rig"}
     assert issubclass(UsdExportError, ValueError)
