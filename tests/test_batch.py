@@ -74,7 +74,7 @@ def test_failing_head_is_frozen_and_reported(rigs, device):
     batch = fw.FaceBatch(a, 2, device=device, backend="heads")
     batch.heads[1].max_refinement = 0  # no retries for the poisoned head
     X = batch.heads[1].state.positions.numpy()
-    X[5] = np.nan  # a NaN in head 1
+    X[int(np.flatnonzero(~a.fixed & ~a.held)[0])] = np.nan  # a NaN in a free node of head 1 (a fixed one is reset)
     batch.heads[1].state.positions.assign(X)
     batch.heads[1].state.prev_positions.assign(X)
     e = _controls(a, 5)

@@ -34,9 +34,10 @@ def one_line_error(code, out, err, *needles):
         assert n in lines[0], (n, lines[0])
 
 
-def facewarp_process(*argv):
-    """Run ``python -m facewarp ARGV`` in a fresh process (stdout and stderr kept apart)."""
-    env = {k: v for k, v in os.environ.items() if k != "FACEWARP_VERBOSE"}
+def facewarp_process(*argv, **env_extra):
+    """Run ``python -m facewarp ARGV`` in a fresh process (stdout and stderr kept apart; ``env_extra``
+    added to its environment)."""
+    env = {k: v for k, v in os.environ.items() if k != "FACEWARP_VERBOSE"} | env_extra
     return subprocess.run([sys.executable, "-m", "facewarp", *argv], capture_output=True, text=True, env=env)
 
 
@@ -146,7 +147,7 @@ def test_device_cuda_without_gpu(capsys):
 def test_json_stdout_is_one_document_and_warp_is_quiet(tmp_path):
     """With --json stdout holds exactly one JSON document; Warp's messages (banner, the CUDA
     driver note on machines without a GPU) appear only with --verbose, and then on stderr."""
-    r = facewarp_process("--json", "template", "info")
+    r = facewarp_process("--json", "template", "info", FACEWARP_CACHE_DIR="off")  # no template cache: Warp runs
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["fdp_count"] == 84
     assert r.stderr == "", r.stderr  # Warp ran (FDP placement) but said nothing
@@ -154,7 +155,7 @@ def test_json_stdout_is_one_document_and_warp_is_quiet(tmp_path):
     quad.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
     r = facewarp_process("--json", "--device", "cpu", "mesh", "check", str(quad))
     assert r.returncode == 0 and json.loads(r.stdout)["face_count"] == 2 and r.stderr == ""
-    r = facewarp_process("--json", "--verbose", "template", "info")
+    r = facewarp_process("--json", "--verbose", "template", "info", FACEWARP_CACHE_DIR="off")
     assert r.returncode == 0 and json.loads(r.stdout)["vertex_count"] > 0
     assert "Warp" in r.stderr  # the banner went to stderr
 
