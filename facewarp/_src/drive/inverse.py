@@ -170,6 +170,11 @@ class Tracker:
         corrections: Iterations of a fresh sensitivity towards the exact tangent (default 1 offline,
             0 real-time; :func:`.sensitivity.step_sensitivity`).
 
+    Attributes:
+        noise: The targets' estimated noise [m] per axis (offline; module doc), 0 before two frames.
+        stats: The :class:`TrackerStats`.
+        last_error: (K,) float64 [m], each point's distance from its target in the last frame (NaN: missing).
+
     Raises:
         InputError: a bad argument (one line naming it), unknown point names (all named).
     """
