@@ -32,8 +32,8 @@ noise_reference)^2`` (1 to :data:`NOISE_GAIN_MAX`; the maximum until the first e
 muscles' point-space smoothness is multiplied by ``gain`` and their momentum divided by
 ``sqrt(gain)`` (offline mode; in real time the one-iteration step's lag changes the residuals every
 frame and is no noise to hold against). The jaw, seen by many points, keeps the plain smoothness
-(held harder it lags a fast opening). Without this, 0.5 mm noise with 30 % of the markers missing shook weakly seen muscles (the
-lip corners', the brows') by 3 to 5 mm between frames.
+(held harder it lags a fast opening). Without this, 0.5 mm noise with 30 % of the markers missing
+shook weakly seen muscles (the lip corners', the brows') by 3 to 5 mm between frames.
 """
 
 from __future__ import annotations
