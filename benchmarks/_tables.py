@@ -556,20 +556,21 @@ def batch_scaling(r: Results) -> str:
     for name in r.glob("batch_*"):
         doc = r.doc(name)
         fig = doc["figures"]
+        dev = f"{doc['device']} ({fig.get('backend', 'heads')})"  # FaceBatch's backend: a Model per head, or one
         for row in fig.get("rows", []):
             if "head_frames_per_second" not in row:
                 part = row.get("partial_ms_per_frame_by_streams") or {}
                 if part:  # the batch timed, the run stopped after (time or memory): its numbers, marked partial
                     k = min(part, key=part.get)
-                    rows.append([doc["device"], f"{row['n']:,}", f"{part[k]:.1f} (partial)",
+                    rows.append([dev, f"{row['n']:,}", f"{part[k]:.1f} (partial)",
                                  f"{row['n'] * 1e3 / part[k]:,.0f}", k, "-", "-", "-", "-",
                                  f"{row['gpu_memory_per_head_mb']:.1f}" if "gpu_memory_per_head_mb" in row else "-"])
                 else:
-                    rows.append([doc["device"], str(row["n"]), row.get("error", "not measured")[:60], *["-"] * 7])
+                    rows.append([dev, str(row["n"]), row.get("error", "not measured")[:60], *["-"] * 7])
                 continue
             mem = row.get("gpu_memory_per_head_mb")
             newton = row.get("newton_vbd", {})
-            rows.append([doc["device"], f"{row['n']:,}", f"{row['ms_per_frame']:.1f}", hfs(row), str(row.get("streams", 1)),
+            rows.append([dev, f"{row['n']:,}", f"{row['ms_per_frame']:.1f}", hfs(row), str(row.get("streams", 1)),
                          hfs(row.get("naive")),
                          f"{row['speedup_over_naive']:.2f}x" if "speedup_over_naive" in row else "-",
                          hfs(row.get("one_model_tissue")),
@@ -578,7 +579,7 @@ def batch_scaling(r: Results) -> str:
                          f"{mem:.1f}" if mem is not None else "-"])
     if not rows:
         return "(no batch result committed yet: python -m benchmarks batch)"
-    return _rows_md(["device", "N", "ms / frame", "head-frames / s", "streams", "naive loop", "batch / naive",
+    return _rows_md(["device (backend)", "N", "ms / frame", "head-frames / s", "streams", "naive loop", "batch / naive",
                      "one Model, tissue only", "Newton VBD", "GPU MB / head"], rows)
 
 
