@@ -554,6 +554,8 @@ def batch_scaling(r: Results) -> str:
 
     rows = []
     for name in r.glob("batch_*"):
+        if name.startswith("batch_profile"):  # the kernel profile: its own table
+            continue
         doc = r.doc(name)
         fig = doc["figures"]
         dev = f"{doc['device']} ({fig.get('backend', 'heads')})"  # FaceBatch's backend: a Model per head, or one
