@@ -247,7 +247,7 @@ class _FakeRay(types.ModuleType):
 
     def __init__(self, gpus: float):
         super().__init__("ray")
-        self.gpus, self.submitted, self._up = gpus, [], False
+        self.gpus, self.submitted, self.groups, self._up = gpus, [], [], False
         self.exceptions = types.SimpleNamespace(WorkerCrashedError=type("WorkerCrashedError", (Exception,), {}),
                                                 NodeDiedError=type("NodeDiedError", (Exception,), {}),
                                                 RayError=type("RayError", (Exception,), {}))
@@ -276,8 +276,11 @@ class _FakeRay(types.ModuleType):
 
             def remote(self, task):
                 ray.submitted.append((task["step"], task["device"], self.opts))
-                return _Ref({"status": "done", "error": None, "outputs": [], "summary": {}, "device": task["device"],
-                             "seconds": 0.0, "worker": None})
+                ray.groups.append(len(task.get("group", [task])))
+                record = {"status": "done", "error": None, "outputs": [], "summary": {}, "device": task["device"],
+                          "seconds": 0.0, "worker": None}
+                return _Ref([dict(record, batched_with=len(task["group"])) for _ in task["group"]]
+                            if "group" in task else record)
 
         return lambda fn: Remote(fn)
 
@@ -309,6 +312,25 @@ def test_ray_physics_steps_device(scans, tmp_path, capsys, monkeypatch, gpus, fl
     for step in ("simulate", "rig"):
         assert got[step] == (want, {"num_cpus": 1, **({"num_gpus": num_gpus} if num_gpus else {})})
     assert _manifest(tmp_path / "out")["good1"]["steps"]["rig"]["device"] == want
+
+
+def test_ray_gpu_groups_the_simulations(scans, tmp_path, capsys, monkeypatch):
+    """On a Ray cluster with a GPU the scans' simulations go as one group task (default up to 64)
+    asking for the GPU; --simulate-batch 1 keeps a task per scan."""
+    for flag, groups in ((None, [2]), ("1", [1, 1])):
+        ray = _FakeRay(1)
+        monkeypatch.setitem(sys.modules, "ray", ray)
+        out = tmp_path / f"out{flag}"
+        rep = _run(capsys, scans / "good1.obj", scans / "good2.obj", "--out", out, "--steps", "adapt,build,simulate",
+                   "--ray", *(["--simulate-batch", flag] if flag else []))
+        assert rep["done"] == 2 and rep["tasks_run"] == 6
+        assert rep["simulate_grouping"]["batch"] == (64 if not flag else 1)
+        sims = [(dev, opts, n) for (step, dev, opts), n in zip(ray.submitted, ray.groups) if step == "simulate"]
+        assert [n for _, _, n in sims] == groups
+        assert all(dev == "cuda" and opts == {"num_cpus": 1, "num_gpus": 1.0} for dev, opts, _ in sims)
+        m = _manifest(out)
+        assert [m[n]["steps"]["simulate"].get("batched_with") for n in ("good1", "good2")] == (
+            [2, 2] if not flag else [None, None])
 
 
 def test_ray_local_two_workers(scans, tmp_path, capsys, monkeypatch):
