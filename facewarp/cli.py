@@ -565,7 +565,8 @@ def cmd_batch_run(args):
                     levels=args.levels, rig_formats=args.rig_formats, rig_inbetweens=args.rig_inbetweens,
                     rig_muscles=[m for m in args.rig_muscles.split(",") if m] if args.rig_muscles else None,
                     device=args.device, ray=args.ray, workers=args.workers,
-                    gpus_per_task=args.gpus_per_task, max_retries=args.max_retries, retry_failed=args.retry_failed,
+                    gpus_per_task=args.gpus_per_task, simulate_batch=args.simulate_batch,
+                    max_retries=args.max_retries, retry_failed=args.retry_failed,
                     progress=not args.json)
     cols = list(STEPS)
     width = max([len(r["name"]) for r in rep["rows"]] + [4])
@@ -583,6 +584,13 @@ def cmd_batch_run(args):
                      + (f": {r['failed_step']}: {r['error']}" if r["error"] else ""))
     if len(rep["rows"]) > len(shown):
         lines.append(f"  ... {len(rep['rows']) - len(shown)} more in {rep['report_csv']}")
+    g = rep["simulate_grouping"]
+    if g["groups"]:
+        lines.append(f"  simulate: {g['grouped_scans']} scans in {g['groups']} FaceBatch groups of up to "
+                     f"{g['batch']}")
+    if g["fallbacks"]:
+        lines.append(f"  simulate: {g['fallbacks']} scans of a group simulated alone instead (the group could not "
+                     f"step together: {'; '.join(g['fallback_errors'])})")
     lines.append(f"  wrote {rep['manifest']}, {rep['report']}, {rep['report_csv']}")
     _emit(args, rep, lines)
 
@@ -909,6 +917,10 @@ def build_parser() -> argparse.ArgumentParser:
                     metavar="F", help="GPUs per simulate or rig task, 0..64: on Ray its num_gpus (default 1 when the "
                          "cluster has a GPU, else 0: on the CPU); with local processes > 0 runs those steps on cuda "
                          "when this machine has a GPU (default: on --device)")
+    br.add_argument("--simulate-batch", type=_whole_in(1, 4096), metavar="K",
+                    help="scans whose simulate steps together in one FaceBatch task, 1..4096 (default 64 when "
+                         "simulate runs on a GPU, else 1: a task per scan); each scan still gets its own "
+                         "simulate/ folder and record")
     br.add_argument("--max-retries", type=_whole_in(0, 100), metavar="N", default=2,
                     help="retries of a step whose worker process died (killed, out of memory), 0..100, default 2")
     br.add_argument("--retry-failed", action="store_true", help="run the steps that failed in an earlier run again")

@@ -4,7 +4,9 @@ Tiny synthetic scans (4,000 triangles), one refinement level, adapt + build (sim
 0.1 s; the rig of two muscles for another): a broken scan in the batch, a re-run that skips finished
 work (a renamed copy is known by its content), --retry-failed, a killed worker retried then failed,
 Ctrl-C semantics of the manifest, the device the physics steps get with --gpus-per-task (a GPU
-mocked: Warp's device count locally, a stand-in ``ray`` module for Ray).
+mocked: Warp's device count locally, a stand-in ``ray`` module for Ray), and grouped simulations
+(--simulate-batch: the two good scans' simulate in one FaceBatch task, on the CPU here) against the
+same simulations one task per scan.
 """
 
 from __future__ import annotations
@@ -145,6 +147,10 @@ def test_errors(scans, tmp_path, capsys):
         ([scans / "good1.obj", "--rig-inbetweens", "9"], "--rig-inbetweens"),
         ([scans / "good1.obj", "--steps", "rig"], "rig needs build done first"),  # a fresh DIR has no build
         ([scans / "good1.obj", "--max-retries", "-1"], "--max-retries"),
+        ([scans / "good1.obj", "--simulate-batch", "0"], "--simulate-batch"),
+        ([scans / "good1.obj", "--simulate-batch", "-2"], "--simulate-batch"),
+        ([scans / "good1.obj", "--simulate-batch", "4097"], "--simulate-batch"),
+        ([scans / "good1.obj", "--simulate-batch", "2.5"], "--simulate-batch"),
     ):
         code = main(["batch", "run", *map(str, argv), "--out", str(tmp_path / "o")])
         err = capsys.readouterr().err
@@ -241,7 +247,7 @@ class _FakeRay(types.ModuleType):
 
     def __init__(self, gpus: float):
         super().__init__("ray")
-        self.gpus, self.submitted, self._up = gpus, [], False
+        self.gpus, self.submitted, self.groups, self._up = gpus, [], [], False
         self.exceptions = types.SimpleNamespace(WorkerCrashedError=type("WorkerCrashedError", (Exception,), {}),
                                                 NodeDiedError=type("NodeDiedError", (Exception,), {}),
                                                 RayError=type("RayError", (Exception,), {}))
@@ -270,8 +276,11 @@ class _FakeRay(types.ModuleType):
 
             def remote(self, task):
                 ray.submitted.append((task["step"], task["device"], self.opts))
-                return _Ref({"status": "done", "error": None, "outputs": [], "summary": {}, "device": task["device"],
-                             "seconds": 0.0, "worker": None})
+                ray.groups.append(len(task.get("group", [task])))
+                record = {"status": "done", "error": None, "outputs": [], "summary": {}, "device": task["device"],
+                          "seconds": 0.0, "worker": None}
+                return _Ref([dict(record, batched_with=len(task["group"])) for _ in task["group"]]
+                            if "group" in task else record)
 
         return lambda fn: Remote(fn)
 
@@ -303,6 +312,25 @@ def test_ray_physics_steps_device(scans, tmp_path, capsys, monkeypatch, gpus, fl
     for step in ("simulate", "rig"):
         assert got[step] == (want, {"num_cpus": 1, **({"num_gpus": num_gpus} if num_gpus else {})})
     assert _manifest(tmp_path / "out")["good1"]["steps"]["rig"]["device"] == want
+
+
+def test_ray_gpu_groups_the_simulations(scans, tmp_path, capsys, monkeypatch):
+    """On a Ray cluster with a GPU the scans' simulations go as one group task (default up to 64)
+    asking for the GPU; --simulate-batch 1 keeps a task per scan."""
+    for flag, groups in ((None, [2]), ("1", [1, 1])):
+        ray = _FakeRay(1)
+        monkeypatch.setitem(sys.modules, "ray", ray)
+        out = tmp_path / f"out{flag}"
+        rep = _run(capsys, scans / "good1.obj", scans / "good2.obj", "--out", out, "--steps", "adapt,build,simulate",
+                   "--ray", *(["--simulate-batch", flag] if flag else []))
+        assert rep["done"] == 2 and rep["tasks_run"] == 6
+        assert rep["simulate_grouping"]["batch"] == (64 if not flag else 1)
+        sims = [(dev, opts, n) for (step, dev, opts), n in zip(ray.submitted, ray.groups) if step == "simulate"]
+        assert [n for _, _, n in sims] == groups
+        assert all(dev == "cuda" and opts == {"num_cpus": 1, "num_gpus": 1.0} for dev, opts, _ in sims)
+        m = _manifest(out)
+        assert [m[n]["steps"]["simulate"].get("batched_with") for n in ("good1", "good2")] == (
+            [2, 2] if not flag else [None, None])
 
 
 def test_ray_local_two_workers(scans, tmp_path, capsys, monkeypatch):
@@ -354,3 +382,111 @@ def test_ctrl_c_leaves_finished_work_and_a_valid_manifest(scans, tmp_path):
     assert done and all((out / m[n]["folder"] / s).is_dir() for n, s in done)
     assert len(done) < 4 and not list(out.glob("scans/*/.*.partial"))
     assert json.loads((out / "report.json").read_text())["totals"]["scans"] == 2
+
+
+SIM = ["--steps", "adapt,build,simulate", "--levels", "1", "--expression", "laugh", "--seconds", "0.1"]
+"""The simulate of the grouped tests: 4 frames of a laugh (its jaw opens: the MuJoCo jaw is coupled)."""
+
+
+def _sim_run(first, scans, tmp_path_factory, *extra):
+    """A copy of the adapt + build batch with the simulate step added (the broken scan too)."""
+    import io
+    from contextlib import redirect_stdout
+
+    out = tmp_path_factory.mktemp("sim") / "out"
+    shutil.copytree(first, out)
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        code = main(["--json", "batch", "run", *(str(scans / f"{n}.obj") for n in ("good1", "broken", "good2")),
+                     "--out", str(out), *SIM, "--workers", "2", *extra])
+    assert code == 0
+    return out, json.loads(buf.getvalue())
+
+
+@pytest.fixture(scope="module")
+def grouped(first, scans, tmp_path_factory):
+    """The two good scans' simulate as one group task (--simulate-batch 3 on the CPU)."""
+    return _sim_run(first, scans, tmp_path_factory, "--simulate-batch", "3")
+
+
+@pytest.fixture(scope="module")
+def alone(first, scans, tmp_path_factory):
+    """The same simulate, one task per scan (the CPU's default)."""
+    return _sim_run(first, scans, tmp_path_factory)
+
+
+def test_grouped_simulate_writes_what_each_scan_gets_alone(grouped, alone):
+    import numpy as np
+
+    (g, grep), (a, arep) = grouped, alone
+    assert grep["simulate_grouping"]["groups"] == 1 and grep["simulate_grouping"]["grouped_scans"] == 2
+    assert arep["simulate_grouping"]["groups"] == 0 and arep["simulate_grouping"]["batch"] == 1
+    assert grep["tasks_run"] == 1 * 2 and grep["tasks_failed_kept"] == 1 and grep["tasks_kept"] == 4
+    mg, ma = _manifest(g), _manifest(a)
+    assert mg["broken"]["steps"]["adapt"]["status"] == "failed"  # still failed at adapt
+    assert mg["broken"]["steps"]["build"]["status"] == "skipped" and "simulate" not in mg["broken"]["steps"]
+    recs = [mg[n]["steps"]["simulate"] for n in ("good1", "good2")]
+    for r, n in zip(recs, ("good1", "good2")):
+        ra = ma[n]["steps"]["simulate"]
+        assert r["status"] == "done" and r["error"] is None and r["batched_with"] == 2 and "batched_with" not in ra
+        assert r["params"] == ra["params"] and r["device"] == ra["device"] == "cpu" and r["attempts"] == 1
+        assert r["seconds"] == pytest.approx(r["group_seconds"] / 2, abs=2e-3) and r["worker"]["pid"] > 0
+        assert set(r["summary"]) == set(ra["summary"]) and r["summary"]["frames"] == ra["summary"]["frames"] == 4
+        assert r["summary"]["nodes"] == ra["summary"]["nodes"] and r["summary"]["expression"] == "laugh"
+        fg, fa = g / mg[n]["folder"] / "simulate", a / ma[n]["folder"] / "simulate"
+        assert sorted(p.name for p in fg.iterdir()) == sorted(p.name for p in fa.iterdir()) == [
+            "frames.npz", "frames.png", "report.json"]
+        assert sorted(r["outputs"]) == sorted(str((fg / f).relative_to(g)) for f in ("frames.npz", "frames.png",
+                                                                                   "report.json"))
+        jg, ja = json.loads((fg / "report.json").read_text()), json.loads((fa / "report.json").read_text())
+        assert set(jg) == set(ja) and jg["jaw"] == ja["jaw"] == "mujoco"
+        assert jg["files"] == [str(fg / "frames.npz"), str(fg / "frames.png")]
+        assert jg["max_fdp_motion_m"].keys() == ja["max_fdp_motion_m"].keys()
+        with np.load(fg / "frames.npz") as zg, np.load(fa / "frames.npz") as za:
+            assert set(zg.files) == set(za.files)
+            for k in ("points", "fdp_points", "muscle_curves", "jaw", "activations"):
+                np.testing.assert_allclose(zg[k], za[k], atol=1e-6, rtol=0, err_msg=f"{n}: {k}")
+            assert np.abs(zg["fdp_points"][-1] - zg["fdp_points"][0]).max() > 1e-4  # the laugh moved the face
+    assert not list(g.glob("scans/*/.*.partial"))
+    rows_g, rows_a = ({r["name"]: r for r in rep["rows"]} for rep in (grep, arep))
+    for n in ("good1", "good2", "broken"):
+        assert rows_g[n].keys() == rows_a[n].keys() and rows_g[n]["status"] == rows_a[n]["status"]
+        assert [k for k, v in rows_g[n].items() if v is None] == [k for k, v in rows_a[n].items() if v is None]
+    assert rows_g["good1"]["status"] == "done" and rows_g["good1"]["frames"] == 4 and rows_g["good1"]["simulate_s"] > 0
+    with open(g / "report.csv") as f:
+        assert [r["name"] for r in csv.DictReader(f)] == ["good1", "broken", "good2"]
+
+
+def test_grouped_rerun_keeps_everything(grouped, alone, scans, capsys):
+    """A re-run keeps the grouped simulations, and grouping keeps simulations run one per task."""
+    for out, extra in ((grouped[0], ["--simulate-batch", "3"]), (alone[0], ["--simulate-batch", "2"])):
+        before = _manifest(out)
+        rep = _run(capsys, *(scans / f"{n}.obj" for n in ("good1", "broken", "good2")), "--out", out, *SIM, *extra)
+        assert rep["tasks_run"] == 0 and rep["tasks_kept"] == 6 and rep["simulate_grouping"]["groups"] == 0
+        after = _manifest(out)
+        assert {n: e["steps"] for n, e in after.items()} == {n: e["steps"] for n, e in before.items()}
+
+
+def test_grouped_simulate_killed_then_one_bad_head(first, scans, tmp_path, capsys, monkeypatch):
+    """A group whose worker dies is retried whole, then failed for each scan; a head that cannot be
+    simulated (its build lost its head.xml) fails alone while the group's other scan is done."""
+    out = tmp_path / "out"
+    shutil.copytree(first, out)
+    goods = [scans / "good1.obj", scans / "good2.obj"]
+    monkeypatch.setenv(KILL_ENV, "good2:simulate")
+    rep = _run(capsys, *goods, "--out", out, *SIM, "--simulate-batch", "2", "--max-retries", "1", "--workers", "1")
+    assert rep["failed"] == 2 and rep["simulate_grouping"]["groups"] == 1
+    for n in ("good1", "good2"):
+        r = _manifest(out)[n]["steps"]["simulate"]
+        assert r["status"] == "failed" and "died" in r["error"] and "(2 attempts)" in r["error"], r
+        assert r["attempts"] == 2 and r["batched_with"] == 2
+    monkeypatch.delenv(KILL_ENV)
+    (out / _manifest(out)["good2"]["folder"] / "build" / "head.xml").unlink()
+    rep = _run(capsys, *goods, "--out", out, *SIM, "--simulate-batch", "2", "--retry-failed", "--workers", "1")
+    assert rep["tasks_run"] == 2 and rep["done"] == 1 and rep["failed"] == 1
+    m = _manifest(out)
+    ok, bad = m["good1"]["steps"]["simulate"], m["good2"]["steps"]["simulate"]
+    assert ok["status"] == "done" and ok["batched_with"] == 2 and ok["summary"]["frames"] == 4
+    assert bad["status"] == "failed" and "head.xml" in bad["error"] and "\n" not in bad["error"]
+    assert bad["batched_with"] == 2 and not (out / m["good2"]["folder"] / "simulate").exists()
+    assert not list(out.glob("scans/*/.*.partial"))

@@ -15,6 +15,15 @@ every ten times its own write time for a large batch) and at the end. Ctrl-C kil
 tasks, leaves the finished ones and a valid manifest, writes the reports and raises
 :class:`KeyboardInterrupt`.
 
+Grouped simulations: with ``simulate_batch`` K > 1 (default 64 when simulate runs on a GPU, 1 on
+the CPU, where a :class:`~facewarp.FaceBatch` only loops over its heads) the scans whose build is
+done wait for their ``simulate`` and go as one task of up to K scans
+(:func:`~facewarp._src.fleet.tasks.run_group`): the heads step together in one FaceBatch and each
+scan's ``simulate/`` folder and record are what it gets alone (its seconds the group's shared
+evenly, ``batched_with`` the group's size). A group leaves when it is full, or when no scan still
+on its way to simulate could join it; a group of one is an ordinary task. A group whose worker
+dies is retried whole, as a task is.
+
 A step not chosen must be done from an earlier run for the steps that read it (``--steps rig``
 finds the build in the manifest); a scan without it gets the step ``skipped`` with the one-line
 reason, and when no scan has it the batch stops before it starts (:class:`InputError`, one line).
@@ -38,7 +47,7 @@ from ..core.errors import InputError
 from ..core.fileio import atomic_write, write_json
 from .manifest import NEEDS, STEPS, Manifest, ScanInput, depends, plain
 
-__all__ = ["REPORT_COLUMNS", "run_batch", "write_reports"]
+__all__ = ["GPU_SIMULATE_BATCH", "MAX_SIMULATE_BATCH", "REPORT_COLUMNS", "run_batch", "write_reports"]
 
 REPORT_COLUMNS = (
     "name", "key", "scan", "status", "failed_step", "error",
@@ -49,6 +58,12 @@ REPORT_COLUMNS = (
 )
 """Columns of ``report.csv`` (and keys of each row of ``report.json``), seconds per step in ``*_s``."""
 
+
+MAX_SIMULATE_BATCH = 4096
+"""Most scans one grouped ``simulate`` task steps together."""
+
+GPU_SIMULATE_BATCH = 64
+"""Scans per grouped ``simulate`` task by default when simulate runs on a GPU (1 on the CPU)."""
 
 RIG_FORMATS = ("usdc", "usda", "glb")
 """Files the ``rig`` step can write (one bake, each format a file ``rig/rig.FORMAT``)."""
@@ -122,7 +137,7 @@ class _Saver:
 def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate"), expression: str = "smile",
               seconds: float = 2.0, fps: float = 30.0, levels: int | None = 2, jaw: str = "mujoco", rig_formats=("usdc", "glb"),
               rig_inbetweens: int = 0, rig_muscles=None, device: str = "cpu", ray: str | None = None,
-              workers: int | None = None, gpus_per_task: float | None = None,
+              workers: int | None = None, gpus_per_task: float | None = None, simulate_batch: int | None = None,
               max_retries: int = 2, retry_failed: bool = False, progress: bool = True) -> dict:
     """Run ``scans`` through ``steps`` into the folder ``out``; returns the batch summary.
 
@@ -145,13 +160,19 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
         gpus_per_task: GPUs per simulate or rig task (Ray: default 1 when the cluster has a GPU, else 0;
             local processes: > 0 runs those two steps on ``cuda`` when this machine has a CUDA device,
             default ``device``).
+        simulate_batch: Scans whose ``simulate`` steps together in one :class:`~facewarp.FaceBatch`
+            task, 1..:data:`MAX_SIMULATE_BATCH` (default :data:`GPU_SIMULATE_BATCH` when simulate
+            runs on a GPU, else 1: a task per scan); module doc.
         max_retries: Retries of a task whose worker died, >= 0.
         retry_failed: Run the steps that failed in an earlier run again.
         progress: Show the bar on stderr (when it is a terminal).
 
     Returns:
         ``{"out", "manifest", "report", "report_csv", "executor", "scans", "done", "failed",
-        "incomplete", "tasks_run", "tasks_kept", "seconds", "interrupted", "rows"}``.
+        "incomplete", "tasks_run", "tasks_kept", "seconds", "interrupted", "rows", "simulate_grouping"}``;
+        ``simulate_grouping``: ``{"batch"`` (K), ``"groups"`` (grouped tasks run), ``"grouped_scans"``,
+        ``"fallbacks"`` (scans of a group that could not step together, run alone), ``"fallback_errors"``
+        (why, one line each)``}``.
     """
     t0 = time.perf_counter()
     steps = tuple(s for s in STEPS if s in set(steps))
@@ -164,6 +185,9 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
         raise InputError(f"out {out}: exists and is not a folder")
     if not (isinstance(max_retries, int) and max_retries >= 0):
         raise InputError(f"max_retries: expected a whole number >= 0, got {max_retries!r}")
+    if simulate_batch is not None and not (isinstance(simulate_batch, int) and not isinstance(simulate_batch, bool)
+                                           and 1 <= simulate_batch <= MAX_SIMULATE_BATCH):
+        raise InputError(f"simulate_batch: expected a whole number 1..{MAX_SIMULATE_BATCH}, got {simulate_batch!r}")
     rig_formats, rig_inbetweens, rig_muscles = _rig_options(rig_formats, rig_inbetweens, rig_muscles)
     manifest = Manifest(out)
     keys: list[str] = []
@@ -228,10 +252,18 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
         executor = RayExecutor(None if ray == "local" else ray, workers=workers, gpus_per_task=gpus_per_task,
                                max_retries=max_retries)
 
+    if simulate_batch is None:
+        simulate_batch = GPU_SIMULATE_BATCH if executor.device("simulate", device).startswith("cuda") else 1
     total = sum(len(c) for c in todo.values())
     counts = {"done": 0, "failed": 0}
+    grouping = {"batch": simulate_batch, "groups": 0, "grouped_scans": 0, "fallbacks": 0, "fallback_errors": []}
+    held: list[str] = []  # scans whose simulate waits for its group
+    # scans with a simulate still ahead of their current step: they may join a group that waits
+    coming = {k for k, c in todo.items() if "simulate" in c[1:]}
     bar = _Bar(total, 0, progress)
-    ready = [k for k in keys if k in todo]
+    ready = []
+    for k in (k for k in keys if k in todo):  # a scan whose build is kept: its simulate waits for its group
+        (held if todo[k][0] == "simulate" and simulate_batch > 1 else ready).append(k)
     inflight: dict = {}  # handle -> (key, step, task)
     attempts: dict[tuple[str, str], int] = {}
     interrupted = False
@@ -247,6 +279,10 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
 
     def finish(key: str, step: str, record: dict) -> None:
         record = dict(record, params=params[step], attempts=attempts.get((key, step), 0) + 1)
+        if record.get("group_fallback"):
+            grouping["fallbacks"] += 1
+            if record["group_fallback"] not in grouping["fallback_errors"]:
+                grouping["fallback_errors"].append(record["group_fallback"])
         manifest.set_step(key, step, record)
         chain = todo[key]
         chain.pop(0)
@@ -262,35 +298,66 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
                 manifest.set_step(key, s, {"status": "skipped", "params": params[s], "error": f"{step} failed"})
             chain[:] = [s for s in chain if s not in readers]  # a failed simulation does not stop the rig
             bar.show(counts["done"], counts["failed"], len(inflight), advance=len(readers))
-        if chain:
+        if key in coming and "simulate" not in chain[1:]:
+            coming.discard(key)  # its simulate is next (it joins the held ones) or no longer comes
+        if chain and chain[0] == "simulate" and simulate_batch > 1:
+            held.append(key)  # waits for its group (no slot taken)
+        elif chain:
             ready.append(key)
         else:
             del todo[key]
         saver.changed()
 
+    def submit_group(group: list[str]) -> None:
+        if len(group) == 1:  # a group of one: the ordinary task
+            task = task_of(group[0], "simulate")
+            inflight[executor.submit(task)] = (group[0], "simulate", task)
+            return
+        members = [task_of(k, "simulate") for k in group]
+        task = {"step": "simulate", "group": members, "out": members[0]["out"], "params": params["simulate"],
+                "device": members[0]["device"], "name": ",".join(m["name"] for m in members)}
+        inflight[executor.submit(task)] = (tuple(group), "simulate", task)
+        grouping["groups"] += 1
+        grouping["grouped_scans"] += len(group)
+
     try:
         bar.show(0, 0, 0)
-        while ready or inflight:
+        while ready or inflight or held:
             while ready and len(inflight) < executor.capacity:
                 key = ready.pop(0)
                 step = todo[key][0]
                 task = task_of(key, step)
                 inflight[executor.submit(task)] = (key, step, task)
+            # a group leaves when full, or when no scan on its way to simulate could still join it
+            while held and len(inflight) < executor.capacity and (len(held) >= simulate_batch or not coming):
+                group, held[:] = held[:simulate_batch], held[simulate_batch:]
+                submit_group(group)
             bar.show(counts["done"], counts["failed"], len(inflight))
+            if not inflight:
+                continue
             for handle, record, died in executor.wait(inflight, timeout=0.5):
                 key, step, task = inflight.pop(handle)
+                group = list(key) if isinstance(key, tuple) else [key]
                 if record is None:
-                    n = attempts.get((key, step), 0) + 1
+                    n = attempts.get((group[0], step), 0) + 1
                     if not executor.retries_inside and n <= max_retries:
-                        attempts[(key, step)] = n
+                        for k in group:
+                            attempts[(k, step)] = n
                         inflight[executor.submit(task)] = (key, step, task)
                         continue
-                    record = {"status": "failed", "error": died + (f" ({n} attempts)" if not executor.retries_inside
-                                                                   else ""),
-                              "outputs": [], "summary": {}, "seconds": None, "worker": None}
-                    attempts[(key, step)] = n - 1 if not executor.retries_inside else max_retries
-                finish(key, step, record)
-                bar.show(counts["done"], counts["failed"], len(inflight), advance=1)
+                    dead = {"status": "failed", "error": died + (f" ({n} attempts)" if not executor.retries_inside
+                                                                 else ""),
+                            "outputs": [], "summary": {}, "seconds": None, "worker": None}
+                    if len(group) > 1:
+                        dead["batched_with"] = len(group)
+                    records = [dead] * len(group)
+                    for k in group:
+                        attempts[(k, step)] = n - 1 if not executor.retries_inside else max_retries
+                else:
+                    records = record if isinstance(record, list) else [record]
+                for k, r in zip(group, records):
+                    finish(k, step, r)
+                bar.show(counts["done"], counts["failed"], len(inflight), advance=len(group))
             saver.tick()
     except KeyboardInterrupt:
         interrupted = True
@@ -298,12 +365,13 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
         bar.close()
         executor.close(abort=bool(inflight) or interrupted, handles=list(inflight))
         for key, step, _ in inflight.values():  # killed halfway: no half-written step folder stays
-            shutil.rmtree(manifest.folder(key) / f".{step}.partial", ignore_errors=True)
+            for k in key if isinstance(key, tuple) else (key,):
+                shutil.rmtree(manifest.folder(k) / f".{step}.partial", ignore_errors=True)
         manifest.save()
     summary = write_reports(manifest, keys)
     summary.update(executor=executor.description, tasks_run=counts["done"] + counts["failed"], tasks_kept=kept,
                    tasks_failed_kept=failed_kept, seconds=round(time.perf_counter() - t0, 3),
-                   interrupted=interrupted, steps=list(steps))
+                   interrupted=interrupted, steps=list(steps), simulate_grouping=grouping)
     if interrupted:
         raise KeyboardInterrupt
     return summary

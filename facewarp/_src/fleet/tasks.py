@@ -9,6 +9,11 @@ adaptation) is returned as the one-line error of a ``failed`` record and never r
 scan does not stop the batch, and Ray does not retry it. Only the death of the worker process
 itself (killed, out of memory) reaches the caller, which retries the step.
 
+A *group* task (``{"step": "simulate", "group": [task, ...], ...}``) is the ``simulate`` step of
+several scans in one :class:`~facewarp.FaceBatch` (:func:`run_group`): each scan's folder is
+staged and renamed as above, and the result is one record per scan (a head frozen by a failure
+is its scan's ``failed`` record, the others are ``done``).
+
 The task and its result are plain dicts (they cross process and machine boundaries).
 """
 
@@ -22,11 +27,12 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["KILL_ENV", "init_worker", "run_step", "step_summary"]
+__all__ = ["KILL_ENV", "init_worker", "run_group", "run_step", "step_summary"]
 
 KILL_ENV = "FACEWARP_FLEET_TEST_KILL"
 """Test hook: ``NAME:STEP`` makes the worker running that step of the scan named ``NAME`` kill
-itself (SIGKILL), as a crashed or out-of-memory worker would die."""
+itself (SIGKILL), as a crashed or out-of-memory worker would die (a group task: when any of
+its scans is named)."""
 
 MAX_ERROR = 400
 """Longest error line kept in the manifest [characters]."""
@@ -167,8 +173,8 @@ def _run_job(task: dict, tmp: Path) -> dict:
     raise ValueError(f"unknown step {step!r}")
 
 
-def run_step(task: dict) -> dict:
-    """Run one step of one scan; returns its manifest record.
+def run_step(task: dict) -> dict | list[dict]:
+    """Run one step of one scan; returns its manifest record (a group task: :func:`run_group`'s records).
 
     ``task``: ``step`` (adapt, build, simulate or rig), ``name``, ``folder`` (the scan's output folder),
     ``out`` (the batch folder), ``scan``, ``landmarks`` (or None), ``units``, ``params`` (the
@@ -178,6 +184,8 @@ def run_step(task: dict) -> dict:
     ``worker`` (pid, host, peak resident memory of the worker process [MiB]) and ``summary``
     (:func:`step_summary`).
     """
+    if "group" in task:
+        return run_group(task)
     t0, c0 = time.perf_counter(), _cpu_seconds()
     step, folder, out = task["step"], Path(task["folder"]), Path(task["out"])
     kill = os.environ.get(KILL_ENV, "")
@@ -203,3 +211,72 @@ def run_step(task: dict) -> dict:
     record["cpu_seconds"] = None if c0 is None or c1 is None else round(c1 - c0, 3)
     record["worker"] = {"pid": os.getpid(), "host": socket.gethostname(), "peak_rss_mib": _peak_rss_mib()}
     return record
+
+
+def run_group(task: dict) -> list[dict]:
+    """The ``simulate`` step of several scans together in one :class:`~facewarp.FaceBatch`
+    (:func:`~facewarp._src.jobs.batch_simulate.simulate_group_files`); returns one record per scan,
+    in the order of ``task["group"]``.
+
+    ``task``: ``step`` (``"simulate"``), ``group`` (the scans' own :func:`run_step` tasks),
+    ``out``, ``params`` and ``device`` (those of every scan). Each scan's outputs are staged in
+    ``FOLDER/.simulate.partial`` and renamed to ``FOLDER/simulate`` when its head is done. A record
+    is :func:`run_step`'s with ``batched_with`` (the scans of the group), ``seconds`` and
+    ``cpu_seconds`` the group's divided evenly between its scans, and ``group_seconds`` (the
+    group's wall time). When the group as a whole fails (options bad for every scan, an error of the
+    :class:`~facewarp.FaceBatch` itself rather than of one head), each scan runs alone here
+    (:func:`run_step`) and its record says why in ``group_fallback``.
+    """
+    t0, c0 = time.perf_counter(), _cpu_seconds()
+    members, out, p = task["group"], Path(task["out"]), task["params"]
+    step = task["step"]
+    kill = os.environ.get(KILL_ENV, "")
+    if kill and any(kill == f"{m['name']}:{step}" for m in members):
+        os.kill(os.getpid(), signal.SIGKILL)
+    folders = [Path(m["folder"]) for m in members]
+    tmps = [f / f".{step}.partial" for f in folders]
+    for f, tmp in zip(folders, tmps):
+        shutil.rmtree(tmp, ignore_errors=True)
+        f.mkdir(parents=True, exist_ok=True)
+    try:
+        from ..jobs.batch_simulate import simulate_group_files
+
+        results = simulate_group_files([f / "build" for f in folders], p["expression"], tmps, seconds=p["seconds"],
+                                       fps=p.get("fps", 30.0), device=task.get("device", "cpu"),
+                                       jaw=p.get("jaw", "mujoco"))
+    except Exception as e:  # the group as a whole: each scan alone, as without grouping
+        why = _one_line(e)
+        for tmp in tmps:
+            shutil.rmtree(tmp, ignore_errors=True)
+        records = [run_step(m) for m in members]
+        for r in records:
+            r.update(batched_with=1, group_fallback=why)
+        return records
+    from ..core.fileio import write_json
+    from .manifest import plain
+
+    n = len(members)
+    wall = time.perf_counter() - t0
+    c1 = _cpu_seconds()
+    worker = {"pid": os.getpid(), "host": socket.gethostname(), "peak_rss_mib": _peak_rss_mib()}
+    records = []
+    for folder, tmp, rep in zip(folders, tmps, results):
+        final = folder / step
+        record = {"status": "failed", "error": None, "outputs": [], "summary": {}, "device": task.get("device", "cpu")}
+        try:
+            if isinstance(rep, BaseException):
+                raise rep
+            rep["files"] = [str(final / Path(f).name) for f in rep.get("files", [])]
+            write_json(tmp / "report.json", plain(rep))
+            if final.exists():
+                shutil.rmtree(final)
+            os.replace(tmp, final)
+            record.update(status="done", summary=step_summary(step, rep),
+                          outputs=sorted(str(f.relative_to(out)) for f in final.rglob("*") if f.is_file()))
+        except Exception as e:  # this scan's error; the group's other scans go on
+            record["error"] = _one_line(e)
+            shutil.rmtree(tmp, ignore_errors=True)
+        record.update(seconds=round(wall / n, 3), group_seconds=round(wall, 3), batched_with=n, worker=worker,
+                      cpu_seconds=None if c0 is None or c1 is None else round((c1 - c0) / n, 3))
+        records.append(record)
+    return records

@@ -4,6 +4,10 @@ Files in: the ``facewarp build`` folders (one head each, any mix of identities),
 for all (or one per head from a ``--per-head`` file). Files out: ``head_KK.usdc`` per head (the
 USD animation of :class:`~facewarp.UsdAnimation`, streamed while simulating) and
 ``report.json`` (per-head status, frames per second, head-frames per second).
+
+:func:`simulate_group_files` is the other use of one :class:`~facewarp.FaceBatch`: the
+``simulate`` step of ``facewarp batch run`` for a group of scans, each head's folder written as
+:func:`~facewarp._src.jobs.face.simulate_files` writes it alone (``frames.npz``, ``frames.png``).
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from ..core.limits import MAX_FPS, MAX_SECONDS
 from ..expressions import timeline_from_spec
 from ..physics.face_rig import load_face_rig
 
-__all__ = ["MAX_CLI_HEADS", "batch_simulate_files", "read_per_head"]
+__all__ = ["MAX_CLI_HEADS", "batch_simulate_files", "read_per_head", "simulate_group_files"]
 
 MAX_CLI_HEADS = 10_000
 """Largest number of build folders of one ``facewarp batch simulate``."""
@@ -168,3 +172,105 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
            "rows": rows, "files": files + [str(out / "report.json")]}
     write_json(out / "report.json", rep)
     return rep
+
+
+def simulate_group_files(heads, expression, outs, *, seconds: float = 2.0, fps: float = 30.0, device: str = "cpu",
+                         jaw: str = "mujoco") -> list:
+    """Play ``expression`` on every build folder of ``heads`` together in one
+    :class:`~facewarp.FaceBatch` (``backend="heads"``: a :class:`~facewarp.FaceSimulator` per head,
+    the MuJoCo jaw possible) and write each head's folder of ``outs`` as
+    :func:`~facewarp._src.jobs.face.simulate_files` does for one head: ``frames.npz`` and
+    ``frames.png``, and the same report.
+
+    A head of the batch is stepped by the same calls as alone (the controls of :func:`~facewarp.play`,
+    the MuJoCo jaw's exchange around the skin step), so on the CPU its frames are those of
+    :func:`~facewarp._src.jobs.face.simulate_files` bit for bit. Timing: the stepping of the group is
+    shared evenly, so a head's ``frames_per_second`` is its frames over (the group's stepping time
+    divided by the heads), i.e. the group's head-frames per second.
+
+    Args:
+        heads: ``facewarp build`` folders, one per head, N.
+        expression: A preset, ``"sequence"``, a sequence file or ``"muscle=value,..."`` (every head).
+        outs: N output folders (made here), one per head.
+        seconds, fps: Length [s] and frames per second.
+        device: Warp device of every head.
+        jaw: ``"mujoco"`` (default: each build's ``head.xml``, :meth:`~facewarp.FaceBatch.use_mujoco_jaws`)
+            or ``"kinematic"``.
+
+    Returns:
+        Per head, in order: its report (the keys of :func:`~facewarp._src.jobs.face.simulate_files`'
+        report), or the exception that head met (a bad build folder, a head frozen by a failure:
+        :class:`~facewarp.SimulationError` with the error :attr:`~facewarp.FaceBatch.status` gives),
+        which :func:`~facewarp._src.jobs.face.simulate_files` would raise for it.
+
+    Raises:
+        InputError: options bad for every head (expression, seconds, fps, jaw), or ``outs`` not one per head.
+    """
+    from ..core.errors import SimulationError
+    from ..sim.batch import FaceBatch
+    from ..sim.play import FrameRecorder, PlayStats
+    from .checks import check_out_dir, make_out_dir
+    from .face import MAX_FRAMES, _check_simulate, _load_simulated_head, _simulate_report, _write_frames
+
+    heads, outs = [Path(h) for h in heads], [Path(o) for o in outs]
+    if not heads:
+        raise InputError("heads: give at least one `facewarp build` folder")
+    if len(outs) != len(heads):
+        raise InputError(f"outs: expected one output folder per head ({len(heads)}), got {len(outs)}")
+    seconds, timeline, name, jaw = _check_simulate(expression, seconds, fps, None, jaw, "physical", None)
+    if not seconds * fps < MAX_FRAMES:
+        raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
+                         f"more than {MAX_FRAMES} per run")
+    results: list = [None] * len(heads)
+    loaded = {}
+    for i, (h, o) in enumerate(zip(heads, outs)):  # a bad folder fails its head only
+        try:
+            check_out_dir(o)
+            loaded[i] = _load_simulated_head(h, seconds, fps, jaw)
+            make_out_dir(o)
+        except Exception as e:
+            results[i] = e
+    live = list(loaded)
+    if not live:
+        return results
+    t0 = time.perf_counter()
+    batch = FaceBatch([loaded[i][0] for i in live], device=device, fps=fps, backend="heads")
+    if jaw == "mujoco":
+        batch.use_mujoco_jaws([loaded[i][1] for i in live])
+    per = [timeline.for_head(sim.fr) for sim in batch.heads]  # chin drops -> each head's jaw angles, as play does
+    nf = int(round(seconds * fps)) + 1
+    keep = [FrameRecorder() for _ in live]
+    for rec, sim in zip(keep, batch.heads):
+        rec.start(sim, nf)
+    stepping = 0.0
+    for k in range(nf):
+        t = k / fps
+        if k > 0:
+            es = [tl.sample(t) for tl in per]
+            batch.set_activations(es)
+            batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
+            s0 = time.perf_counter()
+            batch.step()
+            stepping += time.perf_counter() - s0
+        for j, (rec, sim) in enumerate(zip(keep, batch.heads)):
+            if j not in batch.failed:
+                rec.frame(sim, k, t)
+    wall = time.perf_counter() - t0
+    share = max(stepping, 1e-9) / len(live)  # the group's stepping shared evenly between its heads
+    for j, i in enumerate(live):
+        if j in batch.failed:
+            results[i] = SimulationError(batch.failed[j])
+            continue
+        sim = batch.heads[j]
+        events = list(batch._mujoco[j].coupler.events) if batch._mujoco is not None else []
+        stats = PlayStats(frames=nf, seconds=seconds, wall_s=wall / len(live), simulation_wall_s=share,
+                          frames_per_second=(nf - 1) / share, steps_per_second=(nf - 1) * sim.substeps / share,
+                          realtime_factor=(nf - 1) / sim.fps / share, substeps=int(sim.substeps), dt_s=float(sim.dt),
+                          device=str(sim.device), jaw=jaw, frame_stats=sim.stats.as_dict(), mujoco_events=events)
+        keep[j].finish(sim, stats)
+        try:
+            written, moved = _write_frames(outs[i], keep[j].frames, timeline, seconds, fps, name, device)
+            results[i] = _simulate_report(name, stats, sim, loaded[i][0], jaw, written, moved)
+        except Exception as e:
+            results[i] = e
+    return results

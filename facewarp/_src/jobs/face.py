@@ -158,36 +158,13 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
     frame cap (:mod:`~facewarp._src.jobs.animation`). With ``tets`` the USD also holds the skin's
     tet layer (a ``TetMesh`` of purpose ``guide``).
     """
-    for key, v in (("seconds", seconds), ("fps", fps)):
-        if not (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-                and math.isfinite(v) and v > 0):
-            raise InputError(f"{key}: expected a finite number > 0, got {v!r}")
-    seconds = float(seconds)
-    timeline, name = _timeline(expression, seconds, name)
+    seconds, timeline, name, jaw = _check_simulate(expression, seconds, fps, name, jaw, material, substeps)
     usd_out = Path(out).suffix.lower() in USD_SUFFIXES
     out = check_usd_path(out) if usd_out else check_out_dir(out)
     if not usd_out and not seconds * fps < MAX_FRAMES:  # a FrameRecorder keeps round(seconds * fps) + 1 frames
         raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
                          f"more than {MAX_FRAMES} per run")
-    if jaw is None:
-        jaw = "kinematic" if material == "thesis" else "mujoco"
-    if jaw not in JAWS:
-        raise InputError(f"jaw: expected one of {', '.join(JAWS)}, got {jaw!r}")
-    check_amount("seconds", seconds, high=MAX_SECONDS)
-    check_amount("fps", fps, high=MAX_FPS)
-    if substeps is not None:
-        check_count("substeps", substeps, high=MAX_SUBSTEPS)
-    check_steps(seconds, fps, substeps)
-    fr = load_face_rig(head_path)
-    frames = round(seconds * fps) + 1  # kept in memory (a folder) or as USD time samples (a USD file)
-    check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), frames, len(fr.head_vertices)),
-                 f"seconds, fps: {frames} frames of a head of {len(fr.nodes)} nodes and {len(fr.tets)} tets")
-    mjcf = (Path(head_path) if Path(head_path).is_dir() else Path(head_path).parent) / "head.xml"
-    if jaw == "mujoco" and not mjcf.is_file():
-        raise InputError(f"{head_path}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, "
-                         "or simulate with the kinematic jaw)")
-    if jaw == "mujoco":
-        load_mjcf(mjcf)  # a broken head.xml fails before the simulator is made
+    fr, mjcf = _load_simulated_head(head_path, seconds, fps, jaw)
     sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps, solver=solver, material=material)
     driver = jaw_driver(sim, jaw, mjcf=mjcf)
     # the sinks: every frame kept (a folder) or only the FDPs' largest motion (a USD file alone)
@@ -201,16 +178,64 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
     with anim if anim is not None else contextlib.nullcontext():
         stats = _play(sim, timeline, seconds, sinks, driver, progress)
     if keep is not None:
-        frames = keep.frames
-        save_frames_npz(out / "frames.npz", frames)
-        sheet, hmax = frames_sheet(frames, peak_frames(timeline, seconds, fps), device=device)
-        save_png(out / "frames.png", sheet, title=f"{Path(name).name}: rest and peak",
-                 colorbar=(0.0, hmax * 1e3, "displacement from rest [mm]"), font_size=sheet_font_size(sheet))
-        written = [out / "frames.npz", out / "frames.png"] + ([usd_path] if usd_path is not None else [])
-        moved = np.linalg.norm(frames.fdp_points - frames.fdp_points[:1], axis=2).max(0)
+        written, moved = _write_frames(out, keep.frames, timeline, seconds, fps, name, device)
+        written += [usd_path] if usd_path is not None else []
     else:
         written = [out]
         moved = motion.moved
+    return _simulate_report(name, stats, sim, fr, jaw, written, moved)
+
+
+def _check_simulate(expression, seconds, fps, name, jaw, material, substeps) -> tuple[float, Timeline, str, str]:
+    """The checks of :func:`simulate_files` that need no head: (seconds [s], timeline, label, jaw)."""
+    for key, v in (("seconds", seconds), ("fps", fps)):
+        if not (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+                and math.isfinite(v) and v > 0):
+            raise InputError(f"{key}: expected a finite number > 0, got {v!r}")
+    seconds = float(seconds)
+    timeline, name = _timeline(expression, seconds, name)
+    if jaw is None:
+        jaw = "kinematic" if material == "thesis" else "mujoco"
+    if jaw not in JAWS:
+        raise InputError(f"jaw: expected one of {', '.join(JAWS)}, got {jaw!r}")
+    check_amount("seconds", seconds, high=MAX_SECONDS)
+    check_amount("fps", fps, high=MAX_FPS)
+    if substeps is not None:
+        check_count("substeps", substeps, high=MAX_SUBSTEPS)
+    check_steps(seconds, fps, substeps)
+    return seconds, timeline, name, jaw
+
+
+def _load_simulated_head(head_path, seconds: float, fps: float, jaw: str):
+    """The face rig of a build (checked to fit in memory for ``seconds`` at ``fps``) and its
+    ``head.xml`` path (parsed when ``jaw`` is ``"mujoco"``)."""
+    fr = load_face_rig(head_path)
+    frames = round(seconds * fps) + 1  # kept in memory (a folder) or as USD time samples (a USD file)
+    check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), frames, len(fr.head_vertices)),
+                 f"seconds, fps: {frames} frames of a head of {len(fr.nodes)} nodes and {len(fr.tets)} tets")
+    mjcf = (Path(head_path) if Path(head_path).is_dir() else Path(head_path).parent) / "head.xml"
+    if jaw == "mujoco" and not mjcf.is_file():
+        raise InputError(f"{head_path}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, "
+                         "or simulate with the kinematic jaw)")
+    if jaw == "mujoco":
+        load_mjcf(mjcf)  # a broken head.xml fails before the simulator is made
+    return fr, mjcf
+
+
+def _write_frames(out: Path, frames, timeline: Timeline, seconds: float, fps: float, name: str,
+                  device: str) -> tuple[list, np.ndarray]:
+    """``out/frames.npz`` and ``out/frames.png`` of the recorded :class:`~facewarp.Frames`; returns
+    the files written and each FDP's largest motion from rest [m], shape (84,)."""
+    save_frames_npz(out / "frames.npz", frames)
+    sheet, hmax = frames_sheet(frames, peak_frames(timeline, seconds, fps), device=device)
+    save_png(out / "frames.png", sheet, title=f"{Path(name).name}: rest and peak",
+             colorbar=(0.0, hmax * 1e3, "displacement from rest [mm]"), font_size=sheet_font_size(sheet))
+    moved = np.linalg.norm(frames.fdp_points - frames.fdp_points[:1], axis=2).max(0)
+    return [out / "frames.npz", out / "frames.png"], moved
+
+
+def _simulate_report(name: str, stats, sim, fr, jaw: str, written: list, moved) -> dict:
+    """The report of :func:`simulate_files` from the run's :class:`~facewarp._src.sim.play.PlayStats`."""
     return {
         "expression": name, "frames": stats.frames, "seconds": stats.seconds, "fps": sim.fps,
         "substeps": stats.substeps, "dt_s": stats.dt_s, "steps_per_second": stats.steps_per_second,
