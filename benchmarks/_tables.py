@@ -585,6 +585,36 @@ def batch_scaling(r: Results) -> str:
                      "one Model, tissue only", "Newton VBD", "GPU MB / head"], rows)
 
 
+@table("batch_profile")
+def batch_profile(r: Results) -> str:
+    """Where a batched frame's time goes (``batch_profile_*.json`` of ``python -m benchmarks batch_profile``):
+    per N the graph's frame, Newton iterations, the kernels' GPU time by the solver's jobs and the top kernels."""
+    rows = []
+    for name in r.glob("batch_profile_*"):
+        doc = r.doc(name)
+        for row in doc["figures"].get("rows", []):
+            p = row.get("profile")
+            if p is None:
+                continue
+            jobs = p["jobs"]
+
+            def share(*labels):
+                return f"{sum(jobs.get(k, {}).get('share', 0.0) for k in labels):.0%}"
+
+            top = ", ".join(f"`{k['kernel']}` {k['ms_per_frame']:.1f}" for k in p["kernels"][:3])
+            rows.append([doc["device"], f"{row['n']:,}", f"{row['tets']:,}", f"{row['ms_per_frame']:.1f}",
+                         f"{row['head_frames_per_second']:,.0f}", f"{row.get('newton_iterations_per_frame', 0):.1f}",
+                         f"{p['kernel_ms_per_frame']:.1f}", f"{p['launches_per_frame']:.0f}",
+                         share("Hessian assembly"), share("conjugate gradients"),
+                         share("energy and gradient", "line search"), top])
+    if not rows:
+        return "(no profile committed yet: python -m benchmarks batch_profile --device cuda)"
+    rows.sort(key=lambda x: (x[0], int(x[1].replace(",", ""))))
+    return _rows_md(["device", "N", "tets", "ms / frame (graph)", "head-frames / s", "Newton it. / frame",
+                     "kernel ms / frame", "launches / frame", "Hessian assembly", "CG", "energy + line search",
+                     "top kernels (ms / frame)"], rows)
+
+
 def render(name: str, results: Results | None = None) -> str:
     """The Markdown of table ``name``."""
     if name not in TABLES:
