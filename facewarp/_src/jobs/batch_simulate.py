@@ -62,6 +62,30 @@ def read_per_head(path, count: int) -> list[str]:
     return out
 
 
+def play_batch(batch, timelines, frames: int, fps: float, on_frame, progress=None) -> float:
+    """Frames ``0 .. frames - 1`` of every head of ``batch`` (a :class:`~facewarp.FaceBatch` of the
+    ``"heads"`` backend): each head's timeline sampled at ``k / fps`` [s] and stepped together;
+    ``on_frame(head, simulator, k, t)`` after every frame for each head still live (a frozen head's
+    output ends at its last good frame), ``progress(k, frames)`` after each frame. Returns the
+    seconds spent stepping (wall)."""
+    stepping = 0.0
+    for k in range(frames):
+        t = k / fps
+        if k > 0:
+            es = [tl.sample(t) for tl in timelines]
+            batch.set_activations(es)
+            batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
+            s0 = time.perf_counter()
+            batch.step()
+            stepping += time.perf_counter() - s0
+        for i, sim in enumerate(batch.heads):
+            if i not in batch.failed:
+                on_frame(i, sim, k, t)
+        if progress:
+            progress(k, frames)
+    return stepping
+
+
 def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds: float = 2.0, fps: float = 30.0,
                          device: str = "cpu", jaw: str = "kinematic", stage: str | None = None, progress=None) -> dict:
     """Play ``expression`` (or each head's own from ``per_head``) on every build folder of
@@ -128,22 +152,9 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     width = max(2, len(str(len(heads) - 1)))
     names = [f"head_{i:0{width}d}.usdc" for i in range(len(heads))]
     anims = [UsdAnimation(out / n, sim) for n, sim in zip(names, batch.heads)]
-    stepping = 0.0
     try:
-        for k in range(nf):
-            t = k / fps
-            if k > 0:
-                es = [tl.sample(t) for tl in per]
-                batch.set_activations(es)
-                batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
-                s0 = time.perf_counter()
-                batch.step()
-                stepping += time.perf_counter() - s0
-            for i, (a, sim) in enumerate(zip(anims, batch.heads)):
-                if i not in batch.failed:  # a frozen head's animation ends at its last good frame
-                    a.add(sim, t)
-            if progress:
-                progress(k, nf)
+        # a frozen head's animation ends at its last good frame
+        stepping = play_batch(batch, per, nf, fps, lambda i, sim, k, t: anims[i].add(sim, t), progress)
         for a in anims:
             a.close()
     except BaseException:
@@ -242,19 +253,7 @@ def simulate_group_files(heads, expression, outs, *, seconds: float = 2.0, fps: 
     keep = [FrameRecorder() for _ in live]
     for rec, sim in zip(keep, batch.heads):
         rec.start(sim, nf)
-    stepping = 0.0
-    for k in range(nf):
-        t = k / fps
-        if k > 0:
-            es = [tl.sample(t) for tl in per]
-            batch.set_activations(es)
-            batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
-            s0 = time.perf_counter()
-            batch.step()
-            stepping += time.perf_counter() - s0
-        for j, (rec, sim) in enumerate(zip(keep, batch.heads)):
-            if j not in batch.failed:
-                rec.frame(sim, k, t)
+    stepping = play_batch(batch, per, nf, fps, lambda j, sim, k, t: keep[j].frame(sim, k, t))
     wall = time.perf_counter() - t0
     share = max(stepping, 1e-9) / len(live)  # the group's stepping shared evenly between its heads
     for j, i in enumerate(live):
