@@ -130,6 +130,38 @@ def _poses(name: str, R, t, n: int) -> tuple[np.ndarray, np.ndarray]:
     return R.copy(), t.copy()
 
 
+def activation_rows(activations, names: list) -> list:
+    """Every head's activations checked: ``activations`` an array (N, M) in [0, 1] (heads of one
+    muscle count: checked at once, no per-head host work) or a list of N entries, each what
+    :meth:`~facewarp.FaceSimulator.set_activations` takes; ``names`` the N heads' muscle names.
+    Returns N float32 vectors (M_i,). Raises :class:`InputError` naming the head and the muscle."""
+    n = len(names)
+    if isinstance(activations, np.ndarray):
+        if activations.ndim != 2 or activations.shape[0] != n:
+            raise InputError(f"activations: expected shape ({n}, M), got {activations.shape}")
+        if {len(m) for m in names} == {activations.shape[1]}:
+            a = np.asarray(activations, np.float64)
+            bad = np.argwhere(~np.isfinite(a) | (a < 0.0) | (a > 1.0))
+            if len(bad):
+                i, k = (int(v) for v in bad[0])
+                raise InputError(f"activations of head {i}: {names[i][k]} is {a[i, k]!r}, expected a value in [0, 1]")
+            return list(a.astype(np.float32))
+        rows = list(activations)
+    elif isinstance(activations, (list, tuple)):
+        if len(activations) != n:
+            raise InputError(f"activations: expected {n} entries (one per head), got {len(activations)}")
+        rows = list(activations)
+    else:
+        raise InputError(f"activations: expected an array ({n}, M) or a list of {n} entries, got {describe(activations)}")
+    targets = []
+    for i, a in enumerate(rows):
+        try:
+            targets.append(activation_vector(names[i], a))
+        except InputError as e:
+            raise InputError(f"activations of head {i}: {e}") from None
+    return targets
+
+
 class FaceBatch:
     """N simulated faces, each its own person, stepped together (module doc).
 
@@ -224,8 +256,6 @@ class FaceBatch:
         self._graphs: dict[tuple, list] = {}
         self._use_graph = all(h.stepper.use_graph for h in self.heads)
         self._host_keys = [[k for k in _SOLVER_HOST_STATE if hasattr(h.solver, k)] for h in self.heads]
-        ms = {len(h.fr.rig.names) for h in self.heads}
-        self._same_m = ms.pop() if len(ms) == 1 else None  # one muscle count: (N, M) activations checked at once
         self._stream_pool: list = []
         self.streams = streams
         self.step_seconds = 0.0
@@ -294,34 +324,7 @@ class FaceBatch:
                 entries, each what :meth:`~facewarp.FaceSimulator.set_activations` takes (a dict
                 name -> value, an :class:`~facewarp.Expression`, an (M,) array).
         """
-        if isinstance(activations, np.ndarray):
-            if activations.ndim != 2 or activations.shape[0] != self.count:
-                raise InputError(f"activations: expected shape ({self.count}, M), got {activations.shape}")
-            if self._same_m is not None and activations.shape[1] == self._same_m:  # one check for all heads
-                A = np.asarray(activations, np.float64)
-                bad = np.argwhere(~np.isfinite(A) | (A < 0.0) | (A > 1.0))
-                if len(bad):
-                    i, j = (int(v) for v in bad[0])
-                    raise InputError(f"activations of head {i}: muscle {j} is {A[i, j]!r}, expected a value in [0, 1]")
-                A32 = A.astype(np.float32)
-                for h, a in zip(self.heads, A32):
-                    h._target_a = a
-                return
-            rows = list(activations)
-        elif isinstance(activations, (list, tuple)):
-            if len(activations) != self.count:
-                raise InputError(f"activations: expected {self.count} entries (one per head), got {len(activations)}")
-            rows = list(activations)
-        else:
-            raise InputError(f"activations: expected an array ({self.count}, M) or a list of {self.count} entries, "
-                             f"got {describe(activations)}")
-        targets = []
-        for i, (h, a) in enumerate(zip(self.heads, rows)):
-            try:
-                targets.append(activation_vector(h.fr.rig.names, a))
-            except InputError as e:
-                raise InputError(f"activations of head {i}: {e}") from None
-        for h, a in zip(self.heads, targets):
+        for h, a in zip(self.heads, activation_rows(activations, [h.fr.rig.names for h in self.heads])):
             h._target_a = a
 
     def set_jaw(self, angles) -> None:

@@ -44,7 +44,7 @@ from ..core.checks import check_array, check_choice, check_int, check_simulator_
 from ..core.errors import InputError, SimulationError
 from ..core.warp import get_warp
 from ..physics.volume_barrier import VOLUME_FLOOR
-from .batch import _SIM_KEYS, FaceBatch, _poses, _rig_list
+from .batch import _SIM_KEYS, FaceBatch, _poses, _rig_list, activation_rows
 from .readout import activation_vector, fdp_points, head_surface, jaw_vector, parts_at, surface_index
 from .rollback import MAX_REFINEMENT, FrameGuard, FrameStats
 from .simulator import FaceSimulator
@@ -168,34 +168,7 @@ class FaceBatchModel(FaceBatch):
 
     def set_activations(self, activations) -> None:
         """As :meth:`FaceBatch.set_activations <facewarp.FaceBatch.set_activations>`: (N, M) or a list of N entries."""
-        if isinstance(activations, np.ndarray):
-            if activations.ndim != 2 or activations.shape[0] != self.count:
-                raise InputError(f"activations: expected shape ({self.count}, M), got {activations.shape}")
-            M = {len(fr.rig.names) for fr in self.rigs}
-            if M == {activations.shape[1]}:  # one muscle count: checked at once (no per-head host work)
-                a = np.asarray(activations, np.float64)
-                bad = np.argwhere(~np.isfinite(a) | (a < 0.0) | (a > 1.0))
-                if len(bad):
-                    i, k = (int(v) for v in bad[0])
-                    raise InputError(f"activations of head {i}: {self.rigs[i].rig.names[k]} is {a[i, k]!r}, "
-                                     "expected a value in [0, 1]")
-                self._target_a = list(a.astype(np.float32))
-                return
-            rows = list(activations)
-        elif isinstance(activations, (list, tuple)):
-            if len(activations) != self.count:
-                raise InputError(f"activations: expected {self.count} entries (one per head), got {len(activations)}")
-            rows = list(activations)
-        else:
-            raise InputError(f"activations: expected an array ({self.count}, M) or a list of {self.count} entries, "
-                             f"got {describe(activations)}")
-        targets = []
-        for i, a in enumerate(rows):
-            try:
-                targets.append(activation_vector(self.rigs[i].rig.names, a))
-            except InputError as e:
-                raise InputError(f"activations of head {i}: {e}") from None
-        self._target_a = targets
+        self._target_a = activation_rows(activations, [fr.rig.names for fr in self.rigs])
 
     def set_jaw(self, angles) -> None:
         """As :meth:`FaceBatch.set_jaw <facewarp.FaceBatch.set_jaw>`: (N, 2) or (N,) openings [rad]."""
