@@ -264,7 +264,7 @@ class FaceBatchModel(FaceBatch):
     def _head_ratios(self) -> np.ndarray:
         """Each head's smallest V / V0 now, (N,), float64 (one kernel, one read)."""
         wp = self._wp
-        from . import kernels_batch_model as kb
+        from . import kernels_rollback as kb
 
         m = self.model
         self._ratio.fill_(3.0e38)
