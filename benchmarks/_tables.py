@@ -615,6 +615,43 @@ def batch_profile(r: Results) -> str:
                      "top kernels (ms / frame)"], rows)
 
 
+@table("drive")
+def drive(r: Results) -> str:
+    """The inverse solve per head (``drive_cpu.json`` of ``python -m benchmarks drive``): the round trip
+    (the recovered face against the true one, FDPs and whole skin, worst frame), both modes' speed and
+    the robust case."""
+    doc = r.doc("drive_cpu")
+    rows = []
+    for h in doc["figures"]["heads"]:
+        c = h["cases"]
+
+        def cell(case, key, fmt="{:.2f}"):
+            v = c.get(case, {}).get(key)
+            return "-" if v is None else fmt.format(v)
+
+        rob = c.get("robust_offline", {})
+        rows.append([h["head"], f"{h['frames']} ({h['seconds']:g} s)",
+                     f"{cell('all84_offline', 'fdp_rms_mm_max')} / {cell('all84_offline', 'skin_rms_mm_max')}",
+                     f"{cell('tracker30_offline', 'fdp_rms_mm_max')} / {cell('tracker30_offline', 'skin_rms_mm_max')}",
+                     f"{cell('all84_realtime', 'fdp_rms_mm_max')} / {cell('tracker30_realtime', 'fdp_rms_mm_max')}",
+                     f"{_fps(h['ground_truth_frames_per_second'])}",
+                     f"{cell('all84_offline', 'frames_per_second', '{:.1f}')} / "
+                     f"{cell('tracker30_offline', 'frames_per_second', '{:.1f}')}",
+                     f"{cell('all84_realtime', 'frames_per_second', '{:.1f}')} / "
+                     f"{cell('tracker30_realtime', 'frames_per_second', '{:.1f}')}",
+                     "-" if not rob else f"{rob['fdp_rms_mm_max']:.2f}, jump {rob['max_jump_fdp_mm']:.2f}"
+                     + (f", {rob['frames_with_fdp_jump_over_2mm']} frames > 2 mm"
+                        if "frames_with_fdp_jump_over_2mm" in rob else "")
+                     + (" (failed)" if rob.get("failed") else "")])
+    load = doc["figures"].get("load_average_at_start")
+    head = ["head", "frames", "offline, 84 FDPs: FDP / skin RMS, worst frame [mm]", "offline, 30 FDPs [mm]",
+            "real time, 84 / 30 FDPs: FDP RMS [mm]", "forward sim. frames/s", "offline frames/s (84 / 30)",
+            "real-time frames/s (84 / 30)", "robust: FDP RMS [mm], largest jump [mm]"]
+    note = (f"\n{doc['machine'].get('cores', '?')}-core CPU, {doc['date'][:10]}, seed {doc['figures'].get('seed')}"
+            + (f", load average {load[0]:.1f} at the start" if load else "") + ".\n")
+    return _rows_md(head, rows) + note
+
+
 def render(name: str, results: Results | None = None) -> str:
     """The Markdown of table ``name``."""
     if name not in TABLES:

@@ -180,7 +180,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cuda")
     ap.add_argument("--sizes", default=None, help="comma list of N (default cuda 1,100,300; cpu 1,2)")
-    ap.add_argument("--heads", default="default,scaled", help="head specs cycled over the batch (benchmarks/batch.py)")
+    ap.add_argument("--heads", default="default,scaled", help="head specs cycled over the batch (benchmarks/_batch_heads.py)")
     ap.add_argument("--preset", default="laugh")
     ap.add_argument("--frames", type=int, default=10, help="timed frames with graphs (after 2 warm-up frames)")
     ap.add_argument("--profile-frames", type=int, default=3, help="frames timed kernel by kernel")
@@ -188,7 +188,7 @@ def main(argv=None) -> int:
     ap.add_argument("--level", type=int, default=0)
     ap.add_argument("--name", default=None, help="result name (default batch_profile_<device>)")
     args = ap.parse_args(argv)
-    from benchmarks.batch import make_rigs, newton_replicated
+    from benchmarks._batch_heads import make_rigs, newton_replicated
 
     cuda = args.device.startswith("cuda")
     sizes = [int(s) for s in (args.sizes or ("1,100,300" if cuda else "1,2")).split(",") if s.strip()]
