@@ -238,6 +238,28 @@ def test_face_view_eyes_have_iris_and_pupil(head):
     assert patch.max() < 90, f"no dark pupil at the front of the left eye ({r}, {c}): {patch.max(0)}"
 
 
+def test_preview_eyes_show_iris_and_pupil_at_the_pupil_fdps(head):
+    from facewarp.render import colored_scene
+
+    t, lm = head
+    V, F, C = colored_scene(t)
+    P = np.array([lm["3.5"], lm["3.6"]])  # the pupils' centres (MPEG-4 FDPs)
+    lo, hi = P.min(0) - [0.02, 0.012, 0.0], P.max(0) + [0.02, 0.012, 0.0]
+    lo[2], hi[2] = V[:, 2].min(), V[:, 2].max()  # the whole depth (the far plane behind the head)
+    W, H = 160, 64
+    img = render_mesh(V, F, view="front", width=W, height=H, vertex_colors=C, frame_points=np.array([lo, hi]),
+                      margin=0.0, supersample=1).astype(int)
+    size, mid = max((hi[0] - lo[0]) / W, (hi[1] - lo[1]) / H), 0.5 * (lo + hi)  # metres per pixel, centre
+    for p, side in zip(P, (1.0, -1.0)):
+        c, r = (int(round(v)) for v in ((p[0] - mid[0]) / size + (W - 1) / 2, -(p[1] - mid[1]) / size + (H - 1) / 2))
+        pupil = img[r - 1:r + 2, c - 1:c + 2].reshape(-1, 3)
+        assert pupil.max() < 60, f"no dark pupil at FDP ({r}, {c}): {pupil.max(0)}"
+        ring = img[r, c + int(round(side * 4.0e-3 / size))]  # 4 mm out: the iris (11.7 mm across), brown
+        assert 20 < ring[0] < 200 and ring[0] > ring[2] + 15, ring
+        white = img[r, c + int(round(side * 8.5e-3 / size))]  # 8.5 mm out, towards the ear: sclera
+        assert white.min() > 120 and np.ptp(white) < 20, white  # off-white (shaded: the ball turns away)
+
+
 def test_expression_sheet_pairs_rest_and_peak_and_wraps(head):
     from facewarp.render import expression_sheet
 

@@ -145,6 +145,23 @@ def test_gltf_deforms_as_the_linear_rig(made):
         np.testing.assert_allclose(MW[k][-1], jaw / rig.jaw_angle, atol=1e-5)
 
 
+def test_gltf_has_the_looks_of_eyes_teeth_tongue(made):
+    d, rig = made
+    doc, acc = _glb(d / "rig.glb")
+    mats = {m["name"]: m["pbrMetallicRoughness"]["baseColorFactor"][:3] for m in doc["materials"]}
+    for look in ("Skin", "Sclera", "Iris", "Pupil", "Teeth_Upper", "Teeth_Lower", "Tongue"):
+        assert look in mats, (look, sorted(mats))
+    assert max(mats["Pupil"]) < 0.1 and min(mats["Sclera"]) > 0.8 and mats["Iris"][0] > mats["Iris"][2]
+    assert mats["Tongue"][0] > mats["Tongue"][1] and min(mats["Teeth_Upper"]) > 0.8
+    assert "Lips" not in mats  # a build folder has a skin texture (texture.png): the lips are the texture's
+    names = [m["name"] for m in doc["materials"]]
+    for part, name in (("Eye_L", "eye_L"), ("Eye_R", "eye_R")):
+        mesh = next(m for m in doc["meshes"] if m["name"] == part)
+        assert sorted(names[p["material"]] for p in mesh["primitives"]) == ["Iris", "Pupil", "Sclera"]
+        faces = np.concatenate([acc(p["indices"]).reshape(-1, 3) for p in mesh["primitives"]])
+        assert len(faces) == len(rig.parts[name][1])  # each face of the ball in one primitive
+
+
 def test_gltf_validator_reports_no_errors(made):
     node = shutil.which("node")
     script = ROOT / "benchmarks" / "gltf_validate.js"

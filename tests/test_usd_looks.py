@@ -1,5 +1,7 @@
-"""The head's USD looks right in a DCC tool: parts named on their Mesh prims, lips / iris / pupil
-coloured by material subsets, a camera that frames the head and lights; USD's checks pass."""
+"""The head's USD looks right in a DCC tool: parts named on their Mesh prims, lips / sclera / iris /
+pupil coloured by material subsets (each eyeball partitioned once, the iris and pupil about the gaze
+to the pupil FDPs 3.5 / 3.6), teeth and tongue looks, an iris colour option, a camera that frames
+the head and lights; USD's checks pass."""
 
 from __future__ import annotations
 
@@ -74,8 +76,62 @@ def test_colours_of_lips_eyes_teeth(take):
         pupil = UsdGeom.Subset(stage.GetPrimAtPath(f"/Head/Parts/{side}/Pupil"))
         assert len(iris.GetIndicesAttr().Get()) and len(pupil.GetIndicesAttr().Get())
         assert colour(pupil.GetPrim()).max() < 0.1 and colour(stage.GetPrimAtPath(f"/Head/Parts/{side}")).min() > 0.8
-        assert colour(iris.GetPrim())[2] > colour(iris.GetPrim())[0]  # blue-grey iris
+        assert colour(iris.GetPrim())[0] > colour(iris.GetPrim())[2]  # brown-hazel iris by default
     assert colour(stage.GetPrimAtPath("/Head/Parts/Tongue"))[0] > 0.6
+
+
+def test_eyes_are_sclera_iris_pupil_once_about_the_gaze(take):
+    from pxr import Usd, UsdGeom, UsdShade
+
+    rig, path = take
+    stage = Usd.Stage.Open(str(path))
+    ids = [str(k) for k in rig.fdp_ids]
+    P = fw.FaceSimulator(rig).fdp_points()  # at rest
+    for part, prim_name, pupil_fdp in (("eye_L", "Eye_L", "3.5"), ("eye_R", "Eye_R", "3.6")):
+        V, F = (np.asarray(a) for a in rig.parts[part])
+        prim = stage.GetPrimAtPath(f"/Head/Parts/{prim_name}")
+        subsets = {s.GetPrim().GetName(): np.array(s.GetIndicesAttr().Get())
+                   for s in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()}
+        assert set(subsets) == {"Sclera", "Iris", "Pupil"}, subsets.keys()
+        assert UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsetsFamilyType() == UsdGeom.Tokens.partition
+        every = np.sort(np.concatenate(list(subsets.values())))
+        np.testing.assert_array_equal(every, np.arange(len(F)), err_msg=f"{part}: faces not covered exactly once")
+        for name, idx in subsets.items():
+            sub = UsdGeom.Subset(stage.GetPrimAtPath(f"/Head/Parts/{prim_name}/{name}"))
+            mat = UsdShade.MaterialBindingAPI(sub.GetPrim()).GetDirectBinding().GetMaterial()
+            assert mat.GetPath() == f"/Head/Looks/{name}" and len(idx), (part, name)
+        c = V.mean(0)
+        R = np.linalg.norm(V - c, axis=1).mean()
+        gaze = (P[ids.index(pupil_fdp)] - c) / np.linalg.norm(P[ids.index(pupil_fdp)] - c)
+        D = V[F].mean(1) - c
+        angle = np.degrees(np.arccos(np.clip(D @ gaze / np.linalg.norm(D, axis=1), -1, 1)))
+        iris_half = np.degrees(np.arcsin(0.5 * 11.7e-3 / R))  # a human iris ~11.7 mm across
+        assert angle[subsets["Iris"]].max() <= iris_half + 1e-6
+        assert angle[subsets["Sclera"]].min() > iris_half
+        assert angle[subsets["Pupil"]].max() < angle[subsets["Iris"]].max()
+        assert angle.argmin() in subsets["Pupil"]
+    for look in ("Sclera", "Iris", "Pupil", "Teeth_Upper", "Teeth_Lower", "Tongue"):
+        assert stage.GetPrimAtPath(f"/Head/Looks/{look}").IsA(UsdShade.Material), look
+    for teeth in ("Teeth_Upper", "Teeth_Lower"):
+        mat = UsdShade.MaterialBindingAPI(stage.GetPrimAtPath(f"/Head/Parts/{teeth}")).ComputeBoundMaterial()[0]
+        assert mat.GetPath() == f"/Head/Looks/{teeth}"
+        rgb = np.array(UsdShade.Shader(stage.GetPrimAtPath(f"{mat.GetPath()}/PreviewSurface"))
+                       .GetInput("diffuseColor").Get())
+        assert rgb.min() > 0.8 and rgb[2] < rgb[0]  # ivory
+
+
+def test_iris_colour_option(tmp_path):
+    from pxr import Usd, UsdShade
+
+    sim = fw.FaceSimulator(fw.build_face(fw.default_template(0)))
+    with fw.UsdAnimation(tmp_path / "blue.usda", sim, iris_color=(0.1, 0.3, 0.5)) as usd:
+        usd.add(sim, 0.0)
+    stage = Usd.Stage.Open(str(tmp_path / "blue.usda"))
+    shader = UsdShade.Shader(stage.GetPrimAtPath("/Head/Looks/Iris/PreviewSurface"))
+    np.testing.assert_allclose(shader.GetInput("diffuseColor").Get(), (0.1, 0.3, 0.5), atol=1e-6)
+    with pytest.raises(fw.InputError, match="iris_color"):
+        fw.UsdAnimation(tmp_path / "bad.usda", sim, iris_color=(1.5, 0, 0))
+    assert not (tmp_path / "bad.usda").exists()
 
 
 def test_camera_frames_the_head_and_checks_pass(take):

@@ -19,15 +19,19 @@ Animation (:class:`AnimationWriter`, read back with :func:`read_animation`)
                                    normals (area-weighted, interpolation "vertex") and extent;
                                    primvars:st (vertex or indexed faceVarying) when uv is given;
                                    material Looks/Skin; subdivisionScheme "none"
-          Parts/<name>             Xform with a time-sampled xformOp:transform (matrix4d)
-            Mesh                   the part's Mesh at rest; material Looks/White
-                                   (Looks/Skin for names containing "tongue")
+          Parts/<Name>             the part's Mesh at rest with a time-sampled xformOp:transform
+                                   (matrix4d); material Looks/White (Looks/Skin for names
+                                   containing "tongue"), or Looks/<Name> of its ``part_colors``
+            <Subset>               with ``subsets``: GeomSubsets (family materialBind, a partition
+                                   of the mesh's faces) bound to Looks/<Subset>; facewarp's looks:
+                                   Sclera, Iris, Pupil on each eyeball, Lips on the skin
           Muscles                  BasisCurves, type "linear", one curve per muscle; time-sampled
                                    points and extent; uniform primvars:activation (float, one per
                                    curve) and primvars:displayColor, time-sampled; uniform
                                    string[] muscleNames
           Tissue                   TetMesh (purpose "guide"), time-sampled points and extent
-          Looks/Skin, Looks/White  Material with a UsdPreviewSurface
+          Looks/Skin, Looks/White  Material with a UsdPreviewSurface (and one per part colour and
+                                   subset name)
           Looks/SkinTexture        with ``skin_texture``: UsdPreviewSurface whose diffuseColor is a
                                    UsdUVTexture (sRGB, ``./<stem>_skin.png``) read at primvars:st;
                                    bound to the skin instead of Looks/Skin

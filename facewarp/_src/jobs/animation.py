@@ -124,12 +124,16 @@ class UsdAnimation(Sink):
         muscle_samples: Points per muscle curve.
         tets: Also write the skin's tet layer as a ``TetMesh`` (purpose ``guide``) with
             time-sampled nodes.
+        iris_color: Optional iris RGB (3,) in 0..1, linear (default brown-hazel). The file's looks
+            (``present.looks``): ``Looks/Sclera``, ``Looks/Iris``, ``Looks/Pupil`` bound through
+            GeomSubsets of each eyeball, ``Looks/Lips`` on the skin (without a skin texture),
+            the parts' own ``Looks/Teeth_Upper``, ``Looks/Teeth_Lower``, ``Looks/Tongue``.
 
     Raises:
         InputError: a bad path (extension, missing folder) or input the writer refuses.
     """
 
-    def __init__(self, path, sim, *, muscle_samples: int = MUSCLE_SAMPLES, tets: bool = False):
+    def __init__(self, path, sim, *, muscle_samples: int = MUSCLE_SAMPLES, tets: bool = False, iris_color=None):
         from usd_export import AnimationWriter, UsdExportError
 
         from ..present.looks import head_camera, head_looks
@@ -144,7 +148,8 @@ class UsdAnimation(Sink):
                                           parts=dict(fr.parts), muscles=list(fr.rig.names),
                                           muscle_samples=self.samples, muscle_rest=muscle_curves(sim, self.samples),
                                           tets=(fr.tets, fr.nodes) if self.tets else None,
-                                          **head_looks(fr), camera=head_camera(fr), lights=True,
+                                          **head_looks(fr, iris_color=iris_color), camera=head_camera(fr),
+                                          lights=True,
                                           **_skin_look(fr))
         except UsdExportError as e:
             raise InputError(str(e)) from None

@@ -46,7 +46,7 @@ def demo_frames(fr, rig, *, seconds: float | None = None, each: float = 0.8) -> 
 
 
 def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscles=None, device: str = "cpu",
-              progress=None) -> dict:
+              progress=None, iris_color=None) -> dict:
     """Bake ``build``'s rig and write it to ``out`` (``.usda``, ``.usdc`` or ``.glb``); returns a report.
 
     Args:
@@ -57,9 +57,12 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
         muscles: Optional muscle names to bake (default all).
         device: Warp device.
         progress: Optional ``progress(done, total, name)`` per baked shape.
+        iris_color: Optional iris RGB (3,) in 0..1, linear, of the files' looks (``present.looks``).
     """
     from ..physics.face_rig import load_face_rig
-    from ..present.looks import head_camera, head_looks
+    from ..present.looks import head_camera, head_looks, iris_rgb
+
+    iris_rgb(iris_color)
 
     outs = [Path(o) for o in out] if isinstance(out, (list, tuple)) else [Path(out)]
     if not outs:
@@ -81,7 +84,7 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
     fr = load_face_rig(build)
     rig = bake_blendshapes(fr, muscles=muscles, inbetweens=inbetweens, device=device, progress=progress)
     frames = demo_frames(fr, rig)
-    looks = head_looks(fr)
+    looks = head_looks(fr, iris_color=iris_color)
     camera = head_camera(fr)
     for out in outs:
         if out.suffix.lower() == ".glb":

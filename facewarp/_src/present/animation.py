@@ -18,6 +18,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.fileio import atomic_write
+from .looks import part_kind, refine_ball
 from .render import colormap, render_mesh, view_axes
 from .template import CAVITY, head_colors, part_colors
 
@@ -47,32 +48,6 @@ def _framed_points(bounds, rest: np.ndarray) -> np.ndarray:
     return np.concatenate(sets)
 
 
-def _refine_ball(V: np.ndarray, F: np.ndarray, levels: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """A ball-like closed mesh (an eyeball) refined ``levels`` times for drawing: every triangle
-    split into four, each new vertex pushed out from the centre to the mean radius of its edge's
-    ends (so an iris 6 mm across is drawn round, not as a blur over 3 mm triangles).
-
-    Args:
-        V: Vertices [m], shape (k, 3), float. F: Triangles, shape (l, 3), int.
-
-    Returns:
-        Refined vertices (k', 3) [m] and triangles (4**levels * l, 3).
-    """
-    c = V.mean(0)
-    for _ in range(levels):
-        E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-        edges, inverse = np.unique(E, axis=0, return_inverse=True)
-        a, b = V[edges[:, 0]] - c, V[edges[:, 1]] - c
-        m = a + b
-        r = 0.5 * (np.linalg.norm(a, axis=1) + np.linalg.norm(b, axis=1))
-        mid = c + m / np.maximum(np.linalg.norm(m, axis=1), 1e-12)[:, None] * r[:, None]
-        e = len(V) + inverse.reshape(3, -1).T  # new vertex of the edges (01, 12, 20) of each triangle
-        V = np.concatenate([V, mid])
-        F = np.concatenate([np.stack([F[:, 0], e[:, 0], e[:, 2]], 1), np.stack([F[:, 1], e[:, 1], e[:, 0]], 1),
-                            np.stack([F[:, 2], e[:, 2], e[:, 1]], 1), e])
-    return V, F
-
-
 def _rigid_map(A: np.ndarray, B: np.ndarray):
     """The rigid motion (Kabsch) taking the points A (k, 3) closest to B (k, 3) [m], as a function of (j, 3) points."""
     ca, cb = A.mean(0), B.mean(0)
@@ -100,7 +75,8 @@ class FaceView:
         faces: Head triangles, shape (m, 3), int: all of them are drawn.
         landmarks: FDP id -> rest position [m] (uses 2.1, 2.2, 2.3, 8.1-8.4 and 11.1).
         parts: Rigid parts at rest, name -> (V (k, 3) [m], F (l, 3) int); coloured by
-            :func:`~facewarp.render.part_colors` (eyes with iris and pupil, teeth, tongue).
+            :func:`~facewarp.render.part_colors` (eyes with iris and pupil about the gaze to the
+            pupil FDPs 3.5 / 3.6, teeth, tongue).
         view: A view of :func:`~facewarp.render_mesh` (``"front"``, ``"three_quarter"``, ...).
         size: Image height [px]; default: tall enough that the face (hairline 11.1 to chin 2.1)
             spans ``face_height`` pixels.
@@ -115,6 +91,7 @@ class FaceView:
         device: Warp device to render on.
         texture: Optional skin texture ``(image (h, w, 3) uint8, corner_uv (m, 3, 2))`` drawn instead
             of the skin colours (:func:`~facewarp.render_mesh`'s ``texture``).
+        iris_color: Optional iris RGB (3,) in 0..1, linear (default brown-hazel).
 
     Attributes:
         size, width: Image height and width [px].
@@ -124,7 +101,8 @@ class FaceView:
 
     def __init__(self, rest_points, faces, landmarks: dict, parts: dict | None = None, *, view="front",
                  size: int | None = None, face_height: int | None = None, aspect: float | None = None,
-                 reach: float = 0.004, bounds=None, supersample: int = 2, device: str = "cpu", texture=None):
+                 reach: float = 0.004, bounds=None, supersample: int = 2, device: str = "cpu", texture=None,
+                 iris_color=None):
         P0 = np.asarray(rest_points, dtype=np.float64)
         if P0.ndim != 2 or P0.shape[1] != 3:
             raise InputError(f"rest_points: expected shape (n, 3), got {P0.shape}")
@@ -153,8 +131,9 @@ class FaceView:
         self.parts = {k: (np.asarray(V, np.float64), np.asarray(Fp, np.int64)) for k, (V, Fp) in (parts or {}).items()}
         # eyeballs are drawn refined (round iris and pupil); parts move rigidly, so a refined mesh
         # follows its part by the part's rigid motion
-        self._drawn = {k: _refine_ball(V, Fp) if k.startswith("eye") else (V, Fp) for k, (V, Fp) in self.parts.items()}
-        self.part_colors = {k: part_colors(k, V) for k, (V, _) in self._drawn.items()}
+        self._drawn = {k: refine_ball(V, Fp) if part_kind(k) == "eye" else (V, Fp) for k, (V, Fp) in self.parts.items()}
+        self.part_colors = {k: part_colors(k, Vd, landmarks=lm, iris_color=iris_color, ball=self.parts[k][0])
+                            for k, (Vd, _) in self._drawn.items()}
         self.view, self.device, self.supersample = view, device, supersample
         # the framed rectangle in the image plane, and its four corners as framing points
         right, up, forward = view_axes(view)

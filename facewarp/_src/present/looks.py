@@ -1,17 +1,24 @@
-"""How a head looks in a DCC tool: part colours, coloured face groups (lips, iris, pupil) and a
-framing camera, for the USD writer (``usd_export.AnimationWriter``'s ``part_colors``,
-``subsets``, ``camera`` and ``lights``).
+"""How a head looks: the one palette and the face groups (lips, sclera, iris, pupil) that every
+output uses -- the USD animation and UsdSkel rig (``usd_export``'s ``part_colors`` and ``subsets``),
+the glTF rig (one primitive per look) and the package's renders (:func:`part_vertex_colors`) --
+plus a framing camera for the USD files.
 
 The groups are found on the rig's own geometry, so they follow any adapted head:
 
 - **lips**: skin faces inside the outer lip contour (FDPs 8.1-8.10, MPEG-4) seen from the front
   (the contour's points sorted by angle about their centroid in the x-y plane), and in front of
-  the contour's mean depth less :data:`LIP_DEPTH`;
-- **iris / pupil**: eye faces whose direction from the eyeball's centre is within
-  :data:`IRIS_ANGLE` / :data:`PUPIL_ANGLE` of the gaze (+z, the head frame's forward axis); the
-  rest of the eye is sclera;
-- **teeth** are one colour: the template's tooth rows are single bands of faces from crown to
-  root, with no faces of their own for gums.
+  the contour's mean depth less :data:`LIP_DEPTH`; a head with a skin texture (baked from its scan,
+  or its preview colours painted over the UVs) takes its lips from the texture instead;
+- **eyes**: the gaze axis of an eyeball runs from its centre (the mean of its vertices) to its
+  pupil FDP (3.5 left, 3.6 right: whichever lies on the ball), else along +z, the head frame's
+  forward axis. A face whose centre lies within :func:`eye_angles`' pupil / iris half-angle of
+  that axis is **Pupil** / **Iris**, the rest **Sclera**: the three partition the ball's faces;
+- **teeth** are one colour (ivory): the template's tooth rows are single bands of faces from crown
+  to root, with no faces of their own for gums, so there are no gums; the **tongue** is one colour.
+
+The names of the looks (USD ``Looks/<name>`` materials and ``GeomSubset`` s, glTF materials) are
+``Lips`` (skin subset), ``Sclera``, ``Iris``, ``Pupil`` (eyeball subsets), and the parts' own
+materials ``Eye_L``, ``Eye_R`` (sclera), ``Teeth_Upper``, ``Teeth_Lower`` and ``Tongue``.
 """
 
 from __future__ import annotations
@@ -20,40 +27,205 @@ import math
 
 import numpy as np
 
-__all__ = ["COLORS", "IRIS_ANGLE", "LIP_DEPTH", "PUPIL_ANGLE", "head_camera", "head_looks", "lip_faces"]
+from ..core.errors import InputError
+
+__all__ = ["COLORS", "IRIS_DIAMETER", "LIP_DEPTH", "PUPIL_DIAMETER", "eye_angles", "eye_looks", "gaze_axis",
+           "head_camera", "head_looks", "iris_rgb", "lip_faces", "part_kind", "part_looks", "part_vertex_colors",
+           "refine_ball", "rest_fdps"]
 
 COLORS = {
-    "skin": (0.80, 0.58, 0.48),
-    "lips": (0.70, 0.34, 0.35),
-    "sclera": (0.94, 0.93, 0.89),
-    "iris": (0.24, 0.40, 0.55),
-    "pupil": (0.02, 0.02, 0.02),
-    "teeth": (0.95, 0.93, 0.85),
-    "tongue": (0.76, 0.36, 0.38),
+    "skin": (0.87, 0.72, 0.62),
+    "lips": (0.78, 0.47, 0.45),
+    "mouth": (0.45, 0.20, 0.20),  # the lips' inner sheets (previews)
+    "cavity": (0.16, 0.05, 0.05),  # the inside of the head seen through the open mouth (previews)
+    "sclera": (0.94, 0.93, 0.89),  # off-white
+    "iris": (0.30, 0.19, 0.08),  # brown-hazel, the commonest iris colour
+    "pupil": (0.02, 0.02, 0.02),  # near-black
+    "teeth": (0.95, 0.93, 0.85),  # ivory
+    "tongue": (0.76, 0.36, 0.38),  # muscle red-pink
 }
-"""Linear RGB (0..1) of each look."""
+"""Linear RGB (0..1) of each look, the one palette of every output."""
 
-IRIS_ANGLE = math.radians(30.0)
-"""Half-angle of the iris seen from the eyeball's centre [rad] (an iris about 12 mm across on a
-24 mm eyeball: asin(6 / 12) = 30 deg)."""
+IRIS_DIAMETER = 11.7e-3
+"""Visible iris diameter [m]: the horizontal visible iris diameter of adults is 11.7 +- 0.5 mm
+(Ruefer, Schroeder, Erb, J. Cataract Refract. Surg. 31 (2005) 1150: 11.71 mm, SD 0.42, n = 689;
+textbook range 11.5-12 mm)."""
 
-PUPIL_ANGLE = math.radians(12.0)
-"""Half-angle of the pupil [rad] (about 4-5 mm across in room light)."""
+PUPIL_DIAMETER = 4.0e-3
+"""Pupil diameter [m]: 3-5 mm in room light (2 mm in bright light, 8 mm dark-adapted; Watson and
+Yellott, J. Vision 12(10):12 (2012)); the middle of the room-light range."""
 
 LIP_DEPTH = 0.012
 """How far behind the lip contour's mean depth faces still count as lips [m]."""
 
 _LIP_CONTOUR = tuple(f"8.{k}" for k in range(1, 11))
+_PUPILS = ("3.5", "3.6")
 
 
-def _rest_fdps(fr) -> dict:
-    """Rest positions [m] of the FDPs on the skin: id -> (3,) float64."""
+def iris_rgb(iris_color=None) -> tuple:
+    """The iris colour to use: ``iris_color`` (RGB (3,) in 0..1, linear) checked, or :data:`COLORS` ``["iris"]``.
+
+    Raises:
+        InputError: ``iris_color`` is not three numbers in 0..1.
+    """
+    if iris_color is None:
+        return COLORS["iris"]
+    try:
+        c = np.asarray(iris_color, dtype=np.float64)
+    except (TypeError, ValueError):
+        c = np.zeros(0)
+    if c.shape != (3,) or not np.isfinite(c).all() or (c < 0).any() or (c > 1).any():
+        raise InputError(f"iris_color: expected an RGB colour of three numbers in 0..1, got {iris_color!r}")
+    return tuple(float(v) for v in c)
+
+
+def part_kind(name: str) -> str:
+    """What a rigid part is, from its name: ``"eye"``, ``"teeth"``, ``"tongue"`` or ``"other"``."""
+    low = str(name).lower()
+    if "eye" in low:
+        return "eye"
+    if "teeth" in low or "tooth" in low:
+        return "teeth"
+    return "tongue" if "tongue" in low else "other"
+
+
+def rest_fdps(fr) -> dict:
+    """Rest positions [m] of a face rig's FDPs, on the skin and on the parts: id -> (3,) float64."""
     out = {}
     V = np.asarray(fr.head_vertices, np.float64)
     F = np.asarray(fr.head_faces)
+    parts = dict(fr.parts)
     for fid, part, f, b in zip(fr.fdp_ids, fr.fdp_part, fr.fdp_face, fr.fdp_bary):
-        if str(part) == "head":
+        part = str(part)
+        if part == "head":
             out[str(fid)] = np.asarray(b, np.float64) @ V[F[int(f)]]
+        elif part in parts:
+            Vp, Fp = np.asarray(parts[part][0], np.float64), np.asarray(parts[part][1])
+            out[str(fid)] = np.asarray(b, np.float64) @ Vp[Fp[int(f)]]
+    return out
+
+
+def gaze_axis(V, fdps: dict | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """Centre, gaze axis and radius of an eyeball.
+
+    Args:
+        V: The eyeball's vertices [m], shape (k, 3), float (a closed ball-like mesh).
+        fdps: Optional FDP id -> rest position (3,) [m]; the pupil FDP (3.5 or 3.6) that lies on
+            the ball (within half a radius of its surface) gives the gaze.
+
+    Returns:
+        centre (3,) float64 [m] (the vertices' mean), unit gaze axis (3,) float64 (centre to the
+        pupil FDP, else +z, the head's forward axis) and the mean radius [m].
+    """
+    V = np.asarray(V, np.float64)
+    c = V.mean(0)
+    R = float(np.linalg.norm(V - c, axis=1).mean())
+    axis, best = np.array([0.0, 0.0, 1.0]), math.inf
+    for pid in _PUPILS:
+        p = None if fdps is None else fdps.get(pid)
+        if p is None:
+            continue
+        d = np.asarray(p, np.float64) - c
+        r = float(np.linalg.norm(d))
+        if abs(r - R) < 0.5 * R and r < best:
+            axis, best = d / r, r
+    return c, axis, R
+
+
+def eye_angles(radius: float) -> tuple[float, float]:
+    """Half-angles [rad] of the pupil and the iris seen from the centre of an eyeball of ``radius`` [m]:
+    ``asin(d / 2 / radius)`` for :data:`PUPIL_DIAMETER` and :data:`IRIS_DIAMETER` (9.6 and 29.2 deg
+    on a 24 mm ball)."""
+    r = max(float(radius), 1e-9)
+    return (math.asin(min(1.0, 0.5 * PUPIL_DIAMETER / r)), math.asin(min(1.0, 0.5 * IRIS_DIAMETER / r)))
+
+
+def _axis_faces(V: np.ndarray, F: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Faces F (m, 3) of V (k, 3) that the ray from c along a passes through (edges and corners
+    included), shape (m,) bool."""
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    e1, e2 = B - A, C - A
+    h = np.cross(a, e2)
+    det = np.einsum("ij,ij->i", e1, h)
+    ok = np.abs(det) > 1e-30
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = c - A
+    u = inv * np.einsum("ij,ij->i", s, h)
+    q = np.cross(s, e1)
+    v = inv * (q @ a)
+    t = inv * np.einsum("ij,ij->i", e2, q)
+    tol = 1e-6
+    return ok & (u >= -tol) & (v >= -tol) & (u + v <= 1 + tol) & (t > 0)
+
+
+def eye_looks(V, F, fdps: dict | None = None, *, iris_color=None) -> dict:
+    """The faces of an eyeball's sclera, iris and pupil (see the module docstring).
+
+    Args:
+        V: The eyeball's rest vertices [m], shape (k, 3), float. F: Its triangles, shape (m, 3), int.
+        fdps: Optional FDP id -> rest position (3,) [m] for the gaze (:func:`gaze_axis`).
+        iris_color: Optional iris RGB (3,) in 0..1 (default :data:`COLORS` ``["iris"]``).
+
+    Returns:
+        ``{"Sclera": (faces, RGB), "Iris": (faces, RGB), "Pupil": (faces, RGB)}``, faces (j,) int64:
+        each face of the ball in exactly one. A face is pupil if its centre lies within the pupil's
+        half-angle of the gaze axis or the axis passes through it (a coarse ball still gets a pupil),
+        else iris within the iris' half-angle, else sclera.
+    """
+    V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    c, a, R = gaze_axis(V, fdps)
+    pupil_half, iris_half = eye_angles(R)
+    D = V[F].mean(1) - c
+    ang = np.arccos(np.clip(D @ a / np.maximum(np.linalg.norm(D, axis=1), 1e-30), -1.0, 1.0))
+    pupil = (ang <= pupil_half) | _axis_faces(V, F, c, a)
+    iris = ~pupil & (ang <= iris_half)
+    return {"Sclera": (np.flatnonzero(~pupil & ~iris), COLORS["sclera"]),
+            "Iris": (np.flatnonzero(iris), iris_rgb(iris_color)),
+            "Pupil": (np.flatnonzero(pupil), COLORS["pupil"])}
+
+
+def part_looks(name: str, V, F, fdps: dict | None = None, *, iris_color=None) -> tuple[tuple, dict]:
+    """A rigid part's own colour and its coloured face groups.
+
+    Args:
+        name: The part's name (:func:`part_kind`). V (k, 3) [m], F (m, 3) int: its rest mesh.
+        fdps, iris_color: As :func:`eye_looks`'s.
+
+    Returns:
+        (RGB of the part, {look name: (faces (j,) int64, RGB)}): an eyeball is sclera with the
+        groups of :func:`eye_looks`; teeth (and any other part) ivory, the tongue red-pink, no groups.
+    """
+    kind = part_kind(name)
+    if kind == "eye":
+        return COLORS["sclera"], eye_looks(V, F, fdps, iris_color=iris_color)
+    return COLORS["tongue" if kind == "tongue" else "teeth"], {}
+
+
+def part_vertex_colors(name: str, V, fdps: dict | None = None, *, iris_color=None, ball=None) -> np.ndarray:
+    """Per-vertex colours of a rigid part for the renders, (k, 3) float64 in 0..1 (linear RGB).
+
+    The same looks as :func:`part_looks`, by vertex: on an eyeball a vertex within the pupil's /
+    iris' half-angle of the gaze axis is pupil / iris (and the vertex nearest the axis is pupil
+    always), so draw a refined ball for a round iris.
+
+    Args:
+        name: The part's name. V: Its vertices [m], shape (k, 3), float.
+        fdps, iris_color: As :func:`eye_looks`'s.
+        ball: Optional vertices (j, 3) [m] of the eyeball that V draws (V a :func:`refine_ball` of
+            them): its centre and gaze (default V's own).
+    """
+    V = np.asarray(V, np.float64)
+    kind = part_kind(name)
+    if kind != "eye":
+        return np.tile(np.asarray(COLORS["tongue" if kind == "tongue" else "teeth"]), (len(V), 1))
+    c, a, R = gaze_axis(V if ball is None else ball, fdps)
+    pupil_half, iris_half = eye_angles(R)
+    D = V - c
+    ang = np.arccos(np.clip(D @ a / np.maximum(np.linalg.norm(D, axis=1), 1e-30), -1.0, 1.0))
+    pupil = (ang <= pupil_half) | (ang <= ang.min())
+    out = np.tile(np.asarray(COLORS["sclera"]), (len(V), 1))
+    out[~pupil & (ang <= iris_half)] = iris_rgb(iris_color)
+    out[pupil] = COLORS["pupil"]
     return out
 
 
@@ -70,7 +242,7 @@ def _inside(P: np.ndarray, poly: np.ndarray) -> np.ndarray:
 
 def lip_faces(fr) -> np.ndarray:
     """Indices of the skin faces that are lips (see the module docstring), shape (k,), int64."""
-    fdp = _rest_fdps(fr)
+    fdp = rest_fdps(fr)
     pts = np.array([fdp[i] for i in _LIP_CONTOUR if i in fdp])
     if len(pts) < 4:
         return np.zeros(0, np.int64)
@@ -83,34 +255,57 @@ def lip_faces(fr) -> np.ndarray:
     return np.flatnonzero(ok)
 
 
-def head_looks(fr) -> dict:
-    """Part colours and face groups of a face rig's head for ``usd_export.AnimationWriter``.
+def refine_ball(V: np.ndarray, F: np.ndarray, levels: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """A ball-like closed mesh (an eyeball) refined ``levels`` times for drawing: every triangle
+    split into four, each new vertex pushed out from the centre to the mean radius of its edge's
+    ends (so an iris 12 mm across is drawn round, not as a blur over 3 mm triangles).
 
     Args:
-        fr: A :class:`~facewarp.FaceRig` (head vertices and faces, FDPs, ``parts``).
+        V: Vertices [m], shape (k, 3), float. F: Triangles, shape (l, 3), int.
 
     Returns:
-        ``{"part_colors": {part: RGB}, "subsets": {"Skin" or part: {name: (faces (k,) int64, RGB)}}}``.
+        Refined vertices (k', 3) [m] and triangles (4**levels * l, 3).
     """
+    c = V.mean(0)
+    for _ in range(levels):
+        E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        edges, inverse = np.unique(E, axis=0, return_inverse=True)
+        a, b = V[edges[:, 0]] - c, V[edges[:, 1]] - c
+        m = a + b
+        r = 0.5 * (np.linalg.norm(a, axis=1) + np.linalg.norm(b, axis=1))
+        mid = c + m / np.maximum(np.linalg.norm(m, axis=1), 1e-12)[:, None] * r[:, None]
+        e = len(V) + inverse.reshape(3, -1).T  # new vertex of the edges (01, 12, 20) of each triangle
+        V = np.concatenate([V, mid])
+        F = np.concatenate([np.stack([F[:, 0], e[:, 0], e[:, 2]], 1), np.stack([F[:, 1], e[:, 1], e[:, 0]], 1),
+                            np.stack([F[:, 2], e[:, 2], e[:, 1]], 1), e])
+    return V, F
+
+
+def head_looks(fr, *, iris_color=None) -> dict:
+    """Part colours and face groups of a face rig's head for ``usd_export``'s writers and the glTF rig.
+
+    Args:
+        fr: A :class:`~facewarp.FaceRig` (head vertices and faces, FDPs, ``parts``, ``skin_texture``).
+        iris_color: Optional iris RGB (3,) in 0..1, linear (default :data:`COLORS` ``["iris"]``, brown-hazel).
+
+    Returns:
+        ``{"part_colors": {part: RGB}, "subsets": {"Skin" or part: {name: (faces (k,) int64, RGB)}}}``:
+        ``Lips`` on the skin (only without a skin texture, which carries the lips itself), ``Sclera``,
+        ``Iris`` and ``Pupil`` on each eyeball (a partition of its faces).
+
+    Raises:
+        InputError: a bad ``iris_color``.
+    """
+    iris_rgb(iris_color)
     part_colors, subsets = {}, {}
-    lips = lip_faces(fr)
+    fdps = rest_fdps(fr)
+    lips = np.zeros(0, np.int64) if getattr(fr, "skin_texture", None) else lip_faces(fr)
     if len(lips):
         subsets["Skin"] = {"Lips": (lips, COLORS["lips"])}
     for name, (V, F) in dict(fr.parts).items():
-        V, F = np.asarray(V, np.float64), np.asarray(F)
-        low = str(name).lower()
-        C = V[F].mean(1)
-        if "eye" in low:
-            part_colors[name] = COLORS["sclera"]
-            d = C - V.mean(0)
-            cos = d[:, 2] / np.maximum(np.linalg.norm(d, axis=1), 1e-12)
-            pupil = np.flatnonzero(cos >= math.cos(PUPIL_ANGLE))
-            iris = np.flatnonzero((cos >= math.cos(IRIS_ANGLE)) & (cos < math.cos(PUPIL_ANGLE)))
-            subsets[name] = {"Iris": (iris, COLORS["iris"]), "Pupil": (pupil, COLORS["pupil"])}
-        elif "teeth" in low or "tooth" in low:
-            part_colors[name] = COLORS["teeth"]
-        elif "tongue" in low:
-            part_colors[name] = COLORS["tongue"]
+        part_colors[name], groups = part_looks(name, V, F, fdps, iris_color=iris_color)
+        if groups:
+            subsets[name] = groups
     return {"part_colors": part_colors, "subsets": subsets}
 
 

@@ -7,19 +7,20 @@ from pathlib import Path
 import numpy as np
 
 from ..template.head import REGIONS, Template
+from .looks import COLORS, part_kind, part_vertex_colors, refine_ball
 from .render import render_mesh, save_png
 
 __all__ = ["CAVITY", "LIPS", "MOUTH", "SKIN", "TEETH", "TONGUE", "colored_scene", "head_colors", "part_colors",
            "render_previews", "vermilion_weight"]
 
 
-SKIN = np.array([0.87, 0.72, 0.62])
-"""Skin colour of the previews, linear RGB in [0, 1], shape (3,)."""
-LIPS = np.array([0.78, 0.47, 0.45])
+SKIN = np.array(COLORS["skin"])
+"""Skin colour of the previews (the looks' palette, ``present.looks.COLORS``), linear RGB in [0, 1], shape (3,)."""
+LIPS = np.array(COLORS["lips"])
 """Lip colour of the previews, linear RGB in [0, 1], shape (3,)."""
-TEETH = np.array([0.97, 0.95, 0.85])
-"""Teeth colour of the previews, linear RGB in [0, 1], shape (3,)."""
-TONGUE = np.array([0.8, 0.42, 0.42])
+TEETH = np.array(COLORS["teeth"])
+"""Teeth colour of the previews (ivory), linear RGB in [0, 1], shape (3,)."""
+TONGUE = np.array(COLORS["tongue"])
 """Tongue colour of the previews, linear RGB in [0, 1], shape (3,)."""
 
 
@@ -36,29 +37,27 @@ def vermilion_weight(V, lm: dict, mask=None) -> np.ndarray:
     return w if mask is None else w * mask
 
 
-_EYE_PALETTE = np.array([[0.05, 0.05, 0.05], [0.33, 0.24, 0.16], [0.96, 0.95, 0.93]])  # pupil, iris, sclera
-MOUTH = np.array([0.45, 0.2, 0.2])
+MOUTH = np.array(COLORS["mouth"])
 """Inside of the mouth (the lips' inner sheets), linear RGB."""
-CAVITY = np.array([0.16, 0.05, 0.05])
+CAVITY = np.array(COLORS["cavity"])
 """The inside of the head seen through the open mouth (the skin's back side), linear RGB."""
 
 
-def part_colors(name: str, V) -> np.ndarray:
+def part_colors(name: str, V, *, landmarks: dict | None = None, iris_color=None, ball=None) -> np.ndarray:
     """Preview colours of a rigid part at rest, (k, 3) in [0, 1], for its vertices V (k, 3) [m].
 
-    Eyeballs (names starting ``eye``): white sclera with a brown iris (6 mm radius) and a black
-    pupil (2 mm) around the axis through the ball's centre along +z (the template's gaze);
-    teeth :data:`TEETH`; anything else (the tongue) :data:`TONGUE`.
+    The looks of every output (``present.looks``): eyeballs (names with ``eye``) off-white sclera,
+    a brown-hazel iris 11.7 mm across and a near-black pupil 4 mm across around the gaze axis (the
+    ball's centre to its pupil FDP 3.5 / 3.6 in ``landmarks``, else +z); teeth (and other parts)
+    :data:`TEETH`; the tongue :data:`TONGUE`.
+
+    Args:
+        name: The part's name. V: Its vertices [m], shape (k, 3), float.
+        landmarks: Optional FDP id -> rest position (3,) [m] (the pupils give the gaze).
+        iris_color: Optional iris RGB (3,) in 0..1, linear.
+        ball: Optional vertices of the eyeball that V draws refined (its centre and gaze).
     """
-    V = np.asarray(V, dtype=np.float64)
-    if name.startswith("eye"):
-        d = V - V.mean(0)
-        r = np.linalg.norm(d, axis=1)
-        ang = np.arccos(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1, 1))
-        rm = max(float(r.mean()), 6.5e-3)
-        k = np.where(ang < np.arcsin(2.0e-3 / rm), 0, np.where(ang < np.arcsin(6.0e-3 / rm), 1, 2))
-        return _EYE_PALETTE[k]
-    return np.tile(TEETH if name.startswith("teeth") else TONGUE, (len(V), 1))
+    return part_vertex_colors(name, V, landmarks, iris_color=iris_color, ball=ball)
 
 
 def head_colors(V, lm: dict) -> np.ndarray:
@@ -83,8 +82,8 @@ def head_colors(V, lm: dict) -> np.ndarray:
 def colored_scene(t: Template) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Skin and rigid parts merged into one mesh with per-vertex colours for previews.
 
-    Lips are tinted, eyeballs get a sclera, iris (6 mm) and pupil (2 mm) facing +z.
-    Returns V (n, 3) [m], F (m, 3), colours (n, 3) in [0, 1].
+    Lips are tinted, eyeballs (drawn refined) get a sclera, iris and pupil about the gaze
+    (:func:`part_colors`). Returns V (n, 3) [m], F (m, 3), colours (n, 3) in [0, 1].
     """
     Vs, Fs, Cs = [t.vertices], [t.faces], []
     col = np.tile(SKIN, (t.vertex_count, 1))
@@ -95,8 +94,10 @@ def colored_scene(t: Template) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     col = col * (1 - wgt[:, None]) + LIPS * wgt[:, None]
     Cs.append(col)
     off = t.vertex_count
-    for name, (V, F) in t.parts.items():
-        Cs.append(part_colors(name, V))
+    lm = t.landmarks()
+    for name, (V0, F0) in t.parts.items():
+        V, F = refine_ball(np.asarray(V0, np.float64), np.asarray(F0)) if part_kind(name) == "eye" else (V0, F0)
+        Cs.append(part_colors(name, V, landmarks=lm, ball=V0))
         Vs.append(V)
         Fs.append(F + off)
         off += len(V)
