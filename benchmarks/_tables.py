@@ -652,6 +652,24 @@ def drive(r: Results) -> str:
     return _rows_md(head, rows) + note
 
 
+@table("fleet")
+def fleet(r: Results) -> str:
+    """``facewarp batch run`` on the 2-core box (``fleet_cpu.json`` of ``python -m benchmarks fleet``): one scan
+    after another, local processes and a local Ray, and what each task needs."""
+    doc = r.doc("fleet_cpu")
+    f = doc["figures"]
+    rows = [[mode, f[key]["executor"], f"{f[key]['wall_s']:.1f}", f"{f[key]['done']} / {f[key]['failed']}",
+             "1.00x" if key == "serial" else f"{f['serial']['wall_s'] / f[key]['wall_s']:.2f}x"]
+            for mode, key in (("one after another", "serial"), ("local processes", "local"), ("local Ray", "ray"))]
+    steps = "; ".join(f"{k} {v['cpu_seconds_median']:.2f} CPU s, {v['worker_peak_rss_mib_max']:.0f} MiB"
+                      for k, v in f["per_step"].items())
+    return (_rows_md(["mode", "executor", "wall [s]", "done / failed", "speed-up"], rows)
+            + f"\n{f['scans']} scans ({f['broken_scans']} broken) through {', '.join(f['steps'])} "
+            f"({f['smile_seconds']:g} s smile) on {doc['machine'].get('cores', '?')} cores, {doc['date'][:10]}: "
+            f"Ray {f['ray_overhead_over_local']:.1%} over local processes ({f['ray_startup_s']:.1f} s of it "
+            f"starting Ray). Per task (median CPU seconds, largest worker memory): {steps}.\n")
+
+
 def render(name: str, results: Results | None = None) -> str:
     """The Markdown of table ``name``."""
     if name not in TABLES:
