@@ -412,6 +412,8 @@ def measured(r: Results) -> str:
                  f"median {ad['marker_error_mm']['median']:.2f} mm; {rep['anatomy']['inverted_count']} inverted tets",
                  "`demo/report.json`"])
     rows += _likeness_rows(r["likeness"])
+    rows.append(_likeness_real_row(r["likeness_real"]))
+    rows.append(_blender_texture_row(r["blender_texture"]))
     return _rows_md(["what", "result", "file"], rows)
 
 
@@ -441,6 +443,37 @@ def _likeness_rows(fig: dict) -> list[list[str]]:
          f"{100 * g['worst_abs_relative_error']:.1f} %, {g['within_5_percent']} of {g['seeds']} within 5 % (tests: mm, "
          "cm, m and a random unit within 5 % on seeds 0-3)", "`likeness.json`"],
     ]
+
+
+def _likeness_real_row(fig: dict) -> list[str]:
+    """The likeness on a real textured scan (``likeness_real.json``: ``python -m benchmarks likeness --scan``)."""
+    s, sc, t = fig["summary"], fig["scan"], fig["summary"]["targets"]
+    name = sc["attribution"].split(" (")[0] if sc["attribution"] else sc["file"]
+    return [f"the person's likeness on a real textured scan: {name} ({sc['licence'].split(' (')[0]}, kept outside the "
+            f"repository), no landmarks (detected FDPs), `--units auto` ({fig['scale']['metres_per_unit'] * 1e3:.1f} mm "
+            f"per unit), `texture.png` {fig['settings']['texture_size']} px baked; head vs scan rendered from the same "
+            "cameras (front, three-quarter; unlit, face region)",
+            f"mean CIELAB Delta E {s['delta_e_mean']:.2f} (target < {t['delta_e_below']:g}; one flat colour: the "
+            f"scan's median {s['delta_e_flat']:.1f}, the face's mean {s['delta_e_flat_face_mean']:.1f}), L* "
+            f"correlation {s['lightness_correlation']:.3f} (target >= {t['lightness_correlation_at_least']:g}; flat 0); "
+            f"{100 * fig['texture']['covered_fraction']:.1f} % of texels from the scan; picture "
+            f"`{fig['picture']['file']}` (scan, head, flat): the same person, the geometry differs at the open eye "
+            "and mouth openings, the nostrils and the ears", "`likeness_real.json`"]
+
+
+def _blender_texture_row(fig: dict) -> list[str]:
+    """Blender's USD import of the demo's animation: the skin's image texture (``blender_texture.json``)."""
+    imp = fig["imports"][0]
+    st = imp["skin_texture"]
+    img = st["images"][0] if st["images"] else None
+    mats = imp["looks"].get(st["object"], {}).get("materials", [])
+    faces = sum(m["faces"] for m in mats if "image" in m)
+    total = imp["looks"].get(st["object"], {}).get("faces", 0)
+    got = (f"Principled BSDF Base Color <- Image Texture `{img['file']}` ({img['size_px'][0]} x {img['size_px'][1]} px, "
+           f"{img['colorspace']}, loaded) on {faces} of {total} skin faces, UV map `{st['uv_maps'][0]}`"
+           if st["ok"] else "NO image texture on the skin")
+    return [f"Blender {fig['blender']} (bpy) imports `facewarp demo --quick`'s `animation.usdc`", got,
+            "`blender_texture.json`"]
 
 
 def _expression_heads_row(fig: dict) -> list[str]:

@@ -19,6 +19,20 @@ OBJ with ``v x y z r g b`` and:
    the scale from the given FDPs over ``--scale-seeds`` faces (20), no adaptation.
 
 Results: ``benchmarks/results/likeness.json`` (machine, versions, date, per seed and the means).
+
+**A real scan** (``--scan PATH``; results ``likeness_real.json``, pictures ``likeness_real.png``)::
+
+    python -m benchmarks likeness --scan /work/scans/leeperrysmith_intact/LeePerrySmith.glb \\
+        --scan-texture /work/scans/leeperrysmith_intact/Map-COL.jpg --scan-texture-flip-v \\
+        --scan-source "..." --scan-licence "CC BY 3.0" --scan-attribution "..." --observed "..."
+
+The scan (any mesh ``facewarp adapt`` reads; with ``--scan-texture`` its UVs and that image are
+first written together as a textured GLB, for scans that ship the colour map beside the mesh)
+adapts with no landmarks (detected FDPs) and ``--units auto``; the scan is brought into the
+template's frame by the similarity between ``adapted_scan_frame.obj`` and ``adapted.obj``, and
+the same renders and figures as above are taken (front and three-quarter, ``--render-size``
+default 512). The picture is scan | adapted head | flat colour, a row per view. The scan files
+stay outside the repository; the result records their source, licence and attribution.
 """
 
 from __future__ import annotations
@@ -110,15 +124,126 @@ def run_seed(seed: int, work: Path, *, texture_size: int, render_size: int, devi
     }
 
 
+def _textured_glb(scan: Path, image: Path, out: Path, *, flip_v: bool) -> Path:
+    """The scan's mesh with its UVs and ``image`` as one textured GLB (colour maps shipped beside the mesh).
+
+    ``flip_v``: the map is addressed with v measured the other way (three.js's ``TextureLoader``
+    flips images by default, and maps made for it, like the LeePerrySmith head's, expect that),
+    so the image is flipped top to bottom before it goes into the GLB.
+    """
+    import trimesh
+    from PIL import Image
+
+    m = trimesh.load(str(scan), process=False, force="mesh")
+    uv = getattr(m.visual, "uv", None)
+    if uv is None or len(uv) != len(m.vertices):
+        raise SystemExit(f"--scan {scan}: no per-vertex UVs to put --scan-texture on")
+    img = Image.open(image).convert("RGB")
+    if flip_v:
+        img = img.transpose(Image.Transpose.FLIP_TOP_BOTTOM)
+    tex = trimesh.Trimesh(m.vertices, m.faces, process=False,
+                          visual=trimesh.visual.TextureVisuals(uv=uv, image=img))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tex.export(str(out))
+    return out
+
+
+def run_scan(args, work: Path) -> dict:
+    """A real textured scan: detected FDPs, ``--units auto``, the texture baked, head vs scan rendered."""
+    import facewarp as fw
+    from PIL import Image
+
+    scan_path = Path(args.scan)
+    if args.scan_texture:
+        scan_path = _textured_glb(scan_path, Path(args.scan_texture), work / "scan" / "scan_textured.glb",
+                                  flip_v=args.scan_texture_flip_v)
+    scan = fw.load_mesh(scan_path)  # file units (auto below); the similarity fit takes them to the template frame
+    if scan.texture is None and scan.colors is None:
+        raise SystemExit(f"--scan {args.scan}: no colour (give --scan-texture)")
+    out = work / "adapt"
+    t0 = time.perf_counter()
+    rep = _adapt([str(scan_path), "--out", str(out), "--units", "auto", "--levels", str(args.levels),
+                  "--texture-size", str(args.texture_size)], args.device)
+    wall = time.perf_counter() - t0
+    tex = np.asarray(Image.open(out / "texture.png").convert("RGB"))
+    head = fw.load_mesh(out / "adapted.obj")  # template frame [m]
+    head_scan = fw.load_mesh(out / "adapted_scan_frame.obj")  # the same vertices in the scan's frame and unit
+    to_template = fw.geometry.fit_similarity(head_scan.vertices, head.vertices)
+    fit_rms = float(np.sqrt(np.mean(np.sum((to_template.apply(head_scan.vertices) - head.vertices) ** 2, axis=1))))
+    t = fw.default_template(0)
+    look = ({"scan_colors": scan.colors} if scan.texture is None
+            else {"scan_texture": scan.texture, "scan_corner_uv": scan.corner_uv})
+    res = fw.render.likeness_views(head.vertices, t.faces, tex, t.uv[t.face_uv], t.frontal,
+                                   to_template.apply(scan.vertices), scan.faces, **look, size=args.render_size,
+                                   device=args.device)
+    rows = [np.concatenate([v[1], v[0], v[2]], axis=1) for v in res["images"].values()]  # scan | head | flat
+    img = Image.fromarray(np.concatenate(rows, axis=0))
+    picture = RESULTS / f"{args.name}.png"
+    img.save(picture, optimize=True)
+    for colours in (256, 128, 64):  # keep the repository small: a palette looks the same at this size
+        if picture.stat().st_size <= 300_000:  # tests/test_benchmarks_suite.py: pictures < 300 KB
+            break
+        img.quantize(colours, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(picture, optimize=True)
+    m = res["mean"]
+    return {
+        "scan": {"file": Path(args.scan).name,
+                 "texture_file": Path(args.scan_texture).name if args.scan_texture else None,
+                 "texture_flipped_v": bool(args.scan_texture and args.scan_texture_flip_v),
+                 "source": args.scan_source, "licence": args.scan_licence, "attribution": args.scan_attribution,
+                 "vertex_count": int(len(scan.vertices)), "face_count": int(len(scan.faces)),
+                 "texture_px": list(scan.texture.shape[:2]) if scan.texture is not None else None},
+        "adapt_wall_s": round(wall, 2),
+        "scale": rep["scale"],
+        "calibration_rms_residual_m": rep["calibration"]["rms_residual"],
+        "distance_to_scan_m": rep["distance_to_scan_m"],
+        "scan_to_template_fit_rms_m": fit_rms,
+        "texture": rep["texture"],
+        "likeness": res["views"],
+        "mean": res["mean"],
+        "flat_color": res["flat_color"],
+        "summary": {"delta_e_mean": m["delta_e_mean"]["textured"], "delta_e_flat": m["delta_e_mean"]["flat"],
+                    "delta_e_flat_face_mean": m["delta_e_mean"]["flat_face_mean"],
+                    "lightness_correlation": m["lightness_correlation"]["textured"],
+                    "lightness_correlation_flat": m["lightness_correlation"]["flat"],
+                    "targets": {"delta_e_below": 4.0, "lightness_correlation_at_least": 0.6}},
+        "picture": {"file": picture.name, "layout": "columns scan | adapted head (baked texture) | flat colour; "
+                    "rows " + ", ".join(res["images"]), "px_per_image": args.render_size},
+    }
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.likeness", description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3, help="synthetic scans 0..N-1 (default 3)")
     ap.add_argument("--texture-size", type=int, default=2048)
-    ap.add_argument("--render-size", type=int, default=400)
+    ap.add_argument("--render-size", type=int, default=None, help="image side [px] (default 400, with --scan 512)")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--scale-seeds", type=int, default=20, help="faces for the scale from given FDPs (default 20)")
-    ap.add_argument("--name", default="likeness", help="result file name (default likeness)")
+    ap.add_argument("--name", default=None, help="result file name (default likeness, with --scan likeness_real)")
+    ap.add_argument("--scan", default=None, metavar="PATH", help="a real scan instead of the synthetic ones")
+    ap.add_argument("--scan-texture", default=None, metavar="IMG", help="the scan's colour map, when not in its file")
+    ap.add_argument("--scan-texture-flip-v", action="store_true",
+                    help="the colour map expects v flipped (maps for three.js's TextureLoader, e.g. LeePerrySmith)")
+    ap.add_argument("--scan-source", default="", help="where the scan comes from (recorded)")
+    ap.add_argument("--scan-licence", default="", help="its licence (recorded)")
+    ap.add_argument("--scan-attribution", default="", help="its attribution (recorded)")
+    ap.add_argument("--levels", type=int, default=2, help="adaptation levels with --scan (default 2)")
+    ap.add_argument("--observed", default="", help="what the side-by-side picture shows to a person (recorded)")
     args = ap.parse_args(argv)
+    if args.scan is not None:
+        args.name = args.name or "likeness_real"
+        args.render_size = args.render_size or 512
+        with tempfile.TemporaryDirectory() as tmp:
+            r = run_scan(args, Path(tmp))
+        r["observed"] = args.observed
+        s = r["summary"]
+        print(f"{Path(args.scan).name}: Delta E {s['delta_e_mean']:.2f} (flat {s['delta_e_flat']:.2f}, the face's mean "
+              f"colour {s['delta_e_flat_face_mean']:.2f}), L* r "
+              f"{s['lightness_correlation']:.3f}; texels from the scan {r['texture']['covered_fraction'] * 100:.1f} %")
+        result = {"benchmark": "likeness", "machine": machine(args.device), "settings": vars(args), **r}
+        path = save(args.name, result)
+        print(f"wrote {path}")
+        return result
+    args.name, args.render_size = args.name or "likeness", args.render_size or 400
     cases = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.seeds):

@@ -78,6 +78,22 @@ def test_cielab_reference_values():
     np.testing.assert_allclose(lab[2], [53.24, 80.09, 67.20], atol=0.05)  # sRGB red, D65
 
 
+def test_flat_color_difference_is_the_distance_to_the_mean_lab():
+    """Half the pixels one colour, half another: the best flat colour sits midway in CIELAB, so every
+    pixel is half the two colours' Delta E from it; a colour off the middle scores worse."""
+    img = np.zeros((4, 4, 3), np.uint8)
+    img[:2], img[2:] = (200, 150, 130), (120, 80, 70)
+    mask = np.ones((4, 4), bool)
+    mask[0, 0] = mask[3, 3] = False  # one pixel off each half: still balanced
+    a, b = fw.render.srgb_to_lab(img[1, 1]), fw.render.srgb_to_lab(img[2, 2])
+    r = fw.render.flat_color_difference(img, mask)
+    np.testing.assert_allclose(r["delta_e_mean"], 0.5 * np.linalg.norm(a - b), rtol=1e-9, err_msg=str(r))
+    np.testing.assert_allclose(r["lab"], 0.5 * (a + b), rtol=1e-9)
+    assert r["pixels"] == 14 and r["lightness_correlation"] == 0.0
+    other = fw.render.color_difference(np.broadcast_to(img[1, 1], img.shape).copy(), img, mask)
+    assert other["delta_e_mean"] >= r["delta_e_mean"], (other, r)
+
+
 def test_adapt_bakes_a_likeness(tmp_path, capsys):
     """The synthetic scan with its colour: adapt writes texture.png and adapted.mtl, and the textured
     head's renders match the scan's (front, three-quarter) within Delta E 4, L* correlation >= 0.6,

@@ -264,3 +264,35 @@ def test_public_names():
     assert set(usd_export.__all__) == {"AnimationWriter", "UsdExportError", "part_prim_name", "read_animation",
                                        "validate_usd", "write_crowd_stage", "write_meshes_usd", "write_skel_rig"}
     assert issubclass(UsdExportError, ValueError)
+
+
+def test_textured_skin_subsets_show_the_texture(tmp_path):
+    """With a skin texture the skin's subsets (the lips) are bound to the texture's material, so an
+    importer that makes a material slot per subset (Blender) shows the texture there too; without
+    one they keep their tint. The texture's asset path is relative and the file lies beside the USD,
+    read at ``primvars:st`` (what Blender's USD importer follows to an Image Texture node)."""
+    from PIL import Image
+    from pxr import Usd, UsdGeom, UsdShade
+
+    V = 0.1 * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    uv = 0.5 + 0.5 * V[:, :2] / 0.1
+    Image.fromarray(np.full((4, 4, 3), 180, np.uint8)).save(tmp_path / "tex.png")
+    looks = dict(subsets={"Skin": {"Lips": ([0, 1], (0.7, 0.3, 0.3))}})
+    for textured in (True, False):
+        p = tmp_path / f"h{int(textured)}.usda"
+        kw = dict(uv=uv, skin_texture=tmp_path / "tex.png") if textured else {}
+        with AnimationWriter(p, fps=30, faces=F, rest_points=V, **looks, **kw) as w:
+            w.add_frame(0.0, V)
+        assert validate_usd(p) == []
+        stage = Usd.Stage.Open(str(p))
+        lips = stage.GetPrimAtPath("/Head/Skin/Lips")
+        assert list(UsdGeom.Subset(lips).GetIndicesAttr().Get()) == [0, 1]
+        bound = {UsdShade.MaterialBindingAPI(stage.GetPrimAtPath(f"/Head/Skin/{n}")).ComputeBoundMaterial()[0]
+                 .GetPath().name for n in ("Lips", "Rest")}
+        assert bound == ({"SkinTexture"} if textured else {"Lips", "Skin"}), bound
+        if textured:
+            tex = UsdShade.Shader(stage.GetPrimAtPath("/Head/Looks/SkinTexture/DiffuseTexture"))
+            asset = tex.GetInput("file").Get()
+            assert asset.path == "./h1_skin.png" and (tmp_path / "h1_skin.png").is_file()
+            assert UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/Head/Skin")).GetPrimvar("st").IsDefined()

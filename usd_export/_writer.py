@@ -121,7 +121,9 @@ class AnimationWriter:
             ``"Skin"`` or a part name: ``GeomSubset`` s (family ``materialBind``) of those faces
             bound to a material ``Looks/<subset name>`` of that colour (lips on the skin, iris and
             pupil on an eye), and a subset ``Rest`` of the other faces bound to the mesh's own
-            material (a partition). One name, one colour.
+            material (a partition). One name, one colour. With ``skin_texture`` the skin's subsets
+            are bound to the texture's material too (the person's own lip colour, as the package's
+            renders show it; Blender gives each subset a material slot, so a tint would hide it).
         camera: Optional ``{"position": (3,), "target": (3,), "up": (3,)}`` [scene units] and
             optionally ``"focal_length_mm"`` (default 50): a ``Camera`` ``/Camera`` beside the head
             looking from ``position`` at ``target``, so the file opens framed.
@@ -690,8 +692,10 @@ def _dress_stage(layer, s: _Spec, looks: _Looks, *, lights: bool) -> None:
     for name, rgb in looks.part_colors.items():
         mat = _preview_material(stage, f"{ROOT}/{LOOKS}/{s.part_paths[name].name}", rgb, roughness=0.35)
         UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(s.part_paths[name])).Bind(mat)
+    textured = stage.GetPrimAtPath(f"{ROOT}/{LOOKS}/SkinTexture").IsValid()
     for path, rows in looks.subsets.items():
-        _material_subsets(stage, path, rows)
+        # a textured skin's subsets show the texture (the scan's own lip colour), not a flat tint
+        _material_subsets(stage, path, rows, own_only=textured and str(path) == f"{ROOT}/{SKIN}")
     if looks.camera is not None:
         _camera(stage, looks.camera)
     if lights:
@@ -699,10 +703,11 @@ def _dress_stage(layer, s: _Spec, looks: _Looks, *, lights: bool) -> None:
     layer.Save()
 
 
-def _material_subsets(stage, path, rows, looks: str = f"{ROOT}/{LOOKS}") -> None:
+def _material_subsets(stage, path, rows, looks: str = f"{ROOT}/{LOOKS}", *, own_only: bool = False) -> None:
     """Face subsets of the mesh at ``path`` bound to one material per subset name, and a subset
     ``Rest`` of the other faces bound to the mesh's own material: the subsets partition the mesh
-    (importers that give each subset a material slot, as Blender's, otherwise leave the rest bare)."""
+    (importers that give each subset a material slot, as Blender's, otherwise leave the rest bare).
+    ``own_only``: every subset keeps its name but binds the mesh's own material (a textured skin)."""
     if not rows:
         return
     prim = stage.GetPrimAtPath(path)
@@ -712,8 +717,12 @@ def _material_subsets(stage, path, rows, looks: str = f"{ROOT}/{LOOKS}") -> None
     used = np.zeros(len(mesh.GetFaceVertexCountsAttr().Get()), bool)
     for sub, idx, rgb in rows:
         mat_path = f"{looks}/{sub}"
-        mat = UsdShade.Material(stage.GetPrimAtPath(mat_path)) if stage.GetPrimAtPath(mat_path) else \
-            _preview_material(stage, mat_path, rgb, roughness=0.4)
+        if own_only and own:
+            mat = own
+        elif stage.GetPrimAtPath(mat_path):
+            mat = UsdShade.Material(stage.GetPrimAtPath(mat_path))
+        else:
+            mat = _preview_material(stage, mat_path, rgb, roughness=0.4)
         subset = binding.CreateMaterialBindSubset(sub, Vt.IntArray.FromNumpy(idx), UsdGeom.Tokens.face)
         UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(mat)
         used[idx] = True
