@@ -1,7 +1,8 @@
 """Soak: random legal control streams on several heads, every frame checked.
 
     python -m benchmarks soak [--heads 10] [--seconds 60] [--device cpu|cuda] [--jobs 1] [--seed S]
-                              [--name soak_cpu] [--budget-s B] [--skip K]
+                              [--name soak_cpu] [--budget-s B] [--skip K] [--method newton-pcg]
+                              [--synthetic] [--only 6,9]
 
 Each head plays ``--seconds`` of a stream that a tracker or a controller could send, switching
 every frame: about 40 % of the muscles on with activations drawn in [0, 1], the jaw opening drawn
@@ -89,12 +90,12 @@ def _synthetic_head(seed: int, root: Path):
     return fw.load_face_rig(case / "build")
 
 
-def head_specs(count: int, seed: int) -> list[tuple[str, str, int]]:
+def head_specs(count: int, seed: int, *, synthetic: bool = False) -> list[tuple[str, str, int]]:
     """``count`` heads as picklable ``(name, kind, parameter)``: the default head first, then ICT
-    identities (or synthetic scans of seeds ``seed + k`` without the ICT data)."""
+    identities (or synthetic scans of seeds ``seed + k`` without the ICT data, or with ``synthetic``)."""
     specs = [("default_level0", "default", 0)]
     ict = shared_dir() / "data" / "ict-facekit"
-    ids = sorted(int(p.stem[8:]) for p in ict.glob("identity[0-9][0-9][0-9].obj")) if ict.is_dir() else []
+    ids = sorted(int(p.stem[8:]) for p in ict.glob("identity[0-9][0-9][0-9].obj")) if ict.is_dir() and not synthetic else []
     for k in range(count - 1):
         if ids:
             i = ids[k % len(ids)]
@@ -123,14 +124,15 @@ def _volume_ratios(rig, X: np.ndarray, v0: np.ndarray) -> np.ndarray:
 
 
 def soak_head(rig, seconds: float, rng: np.random.Generator, *, device: str = "cpu", progress=None,
-              deadline: float | None = None, progress_every_s: float = PROGRESS_EVERY_S) -> dict:
+              deadline: float | None = None, progress_every_s: float = PROGRESS_EVERY_S, method: str | None = None) -> dict:
     """Play one random control stream on ``rig`` (kinematic jaw); the head's row of the result.
+    ``method``: the implicit solver's method (None: the simulator's default for the device).
     ``progress(row)`` is called every ``progress_every_s`` seconds (wall) with the row so far;
     at ``deadline`` (a ``time.perf_counter()`` value) the stream stops early and the row says so
     (``stopped_by_budget``)."""
     import facewarp as fw
 
-    sim = fw.FaceSimulator(rig, device=device)
+    sim = fw.FaceSimulator(rig, device=device, method=method)
     M = len(sim.muscle_names)
     T = rig.tets
     a0 = rig.nodes[T[:, 0]]
@@ -195,7 +197,7 @@ def _finish_row(row: dict, sim, step_wall: float, step_cpu: float, wall0: float,
 
 
 def _run_head(index: int, spec, seconds: float, seed: int, device: str, root: str, deadline_s: float | None,
-              queue=None) -> dict:
+              queue=None, method: str | None = None) -> dict:
     """Build head ``spec`` and play its stream (in this process or a worker); its row of the result.
     The stream's generator is seeded by ``(seed, index)``, so a head's stream does not depend on
     ``--jobs`` or on the heads before it. Partial rows go to ``queue.put((index, row))`` when one
@@ -217,7 +219,7 @@ def _run_head(index: int, spec, seconds: float, seed: int, device: str, root: st
 
     rng = np.random.default_rng([seed, index])
     try:
-        row = soak_head(rig, seconds, rng, device=device, progress=partial, deadline=deadline)
+        row = soak_head(rig, seconds, rng, device=device, progress=partial, deadline=deadline, method=method)
     except fw.InputError as e:  # e.g. a device this machine does not have: not a soak failure either
         return {"head": name, "build_s": build_s, "run_error": f"{type(e).__name__}: {e}"}
     return {"head": name, "build_s": build_s, **row}
@@ -237,6 +239,13 @@ def main(argv=None) -> dict:
                          "(their rows say stopped_by_budget; the result complete: false)")
     ap.add_argument("--skip", type=int, default=0,
                     help="leave out the first SKIP heads of the list (e.g. 1: ICT heads only)")
+    ap.add_argument("--method", default=None,
+                    help="the implicit solver's method (default: the device's; newton-pcg runs the device solver on "
+                         "the CPU too, to replay a CUDA run's streams)")
+    ap.add_argument("--synthetic", action="store_true",
+                    help="synthetic heads even where the ICT-FaceKit data is (as on a machine without it)")
+    ap.add_argument("--only", default=None,
+                    help="comma list of head indices to play (their streams as in the whole list, seeded by index)")
     args = ap.parse_args(argv)
     if args.heads < 1 or not (args.seconds > 0) or args.jobs < 1 or args.skip < 0:
         ap.error("--heads and --jobs must be >= 1, --skip >= 0 and --seconds > 0")
@@ -246,7 +255,10 @@ def main(argv=None) -> dict:
     name = args.name or f"soak_{args.device.split(':')[0]}"
     t0 = time.perf_counter()
     root = tempfile.mkdtemp(prefix="facewarp_soak_")
-    specs = head_specs(args.heads + args.skip, seed)[args.skip:]
+    specs = list(enumerate(head_specs(args.heads + args.skip, seed, synthetic=args.synthetic)[args.skip:]))
+    if args.only:
+        keep = {int(k) for k in args.only.split(",") if k.strip()}
+        specs = [(i, sp) for i, sp in specs if i in keep]
     rows: dict[int, dict] = {}
 
     def write() -> Path:
@@ -270,11 +282,11 @@ def main(argv=None) -> dict:
                 rows[item[0]] = item[1]
                 write()
 
-        for i, spec in enumerate(specs):
+        for i, spec in specs:
             left = budget_left()
             if left is not None and left <= 0:
                 break
-            finished(i, _run_head(i, spec, args.seconds, seed, args.device, root, left, _Direct()))
+            finished(i, _run_head(i, spec, args.seconds, seed, args.device, root, left, _Direct(), args.method))
     else:
         _parallel(args, specs, seed, root, rows, finished, write, budget_left)
     path = write()
@@ -297,7 +309,7 @@ def _parallel(args, specs, seed: int, root: str, rows: dict, finished, write, bu
         q = manager.Queue()
         t_submit = time.perf_counter()
         pending = {pool.submit(_run_head_budgeted, i, spec, args.seconds, seed, args.device, root,
-                               budget_left(), t_submit, q): i for i, spec in enumerate(specs)}
+                               budget_left(), t_submit, q, args.method): i for i, spec in specs}
         while pending:
             done, _ = wait(pending, timeout=2.0, return_when=FIRST_COMPLETED)
             dirty = False
@@ -314,20 +326,20 @@ def _parallel(args, specs, seed: int, root: str, rows: dict, finished, write, bu
                 try:
                     row = f.result()
                 except Exception as e:  # a worker that died (BrokenProcessPool) or raised
-                    row = {"head": specs[i][0], "run_error": f"{type(e).__name__}: {e}"}
+                    row = {"head": dict(specs)[i][0], "run_error": f"{type(e).__name__}: {e}"}
                 finished(i, row)
                 dirty = False
             if dirty:
                 write()
 
 
-def _run_head_budgeted(index, spec, seconds, seed, device, root, budget_s, t_submit, queue):
+def _run_head_budgeted(index, spec, seconds, seed, device, root, budget_s, t_submit, queue, method=None):
     """:func:`_run_head` in a worker, its budget shortened by the time it waited for a free worker
     (``time.perf_counter`` is CLOCK_MONOTONIC, one clock for every process on Linux)."""
     left = None if budget_s is None else budget_s - (time.perf_counter() - t_submit)
     if left is not None and left <= 0:
         return {"head": spec[0], "run_error": "not started: --budget-s was spent before a worker was free"}
-    return _run_head(index, spec, seconds, seed, device, root, left, queue)
+    return _run_head(index, spec, seconds, seed, device, root, left, queue, method)
 
 
 def _extra(args) -> dict:
@@ -337,11 +349,13 @@ def _extra(args) -> dict:
 def _summary(args, seed: int, rows: list, wall: float) -> dict:
     run = [r for r in rows if "frames" in r]
     frames = sum(r["frames"] for r in run)
-    done = (len(run) == args.heads and not any(r.get("in_progress") or r.get("stopped_by_budget") for r in run)
+    wanted = len({int(k) for k in args.only.split(",") if k.strip()}) if args.only else args.heads
+    done = (len(run) == wanted and not any(r.get("in_progress") or r.get("stopped_by_budget") for r in run)
             and all(r["seconds_simulated"] >= args.seconds - 1e-9 or r["failures"] for r in run))
     return {
         "seed": seed,
-        "requested": {"heads": args.heads, "seconds": args.seconds, "jaw": "kinematic",
+        "requested": {"heads": args.heads, "only": args.only, "synthetic": args.synthetic, "method": args.method,
+                      "seconds": args.seconds, "jaw": "kinematic",
                       "active_fraction": ACTIVE_FRACTION, "jaw_open_max_deg": JAW_OPEN_MAX_DEG,
                       "jaw_side_max_deg": JAW_SIDE_MAX_DEG, "spin_max_rev_s": SPIN_MAX_REV_S},
         "complete": bool(done),

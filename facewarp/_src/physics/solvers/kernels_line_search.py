@@ -248,6 +248,9 @@ def _trial_energies(
             t = t * 0.5
 
 
+_FEASIBLE = wp.constant(wp.float64(1.0e29))  # below it no trial inverted a tet (INVERTED_ENERGY 1e30)
+
+
 # Backtracking on the device: trials t = 1, 1/2, 1/4, 1/8 have energies totals[1..4]; take the
 # first that does not raise the energy above totals[0] (within float32 rounding), else the
 # lowest if it is below, else no move (t = 0).
@@ -264,13 +267,15 @@ def _select_step(
     tol = wp.float64(1.0e-6) * wp.abs(e0) + wp.float64(1.0e-20)
     t = float(1.0)
     best = int(-1)
+    # a trial that inverts a tet sums to >= 1e30: never taken, even when the iterate's own energy is
+    # that large (a tet inverted at x: then any trial inverting none is the improvement)
     for j in range(trials):
-        if best < 0 and totals[1 + j] <= e0 + tol:
+        if best < 0 and totals[1 + j] < _FEASIBLE and totals[1 + j] <= e0 + tol:
             best = j
     if best < 0:
         lowest = e0
         for j in range(trials):
-            if totals[1 + j] < lowest:
+            if totals[1 + j] < _FEASIBLE and totals[1 + j] < lowest:
                 lowest = totals[1 + j]
                 best = j
     if best < 0:

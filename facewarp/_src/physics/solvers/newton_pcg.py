@@ -45,7 +45,7 @@ from .implicit import SolverImplicit, _COMMON_OPTIONS
 
 __all__ = ["SolverDeviceNewtonPCG", "default_linear_iterations"]
 
-_LINE_SEARCH_TRIALS = 4  # device line search: t = 1, 1/2, 1/4, 1/8
+_LINE_SEARCH_TRIALS = 8  # device line search: t = 1, 1/2, ..., 1/128
 
 
 def default_linear_iterations(node_count: int) -> int:
