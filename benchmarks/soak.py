@@ -95,7 +95,8 @@ def head_specs(count: int, seed: int, *, synthetic: bool = False) -> list[tuple[
     identities (or synthetic scans of seeds ``seed + k`` without the ICT data, or with ``synthetic``)."""
     specs = [("default_level0", "default", 0)]
     ict = shared_dir() / "data" / "ict-facekit"
-    ids = sorted(int(p.stem[8:]) for p in ict.glob("identity[0-9][0-9][0-9].obj")) if ict.is_dir() and not synthetic else []
+    ids = (sorted(int(p.stem[8:]) for p in ict.glob("identity[0-9][0-9][0-9].obj"))
+           if ict.is_dir() and not synthetic else [])
     for k in range(count - 1):
         if ids:
             i = ids[k % len(ids)]
@@ -124,7 +125,8 @@ def _volume_ratios(rig, X: np.ndarray, v0: np.ndarray) -> np.ndarray:
 
 
 def soak_head(rig, seconds: float, rng: np.random.Generator, *, device: str = "cpu", progress=None,
-              deadline: float | None = None, progress_every_s: float = PROGRESS_EVERY_S, method: str | None = None) -> dict:
+              deadline: float | None = None, progress_every_s: float = PROGRESS_EVERY_S,
+              method: str | None = None) -> dict:
     """Play one random control stream on ``rig`` (kinematic jaw); the head's row of the result.
     ``method``: the implicit solver's method (None: the simulator's default for the device).
     ``progress(row)`` is called every ``progress_every_s`` seconds (wall) with the row so far;

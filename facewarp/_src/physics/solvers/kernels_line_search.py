@@ -251,7 +251,7 @@ def _trial_energies(
 _FEASIBLE = wp.constant(wp.float64(1.0e29))  # below it no trial inverted a tet (INVERTED_ENERGY 1e30)
 
 
-# Backtracking on the device: trials t = 1, 1/2, 1/4, 1/8 have energies totals[1..4]; take the
+# Backtracking on the device: trials t = 1, 1/2, ..., 2^-(trials-1) have energies totals[1..trials]; take the
 # first that does not raise the energy above totals[0] (within float32 rounding), else the
 # lowest if it is below, else no move (t = 0).
 @wp.kernel

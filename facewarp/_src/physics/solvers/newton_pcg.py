@@ -7,8 +7,8 @@ count beyond: :func:`default_linear_iterations`) of block-Jacobi preconditioned 
 iterations on the block-sparse Hessian assembled by kernels, one launch per CG iteration (the
 Chronopoulos-Gear form with the product fused into the update, :mod:`.kernels_linear`: about a
 tenth of ``warp.optim.linear.cg``'s launches, the same iterates), and a backtracking line search
-(t = 1, 1/2, 1/4, 1/8, all four evaluated in one pass) decided on the device
-(:mod:`.kernels_line_search`). The default on CUDA; it runs on the CPU too.
+(t = 1, 1/2, ..., 1/128, all eight evaluated in one pass; a trial inverting a tet is never taken)
+decided on the device (:mod:`.kernels_line_search`). The default on CUDA; it runs on the CPU too.
 
 The Newton loop is adaptive: it runs until no free node moves more than ``tolerance`` (3e-5 m
 from the simulator) in an iteration, at most ``max_iterations`` (12), as a ``wp.capture_while``
@@ -25,7 +25,7 @@ pcg``; every FDP of the five Table 6.4 presets during attack, hold and release; 
 within 0.03-0.25 mm at 3.8-6.9 Newton iterations per frame. ``iterations=k`` gives a fixed count
 instead (the interactive mode): 3 stay within 0.32 mm, 2 and 1 miss the 0.5 mm on some presets
 (0.6 and 1.9 mm, on the CPU). A level-0 frame is launch bound (H100: 381 frames/s adaptive, 522
-with 3 iterations; ``benchmarks/physics_steps.py``): the four line-search trials are one pass
+with 3 iterations; ``benchmarks/physics_steps.py``): the line-search trials are one pass
 (``_trial_energies``), every stage's springs one pooled launch (``_SpringPool``), a CG iteration
 one launch, so a Newton iteration is 36 launches where it was ~140 (179 frames/s). Before the
 exact Hessian, its retry and the extrapolated guess, the former fixed 3 x 50 missed by up to
@@ -273,7 +273,7 @@ class SolverDeviceNewtonPCG(SolverImplicit):
     def _iteration(self, control: Control, h: float) -> None:
         """One Newton iteration at the iterate x: Hessian and gradient, CG, line search on the device.
 
-        The line search evaluates its four trials in one pass (:func:`~.kernels_line_search._trial_energies`:
+        The line search evaluates its eight trials in one pass (:func:`~.kernels_line_search._trial_energies`:
         every element, node and spring at every trial), every stage's springs are one pool and
         a CG iteration is one launch: 36 launches per Newton iteration, where a launch per trial,
         per spring set and per CG phase took ~140 (the level-0 frame is launch bound)."""
