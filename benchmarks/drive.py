@@ -235,8 +235,10 @@ def main(argv=None) -> dict:
         "load_average_at_start": load0,
         "load_average_at_end": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
         "seed": seed, "complete": complete, "wall_s": time.perf_counter() - t0,
-        "note": (f"takes of {args.seconds:g} s at {args.fps:g} fps (the issue's 10 s shortened to fit the shared "
-                 "2-core box, other jobs running beside: speeds are lower bounds); level 0 default head; CPU; " +
+        "note": (f"takes of {args.seconds:g} s at {args.fps:g} fps"
+                 + (" (the issue's 10 s shortened to fit the shared box)" if args.seconds < 10 else "")
+                 + f"; level 0, heads {', '.join(args.heads)}; {args.device if hasattr(args, 'device') else 'cpu'}; "
+                 "speeds are lower bounds where other jobs ran beside (the load averages above); " +
                  ("only the robust case (corrupted all-84 targets, offline)" if args.robust_only else
                   "the same random performance fed as 84 FDPs and as the 30 a tracker gives")),
         "targets": {"round_trip_rms_mm": 0.5, "offline_frames_per_second": 30, "realtime_frames_per_second": 60,
