@@ -220,8 +220,8 @@ def simulate_group_files(heads, expression, outs, *, seconds: float = 2.0, fps: 
     from ..core.errors import SimulationError
     from ..sim.batch import FaceBatch
     from ..sim.play import FrameRecorder, PlayStats
-    from .checks import check_out_dir, make_out_dir
-    from .face import MAX_FRAMES, _check_simulate, _load_simulated_head, _simulate_report, _write_frames
+    from .checks import check_out_dir, load_simulated_head, make_out_dir
+    from .face import MAX_FRAMES, _check_simulate, _simulate_report, _write_frames
 
     heads, outs = [Path(h) for h in heads], [Path(o) for o in outs]
     if not heads:
@@ -237,7 +237,7 @@ def simulate_group_files(heads, expression, outs, *, seconds: float = 2.0, fps: 
     for i, (h, o) in enumerate(zip(heads, outs)):  # a bad folder fails its head only
         try:
             check_out_dir(o)
-            loaded[i] = _load_simulated_head(h, seconds, fps, jaw)
+            loaded[i] = load_simulated_head(h, seconds, fps, jaw)
             make_out_dir(o)
         except Exception as e:
             results[i] = e

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..core.errors import InputError
 
-__all__ = ["check_out_dir", "make_out_dir"]
+__all__ = ["check_out_dir", "load_simulated_head", "make_out_dir"]
 
 
 def check_out_dir(out) -> Path:
@@ -36,3 +36,24 @@ def make_out_dir(out) -> Path:
     if not os.access(out, os.W_OK | os.X_OK):
         raise InputError(f"out {out}: the folder is not writable")
     return out
+
+
+def load_simulated_head(head_path, seconds: float, fps: float, jaw: str):
+    """The face rig of a build (checked to fit in memory for ``seconds`` at ``fps``) and its
+    ``head.xml`` path (parsed when ``jaw`` is ``"mujoco"``). Here, beside the other checks, so that
+    a simulation's job leaves its own module once on the way to the simulator (tests/test_play.py)."""
+    from ..core.limits import check_memory, estimate_sim_bytes
+    from ..physics.face_rig import load_face_rig
+    from .animation import load_mjcf
+
+    fr = load_face_rig(head_path)
+    frames = round(seconds * fps) + 1  # kept in memory (a folder) or as USD time samples (a USD file)
+    check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), frames, len(fr.head_vertices)),
+                 f"seconds, fps: {frames} frames of a head of {len(fr.nodes)} nodes and {len(fr.tets)} tets")
+    mjcf = (Path(head_path) if Path(head_path).is_dir() else Path(head_path).parent) / "head.xml"
+    if jaw == "mujoco" and not mjcf.is_file():
+        raise InputError(f"{head_path}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, "
+                         "or simulate with the kinematic jaw)")
+    if jaw == "mujoco":
+        load_mjcf(mjcf)  # a broken head.xml fails before the simulator is made
+    return fr, mjcf

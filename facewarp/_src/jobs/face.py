@@ -18,7 +18,7 @@ from ..anatomy.build import build_anatomy, write_anatomy
 from ..core.errors import InputError
 from ..core.fileio import write_json
 from ..core.limits import (MAX_FPS, MAX_LAYERS, MAX_SECONDS, MAX_SUBSTEPS, check_amount, check_count,
-                           check_memory, check_steps, estimate_build_bytes, estimate_sim_bytes)
+                           check_memory, check_steps, estimate_build_bytes)
 from ..coupling.mjcf import write_head_mjcf
 from ..coupling.drivers import JAWS, jaw_driver
 from ..expressions import Expression, Timeline, timeline_from_spec
@@ -30,8 +30,8 @@ from ..present.strips import frames_sheet, sheet_font_size
 from ..sim.frames import save_frames_npz
 from ..sim.play import FrameRecorder, _play
 from ..sim.simulator import FaceSimulator
-from .animation import USD_SUFFIXES, FdpMotion, UsdAnimation, check_usd_path, load_mjcf, peak_frames
-from .checks import check_out_dir, make_out_dir
+from .animation import USD_SUFFIXES, FdpMotion, UsdAnimation, check_usd_path, peak_frames
+from .checks import check_out_dir, load_simulated_head, make_out_dir
 
 __all__ = ["MAX_FRAMES", "USD_NAME", "build_files", "build_head_files", "simulate_files"]
 
@@ -164,7 +164,7 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
     if not usd_out and not seconds * fps < MAX_FRAMES:  # a FrameRecorder keeps round(seconds * fps) + 1 frames
         raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
                          f"more than {MAX_FRAMES} per run")
-    fr, mjcf = _load_simulated_head(head_path, seconds, fps, jaw)
+    fr, mjcf = load_simulated_head(head_path, seconds, fps, jaw)
     sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps, solver=solver, material=material)
     driver = jaw_driver(sim, jaw, mjcf=mjcf)
     # the sinks: every frame kept (a folder) or only the FDPs' largest motion (a USD file alone)
@@ -204,22 +204,6 @@ def _check_simulate(expression, seconds, fps, name, jaw, material, substeps) -> 
         check_count("substeps", substeps, high=MAX_SUBSTEPS)
     check_steps(seconds, fps, substeps)
     return seconds, timeline, name, jaw
-
-
-def _load_simulated_head(head_path, seconds: float, fps: float, jaw: str):
-    """The face rig of a build (checked to fit in memory for ``seconds`` at ``fps``) and its
-    ``head.xml`` path (parsed when ``jaw`` is ``"mujoco"``)."""
-    fr = load_face_rig(head_path)
-    frames = round(seconds * fps) + 1  # kept in memory (a folder) or as USD time samples (a USD file)
-    check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), frames, len(fr.head_vertices)),
-                 f"seconds, fps: {frames} frames of a head of {len(fr.nodes)} nodes and {len(fr.tets)} tets")
-    mjcf = (Path(head_path) if Path(head_path).is_dir() else Path(head_path).parent) / "head.xml"
-    if jaw == "mujoco" and not mjcf.is_file():
-        raise InputError(f"{head_path}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, "
-                         "or simulate with the kinematic jaw)")
-    if jaw == "mujoco":
-        load_mjcf(mjcf)  # a broken head.xml fails before the simulator is made
-    return fr, mjcf
 
 
 def _write_frames(out: Path, frames, timeline: Timeline, seconds: float, fps: float, name: str,
