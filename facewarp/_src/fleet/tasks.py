@@ -135,6 +135,39 @@ def step_summary(step: str, rep: dict) -> dict:
                                      "steps_per_second", "device", "nodes", "tets")}
 
 
+def _kill_hook(names, step: str) -> None:
+    """The :data:`KILL_ENV` test hook: SIGKILL this worker when it runs ``step`` of one of ``names``."""
+    kill = os.environ.get(KILL_ENV, "")
+    if kill and any(kill == f"{n}:{step}" for n in names):
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def _worker() -> dict:
+    """The record's ``worker``: pid, host and peak resident memory of this process [MiB]."""
+    return {"pid": os.getpid(), "host": socket.gethostname(), "peak_rss_mib": _peak_rss_mib()}
+
+
+def _write_simulate_report(rep: dict, folder: Path, tmp: Path) -> dict:
+    """A simulate report's files named where the step's folder will be (``folder/simulate``), written as
+    ``tmp/report.json``; returns ``rep``."""
+    from ..core.fileio import write_json
+    from .manifest import plain
+
+    rep["files"] = [str(folder / "simulate" / Path(f).name) for f in rep.get("files", [])]
+    write_json(tmp / "report.json", plain(rep))
+    return rep
+
+
+def _promote(step: str, rep: dict, tmp: Path, final: Path, out: Path) -> dict:
+    """The finished step's staging folder ``tmp`` renamed to ``final`` (an older one replaced);
+    returns the record's ``status``, ``summary`` and ``outputs`` (files relative to ``out``)."""
+    if final.exists():
+        shutil.rmtree(final)
+    os.replace(tmp, final)
+    return {"status": "done", "summary": step_summary(step, rep),
+            "outputs": sorted(str(f.relative_to(out)) for f in final.rglob("*") if f.is_file())}
+
+
 def _run_job(task: dict, tmp: Path) -> dict:
     step, folder, p = task["step"], Path(task["folder"]), task["params"]
     device = task.get("device", "cpu")
@@ -148,15 +181,11 @@ def _run_job(task: dict, tmp: Path) -> dict:
 
         return build_files(folder / "adapt", tmp, layers=p.get("layers", 1), device=device)
     if step == "simulate":
-        from ..core.fileio import write_json
         from ..jobs.face import simulate_files
-        from .manifest import plain
 
         rep = simulate_files(folder / "build", p["expression"], tmp, seconds=p["seconds"], fps=p.get("fps", 30.0),
                              device=device, jaw=p.get("jaw", "mujoco"))
-        rep["files"] = [str(folder / step / Path(f).name) for f in rep.get("files", [])]
-        write_json(tmp / "report.json", plain(rep))
-        return rep
+        return _write_simulate_report(rep, folder, tmp)
     if step == "rig":
         from ..core.fileio import write_json
         from ..jobs.rig import rig_files
@@ -188,28 +217,21 @@ def run_step(task: dict) -> dict | list[dict]:
         return run_group(task)
     t0, c0 = time.perf_counter(), _cpu_seconds()
     step, folder, out = task["step"], Path(task["folder"]), Path(task["out"])
-    kill = os.environ.get(KILL_ENV, "")
-    if kill and kill == f"{task['name']}:{step}":
-        os.kill(os.getpid(), signal.SIGKILL)
+    _kill_hook([task["name"]], step)
     final, tmp = folder / step, folder / f".{step}.partial"
     record = {"status": "failed", "error": None, "outputs": [], "summary": {}, "device": task.get("device", "cpu")}
     try:
         if tmp.exists():
             shutil.rmtree(tmp)
         folder.mkdir(parents=True, exist_ok=True)
-        rep = _run_job(task, tmp)
-        if final.exists():
-            shutil.rmtree(final)
-        os.replace(tmp, final)
-        record.update(status="done", summary=step_summary(step, rep),
-                      outputs=sorted(str(f.relative_to(out)) for f in final.rglob("*") if f.is_file()))
+        record.update(_promote(step, _run_job(task, tmp), tmp, final, out))
     except Exception as e:  # the scan's error, recorded; the batch goes on
         record["error"] = _one_line(e)
         shutil.rmtree(tmp, ignore_errors=True)
     record["seconds"] = round(time.perf_counter() - t0, 3)
     c1 = _cpu_seconds()
     record["cpu_seconds"] = None if c0 is None or c1 is None else round(c1 - c0, 3)
-    record["worker"] = {"pid": os.getpid(), "host": socket.gethostname(), "peak_rss_mib": _peak_rss_mib()}
+    record["worker"] = _worker()
     return record
 
 
@@ -230,9 +252,7 @@ def run_group(task: dict) -> list[dict]:
     t0, c0 = time.perf_counter(), _cpu_seconds()
     members, out, p = task["group"], Path(task["out"]), task["params"]
     step = task["step"]
-    kill = os.environ.get(KILL_ENV, "")
-    if kill and any(kill == f"{m['name']}:{step}" for m in members):
-        os.kill(os.getpid(), signal.SIGKILL)
+    _kill_hook([m["name"] for m in members], step)
     folders = [Path(m["folder"]) for m in members]
     tmps = [f / f".{step}.partial" for f in folders]
     for f, tmp in zip(folders, tmps):
@@ -252,13 +272,10 @@ def run_group(task: dict) -> list[dict]:
         for r in records:
             r.update(batched_with=1, group_fallback=why)
         return records
-    from ..core.fileio import write_json
-    from .manifest import plain
-
     n = len(members)
     wall = time.perf_counter() - t0
     c1 = _cpu_seconds()
-    worker = {"pid": os.getpid(), "host": socket.gethostname(), "peak_rss_mib": _peak_rss_mib()}
+    worker = _worker()
     records = []
     for folder, tmp, rep in zip(folders, tmps, results):
         final = folder / step
@@ -266,13 +283,7 @@ def run_group(task: dict) -> list[dict]:
         try:
             if isinstance(rep, BaseException):
                 raise rep
-            rep["files"] = [str(final / Path(f).name) for f in rep.get("files", [])]
-            write_json(tmp / "report.json", plain(rep))
-            if final.exists():
-                shutil.rmtree(final)
-            os.replace(tmp, final)
-            record.update(status="done", summary=step_summary(step, rep),
-                          outputs=sorted(str(f.relative_to(out)) for f in final.rglob("*") if f.is_file()))
+            record.update(_promote(step, _write_simulate_report(rep, folder, tmp), tmp, final, out))
         except Exception as e:  # this scan's error; the group's other scans go on
             record["error"] = _one_line(e)
             shutil.rmtree(tmp, ignore_errors=True)

@@ -220,8 +220,8 @@ def simulate_group_files(heads, expression, outs, *, seconds: float = 2.0, fps: 
     from ..core.errors import SimulationError
     from ..sim.batch import FaceBatch
     from ..sim.play import FrameRecorder, PlayStats
-    from .checks import check_out_dir, load_simulated_head, make_out_dir
-    from .face import MAX_FRAMES, _check_simulate, _simulate_report, _write_frames
+    from .checks import check_kept_frames, check_out_dir, load_simulated_head, make_out_dir
+    from .face import _check_simulate, _simulate_report, _write_frames
 
     heads, outs = [Path(h) for h in heads], [Path(o) for o in outs]
     if not heads:
@@ -229,9 +229,7 @@ def simulate_group_files(heads, expression, outs, *, seconds: float = 2.0, fps: 
     if len(outs) != len(heads):
         raise InputError(f"outs: expected one output folder per head ({len(heads)}), got {len(outs)}")
     seconds, timeline, name, jaw = _check_simulate(expression, seconds, fps, None, jaw, "physical", None)
-    if not seconds * fps < MAX_FRAMES:
-        raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
-                         f"more than {MAX_FRAMES} per run")
+    check_kept_frames(seconds, fps)
     results: list = [None] * len(heads)
     loaded = {}
     for i, (h, o) in enumerate(zip(heads, outs)):  # a bad folder fails its head only
@@ -262,10 +260,8 @@ def simulate_group_files(heads, expression, outs, *, seconds: float = 2.0, fps: 
             continue
         sim = batch.heads[j]
         events = list(batch._mujoco[j].coupler.events) if batch._mujoco is not None else []
-        stats = PlayStats(frames=nf, seconds=seconds, wall_s=wall / len(live), simulation_wall_s=share,
-                          frames_per_second=(nf - 1) / share, steps_per_second=(nf - 1) * sim.substeps / share,
-                          realtime_factor=(nf - 1) / sim.fps / share, substeps=int(sim.substeps), dt_s=float(sim.dt),
-                          device=str(sim.device), jaw=jaw, frame_stats=sim.stats.as_dict(), mujoco_events=events)
+        stats = PlayStats.measured(sim, frames=nf, seconds=seconds, wall_s=wall / len(live), stepping_s=share,
+                                   jaw=jaw, mujoco_events=events)
         keep[j].finish(sim, stats)
         try:
             written, moved = _write_frames(outs[i], keep[j].frames, timeline, seconds, fps, name, device)

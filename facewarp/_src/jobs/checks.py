@@ -7,7 +7,11 @@ from pathlib import Path
 
 from ..core.errors import InputError
 
-__all__ = ["check_out_dir", "load_simulated_head", "make_out_dir"]
+__all__ = ["MAX_FRAMES", "check_kept_frames", "check_out_dir", "load_simulated_head", "make_out_dir"]
+
+MAX_FRAMES = 100_000
+"""Most frames one ``simulate`` run keeps in memory (about 1 h at 30 fps; a level-0 head takes
+about 60 kB a frame)."""
 
 
 def check_out_dir(out) -> Path:
@@ -36,6 +40,14 @@ def make_out_dir(out) -> Path:
     if not os.access(out, os.W_OK | os.X_OK):
         raise InputError(f"out {out}: the folder is not writable")
     return out
+
+
+def check_kept_frames(seconds: float, fps: float) -> None:
+    """A run whose frames are all kept in memory (a FrameRecorder keeps round(seconds * fps) + 1
+    frames) stays under :data:`MAX_FRAMES`."""
+    if not seconds * fps < MAX_FRAMES:
+        raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
+                         f"more than {MAX_FRAMES} per run")
 
 
 def load_simulated_head(head_path, seconds: float, fps: float, jaw: str):

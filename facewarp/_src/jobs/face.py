@@ -31,17 +31,12 @@ from ..sim.frames import save_frames_npz
 from ..sim.play import FrameRecorder, _play
 from ..sim.simulator import FaceSimulator
 from .animation import USD_SUFFIXES, FdpMotion, UsdAnimation, check_usd_path, peak_frames
-from .checks import check_out_dir, load_simulated_head, make_out_dir
+from .checks import MAX_FRAMES, check_kept_frames, check_out_dir, load_simulated_head, make_out_dir
 
 __all__ = ["MAX_FRAMES", "USD_NAME", "build_files", "build_head_files", "simulate_files"]
 
 USD_NAME = "animation.usdc"
 """The USD animation ``simulate --usd`` writes into its output folder."""
-
-MAX_FRAMES = 100_000
-"""Most frames one ``simulate`` run keeps in memory (about 1 h at 30 fps; a level-0 head takes
-about 60 kB a frame)."""
-
 
 def build_files(head_path, out, *, layers: int = 1, device: str = "cpu", progress=None, up: str = "z",
                 prefix: str = "") -> dict:
@@ -161,9 +156,8 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
     seconds, timeline, name, jaw = _check_simulate(expression, seconds, fps, name, jaw, material, substeps)
     usd_out = Path(out).suffix.lower() in USD_SUFFIXES
     out = check_usd_path(out) if usd_out else check_out_dir(out)
-    if not usd_out and not seconds * fps < MAX_FRAMES:  # a FrameRecorder keeps round(seconds * fps) + 1 frames
-        raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps is {seconds * fps:.3g} frames, "
-                         f"more than {MAX_FRAMES} per run")
+    if not usd_out:
+        check_kept_frames(seconds, fps)
     fr, mjcf = load_simulated_head(head_path, seconds, fps, jaw)
     sim = FaceSimulator(fr, device=device, substeps=substeps, fps=fps, solver=solver, material=material)
     driver = jaw_driver(sim, jaw, mjcf=mjcf)

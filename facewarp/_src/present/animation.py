@@ -18,7 +18,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.fileio import atomic_write
-from .looks import part_kind, refine_ball
+from .looks import drawn_part
 from .render import colormap, render_mesh, view_axes
 from .template import CAVITY, head_colors, part_colors
 
@@ -131,7 +131,7 @@ class FaceView:
         self.parts = {k: (np.asarray(V, np.float64), np.asarray(Fp, np.int64)) for k, (V, Fp) in (parts or {}).items()}
         # eyeballs are drawn refined (round iris and pupil); parts move rigidly, so a refined mesh
         # follows its part by the part's rigid motion
-        self._drawn = {k: refine_ball(V, Fp) if part_kind(k) == "eye" else (V, Fp) for k, (V, Fp) in self.parts.items()}
+        self._drawn = {k: drawn_part(k, V, Fp) for k, (V, Fp) in self.parts.items()}
         self.part_colors = {k: part_colors(k, Vd, landmarks=lm, iris_color=iris_color, ball=self.parts[k][0])
                             for k, (Vd, _) in self._drawn.items()}
         self.view, self.device, self.supersample = view, device, supersample

@@ -62,8 +62,13 @@ def color_difference(a, b, mask) -> dict:
     la, lb = srgb_to_lab(a)[mask], srgb_to_lab(b)[mask]
     de = np.linalg.norm(la - lb, axis=1)
     r = float(np.corrcoef(la[:, 0], lb[:, 0])[0, 1]) if len(de) > 2 and la[:, 0].std() > 0 and lb[:, 0].std() > 0 else 0.0
+    return _figures(de, r)
+
+
+def _figures(de: np.ndarray, r: float) -> dict:
+    """The figures of a comparison from its per-pixel Delta E (k,) and L* correlation ``r``."""
     return {"delta_e_mean": float(de.mean()), "delta_e_median": float(np.median(de)),
-            "delta_e_p95": float(np.percentile(de, 95)), "lightness_correlation": r, "pixels": int(mask.sum())}
+            "delta_e_p95": float(np.percentile(de, 95)), "lightness_correlation": r, "pixels": int(len(de))}
 
 
 def flat_color_difference(b, mask) -> dict:
@@ -82,10 +87,7 @@ def flat_color_difference(b, mask) -> dict:
     """
     lb = srgb_to_lab(b)[np.asarray(mask, bool)]
     c = lb.mean(axis=0)
-    de = np.linalg.norm(lb - c, axis=1)
-    return {"delta_e_mean": float(de.mean()), "delta_e_median": float(np.median(de)),
-            "delta_e_p95": float(np.percentile(de, 95)), "lightness_correlation": 0.0, "pixels": int(len(de)),
-            "lab": c.tolist()}
+    return {**_figures(np.linalg.norm(lb - c, axis=1), 0.0), "lab": c.tolist()}
 
 
 def likeness_views(head_V, head_F, texture, corner_uv, face_mask, scan_V, scan_F, *, scan_colors=None,

@@ -29,8 +29,9 @@ import numpy as np
 
 from ..core.errors import InputError
 
-__all__ = ["COLORS", "IRIS_DIAMETER", "LIP_DEPTH", "PUPIL_DIAMETER", "eye_angles", "eye_looks", "gaze_axis",
-           "head_camera", "head_looks", "iris_rgb", "lip_faces", "part_kind", "part_looks", "part_vertex_colors",
+__all__ = ["COLORS", "IRIS_DIAMETER", "LIP_DEPTH", "PUPIL_DIAMETER", "drawn_part", "eye_angles", "eye_looks",
+           "gaze_axis", "head_camera", "head_looks", "iris_rgb", "lip_faces", "part_kind", "part_looks",
+           "part_vertex_colors",
            "refine_ball", "rest_fdps"]
 
 COLORS = {
@@ -140,6 +141,18 @@ def eye_angles(radius: float) -> tuple[float, float]:
     return (math.asin(min(1.0, 0.5 * PUPIL_DIAMETER / r)), math.asin(min(1.0, 0.5 * IRIS_DIAMETER / r)))
 
 
+def _gaze_angles(P: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Angles [rad] between the gaze axis ``a`` (3,) and the directions from the centre ``c`` (3,)
+    to the points ``P`` (k, 3) [m], shape (k,)."""
+    D = P - c
+    return np.arccos(np.clip(D @ a / np.maximum(np.linalg.norm(D, axis=1), 1e-30), -1.0, 1.0))
+
+
+def _part_rgb(kind: str) -> tuple:
+    """A part's own colour by :func:`part_kind`: sclera for an eyeball, the tongue's, else the teeth's (ivory)."""
+    return COLORS["sclera" if kind == "eye" else "tongue" if kind == "tongue" else "teeth"]
+
+
 def _axis_faces(V: np.ndarray, F: np.ndarray, c: np.ndarray, a: np.ndarray) -> np.ndarray:
     """Faces F (m, 3) of V (k, 3) that the ray from c along a passes through (edges and corners
     included), shape (m,) bool."""
@@ -175,8 +188,7 @@ def eye_looks(V, F, fdps: dict | None = None, *, iris_color=None) -> dict:
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
     c, a, R = gaze_axis(V, fdps)
     pupil_half, iris_half = eye_angles(R)
-    D = V[F].mean(1) - c
-    ang = np.arccos(np.clip(D @ a / np.maximum(np.linalg.norm(D, axis=1), 1e-30), -1.0, 1.0))
+    ang = _gaze_angles(V[F].mean(1), c, a)
     pupil = (ang <= pupil_half) | _axis_faces(V, F, c, a)
     iris = ~pupil & (ang <= iris_half)
     return {"Sclera": (np.flatnonzero(~pupil & ~iris), COLORS["sclera"]),
@@ -196,9 +208,7 @@ def part_looks(name: str, V, F, fdps: dict | None = None, *, iris_color=None) ->
         groups of :func:`eye_looks`; teeth (and any other part) ivory, the tongue red-pink, no groups.
     """
     kind = part_kind(name)
-    if kind == "eye":
-        return COLORS["sclera"], eye_looks(V, F, fdps, iris_color=iris_color)
-    return COLORS["tongue" if kind == "tongue" else "teeth"], {}
+    return _part_rgb(kind), (eye_looks(V, F, fdps, iris_color=iris_color) if kind == "eye" else {})
 
 
 def part_vertex_colors(name: str, V, fdps: dict | None = None, *, iris_color=None, ball=None) -> np.ndarray:
@@ -216,14 +226,13 @@ def part_vertex_colors(name: str, V, fdps: dict | None = None, *, iris_color=Non
     """
     V = np.asarray(V, np.float64)
     kind = part_kind(name)
+    out = np.tile(np.asarray(_part_rgb(kind)), (len(V), 1))
     if kind != "eye":
-        return np.tile(np.asarray(COLORS["tongue" if kind == "tongue" else "teeth"]), (len(V), 1))
+        return out
     c, a, R = gaze_axis(V if ball is None else ball, fdps)
     pupil_half, iris_half = eye_angles(R)
-    D = V - c
-    ang = np.arccos(np.clip(D @ a / np.maximum(np.linalg.norm(D, axis=1), 1e-30), -1.0, 1.0))
+    ang = _gaze_angles(V, c, a)
     pupil = (ang <= pupil_half) | (ang <= ang.min())
-    out = np.tile(np.asarray(COLORS["sclera"]), (len(V), 1))
     out[~pupil & (ang <= iris_half)] = iris_rgb(iris_color)
     out[pupil] = COLORS["pupil"]
     return out
@@ -278,6 +287,14 @@ def refine_ball(V: np.ndarray, F: np.ndarray, levels: int = 2) -> tuple[np.ndarr
         V = np.concatenate([V, mid])
         F = np.concatenate([np.stack([F[:, 0], e[:, 0], e[:, 2]], 1), np.stack([F[:, 1], e[:, 1], e[:, 0]], 1),
                             np.stack([F[:, 2], e[:, 2], e[:, 1]], 1), e])
+    return V, F
+
+
+def drawn_part(name: str, V, F) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh a renderer draws for a rigid part: an eyeball :func:`refine_ball`-ed (a round iris),
+    any other part as it is. V (k, 3) [m], F (l, 3) int -> (V', F')."""
+    if part_kind(name) == "eye":
+        return refine_ball(np.asarray(V, np.float64), np.asarray(F))
     return V, F
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..template.head import REGIONS, Template
-from .looks import COLORS, part_kind, part_vertex_colors, refine_ball
+from .looks import COLORS, drawn_part, part_vertex_colors
 from .render import render_mesh, save_png
 
 __all__ = ["CAVITY", "LIPS", "MOUTH", "SKIN", "TEETH", "TONGUE", "colored_scene", "head_colors", "part_colors",
@@ -96,7 +96,7 @@ def colored_scene(t: Template) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     off = t.vertex_count
     lm = t.landmarks()
     for name, (V0, F0) in t.parts.items():
-        V, F = refine_ball(np.asarray(V0, np.float64), np.asarray(F0)) if part_kind(name) == "eye" else (V0, F0)
+        V, F = drawn_part(name, V0, F0)
         Cs.append(part_colors(name, V, landmarks=lm, ball=V0))
         Vs.append(V)
         Fs.append(F + off)

@@ -66,6 +66,17 @@ class PlayStats:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    @classmethod
+    def measured(cls, sim, *, frames: int, seconds: float, wall_s: float, stepping_s: float, jaw: str,
+                 mujoco_events=()) -> PlayStats:
+        """The figures of ``frames`` played (frame 0 the rest, ``frames - 1`` stepped) on the
+        :class:`~facewarp.FaceSimulator` ``sim``: ``stepping_s`` [s] of stepping (> 0) in ``wall_s`` [s]."""
+        n = frames - 1
+        return cls(frames=frames, seconds=seconds, wall_s=wall_s, simulation_wall_s=stepping_s,
+                   frames_per_second=n / stepping_s, steps_per_second=n * sim.substeps / stepping_s,
+                   realtime_factor=n / sim.fps / stepping_s, substeps=int(sim.substeps), dt_s=float(sim.dt),
+                   device=str(sim.device), jaw=jaw, frame_stats=sim.stats.as_dict(), mujoco_events=list(mujoco_events))
+
 
 class Sink:
     """Receives the frames of :func:`play`. Override :meth:`frame`; :meth:`start` and
@@ -208,12 +219,9 @@ def _play(sim, timeline: Timeline, seconds: float, sinks: list, jaw, progress) -
             progress(k, nf)
     wall = time.perf_counter() - t0
     stepping = max(stepping, 1e-9)
-    stats = PlayStats(frames=nf, seconds=seconds, wall_s=wall, simulation_wall_s=stepping,
-                      frames_per_second=(nf - 1) / stepping, steps_per_second=(nf - 1) * sim.substeps / stepping,
-                      realtime_factor=(nf - 1) / sim.fps / stepping, substeps=int(sim.substeps), dt_s=float(sim.dt),
-                      device=str(sim.device), jaw=str(getattr(jaw, "name", type(jaw).__name__)),
-                      frame_stats=sim.stats.as_dict(),
-                      mujoco_events=list(getattr(getattr(jaw, "coupler", None), "events", ())))
+    stats = PlayStats.measured(sim, frames=nf, seconds=seconds, wall_s=wall, stepping_s=stepping,
+                               jaw=str(getattr(jaw, "name", type(jaw).__name__)),
+                               mujoco_events=getattr(getattr(jaw, "coupler", None), "events", ()))
     for s in sinks:
         s.finish(sim, stats)
     return stats
