@@ -1,4 +1,5 @@
-"""Shared by the batch benchmarks (batch, batch_profile): the heads of a batch and Newton VBD's replicate."""
+"""Shared by the batch benchmarks (batch, batch_profile): the heads of a batch, its planned controls and timed
+frames, and Newton VBD's replicate."""
 
 from __future__ import annotations
 
@@ -85,3 +86,40 @@ def newton_replicated(problem: dict, n: int, device: str, frames: int, substeps:
                 "note": "tissue only (the peer problem's dead load in place of the muscles, no jaw, no contact)"}
     except Exception as e:
         return {"error": f"{type(e).__name__}: {e}"}
+
+def plan(batch, timelines, frames: int) -> list:
+    """The controls of frames 0 .. frames: per frame the activations (N, M) float32 and jaw angles (N, 2)
+    [rad] of every head (the timelines sampled once, before any timing). ``batch``: a FaceBatch of either
+    backend (its heads' activation vectors)."""
+    fps = batch.fps
+    vec = ((lambda i, e: batch.heads[i].activation_vector(e)) if batch.backend == "heads"
+           else batch.activation_vector)
+    out = [None]
+    for k in range(1, frames + 1):
+        es = [tl.sample(k / fps) for tl in timelines]
+        A = np.stack([vec(i, e) for i, e in enumerate(es)])
+        J = np.array([[e.jaw_u, e.jaw_v] for e in es])
+        out.append((A, J))
+    return out
+
+
+def drive(batch_or_heads, controls: list, frames: int, start: int, *, naive: bool = False) -> float:
+    """Frames ``start .. start + frames - 1`` of the planned controls (:func:`plan`); returns the wall
+    seconds (synchronised)."""
+    import warp as wp
+
+    heads = batch_or_heads if naive else None  # the model backend has no per-head simulators
+    t0 = time.perf_counter()
+    for k in range(start, start + frames):
+        A, J = controls[k]
+        if naive:
+            for i, h in enumerate(heads):
+                h.set_activations(A[i])
+                h.set_jaw(J[i, 0], J[i, 1])
+                h.step()
+        else:
+            batch_or_heads.set_activations(A)
+            batch_or_heads.set_jaw(J)
+            batch_or_heads.step()
+    wp.synchronize()
+    return time.perf_counter() - t0

@@ -35,7 +35,7 @@ import traceback
 
 import numpy as np
 
-from benchmarks._batch_heads import make_rigs, newton_replicated
+from benchmarks._batch_heads import drive, make_rigs, newton_replicated, plan
 from benchmarks._common import RESULTS, save
 
 THREADS = 1
@@ -51,44 +51,6 @@ def mem_used(device: str) -> int | None:
         return int(wp.get_mempool_used_mem_current(device))
     except Exception:
         return None
-
-
-def plan(batch, timelines, frames: int) -> list:
-    """The controls of frames 0 .. frames: per frame the activations (N, M) float32 and jaw angles (N, 2)
-    [rad] of every head (the timelines sampled once, before any timing). ``batch``: a FaceBatch of either
-    backend (its heads' activation vectors)."""
-    fps = batch.fps
-    vec = ((lambda i, e: batch.heads[i].activation_vector(e)) if batch.backend == "heads"
-           else batch.activation_vector)
-    out = [None]
-    for k in range(1, frames + 1):
-        es = [tl.sample(k / fps) for tl in timelines]
-        A = np.stack([vec(i, e) for i, e in enumerate(es)])
-        J = np.array([[e.jaw_u, e.jaw_v] for e in es])
-        out.append((A, J))
-    return out
-
-
-def drive(batch_or_heads, controls: list, frames: int, start: int, *, naive: bool = False) -> float:
-    """Frames ``start .. start + frames - 1`` of the planned controls (:func:`plan`); returns the wall
-    seconds (synchronised)."""
-    import warp as wp
-
-    heads = batch_or_heads if naive else None  # the model backend has no per-head simulators
-    t0 = time.perf_counter()
-    for k in range(start, start + frames):
-        A, J = controls[k]
-        if naive:
-            for i, h in enumerate(heads):
-                h.set_activations(A[i])
-                h.set_jaw(J[i, 0], J[i, 1])
-                h.step()
-        else:
-            batch_or_heads.set_activations(A)
-            batch_or_heads.set_jaw(J)
-            batch_or_heads.step()
-    wp.synchronize()
-    return time.perf_counter() - t0
 
 
 def facewarp_replicated(problem: dict, n: int, device: str, frames: int) -> dict:

@@ -28,8 +28,7 @@ import re
 import time
 import traceback
 
-import numpy as np
-
+from benchmarks._batch_heads import drive, make_rigs, newton_replicated, plan
 from benchmarks._common import save
 
 THREADS = 1
@@ -65,34 +64,6 @@ def kernel_name(r) -> str:
     return re.sub(r"_[0-9a-f]{7,}$", "", name)
 
 
-def controls_for(batch, preset: str, frames: int) -> list:
-    """(activations (N, M) float32, jaw (N, 2) [rad]) of frames 1 .. frames, sampled once before any timing."""
-    import facewarp as fw
-
-    tl = fw.timeline_for(preset, attack=0.3, hold=10.0, release=0.3, start=0.0)
-    tls = [tl.for_head(fr) for fr in batch.rigs]
-    out = [None]
-    for k in range(1, frames + 1):
-        es = [t.sample(k / batch.fps) for t in tls]
-        out.append((np.stack([batch.activation_vector(i, e) for i, e in enumerate(es)]),
-                    np.array([[e.jaw_u, e.jaw_v] for e in es])))
-    return out
-
-
-def play(batch, controls, first: int, count: int) -> float:
-    """Frames ``first .. first + count - 1``; wall seconds, synchronised."""
-    import warp as wp
-
-    wp.synchronize()
-    t0 = time.perf_counter()
-    for k in range(first, first + count):
-        A, J = controls[k]
-        batch.set_activations(A)
-        batch.set_jaw(J)
-        batch.step()
-    wp.synchronize()
-    return time.perf_counter() - t0
-
 
 def newton_iterations(batch) -> int | None:
     try:
@@ -113,11 +84,12 @@ def profile_size(n: int, rigs: list, args) -> dict:
     row["linear_iterations"] = getattr(batch.solver, "linear_iterations", None)
     row["nodes"], row["tets"] = int(batch.model.vertex_count), int(batch.model.tet_count)
     frames, pf = args.frames, args.profile_frames
-    controls = controls_for(batch, args.preset, 2 + max(frames, pf))
+    tl = fw.timeline_for(args.preset, attack=0.3, hold=10.0, release=0.3, start=0.0)
+    controls = plan(batch, [tl.for_head(fr) for fr in batch.rigs], 2 + max(frames, pf))
     # production: graphs on
-    play(batch, controls, 1, 2)  # compile and capture
+    drive(batch, controls, 2, 1)  # compile and capture
     i0 = newton_iterations(batch)
-    sec = play(batch, controls, 3, frames)
+    sec = drive(batch, controls, frames, 3)
     i1 = newton_iterations(batch)
     row["ms_per_frame"] = sec / frames * 1e3
     row["head_frames_per_second"] = n * frames / sec
@@ -133,10 +105,10 @@ def profile_size(n: int, rigs: list, args) -> dict:
         graphs = batch.stepper.use_graph
         batch.stepper.use_graph = False
         try:
-            play(batch, controls, 1, 2)
+            drive(batch, controls, 2, 1)
             wp.timing_begin(cuda_filter=wp.TIMING_ALL, synchronize=True)
             t0 = time.perf_counter()
-            play(batch, controls, 3, pf)
+            drive(batch, controls, pf, 3)
             wall = time.perf_counter() - t0
             records = wp.timing_end(synchronize=True)
         finally:
@@ -188,7 +160,6 @@ def main(argv=None) -> int:
     ap.add_argument("--level", type=int, default=0)
     ap.add_argument("--name", default=None, help="result name (default batch_profile_<device>)")
     args = ap.parse_args(argv)
-    from benchmarks._batch_heads import make_rigs, newton_replicated
 
     cuda = args.device.startswith("cuda")
     sizes = [int(s) for s in (args.sizes or ("1,100,300" if cuda else "1,2")).split(",") if s.strip()]
