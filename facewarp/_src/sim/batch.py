@@ -130,16 +130,17 @@ def _poses(name: str, R, t, n: int) -> tuple[np.ndarray, np.ndarray]:
     return R.copy(), t.copy()
 
 
-def activation_rows(activations, names: list) -> list:
+def activation_rows(activations, names: list, same_m: int | None) -> list:
     """Every head's activations checked: ``activations`` an array (N, M) in [0, 1] (heads of one
-    muscle count: checked at once, no per-head host work) or a list of N entries, each what
-    :meth:`~facewarp.FaceSimulator.set_activations` takes; ``names`` the N heads' muscle names.
+    muscle count ``same_m``: checked at once, no per-head host work) or a list of N entries, each
+    what :meth:`~facewarp.FaceSimulator.set_activations` takes; ``names`` the N heads' muscle names,
+    ``same_m`` their one muscle count (None: the counts differ; :func:`muscle_count`).
     Returns N float32 vectors (M_i,). Raises :class:`InputError` naming the head and the muscle."""
     n = len(names)
     if isinstance(activations, np.ndarray):
         if activations.ndim != 2 or activations.shape[0] != n:
             raise InputError(f"activations: expected shape ({n}, M), got {activations.shape}")
-        if {len(m) for m in names} == {activations.shape[1]}:
+        if same_m is not None and activations.shape[1] == same_m:
             a = np.asarray(activations, np.float64)
             bad = np.argwhere(~np.isfinite(a) | (a < 0.0) | (a > 1.0))
             if len(bad):
@@ -160,6 +161,12 @@ def activation_rows(activations, names: list) -> list:
         except InputError as e:
             raise InputError(f"activations of head {i}: {e}") from None
     return targets
+
+
+def muscle_count(names: list) -> int | None:
+    """The one muscle count of heads with these muscle names, or None when the counts differ."""
+    ms = {len(m) for m in names}
+    return ms.pop() if len(ms) == 1 else None
 
 
 class FaceBatch:
@@ -256,6 +263,8 @@ class FaceBatch:
         self._graphs: dict[tuple, list] = {}
         self._use_graph = all(h.stepper.use_graph for h in self.heads)
         self._host_keys = [[k for k in _SOLVER_HOST_STATE if hasattr(h.solver, k)] for h in self.heads]
+        self._names = [h.fr.rig.names for h in self.heads]
+        self._same_m = muscle_count(self._names)  # one muscle count: (N, M) activations checked at once
         self._stream_pool: list = []
         self.streams = streams
         self.step_seconds = 0.0
@@ -324,7 +333,7 @@ class FaceBatch:
                 entries, each what :meth:`~facewarp.FaceSimulator.set_activations` takes (a dict
                 name -> value, an :class:`~facewarp.Expression`, an (M,) array).
         """
-        for h, a in zip(self.heads, activation_rows(activations, [h.fr.rig.names for h in self.heads])):
+        for h, a in zip(self.heads, activation_rows(activations, self._names, self._same_m)):
             h._target_a = a
 
     def set_jaw(self, angles) -> None:

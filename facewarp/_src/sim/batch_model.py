@@ -44,7 +44,7 @@ from ..core.checks import check_array, check_choice, check_int, check_simulator_
 from ..core.errors import InputError, SimulationError
 from ..core.warp import get_warp
 from ..physics.volume_barrier import VOLUME_FLOOR
-from .batch import _SIM_KEYS, FaceBatch, _poses, _rig_list, activation_rows
+from .batch import _SIM_KEYS, FaceBatch, _poses, _rig_list, activation_rows, muscle_count
 from .readout import activation_vector, fdp_points, head_surface, jaw_vector, parts_at, surface_index
 from .rollback import MAX_REFINEMENT, FrameGuard, FrameStats
 from .simulator import FaceSimulator
@@ -132,6 +132,8 @@ class FaceBatchModel(FaceBatch):
         self.max_refinement = MAX_REFINEMENT
         self.build_seconds = time.perf_counter() - t0
         self.rigs = rigs
+        self._names = [fr.rig.names for fr in rigs]
+        self._same_m = muscle_count(self._names)  # one muscle count: (N, M) activations checked at once
         self.count = n
         self.fps = float(fps)
         self._streams = int(streams)
@@ -168,7 +170,7 @@ class FaceBatchModel(FaceBatch):
 
     def set_activations(self, activations) -> None:
         """As :meth:`FaceBatch.set_activations <facewarp.FaceBatch.set_activations>`: (N, M) or a list of N entries."""
-        self._target_a = activation_rows(activations, [fr.rig.names for fr in self.rigs])
+        self._target_a = activation_rows(activations, self._names, self._same_m)
 
     def set_jaw(self, angles) -> None:
         """As :meth:`FaceBatch.set_jaw <facewarp.FaceBatch.set_jaw>`: (N, 2) or (N,) openings [rad]."""
