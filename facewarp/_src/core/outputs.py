@@ -39,7 +39,7 @@ from pathlib import Path
 from .errors import InputError
 
 __all__ = ["Interrupted", "Staging", "interrupted_by", "raise_if_interrupted", "signals_as_exceptions",
-           "staged_outputs"]
+           "signals_deferred", "staged_outputs"]
 
 PARTIAL_TAG = ".facewarp-partial-"
 """Staged outputs are hidden siblings ``.NAME`` + this + the process id."""
@@ -104,9 +104,10 @@ def signals_as_exceptions() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """SIGINT / SIGTERM held back while the body runs (the commit's renames); they are
-    delivered afterwards (and by then the output is whole)."""
+def signals_deferred() -> Iterator[None]:
+    """SIGINT / SIGTERM held back while the body runs (the commit's renames; a native library's
+    import, whose loader would catch the interrupt and print its own traceback); they are delivered
+    afterwards (and by then the output is whole, or the library loaded)."""
     sigs = {signal.SIGINT, signal.SIGTERM}
     try:
         old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
@@ -191,7 +192,7 @@ class Staging:
     def commit(self) -> None:
         """Move every staged output into place (signals held back meanwhile)."""
         self._rewrite_texts()
-        with _signals_deferred():
+        with signals_deferred():
             for t in self.targets:
                 if not t.stage_root.exists():  # the job wrote nothing there (an optional output)
                     continue

@@ -23,7 +23,8 @@ from ..coupling.drivers import JAWS, jaw_driver, load_mjcf
 from ..expressions import Timeline
 from ..sim.play import Sink, play
 
-__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "FdpMotion", "UsdAnimation", "check_usd_path", "load_mjcf", "part_points",
+__all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "FdpMotion", "UsdAnimation", "check_usd_path", "load_mjcf",
+           "load_usd_export", "part_points",
            "part_transforms", "peak_frames", "play_timeline", "sim_controls"]
 
 USD_SUFFIXES = (".usda", ".usdc", ".usdz")
@@ -107,6 +108,18 @@ def muscle_curves(sim, samples: int = MUSCLE_SAMPLES) -> np.ndarray:
     return sim.muscle_curves(samples)
 
 
+def load_usd_export():
+    """The ``usd_export`` package, imported with SIGINT / SIGTERM held back: USD's loader runs
+    Python while it loads its libraries, and an interrupt raised there is caught and printed by
+    USD (a traceback on stderr) instead of stopping the run; held back, it stops the run right
+    after the import (:func:`~facewarp._src.core.outputs.signals_deferred`)."""
+    from ..core.outputs import signals_deferred
+
+    with signals_deferred():
+        import usd_export
+    return usd_export
+
+
 class UsdAnimation(Sink):
     """Stream a simulator's frames into a USD file (see the module docstring).
 
@@ -134,7 +147,8 @@ class UsdAnimation(Sink):
     """
 
     def __init__(self, path, sim, *, muscle_samples: int = MUSCLE_SAMPLES, tets: bool = False, iris_color=None):
-        from usd_export import AnimationWriter, UsdExportError
+        ue = load_usd_export()
+        AnimationWriter, UsdExportError = ue.AnimationWriter, ue.UsdExportError
 
         from ..present.looks import head_camera, head_looks
 

@@ -164,7 +164,9 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     stepping = max(stepping, 1e-9)
     files = [str(out / n) for n in names]
     if stage is not None:  # the heads side by side along x, a head's width and a third apart
-        from usd_export import write_crowd_stage
+        from .animation import load_usd_export
+
+        write_crowd_stage = load_usd_export().write_crowd_stage
 
         width = max(float(np.ptp(fr.head_vertices[:, 0])) for fr in rigs) * 1.3
         placed = []

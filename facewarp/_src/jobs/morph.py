@@ -167,7 +167,10 @@ def morph_files(head_a, head_b, out, *, steps: int = 8, fps: float = 30.0, build
     Raises:
         InputError: a missing head, heads of different topology, a bad path or number.
     """
-    from usd_export import AnimationWriter, UsdExportError
+    from .animation import load_usd_export
+
+    ue = load_usd_export()
+    AnimationWriter, UsdExportError = ue.AnimationWriter, ue.UsdExportError
 
     step = progress or (lambda msg: None)
     if not (isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and 1 <= steps <= MAX_STEPS):

@@ -101,7 +101,10 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
 
 
 def _write_usd(out, rig, frames, looks, camera) -> None:
-    from usd_export import UsdExportError, write_skel_rig
+    from .animation import load_usd_export
+
+    ue = load_usd_export()
+    UsdExportError, write_skel_rig = ue.UsdExportError, ue.write_skel_rig
 
     shapes = [(name, rig.shapes[name][-1][1], [(f, D) for f, D in rig.shapes[name][:-1]]) for name in rig.names]
     times = np.array([f[0] for f in frames])
