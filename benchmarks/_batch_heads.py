@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from benchmarks._common import case_face
+from benchmarks._common import case_face, head_tag
 
 
 def scaled_head(level: int = 0, scale=(1.06, 0.95, 1.03)):
@@ -27,7 +27,7 @@ def make_rigs(specs: list[str], level: int) -> tuple[list, list[str], list[str]]
     for spec in specs:
         try:
             fr = scaled_head(level) if spec == "scaled" else case_face(spec, level)
-            names.append(spec)
+            names.append(spec if spec in ("scaled", "default") else head_tag(spec))  # a build folder: its head's name
         except Exception as e:  # no ICT data, or the adaptation failed here: a stand-in identity
             notes.append(f"{spec}: not available ({type(e).__name__}: {e}); the scaled default head instead")
             fr, spec = scaled_head(level), "scaled"

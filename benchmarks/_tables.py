@@ -591,7 +591,8 @@ def batch_scaling(r: Results) -> str:
             continue
         doc = r.doc(name)
         fig = doc["figures"]
-        dev = f"{doc['device']} ({fig.get('backend', 'heads')})"  # FaceBatch's backend: a Model per head, or one
+        # FaceBatch's backend (a Model per head, or one) and the heads' level
+        dev = f"{doc['device']} ({fig.get('backend', 'heads')}, L{fig.get('level', 0)})"
         for row in fig.get("rows", []):
             if "head_frames_per_second" not in row:
                 part = row.get("partial_ms_per_frame_by_streams") or {}
@@ -614,7 +615,7 @@ def batch_scaling(r: Results) -> str:
                          f"{mem:.1f}" if mem is not None else "-"])
     if not rows:
         return "(no batch result committed yet: python -m benchmarks batch)"
-    return _rows_md(["device (backend)", "N", "ms / frame", "head-frames / s", "streams", "naive loop", "batch / naive",
+    return _rows_md(["device (backend, level)", "N", "ms / frame", "head-frames / s", "streams", "naive loop", "batch / naive",
                      "one Model, tissue only", "Newton VBD", "GPU MB / head"], rows)
 
 

@@ -1,7 +1,7 @@
 """Inverse solve (issue 24): random performances simulated, their points fed back to fw.drive, the face recovered.
 
     python -m benchmarks drive [--seconds 4] [--heads default identity001 ...] [--seed S] [--name drive_cpu]
-                               [--robust-only] [--budget-s B]
+                               [--robust-only] [--budget-s B] [--device cpu|cuda] [--modes offline,realtime]
 
 Each head plays a new random performance (a new seed every run unless ``--seed``, recorded): every
 muscle switched on with probability 0.4, its activation a smooth curve (piecewise cubic through
@@ -29,7 +29,9 @@ whole skin per frame). Its points are fed back to :func:`facewarp.drive`:
 Heads: ``default`` (the built-in head at level 0) and, when named, adapted ICT-FaceKit identities
 (``identityNNN``, :func:`benchmarks._common.case_face`). On the shared 2-core box the takes are
 short (``--seconds``, default 4 s at 30 fps rather than the issue's 10 s); the result says so.
-Writes benchmarks/results/<name>.json (default ``drive_cpu``).
+``--device cuda`` runs every simulator (ground truth and solves) on the GPU; ``--modes`` picks the
+solve modes of the all84 / tracker30 cases (default both; the robust case is offline).
+Writes benchmarks/results/<name>.json (default ``drive_<device>``).
 """
 
 from __future__ import annotations
@@ -42,6 +44,8 @@ import time
 import numpy as np
 
 from benchmarks._common import case_face, save
+
+DEVICE = "cpu"  # every simulator's device (``--device``)
 
 TRACKER_30 = ("4.1", "4.2", "4.3", "4.4", "4.5", "4.6",  # brows
               "3.1", "3.2", "3.3", "3.4", "3.7", "3.8", "3.11", "3.12",  # eye lids and corners
@@ -77,7 +81,7 @@ def random_performance(rng, frames: int, fps: float, muscles: int):
 
 def ground_truth(fw, rig, A, J, fps: float):
     """The performance simulated: FDPs (T, 84, 3) and skin (T, n, 3) [m], and the stepping rate [frames/s]."""
-    sim = fw.FaceSimulator(rig, fps=fps)
+    sim = fw.FaceSimulator(rig, fps=fps, device=DEVICE)
     P, S = [], []
     t0 = time.perf_counter()
     for a, j in zip(A, J):
@@ -135,7 +139,7 @@ def worst_jumps(Q: np.ndarray, P: np.ndarray, T: np.ndarray, names: list, count:
 
 
 def drive_case(fw, rig, targets, names, P, S, *, fps: float, mode: str, worst: bool = False, **options) -> dict:
-    sim = fw.FaceSimulator(rig, fps=fps, iterations=1 if mode == "realtime" else None)
+    sim = fw.FaceSimulator(rig, fps=fps, iterations=1 if mode == "realtime" else None, device=DEVICE)
     rec = fw.FrameRecorder()
     track = fw.MarkerTrack(fps, list(names), targets, "benchmark")
     try:
@@ -170,7 +174,8 @@ def robust_cases(fw, rig, rng, P, S, ids, fps, row) -> None:
         print(row["head"], name, {k: v for k, v in r.items() if k != "stats"}, flush=True)
 
 
-def run_head(head: str, seconds: float, fps: float, rng, robust_only: bool = False) -> dict:
+def run_head(head: str, seconds: float, fps: float, rng, robust_only: bool = False,
+             modes=("offline", "realtime")) -> dict:
     import facewarp as fw
 
     t0 = time.perf_counter()
@@ -189,12 +194,12 @@ def run_head(head: str, seconds: float, fps: float, rng, robust_only: bool = Fal
         row["wall_s"] = time.perf_counter() - t0
         return row
     for points, sel in (("all84", list(range(len(ids)))), ("tracker30", idx30)):
-        for mode in ("offline", "realtime"):
+        for mode in modes:
             r = drive_case(fw, rig, P[:, sel], [ids[i] for i in sel], P, S, fps=fps, mode=mode)
             row["cases"][f"{points}_{mode}"] = r
             print(head, points, mode, {k: v for k, v in r.items() if k != "stats"}, flush=True)
     # the floor of the real-time mode: the one-iteration simulator driven by the true controls
-    sim = fw.FaceSimulator(rig, fps=fps, iterations=1)
+    sim = fw.FaceSimulator(rig, fps=fps, iterations=1, device=DEVICE)
     Q = []
     for a, j in zip(A, J):
         sim.set_activations(a)
@@ -216,10 +221,18 @@ def main(argv=None) -> dict:
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--heads", nargs="+", default=["default"], help="default and/or identityNNN")
     ap.add_argument("--seed", type=int, help="default: a new seed every run (recorded)")
-    ap.add_argument("--name", default="drive_cpu", help="result name")
+    ap.add_argument("--name", default=None, help="result name (default drive_<device>)")
+    ap.add_argument("--device", default="cpu", help="cpu or cuda: every simulator's device")
+    ap.add_argument("--modes", default="offline,realtime", help="solve modes of the all84 / tracker30 cases")
     ap.add_argument("--robust-only", action="store_true", help="only the robust case (and its ground truth)")
     ap.add_argument("--budget-s", type=float, help="start no new head after this many seconds")
     args = ap.parse_args(argv)
+    global DEVICE
+    DEVICE = args.device
+    modes = tuple(m.strip() for m in args.modes.split(",") if m.strip())
+    if not modes or set(modes) - {"offline", "realtime"}:
+        ap.error(f"--modes: expected offline and/or realtime, got {args.modes!r}")
+    name = args.name or f"drive_{'cuda' if args.device.startswith('cuda') else 'cpu'}"
     seed = args.seed if args.seed is not None else secrets.randbits(32)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
@@ -229,7 +242,7 @@ def main(argv=None) -> dict:
         if args.budget_s is not None and time.perf_counter() - t0 > args.budget_s:
             complete = False
             break
-        rows.append(run_head(head, args.seconds, args.fps, rng, args.robust_only))
+        rows.append(run_head(head, args.seconds, args.fps, rng, args.robust_only, modes))
     cases = [c for r in rows for c in r["cases"].values() if not c.get("failed")]
     figures = {
         "load_average_at_start": load0,
@@ -237,7 +250,7 @@ def main(argv=None) -> dict:
         "seed": seed, "complete": complete, "wall_s": time.perf_counter() - t0,
         "note": (f"takes of {args.seconds:g} s at {args.fps:g} fps"
                  + (" (the issue's 10 s shortened to fit the shared box)" if args.seconds < 10 else "")
-                 + f"; level 0, heads {', '.join(args.heads)}; {args.device if hasattr(args, 'device') else 'cpu'}; "
+                 + f"; level 0, heads {', '.join(args.heads)}; {args.device}; "
                  "speeds are lower bounds where other jobs ran beside (the load averages above); " +
                  ("only the robust case (corrupted all-84 targets, offline)" if args.robust_only else
                   "the same random performance fed as 84 FDPs and as the 30 a tracker gives")),
@@ -247,7 +260,7 @@ def main(argv=None) -> dict:
         "worst_fdp_rms_mm": max((c["fdp_rms_mm_max"] for c in cases), default=None),
         "heads": rows,
     }
-    print("wrote", save(args.name, figures, device="cpu", benchmark="drive"))
+    print("wrote", save(name, figures, device=args.device, benchmark="drive"))
     return figures
 
 
