@@ -31,6 +31,7 @@ from ._src.present.anatomy import (  # noqa: F401
 )
 from ._src.present.template import (  # noqa: F401
     CAVITY,
+    GUMS,
     LIPS,
     MOUTH,
     SKIN,
@@ -52,7 +53,9 @@ from ._src.present.animation import (  # noqa: F401
     save_gif,
 )
 
-__all__ = ["color_difference", "flat_color_difference", "likeness_views", "srgb_to_lab", "CAVITY", "FACE_HEIGHT", "LIPS", "MOUTH", "SKIN", "SKIN_COLOR", "TEETH", "TONGUE", "VIEWS", "FaceView",
+__all__ = ["color_difference", "flat_color_difference", "likeness_views", "srgb_to_lab",
+           "CAVITY", "FACE_HEIGHT", "GUMS", "LIPS", "MOUTH", "SKIN", "SKIN_COLOR", "TEETH", "TONGUE", "VIEWS",
+           "FaceView",
            "colored_scene", "colormap", "displacement_max", "expression_sheet", "frames_sheet", "head_colors",
            "label_grid", "line_chart", "part_colors", "render_anatomy", "render_mesh", "render_previews",
            "render_strip", "render_views", "save_gif", "save_png", "sheet_font_size", "vermilion_weight",

@@ -260,6 +260,35 @@ def test_preview_eyes_show_iris_and_pupil_at_the_pupil_fdps(head):
         assert white.min() > 120 and np.ptp(white) < 20, white  # off-white (shaded: the ball turns away)
 
 
+def test_preview_teeth_have_pink_gums_at_their_roots(head):
+    from facewarp.render import GUMS, TEETH, FaceView, colored_scene
+
+    t, lm = head
+    V, F, C = colored_scene(t)
+    parts = F[F.min(1) >= t.vertex_count]  # the rigid parts alone (the closed lips hide the teeth)
+    W, H = 160, 64
+    for name, root in (("teeth_upper", 1.0), ("teeth_lower", -1.0)):
+        T = np.asarray(t.parts[name][0])
+        lo, hi = T.min(0), T.max(0)
+        lo[2], hi[2] = V[:, 2].min(), V[:, 2].max()
+        img = render_mesh(V, parts, view="front", width=W, height=H, vertex_colors=C, frame_points=np.array([lo, hi]),
+                          margin=0.0, supersample=1).astype(int)
+        size, mid = max((hi[0] - lo[0]) / W, (hi[1] - lo[1]) / H), 0.5 * (lo + hi)
+
+        def pixel(y):  # on the midline, at height y [m]
+            return img[int(round(-(y - mid[1]) / size + (H - 1) / 2)), int(round(-mid[0] / size + (W - 1) / 2))]
+
+        end = T[:, 1].max() if root > 0 else T[:, 1].min()
+        gum = pixel(end - root * 1.5e-3)  # 1.5 mm from the root end: gums, pink
+        crown = pixel(end - root * 5.0e-3)  # 5 mm from it: the crown, ivory
+        assert gum[0] > 60 and gum[0] > gum[1] + 30 and gum[0] > gum[2] + 30, (name, gum)
+        assert crown.min() > 100 and np.ptp(crown) < 40, (name, crown)
+    view = FaceView(t.vertices, t.faces, lm, t.parts, face_height=120)
+    for name in ("teeth_upper", "teeth_lower"):
+        colours = {tuple(np.round(c, 6)) for c in view.part_colors[name]}
+        assert colours == {tuple(np.round(GUMS, 6)), tuple(np.round(TEETH, 6))}, (name, colours)
+
+
 def test_expression_sheet_pairs_rest_and_peak_and_wraps(head):
     from facewarp.render import expression_sheet
 

@@ -145,11 +145,11 @@ def test_gltf_deforms_as_the_linear_rig(made):
         np.testing.assert_allclose(MW[k][-1], jaw / rig.jaw_angle, atol=1e-5)
 
 
-def test_gltf_has_the_looks_of_eyes_teeth_tongue(made):
+def test_gltf_has_the_looks_of_eyes_teeth_gums_tongue(made):
     d, rig = made
     doc, acc = _glb(d / "rig.glb")
     mats = {m["name"]: m["pbrMetallicRoughness"]["baseColorFactor"][:3] for m in doc["materials"]}
-    for look in ("Skin", "Sclera", "Iris", "Pupil", "Teeth_Upper", "Teeth_Lower", "Tongue"):
+    for look in ("Skin", "Sclera", "Iris", "Pupil", "Teeth_Upper", "Teeth_Lower", "Gums", "Tongue"):
         assert look in mats, (look, sorted(mats))
     assert max(mats["Pupil"]) < 0.1 and min(mats["Sclera"]) > 0.8 and mats["Iris"][0] > mats["Iris"][2]
     assert mats["Tongue"][0] > mats["Tongue"][1] and min(mats["Teeth_Upper"]) > 0.8
@@ -160,6 +160,40 @@ def test_gltf_has_the_looks_of_eyes_teeth_tongue(made):
         assert sorted(names[p["material"]] for p in mesh["primitives"]) == ["Iris", "Pupil", "Sclera"]
         faces = np.concatenate([acc(p["indices"]).reshape(-1, 3) for p in mesh["primitives"]])
         assert len(faces) == len(rig.parts[name][1])  # each face of the ball in one primitive
+    # the tooth rows: pink gums at the root end (top of the upper row, bottom of the lower), ivory crowns
+    assert mats["Gums"][0] > 0.5 and mats["Gums"][0] > mats["Gums"][1] + 0.2 and mats["Gums"][0] > mats["Gums"][2] + 0.2
+    for part, name, root in (("Teeth_Upper", "teeth_upper", 1.0), ("Teeth_Lower", "teeth_lower", -1.0)):
+        mesh = next(m for m in doc["meshes"] if m["name"] == part)
+        prims = {names[p["material"]]: p for p in mesh["primitives"]}
+        assert sorted(prims) == sorted(["Gums", part])
+        P = acc(prims["Gums"]["attributes"]["POSITION"]).astype(np.float64)
+        V0 = np.asarray(rig.parts[name][0], np.float64)
+        end = root * (V0[:, 1].max() if root > 0 else V0[:, 1].min())
+        gum, teeth = (P[acc(prims[k]["indices"]).reshape(-1, 3)].mean(1) for k in ("Gums", part))
+        assert len(gum) and (root * gum[:, 1] > end - 3.0e-3).all() and (root * teeth[:, 1] < end - 1.0e-3).all()
+        assert gum[:, 2].max() > V0[:, 2].max() - 1.0e-3  # on the front of the row too, where it shows
+
+
+def test_usdskel_rig_has_the_gums(made):
+    pytest.importorskip("pxr")
+    from pxr import Usd, UsdGeom, UsdShade
+
+    d, rig = made
+    stage = Usd.Stage.Open(str(d / "rig.usda"))
+    for part, name, root in (("Teeth_Upper", "teeth_upper", 1.0), ("Teeth_Lower", "teeth_lower", -1.0)):
+        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/Rig/Parts/{part}"))
+        P = np.array(mesh.GetPointsAttr().Get(), np.float64)
+        F = np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+        sub = UsdGeom.Subset(stage.GetPrimAtPath(f"/Rig/Parts/{part}/Gums"))
+        mat = UsdShade.MaterialBindingAPI(sub.GetPrim()).GetDirectBinding().GetMaterial()
+        assert mat.GetPath() == "/Rig/Looks/Gums"
+        rgb = np.array(UsdShade.Shader(stage.GetPrimAtPath("/Rig/Looks/Gums/PreviewSurface"))
+                       .GetInput("diffuseColor").Get())
+        assert rgb[0] > rgb[1] + 0.2 and rgb[0] > rgb[2] + 0.2  # pink
+        V0 = np.asarray(rig.parts[name][0], np.float64)
+        end = root * (V0[:, 1].max() if root > 0 else V0[:, 1].min())
+        h = root * P[F[np.array(sub.GetIndicesAttr().Get())]].mean(1)[:, 1]
+        assert len(h) and (h > end - 3.0e-3).all()
 
 
 def test_gltf_validator_reports_no_errors(made):

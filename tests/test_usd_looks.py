@@ -1,7 +1,7 @@
 """The head's USD looks right in a DCC tool: parts named on their Mesh prims, lips / sclera / iris /
 pupil coloured by material subsets (each eyeball partitioned once, the iris and pupil about the gaze
-to the pupil FDPs 3.5 / 3.6), teeth and tongue looks, an iris colour option, a camera that frames
-the head and lights; USD's checks pass."""
+to the pupil FDPs 3.5 / 3.6), teeth with pink gums at their roots and tongue looks, an iris colour
+option, a camera that frames the head and lights; USD's checks pass."""
 
 from __future__ import annotations
 
@@ -110,7 +110,7 @@ def test_eyes_are_sclera_iris_pupil_once_about_the_gaze(take):
         assert angle[subsets["Sclera"]].min() > iris_half
         assert angle[subsets["Pupil"]].max() < angle[subsets["Iris"]].max()
         assert angle.argmin() in subsets["Pupil"]
-    for look in ("Sclera", "Iris", "Pupil", "Teeth_Upper", "Teeth_Lower", "Tongue"):
+    for look in ("Sclera", "Iris", "Pupil", "Teeth_Upper", "Teeth_Lower", "Gums", "Tongue"):
         assert stage.GetPrimAtPath(f"/Head/Looks/{look}").IsA(UsdShade.Material), look
     for teeth in ("Teeth_Upper", "Teeth_Lower"):
         mat = UsdShade.MaterialBindingAPI(stage.GetPrimAtPath(f"/Head/Parts/{teeth}")).ComputeBoundMaterial()[0]
@@ -118,6 +118,48 @@ def test_eyes_are_sclera_iris_pupil_once_about_the_gaze(take):
         rgb = np.array(UsdShade.Shader(stage.GetPrimAtPath(f"{mat.GetPath()}/PreviewSurface"))
                        .GetInput("diffuseColor").Get())
         assert rgb.min() > 0.8 and rgb[2] < rgb[0]  # ivory
+
+
+def test_teeth_have_pink_gums_at_their_roots(take):
+    from pxr import Usd, UsdGeom, UsdShade
+
+    rig, path = take
+    stage = Usd.Stage.Open(str(path))
+    gums = UsdShade.Shader(stage.GetPrimAtPath("/Head/Looks/Gums/PreviewSurface"))
+    rgb = np.array(gums.GetInput("diffuseColor").Get())
+    assert rgb[0] > 0.5 and rgb[0] > rgb[1] + 0.2 and rgb[0] > rgb[2] + 0.2, rgb  # pink, not ivory
+    for part, prim_name, root in (("teeth_upper", "Teeth_Upper", 1.0), ("teeth_lower", "Teeth_Lower", -1.0)):
+        prim = stage.GetPrimAtPath(f"/Head/Parts/{prim_name}")
+        mesh = UsdGeom.Mesh(prim)
+        P = np.array(mesh.GetPointsAttr().Get(), np.float64)
+        F = np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+        subsets = {s.GetPrim().GetName(): np.array(s.GetIndicesAttr().Get())
+                   for s in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()}
+        assert set(subsets) == {"Gums", "Rest"}, subsets.keys()  # Rest: the teeth, on the part's own look
+        for name, look in (("Gums", "Gums"), ("Rest", prim_name)):
+            sub = UsdGeom.Subset(stage.GetPrimAtPath(f"/Head/Parts/{prim_name}/{name}"))
+            mat = UsdShade.MaterialBindingAPI(sub.GetPrim()).GetDirectBinding().GetMaterial()
+            assert mat.GetPath() == f"/Head/Looks/{look}", (prim_name, name)
+        every = np.sort(np.concatenate(list(subsets.values())))
+        np.testing.assert_array_equal(every, np.arange(len(F)))
+        # the written row is the rig's own surface (split at the gum line only for the looks)
+        V0, F0 = np.asarray(rig.parts[part][0], np.float64), np.asarray(rig.parts[part][1])
+
+        def area(V, F):
+            return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+
+        np.testing.assert_allclose(area(P, F), area(V0, F0), rtol=1e-5)
+        np.testing.assert_allclose([P.min(0), P.max(0)], [V0.min(0), V0.max(0)], atol=1e-6)
+        # the gums: the faces within 3 mm of the root end (top of the upper row, bottom of the lower),
+        # the front (labial) side included; the teeth: the rest, on the crown side
+        h = root * P[F].mean(1)[:, 1]
+        end = root * (V0[:, 1].max() if root > 0 else V0[:, 1].min())
+        gum = np.zeros(len(F), bool)
+        gum[subsets["Gums"]] = True
+        assert gum.any() and (~gum).any()
+        assert (h[gum] > end - 3.0e-3).all() and (h[~gum] < end - 1.0e-3).all()
+        front = P[F].mean(1)[:, 2] > V0[:, 2].max() - 1.0e-3
+        assert (gum & front).any() and (~gum & front).any()
 
 
 def test_iris_colour_option(tmp_path):

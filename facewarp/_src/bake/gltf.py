@@ -112,7 +112,8 @@ def write_glb(path, rig: BlendshapeRig, *, frames: list | None = None, looks: di
         path: Output file (written atomically).
         rig: The baked rig.
         frames: Optional animation: a list of (time [s], activations {muscle: 0..1}, jaw [rad]).
-        looks: Optional ``present.looks.head_looks`` output (part colours, skin/eye subsets).
+        looks: Optional ``present.looks.head_looks`` output (part colours, skin / eye / gum subsets
+            and the part meshes they index: the tooth rows split at their gum lines).
     """
     looks = looks or {"part_colors": {}, "subsets": {}}
     buf = _Buffer()
@@ -179,6 +180,8 @@ def write_glb(path, rig: BlendshapeRig, *, frames: list | None = None, looks: di
              {"name": "jaw", "translation": pivot, "children": []},
              {"name": "Skin", "mesh": 0, "skin": 0}]
     for pname, (P, F) in rig.parts.items():
+        P, F = looks.get("parts", {}).get(pname, (P, F))
+        P, F = np.asarray(P, np.float64), np.asarray(F, np.int64)
         on_jaw = pname in rig.jaw_parts
         pattrs = {"POSITION": buf.add(P.astype(np.float32), _FLOAT, "VEC3", target=_ARRAY, minmax=True),
                   "NORMAL": buf.add(_normals(P, F).astype(np.float32), _FLOAT, "VEC3", target=_ARRAY)}

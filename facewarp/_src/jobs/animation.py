@@ -140,7 +140,9 @@ class UsdAnimation(Sink):
         iris_color: Optional iris RGB (3,) in 0..1, linear (default brown-hazel). The file's looks
             (``present.looks``): ``Looks/Sclera``, ``Looks/Iris``, ``Looks/Pupil`` bound through
             GeomSubsets of each eyeball, ``Looks/Lips`` on the skin (without a skin texture),
-            the parts' own ``Looks/Teeth_Upper``, ``Looks/Teeth_Lower``, ``Looks/Tongue``.
+            ``Looks/Gums`` through a GeomSubset of each tooth row (the rows written split at their
+            gum lines, ``present.looks.tooth_mesh``), the parts' own ``Looks/Teeth_Upper``,
+            ``Looks/Teeth_Lower``, ``Looks/Tongue``.
 
     Raises:
         InputError: a bad path (extension, missing folder) or input the writer refuses.
@@ -157,12 +159,14 @@ class UsdAnimation(Sink):
         self.samples = int(muscle_samples)
         self.tets = bool(tets)
         self._error = UsdExportError
+        looks = head_looks(fr, iris_color=iris_color)
         try:
             self.writer = AnimationWriter(self.path, fps=sim.fps, faces=fr.head_faces, rest_points=fr.head_vertices,
-                                          parts=dict(fr.parts), muscles=list(fr.rig.names),
+                                          parts=looks["parts"], muscles=list(fr.rig.names),
                                           muscle_samples=self.samples, muscle_rest=muscle_curves(sim, self.samples),
                                           tets=(fr.tets, fr.nodes) if self.tets else None,
-                                          **head_looks(fr, iris_color=iris_color), camera=head_camera(fr),
+                                          part_colors=looks["part_colors"], subsets=looks["subsets"],
+                                          camera=head_camera(fr),
                                           lights=True,
                                           **_skin_look(fr))
         except UsdExportError as e:

@@ -113,7 +113,8 @@ def _write_usd(out, rig, frames, looks, camera) -> None:
     Q = np.array([[math.cos(0.5 * f[2]), *(math.sin(0.5 * f[2]) * rig.jaw_axis)] for f in frames], np.float32)
     try:
         write_skel_rig(out, fps=rig.fps, rest_points=rig.rest, faces=rig.faces, shapes=shapes,
-                       jaw_pivot=rig.jaw_pivot, jaw_weight=rig.jaw_weight, parts=rig.parts, jaw_parts=rig.jaw_parts,
+                       jaw_pivot=rig.jaw_pivot, jaw_weight=rig.jaw_weight,
+                       parts={k: looks["parts"].get(k, v) for k, v in rig.parts.items()}, jaw_parts=rig.jaw_parts,
                        times=times, weights=W, jaw_rotations=Q, part_colors=looks["part_colors"],
                        subsets=looks["subsets"], camera=camera, lights=True)
     except UsdExportError as e:

@@ -2,7 +2,7 @@
 
 :class:`FaceView` renders the whole head (the template's full mesh: scalp, ears, neck down to the
 template's own neck cut, lips tinted, the inside of the mouth darker, eyes with iris and pupil,
-teeth and tongue in place) for any vertex positions of the same topology, always from the same
+teeth with gums and tongue in place) for any vertex positions of the same topology, always from the same
 camera, so frames of an animation line up: the camera frames a fixed rectangle of the image plane
 (by default around the rest head; or around given point sets, e.g. every frame shown, or a box),
 marked by four framing points drawn in the background colour. :func:`save_gif` writes frames as an
@@ -76,7 +76,7 @@ class FaceView:
         landmarks: FDP id -> rest position [m] (uses 2.1, 2.2, 2.3, 8.1-8.4 and 11.1).
         parts: Rigid parts at rest, name -> (V (k, 3) [m], F (l, 3) int); coloured by
             :func:`~facewarp.render.part_colors` (eyes with iris and pupil about the gaze to the
-            pupil FDPs 3.5 / 3.6, teeth, tongue).
+            pupil FDPs 3.5 / 3.6, teeth with gums at their roots, tongue).
         view: A view of :func:`~facewarp.render_mesh` (``"front"``, ``"three_quarter"``, ...).
         size: Image height [px]; default: tall enough that the face (hairline 11.1 to chin 2.1)
             spans ``face_height`` pixels.
@@ -129,11 +129,12 @@ class FaceView:
         self.rest = P0
         self.colors = head_colors(P0, lm)
         self.parts = {k: (np.asarray(V, np.float64), np.asarray(Fp, np.int64)) for k, (V, Fp) in (parts or {}).items()}
-        # eyeballs are drawn refined (round iris and pupil); parts move rigidly, so a refined mesh
-        # follows its part by the part's rigid motion
+        # eyeballs are drawn refined (round iris and pupil), tooth rows split at their gum lines; parts
+        # move rigidly, so a drawn mesh follows its part by the part's rigid motion
         self._drawn = {k: drawn_part(k, V, Fp) for k, (V, Fp) in self.parts.items()}
-        self.part_colors = {k: part_colors(k, Vd, landmarks=lm, iris_color=iris_color, ball=self.parts[k][0])
-                            for k, (Vd, _) in self._drawn.items()}
+        self.part_colors = {k: part_colors(k, Vd, landmarks=lm, iris_color=iris_color, ball=self.parts[k][0],
+                                           faces=Fd)
+                            for k, (Vd, Fd) in self._drawn.items()}
         self.view, self.device, self.supersample = view, device, supersample
         # the framed rectangle in the image plane, and its four corners as framing points
         right, up, forward = view_axes(view)

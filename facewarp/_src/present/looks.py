@@ -1,7 +1,7 @@
-"""How a head looks: the one palette and the face groups (lips, sclera, iris, pupil) that every
-output uses -- the USD animation and UsdSkel rig (``usd_export``'s ``part_colors`` and ``subsets``),
-the glTF rig (one primitive per look) and the package's renders (:func:`part_vertex_colors`) --
-plus a framing camera for the USD files.
+"""How a head looks: the one palette and the face groups (lips, sclera, iris, pupil, gums) that
+every output uses -- the USD animation and UsdSkel rig (``usd_export``'s ``part_colors`` and
+``subsets``), the glTF rig (one primitive per look) and the package's renders
+(:func:`part_vertex_colors`) -- plus a framing camera for the USD files.
 
 The groups are found on the rig's own geometry, so they follow any adapted head:
 
@@ -13,12 +13,24 @@ The groups are found on the rig's own geometry, so they follow any adapted head:
   pupil FDP (3.5 left, 3.6 right: whichever lies on the ball), else along +z, the head frame's
   forward axis. A face whose centre lies within :func:`eye_angles`' pupil / iris half-angle of
   that axis is **Pupil** / **Iris**, the rest **Sclera**: the three partition the ball's faces;
-- **teeth** are one colour (ivory): the template's tooth rows are single bands of faces from crown
-  to root, with no faces of their own for gums, so there are no gums; the **tongue** is one colour.
+- **teeth and gums**: a tooth row (a part named ``teeth``/``tooth`` with ``upper`` or ``lower``) is
+  drawn and exported split at its gum line (:func:`tooth_mesh`): the plane across the row
+  :data:`GUM_HEIGHT` from its root end (a third of the row's height at most), measured along the
+  row's vertical (its vertices' axis of least spread, turned to point at the root: up, +y, for the
+  upper row, down for the lower). The faces on the root side are **Gums** (pink), the rest the
+  teeth (ivory). The template's rows are closed bands from the incisal edge to the root, so the
+  gums are the root end of each band, labial and lingual, and follow any adapted head (the rows'
+  own geometry). Only the looks are split: the simulated tooth meshes (contact, FDPs) stay as
+  they are, and a split row is the same surface (its faces cut in two at the line), riding its
+  part's motion (upper row: the skull, lower row: the jaw). The ICT-FaceKit's own gums are part of
+  its ``tongue`` mesh (:mod:`~facewarp._src.importers.ict`) and take the tongue's colour; its tooth
+  rows carry their roots (about 28 mm high), so their gum band is the 3 mm at the roots' tips;
+- the **tongue** is one colour.
 
 The names of the looks (USD ``Looks/<name>`` materials and ``GeomSubset`` s, glTF materials) are
-``Lips`` (skin subset), ``Sclera``, ``Iris``, ``Pupil`` (eyeball subsets), and the parts' own
-materials ``Eye_L``, ``Eye_R`` (sclera), ``Teeth_Upper``, ``Teeth_Lower`` and ``Tongue``.
+``Lips`` (skin subset), ``Sclera``, ``Iris``, ``Pupil`` (eyeball subsets), ``Gums`` (tooth-row
+subsets), and the parts' own materials ``Eye_L``, ``Eye_R`` (sclera), ``Teeth_Upper``,
+``Teeth_Lower`` (ivory) and ``Tongue``.
 """
 
 from __future__ import annotations
@@ -29,10 +41,9 @@ import numpy as np
 
 from ..core.errors import InputError
 
-__all__ = ["COLORS", "IRIS_DIAMETER", "LIP_DEPTH", "PUPIL_DIAMETER", "drawn_part", "eye_angles", "eye_looks",
-           "gaze_axis", "head_camera", "head_looks", "iris_rgb", "lip_faces", "part_kind", "part_looks",
-           "part_vertex_colors",
-           "refine_ball", "rest_fdps"]
+__all__ = ["COLORS", "GUM_HEIGHT", "IRIS_DIAMETER", "LIP_DEPTH", "PUPIL_DIAMETER", "drawn_part", "eye_angles",
+           "eye_looks", "gaze_axis", "gum_plane", "head_camera", "head_looks", "iris_rgb", "lip_faces", "part_kind",
+           "part_looks", "part_vertex_colors", "refine_ball", "rest_fdps", "tooth_mesh"]
 
 COLORS = {
     "skin": (0.87, 0.72, 0.62),
@@ -43,6 +54,7 @@ COLORS = {
     "iris": (0.30, 0.19, 0.08),  # brown-hazel, the commonest iris colour
     "pupil": (0.02, 0.02, 0.02),  # near-black
     "teeth": (0.95, 0.93, 0.85),  # ivory
+    "gums": (0.72, 0.30, 0.33),  # gingiva: coral pink, deeper than the lips and the tongue
     "tongue": (0.76, 0.36, 0.38),  # muscle red-pink
 }
 """Linear RGB (0..1) of each look, the one palette of every output."""
@@ -55,6 +67,12 @@ textbook range 11.5-12 mm)."""
 PUPIL_DIAMETER = 4.0e-3
 """Pupil diameter [m]: 3-5 mm in room light (2 mm in bright light, 8 mm dark-adapted; Watson and
 Yellott, J. Vision 12(10):12 (2012)); the middle of the room-light range."""
+
+GUM_HEIGHT = 3.0e-3
+"""Height of the gums drawn on a tooth row [m], from its root end toward the crown: the attached
+gingiva at the incisors is about 3.5-4.5 mm wide in the upper jaw and 3.3-3.9 mm in the lower
+(textbook values, Lindhe, Clinical Periodontology and Implant Dentistry); 3 mm leaves the
+template's crowns (10 and 8.2 mm high) 7 and 5.2 mm of ivory."""
 
 LIP_DEPTH = 0.012
 """How far behind the lip contour's mean depth faces still count as lips [m]."""
@@ -196,37 +214,151 @@ def eye_looks(V, F, fdps: dict | None = None, *, iris_color=None) -> dict:
             "Pupil": (np.flatnonzero(pupil), COLORS["pupil"])}
 
 
-def part_looks(name: str, V, F, fdps: dict | None = None, *, iris_color=None) -> tuple[tuple, dict]:
-    """A rigid part's own colour and its coloured face groups.
+def gum_plane(name: str, V) -> tuple[np.ndarray, float] | None:
+    """The gum line of a tooth row (see the module docstring), or None for any other part.
+
+    Args:
+        name: The part's name: a tooth row has ``teeth`` or ``tooth`` and ``upper`` or ``lower`` in it.
+        V: The row's rest vertices [m], shape (k, 3), float.
+
+    Returns:
+        (unit axis (3,) float64 pointing from the crowns to the roots, level [m]): a point ``p`` is
+        on the gums' side where ``p @ axis > level``. The axis is the vertices' direction of least
+        spread (the row's height; +-y, the head's vertical, if that direction is more than 45 deg
+        from it), the level :data:`GUM_HEIGHT` (at most a third of the row's height) below the
+        root end.
+    """
+    low = str(name).lower()
+    if part_kind(name) != "teeth" or ("upper" in low) == ("lower" in low):
+        return None
+    V = np.asarray(V, np.float64)
+    if len(V) < 4:
+        return None
+    X = V - V.mean(0)
+    a = np.linalg.eigh(X.T @ X)[1][:, 0]
+    if abs(a[1]) < math.sqrt(0.5):
+        a = np.array([0.0, 1.0, 0.0])
+    a = a * (1.0 if "upper" in low else -1.0) * math.copysign(1.0, a[1])
+    h = V @ a
+    return a, float(h.max() - min(GUM_HEIGHT, np.ptp(h) / 3.0))
+
+
+def _edge_points(V: np.ndarray, d: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Where the edges (i, j) (each (k,) int) cross the level d = 0, (k, 3) [m]; computed from the
+    lower index, so both triangles of an edge get the very same point."""
+    lo, hi = np.minimum(i, j), np.maximum(i, j)
+    t = d[lo] / (d[lo] - d[hi])
+    return V[lo] + t[:, None] * (V[hi] - V[lo])
+
+
+def _welded(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A triangle soup T (m, 3, 3) [m] as vertices (k, 3) and faces (m, 3) int64, equal corners merged."""
+    if not len(T):
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    V, inv = np.unique(T.reshape(-1, 3), axis=0, return_inverse=True)
+    return V, inv.reshape(-1, 3).astype(np.int64)
+
+
+def tooth_mesh(name: str, V, F) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A part's mesh for the looks: a tooth row split at its gum line, any other part as it is.
+
+    Each triangle that the gum line (:func:`gum_plane`) crosses is cut in three, so every face lies
+    on one side; the two sides are separate pieces (the vertices on the line doubled), so per-vertex
+    colours stay sharp at the line. The surface is the same: only the drawing is split.
+
+    Args:
+        name: The part's name. V: Its rest vertices [m], shape (k, 3), float. F: Its triangles, shape (m, 3), int.
+
+    Returns:
+        Vertices (k', 3) float64 [m], triangles (m', 3) int64 (the teeth's, then the gums') and the
+        gum faces (g,) int64 (none for a part that is not a tooth row).
+    """
+    V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+    plane = gum_plane(name, V)
+    if plane is None:
+        return V, F, np.zeros(0, np.int64)
+    a, level = plane
+    d = V @ a - level
+    g = d[F] > 0
+    n = g.sum(1)
+    sides = [[V[F[n == 0]]], [V[F[n == 3]]]]  # triangle soups (m, 3, 3): teeth, gums
+    mixed = (n == 1) | (n == 2)
+    if mixed.any():
+        Fm, gm = F[mixed], g[mixed]
+        lone_gum = n[mixed] == 1
+        k = np.where(lone_gum, np.argmax(gm, 1), np.argmin(gm, 1))  # the vertex alone on its side
+        R = np.take_along_axis(Fm, (k[:, None] + np.arange(3)) % 3, 1)  # rolled: the lone vertex first
+        A, B, C = V[R[:, 0]], V[R[:, 1]], V[R[:, 2]]
+        pab, pac = _edge_points(V, d, R[:, 0], R[:, 1]), _edge_points(V, d, R[:, 0], R[:, 2])
+        lone = np.stack([A, pab, pac], 1)
+        rest = np.concatenate([np.stack([pab, B, C], 1), np.stack([pab, C, pac], 1)])
+        rest_gum = np.concatenate([~lone_gum, ~lone_gum])
+        sides[0] += [lone[~lone_gum], rest[~rest_gum]]
+        sides[1] += [lone[lone_gum], rest[rest_gum]]
+    pieces = []
+    for soup in sides:
+        T = np.concatenate(soup)
+        area = np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+        pieces.append(_welded(T[area > 1e-18]))
+    (Vt, Ft), (Vg, Fg) = pieces
+    return (np.concatenate([Vt, Vg]), np.concatenate([Ft, Fg + len(Vt)]),
+            np.arange(len(Ft), len(Ft) + len(Fg), dtype=np.int64))
+
+
+def part_looks(name: str, V, F, fdps: dict | None = None, *,
+               iris_color=None) -> tuple[tuple, dict, tuple[np.ndarray, np.ndarray]]:
+    """A rigid part's own colour, its coloured face groups and the mesh they index.
 
     Args:
         name: The part's name (:func:`part_kind`). V (k, 3) [m], F (m, 3) int: its rest mesh.
         fdps, iris_color: As :func:`eye_looks`'s.
 
     Returns:
-        (RGB of the part, {look name: (faces (j,) int64, RGB)}): an eyeball is sclera with the
-        groups of :func:`eye_looks`; teeth (and any other part) ivory, the tongue red-pink, no groups.
+        (RGB of the part, {look name: (faces (j,) int64, RGB)}, (V' (k', 3) float64 [m], F' (m', 3)
+        int64)): an eyeball is sclera with the groups of :func:`eye_looks` on its own mesh; a tooth
+        row ivory with ``Gums`` on its :func:`tooth_mesh`; any other part ivory, the tongue
+        red-pink, no groups, its own mesh.
     """
     kind = part_kind(name)
-    return _part_rgb(kind), (eye_looks(V, F, fdps, iris_color=iris_color) if kind == "eye" else {})
+    if kind == "eye":
+        V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
+        return _part_rgb(kind), eye_looks(V, F, fdps, iris_color=iris_color), (V, F)
+    Vt, Ft, gums = tooth_mesh(name, V, F)
+    return _part_rgb(kind), ({"Gums": (gums, COLORS["gums"])} if len(gums) else {}), (Vt, Ft)
 
 
-def part_vertex_colors(name: str, V, fdps: dict | None = None, *, iris_color=None, ball=None) -> np.ndarray:
+def part_vertex_colors(name: str, V, fdps: dict | None = None, *, iris_color=None, ball=None,
+                       faces=None) -> np.ndarray:
     """Per-vertex colours of a rigid part for the renders, (k, 3) float64 in 0..1 (linear RGB).
 
     The same looks as :func:`part_looks`, by vertex: on an eyeball a vertex within the pupil's /
     iris' half-angle of the gaze axis is pupil / iris (and the vertex nearest the axis is pupil
-    always), so draw a refined ball for a round iris.
+    always), so draw a refined ball for a round iris. On a tooth row (drawn as its
+    :func:`tooth_mesh`) a vertex of a face on the gums' side of the gum line is gums; without
+    ``faces``, a vertex beyond the line.
 
     Args:
         name: The part's name. V: Its vertices [m], shape (k, 3), float.
         fdps, iris_color: As :func:`eye_looks`'s.
-        ball: Optional vertices (j, 3) [m] of the eyeball that V draws (V a :func:`refine_ball` of
-            them): its centre and gaze (default V's own).
+        ball: Optional rest vertices (j, 3) [m] of the part that V draws (V a :func:`drawn_part`
+            of them): an eyeball's centre and gaze, a tooth row's gum line (default V's own).
+        faces: Optional triangles (m, 3) int of V (a tooth row's :func:`tooth_mesh`).
     """
     V = np.asarray(V, np.float64)
     kind = part_kind(name)
     out = np.tile(np.asarray(_part_rgb(kind)), (len(V), 1))
+    if kind == "teeth":
+        plane = gum_plane(name, V if ball is None else ball)
+        if plane is not None:
+            a, level = plane
+            if faces is None:
+                gum = V @ a > level
+            else:
+                F = np.asarray(faces, np.int64)
+                gum = np.zeros(len(V), bool)
+                gum[F[V[F].mean(1) @ a > level].ravel()] = True
+            out[gum] = COLORS["gums"]
+        return out
     if kind != "eye":
         return out
     c, a, R = gaze_axis(V if ball is None else ball, fdps)
@@ -292,9 +424,12 @@ def refine_ball(V: np.ndarray, F: np.ndarray, levels: int = 2) -> tuple[np.ndarr
 
 def drawn_part(name: str, V, F) -> tuple[np.ndarray, np.ndarray]:
     """The mesh a renderer draws for a rigid part: an eyeball :func:`refine_ball`-ed (a round iris),
-    any other part as it is. V (k, 3) [m], F (l, 3) int -> (V', F')."""
+    a tooth row split at its gum line (:func:`tooth_mesh`), any other part as it is.
+    V (k, 3) [m], F (l, 3) int -> (V', F')."""
     if part_kind(name) == "eye":
         return refine_ball(np.asarray(V, np.float64), np.asarray(F))
+    if gum_plane(name, V) is not None:
+        return tooth_mesh(name, V, F)[:2]
     return V, F
 
 
@@ -306,24 +441,27 @@ def head_looks(fr, *, iris_color=None) -> dict:
         iris_color: Optional iris RGB (3,) in 0..1, linear (default :data:`COLORS` ``["iris"]``, brown-hazel).
 
     Returns:
-        ``{"part_colors": {part: RGB}, "subsets": {"Skin" or part: {name: (faces (k,) int64, RGB)}}}``:
-        ``Lips`` on the skin (only without a skin texture, which carries the lips itself), ``Sclera``,
-        ``Iris`` and ``Pupil`` on each eyeball (a partition of its faces).
+        ``{"part_colors": {part: RGB}, "subsets": {"Skin" or part: {name: (faces (k,) int64, RGB)}},
+        "parts": {part: (V (k, 3) float64 [m], F (l, 3) int64)}}``: ``Lips`` on the skin (only
+        without a skin texture, which carries the lips itself), ``Sclera``, ``Iris`` and ``Pupil`` on
+        each eyeball (a partition of its faces), ``Gums`` on each tooth row; ``parts`` are the rest
+        meshes to write, which the part subsets index: the rig's own, but the tooth rows split at
+        their gum lines (:func:`tooth_mesh`; the same surfaces, riding the same part motions).
 
     Raises:
         InputError: a bad ``iris_color``.
     """
     iris_rgb(iris_color)
-    part_colors, subsets = {}, {}
+    part_colors, subsets, meshes = {}, {}, {}
     fdps = rest_fdps(fr)
     lips = np.zeros(0, np.int64) if getattr(fr, "skin_texture", None) else lip_faces(fr)
     if len(lips):
         subsets["Skin"] = {"Lips": (lips, COLORS["lips"])}
     for name, (V, F) in dict(fr.parts).items():
-        part_colors[name], groups = part_looks(name, V, F, fdps, iris_color=iris_color)
+        part_colors[name], groups, meshes[name] = part_looks(name, V, F, fdps, iris_color=iris_color)
         if groups:
             subsets[name] = groups
-    return {"part_colors": part_colors, "subsets": subsets}
+    return {"part_colors": part_colors, "subsets": subsets, "parts": meshes}
 
 
 def head_camera(fr, *, focal_length_mm: float = 50.0, vertical_aperture_mm: float = 15.2908,

@@ -1,4 +1,4 @@
-"""Preview colours and renders of a head: skin, vermilion, eyes (sclera, iris, pupil), teeth."""
+"""Preview colours and renders of a head: skin, vermilion, eyes (sclera, iris, pupil), teeth and gums."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from ..template.head import REGIONS, Template
 from .looks import COLORS, drawn_part, part_vertex_colors
 from .render import render_mesh, save_png
 
-__all__ = ["CAVITY", "LIPS", "MOUTH", "SKIN", "TEETH", "TONGUE", "colored_scene", "head_colors", "part_colors",
+__all__ = ["CAVITY", "GUMS", "LIPS", "MOUTH", "SKIN", "TEETH", "TONGUE", "colored_scene", "head_colors", "part_colors",
            "render_previews", "vermilion_weight"]
 
 
@@ -22,6 +22,8 @@ TEETH = np.array(COLORS["teeth"])
 """Teeth colour of the previews (ivory), linear RGB in [0, 1], shape (3,)."""
 TONGUE = np.array(COLORS["tongue"])
 """Tongue colour of the previews, linear RGB in [0, 1], shape (3,)."""
+GUMS = np.array(COLORS["gums"])
+"""Gum colour of the previews (the root end of each tooth row), linear RGB in [0, 1], shape (3,)."""
 
 
 def vermilion_weight(V, lm: dict, mask=None) -> np.ndarray:
@@ -43,21 +45,25 @@ CAVITY = np.array(COLORS["cavity"])
 """The inside of the head seen through the open mouth (the skin's back side), linear RGB."""
 
 
-def part_colors(name: str, V, *, landmarks: dict | None = None, iris_color=None, ball=None) -> np.ndarray:
+def part_colors(name: str, V, *, landmarks: dict | None = None, iris_color=None, ball=None,
+                faces=None) -> np.ndarray:
     """Preview colours of a rigid part at rest, (k, 3) in [0, 1], for its vertices V (k, 3) [m].
 
     The looks of every output (``present.looks``): eyeballs (names with ``eye``) off-white sclera,
     a brown-hazel iris 11.7 mm across and a near-black pupil 4 mm across around the gaze axis (the
     ball's centre to its pupil FDP 3.5 / 3.6 in ``landmarks``, else +z); teeth (and other parts)
-    :data:`TEETH`; the tongue :data:`TONGUE`.
+    :data:`TEETH`, a tooth row's root end pink gums (drawn split at the gum line,
+    ``present.looks.tooth_mesh``); the tongue :data:`TONGUE`.
 
     Args:
         name: The part's name. V: Its vertices [m], shape (k, 3), float.
         landmarks: Optional FDP id -> rest position (3,) [m] (the pupils give the gaze).
         iris_color: Optional iris RGB (3,) in 0..1, linear.
-        ball: Optional vertices of the eyeball that V draws refined (its centre and gaze).
+        ball: Optional rest vertices (j, 3) [m] of the part that V draws (``present.looks.drawn_part``):
+            an eyeball's centre and gaze, a tooth row's gum line.
+        faces: Optional triangles (m, 3) int of V: the gums' colour stops sharp at the gum line.
     """
-    return part_vertex_colors(name, V, landmarks, iris_color=iris_color, ball=ball)
+    return part_vertex_colors(name, V, landmarks, iris_color=iris_color, ball=ball, faces=faces)
 
 
 def head_colors(V, lm: dict) -> np.ndarray:
@@ -82,8 +88,9 @@ def head_colors(V, lm: dict) -> np.ndarray:
 def colored_scene(t: Template) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Skin and rigid parts merged into one mesh with per-vertex colours for previews.
 
-    Lips are tinted, eyeballs (drawn refined) get a sclera, iris and pupil about the gaze
-    (:func:`part_colors`). Returns V (n, 3) [m], F (m, 3), colours (n, 3) in [0, 1].
+    Lips are tinted, eyeballs (drawn refined) get a sclera, iris and pupil about the gaze, tooth
+    rows (drawn split at the gum line) gums at their roots (:func:`part_colors`).
+    Returns V (n, 3) float [m], F (m, 3) int, colours (n, 3) float in [0, 1].
     """
     Vs, Fs, Cs = [t.vertices], [t.faces], []
     col = np.tile(SKIN, (t.vertex_count, 1))
@@ -97,7 +104,7 @@ def colored_scene(t: Template) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lm = t.landmarks()
     for name, (V0, F0) in t.parts.items():
         V, F = drawn_part(name, V0, F0)
-        Cs.append(part_colors(name, V, landmarks=lm, ball=V0))
+        Cs.append(part_colors(name, V, landmarks=lm, ball=V0, faces=F))
         Vs.append(V)
         Fs.append(F + off)
         off += len(V)
