@@ -264,7 +264,8 @@ class IncrementalPotential:
 
         On the CPU the launches are recorded once per ``(x, control, h)`` and replayed
         (``wp.launch(..., record_cmd=True)``): the host solver evaluates the energy ~300 times a
-        frame, and Warp's argument packing was 40 % of an evaluation at level 0."""
+        frame on a stream switching every frame, and Warp's argument packing took ~40 % of the
+        launches' time at level 0 (cProfile of 10 such frames: 2.3 of 5.5 s)."""
         energy, gather = self._energy_commands(x, control, h)
         for cmd in energy:
             cmd.launch()
