@@ -40,6 +40,7 @@ import time
 import numpy as np
 
 from ...core.errors import InputError, SimulationError
+from ...core.warp import get_warp
 from ..model import Control, Model, State
 from .implicit import SolverImplicit, _COMMON_OPTIONS
 
@@ -179,18 +180,27 @@ class SolverHostImplicit(SolverImplicit):
         self._h = None
         self._solve0 = None
         self._solve_converged = True
-        self._tets = None  # host copy of the tets' node indices (the line search's step bound)
+        self._tets = None  # the step bound's float64 arrays (positions, direction, roots)
         self.line_search_trials = 0  # energy evaluations of the line search so far
         self.step_bound = True  # the line search skips trials that would invert a tet
 
     # ------------------------------------------------------------------------------ evaluation
-    def _host_eval(self, x64: np.ndarray, control: Control, h: float) -> tuple[float, np.ndarray, float]:
-        """Energy, gradient (3n,) and the energy's float32 rounding scale at positions x64 (n, 3);
-        :attr:`_inverted` tells whether a tet is inverted there."""
+    def _host_eval(self, x64: np.ndarray, control: Control, h: float,
+                   with_grad: bool = True) -> tuple[float, np.ndarray | None, float]:
+        """Energy, gradient (3n,) (None without ``with_grad``: :meth:`_host_grad` then) and the
+        energy's float32 rounding scale at positions x64 (n, 3); :attr:`_inverted` tells whether
+        a tet is inverted there."""
         t0 = time.perf_counter()
-        e, g, noise, self._inverted = self.incremental.host_eval(x64, control, h)
+        e, g, noise, self._inverted = self.incremental.host_eval(x64, control, h, with_grad)
         self.timings["gradient"] += time.perf_counter() - t0
         return e, g, noise
+
+    def _host_grad(self, control: Control, h: float) -> np.ndarray:
+        """The gradient at the last :meth:`_host_eval` (made without ``with_grad``)."""
+        t0 = time.perf_counter()
+        g = self.incremental.host_grad(control, h)
+        self.timings["gradient"] += time.perf_counter() - t0
+        return g
 
     def _host_factor(self, x64: np.ndarray, h: float):
         t0 = time.perf_counter()
@@ -225,11 +235,11 @@ class SolverHostImplicit(SolverImplicit):
         t, trials, root = 1.0, 12, None
         while trials > 0:
             xt = x64 + t * d.reshape(-1, 3)
-            et, gt, nt = self._host_eval(xt, control, h)
+            et, _, nt = self._host_eval(xt, control, h, with_grad=False)  # the gradient only if accepted
             self.line_search_trials += 1
             trials -= 1
             if et <= e + 1e-4 * t * gd + noise and not self._inverted:
-                return t, xt, et, gt, nt
+                return t, xt, et, self._host_grad(control, h), nt
             t *= 0.5
             if self._inverted and self.step_bound:
                 if root is None:
@@ -243,35 +253,23 @@ class SolverHostImplicit(SolverImplicit):
     def _first_inversion(self, x64: np.ndarray, d: np.ndarray) -> float:
         """The smallest t in (0, 1] at which a tet's signed volume along ``x64 + t d`` (a cubic in
         t) reaches 0, or inf: the cubic sampled at t = k / 8, the first sign change refined by
-        bisection to 1e-6, float64 on the host (~1 ms at level 0). x64: (n, 3) [m]; d: (3n,) [m]."""
-        T = self._tets
-        if T is None:
-            T = self._tets = self.model.tet_indices.numpy().astype(np.int64)
-        P, Q = x64[T], d.reshape(-1, 3)[T]  # (t, 4, 3)
-        E, F = P[:, 1:] - P[:, :1], Q[:, 1:] - Q[:, :1]
-        e1, e2, e3 = E[:, 0], E[:, 1], E[:, 2]
-        f1, f2, f3 = F[:, 0], F[:, 1], F[:, 2]
+        bisection to 1e-6, float64 (a Warp kernel, ``kernels_line_search._first_inversion``;
+        measured at level 0 on the shared 2-core box: 0.6 ms, the NumPy version it replaces 5.5
+        ms, the same roots). x64: (n, 3) [m]; d: (3n,) [m]."""
+        from . import kernels_line_search as kl
 
-        def tp(u, v, w):
-            return np.einsum("ij,ij->i", u, np.cross(v, w))
-
-        c0 = tp(e1, e2, e3)
-        c1 = tp(f1, e2, e3) + tp(e1, f2, e3) + tp(e1, e2, f3)
-        c2 = tp(f1, f2, e3) + tp(f1, e2, f3) + tp(e1, f2, f3)
-        c3 = tp(f1, f2, f3)
-        grid = np.arange(1, 9) / 8.0
-        vol = c0[:, None] + grid * (c1[:, None] + grid * (c2[:, None] + grid * c3[:, None]))
-        hit = (vol <= 0.0).any(axis=1) & (c0 > 0.0)
-        if not hit.any():
-            return float("inf")
-        c = [c_[hit] for c_ in (c0, c1, c2, c3)]
-        j = np.argmax(vol[hit] <= 0.0, axis=1)
-        lo, hi = np.where(j > 0, grid[j - 1], 0.0), grid[j]
-        for _ in range(17):  # 1/8 / 2^17 < 1e-6
-            mid = 0.5 * (lo + hi)
-            pos = c[0] + mid * (c[1] + mid * (c[2] + mid * c[3])) > 0.0
-            lo, hi = np.where(pos, mid, lo), np.where(pos, hi, mid)
-        return float(hi.min())
+        wp = get_warp()
+        if self._tets is None:
+            n, dev = self.model.vertex_count, self.device
+            self._tets = (wp.zeros(n, dtype=wp.vec3d, device=dev), wp.zeros(n, dtype=wp.vec3d, device=dev),
+                          wp.zeros(self.model.tet_count, dtype=wp.float64, device=dev))
+        xa, da, roots = self._tets
+        xa.numpy()[:] = x64
+        da.numpy()[:] = d.reshape(-1, 3)
+        wp.launch(kl._first_inversion, dim=self.model.tet_count, inputs=[self.model.tet_indices, xa, da],
+                  outputs=[roots], device=self.device)
+        r = float(roots.numpy().min())
+        return float("inf") if r >= 1.0e300 else r
 
     # ------------------------------------------------------------------------------ step
     def _solve(self, state_in: State, control: Control, h: float) -> None:

@@ -358,3 +358,61 @@ def _newton_continue(
     cond[0] = go
     largest[0] = 0.0
     largest[1] = 0.0
+
+
+# ---------------------------------------------------------------------------- the host line search's step bound
+_NO_ROOT = wp.constant(wp.float64(1.0e300))  # a tet whose volume stays positive on (0, 1]
+
+
+@wp.func
+def _cubic(c0: wp.float64, c1: wp.float64, c2: wp.float64, c3: wp.float64, t: wp.float64):
+    return c0 + t * (c1 + t * (c2 + t * c3))
+
+
+# The host L-BFGS line search's step bound (SolverHostImplicit._first_inversion), float64: per tet,
+# the signed volume along x + t d is a cubic in t; the first t in (0, 1] where it reaches 0 (sampled
+# at t = k / 8, the first sign change refined by 17 bisections: 1/8 / 2^17 < 1e-6), or _NO_ROOT.
+@wp.kernel
+def _first_inversion(
+    # Model:
+    tet_indices: wp.array(dtype=wp.vec4i),
+    # State in: the iterate and the direction, float64
+    x: wp.array(dtype=wp.vec3d),
+    d: wp.array(dtype=wp.vec3d),
+    # Out: each tet's first root (or _NO_ROOT)
+    root_out: wp.array(dtype=wp.float64),
+):
+    t = wp.tid()
+    idx = tet_indices[t]
+    p0 = x[idx[0]]
+    q0 = d[idx[0]]
+    e1 = x[idx[1]] - p0
+    e2 = x[idx[2]] - p0
+    e3 = x[idx[3]] - p0
+    f1 = d[idx[1]] - q0
+    f2 = d[idx[2]] - q0
+    f3 = d[idx[3]] - q0
+    c0 = wp.dot(e1, wp.cross(e2, e3))
+    c1 = wp.dot(f1, wp.cross(e2, e3)) + wp.dot(e1, wp.cross(f2, e3)) + wp.dot(e1, wp.cross(e2, f3))
+    c2 = wp.dot(f1, wp.cross(f2, e3)) + wp.dot(f1, wp.cross(e2, f3)) + wp.dot(e1, wp.cross(f2, f3))
+    c3 = wp.dot(f1, wp.cross(f2, f3))
+    root = _NO_ROOT
+    if c0 > wp.float64(0.0):
+        lo = wp.float64(0.0)
+        hi = wp.float64(-1.0)
+        for k in range(1, 9):
+            g = wp.float64(k) / wp.float64(8.0)
+            if hi < wp.float64(0.0):
+                if _cubic(c0, c1, c2, c3, g) <= wp.float64(0.0):
+                    hi = g
+                else:
+                    lo = g
+        if hi > wp.float64(0.0):
+            for _ in range(17):
+                mid = wp.float64(0.5) * (lo + hi)
+                if _cubic(c0, c1, c2, c3, mid) > wp.float64(0.0):
+                    lo = mid
+                else:
+                    hi = mid
+            root = hi
+    root_out[t] = root
