@@ -23,7 +23,7 @@ from typing import Callable
 
 import numpy as np
 
-from benchmarks._common import COMMITTED, SCHEMA_KEYS
+from benchmarks._common import COMMITTED, SCHEMA_KEYS, head_tag
 
 README = COMMITTED.parents[1] / "README.md"
 DOCS = COMMITTED.parents[1] / "docs"
@@ -654,7 +654,22 @@ def drive(r: Results) -> str:
     """The inverse solve per head (``drive_cpu.json`` of ``python -m benchmarks drive``): the round trip
     (the recovered face against the true one, FDPs and whole skin, worst frame), both modes' speed and
     the robust case."""
-    doc = r.doc("drive_cpu")
+    rows, notes = [], []
+    for name in [n for n in ("drive_cpu", "drive_cuda") if n in r.glob("drive_*")]:
+        doc = r.doc(name)
+        dev = "CPU" if doc["device"] == "cpu" else doc["device"]
+        load = doc["figures"].get("load_average_at_start")
+        notes.append(f"{dev}: {doc['machine'].get('cores', '?')} cores, {doc['date'][:10]}, seed {doc['figures'].get('seed')}"
+                     + (f", load average {load[0]:.1f} at the start" if load else ""))
+        rows += _drive_rows(doc, dev)
+    head = ["device", "head", "frames", "offline, 84 FDPs: FDP / skin RMS, worst frame [mm]", "offline, 30 FDPs [mm]",
+            "real time, 84 / 30 FDPs: FDP RMS [mm]", "forward sim. frames/s", "offline frames/s (84 / 30)",
+            "real-time frames/s (84 / 30)", "robust: FDP RMS [mm], largest jump [mm]"]
+    return _rows_md(head, rows) + "\n" + "; ".join(notes) + ".\n"
+
+
+def _drive_rows(doc: dict, dev: str) -> list:
+    """The drive table's rows of one result (a head each)."""
     rows = []
     for h in doc["figures"]["heads"]:
         c = h["cases"]
@@ -664,7 +679,7 @@ def drive(r: Results) -> str:
             return "-" if v is None else fmt.format(v)
 
         rob = c.get("robust_offline", {})
-        rows.append([h["head"], f"{h['frames']} ({h['seconds']:g} s)",
+        rows.append([dev, head_tag(h["head"]) or h["head"], f"{h['frames']} ({h['seconds']:g} s)",
                      f"{cell('all84_offline', 'fdp_rms_mm_max')} / {cell('all84_offline', 'skin_rms_mm_max')}",
                      f"{cell('tracker30_offline', 'fdp_rms_mm_max')} / {cell('tracker30_offline', 'skin_rms_mm_max')}",
                      f"{cell('all84_realtime', 'fdp_rms_mm_max')} / {cell('tracker30_realtime', 'fdp_rms_mm_max')}",
@@ -677,13 +692,7 @@ def drive(r: Results) -> str:
                      + (f", {rob['frames_with_fdp_jump_over_2mm']} frames > 2 mm"
                         if "frames_with_fdp_jump_over_2mm" in rob else "")
                      + (" (failed)" if rob.get("failed") else "")])
-    load = doc["figures"].get("load_average_at_start")
-    head = ["head", "frames", "offline, 84 FDPs: FDP / skin RMS, worst frame [mm]", "offline, 30 FDPs [mm]",
-            "real time, 84 / 30 FDPs: FDP RMS [mm]", "forward sim. frames/s", "offline frames/s (84 / 30)",
-            "real-time frames/s (84 / 30)", "robust: FDP RMS [mm], largest jump [mm]"]
-    note = (f"\n{doc['machine'].get('cores', '?')}-core CPU, {doc['date'][:10]}, seed {doc['figures'].get('seed')}"
-            + (f", load average {load[0]:.1f} at the start" if load else "") + ".\n")
-    return _rows_md(head, rows) + note
+    return rows
 
 
 @table("fleet")
