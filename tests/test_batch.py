@@ -69,6 +69,35 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
     assert np.abs(batch.positions(1) - b.nodes).max() > 1e-3  # the others kept their state
 
 
+def test_batch_same_answer_over_a_two_second_preset(rigs, device):
+    """The issue's same-answer target: two different heads and a third playing other controls, 2 s of
+    laugh (attack, hold, release) at 30 fps, each head within 1e-6 m of the same head alone, every 10th frame."""
+    a, b = rigs
+    heads = [a, b, b]
+    batch = fw.FaceBatch(heads, device=device, backend="heads")
+    alone = [fw.FaceSimulator(fr, device=device) for fr in heads]
+    tl = fw.timeline_for("laugh", attack=0.3, hold=1.2, release=0.3, start=0.0)
+    smile = fw.preset("smile")
+    worst = played = 0.0
+    for k in range(1, 61):
+        es = [tl.for_head(fr).sample(k / 30.0) for fr in heads[:2]]
+        es.append(fw.Expression("smile_half", {m: 0.5 * v for m, v in smile.activations.items()},
+                                0.15 * np.sin(np.pi * k / 30.0) ** 2, 0.0))  # its jaw opens and closes
+        batch.set_activations(es)
+        batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
+        batch.step()
+        for sim, e in zip(alone, es):
+            sim.set_activations(e)
+            sim.set_jaw(e.jaw_u, e.jaw_v)
+            sim.step()
+        if k % 10 == 0:
+            for i, sim in enumerate(alone):
+                worst = max(worst, float(np.abs(batch.positions(i) - sim.positions()).max()))
+            played = max(played, float(np.abs(batch.positions(0) - a.nodes).max()))
+    assert worst <= 1e-6, worst
+    assert played > 1e-3, played  # the laugh moved the face
+
+
 def test_failing_head_is_frozen_and_reported(rigs, device):
     a, _ = rigs
     batch = fw.FaceBatch(a, 2, device=device, backend="heads")
