@@ -74,3 +74,13 @@ def grid_tets(nx: int, ny: int, nz: int, h: float = 0.01) -> tuple[np.ndarray, n
     T[neg] = T[neg][:, [0, 2, 1, 3]]
     return V, T
 
+
+def step_together(batch, alone, es):
+    """One frame of the batch and of each head's simulator alone, the same expressions (head i: es[i])."""
+    batch.set_activations(es)
+    batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
+    batch.step()
+    for sim, e in zip(alone, es):
+        sim.set_activations(e)
+        sim.set_jaw(e.jaw_u, e.jaw_v)
+        sim.step()

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import facewarp as fw
+from conftest import step_together
 
 FRAMES = 12  # 0.4 s at 30 fps: the laugh ramping in with its jaw
 
@@ -83,13 +84,7 @@ def test_batch_same_answer_over_a_two_second_preset(rigs, device):
         es = [tl.for_head(fr).sample(k / 30.0) for fr in heads[:2]]
         es.append(fw.Expression("smile_half", {m: 0.5 * v for m, v in smile.activations.items()},
                                 0.15 * np.sin(np.pi * k / 30.0) ** 2, 0.0))  # its jaw opens and closes
-        batch.set_activations(es)
-        batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
-        batch.step()
-        for sim, e in zip(alone, es):
-            sim.set_activations(e)
-            sim.set_jaw(e.jaw_u, e.jaw_v)
-            sim.step()
+        step_together(batch, alone, es)
         if k % 10 == 0:
             for i, sim in enumerate(alone):
                 worst = max(worst, float(np.abs(batch.positions(i) - sim.positions()).max()))

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import facewarp as fw
+from conftest import step_together
 
 FRAMES = 8  # 0.27 s at 30 fps: the laugh ramping in with its jaw
 
@@ -29,13 +30,7 @@ def _controls(rig, k):
 def _run(heads, batch, alone, quiet=()):
     for k in range(1, FRAMES + 1):
         es = [fw.Expression("quiet", {}, 0.0, 0.0) if i in quiet else _controls(fr, k) for i, fr in enumerate(heads)]
-        batch.set_activations(es)
-        batch.set_jaw(np.array([[e.jaw_u, e.jaw_v] for e in es]))
-        batch.step()
-        for sim, e in zip(alone, es):
-            sim.set_activations(e)
-            sim.set_jaw(e.jaw_u, e.jaw_v)
-            sim.step()
+        step_together(batch, alone, es)
 
 
 def test_one_face_model_is_the_face_simulator(rigs, device):
