@@ -290,12 +290,29 @@ def test_writer_failing_midway_keeps_old_file(tmp_path, monkeypatch):
     p.write_text("old")
     V, F = np.eye(3), np.array([[0, 1, 2]])
 
-    def savetxt_then_fail(f, *args, **kwargs):
-        f.write("v 0 0 0\n")
-        raise OSError("disk full")
+    real_fdopen = os.fdopen
+
+    class FailsOnSecondWrite:  # the header gets written, then the disk is full
+        def __init__(self, f):
+            self.f, self.writes = f, 0
+
+        def write(self, text):
+            self.writes += 1
+            if self.writes > 1:
+                raise OSError("disk full")
+            return self.f.write(text)
+
+        def __getattr__(self, name):
+            return getattr(self.f, name)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return self.f.__exit__(*exc)
 
     with monkeypatch.context() as m:
-        m.setattr(np, "savetxt", savetxt_then_fail)
+        m.setattr(os, "fdopen", lambda *a, **k: FailsOnSecondWrite(real_fdopen(*a, **k)))
         with pytest.raises(OSError, match="disk full"):
             save_obj(p, V, F)
     assert p.read_text() == "old"

@@ -636,21 +636,30 @@ def save_obj(path: str | os.PathLike, V, F, *, uv=None, face_uv=None, units: str
         if mtl is not None:
             f.write(f"mtllib {mtl}\n")
         if colors is None:
-            np.savetxt(f, V / scale, fmt="v %.10g %.10g %.10g")
+            _write_rows(f, V / scale, "v %.10g %.10g %.10g")
         else:
             C = np.asarray(colors, dtype=np.float64)
             if C.shape != V.shape or not np.isfinite(C).all():
                 raise ValueError(f"colors must have shape {V.shape} and be finite, got {C.shape}")
-            np.savetxt(f, np.hstack([V / scale, np.clip(C, 0.0, 1.0)]), fmt="v %.10g %.10g %.10g %.5g %.5g %.5g")
+            _write_rows(f, np.hstack([V / scale, np.clip(C, 0.0, 1.0)]), "v %.10g %.10g %.10g %.5g %.5g %.5g")
         if uv is None:
-            np.savetxt(f, F + 1, fmt="f %d %d %d")
+            _write_rows(f, F + 1, "f %d %d %d")
         else:
-            np.savetxt(f, uv, fmt="vt %.10g %.10g")
+            _write_rows(f, uv, "vt %.10g %.10g")
             if mtl is not None:
                 f.write("usemtl skin\n")
             T = F if face_uv is None else face_uv
             G = np.stack([F + 1, T + 1], axis=2).reshape(len(F), 6)
-            np.savetxt(f, G, fmt="f %d/%d %d/%d %d/%d")
+            _write_rows(f, G, "f %d/%d %d/%d %d/%d")
+
+
+def _write_rows(f, A: np.ndarray, fmt: str, chunk: int = 65536) -> None:
+    """``np.savetxt(f, A, fmt=fmt)`` for a 2D array (one line ``fmt % row`` per row, the same
+    text), formatted by one ``%`` per block of rows instead of one per row (~2x faster)."""
+    A = np.asarray(A)
+    for start in range(0, len(A), chunk):
+        block = A[start:start + chunk]
+        f.write(((fmt + "\n") * len(block)) % tuple(block.ravel().tolist()))
 
 
 def save_glb(path: str | os.PathLike, V, F, uv, face_uv, *, texture=None) -> None:
