@@ -11,6 +11,7 @@ from ._src.present.render import (  # noqa: F401
     render_mesh,
     render_views,
     save_png,
+    shared_hits,
     view_axes,
 )
 from ._src.present.compare import (  # noqa: F401
@@ -58,5 +59,5 @@ __all__ = ["color_difference", "flat_color_difference", "likeness_views", "srgb_
            "FaceView",
            "colored_scene", "colormap", "displacement_max", "expression_sheet", "frames_sheet", "head_colors",
            "label_grid", "line_chart", "part_colors", "render_anatomy", "render_mesh", "render_previews",
-           "render_strip", "render_views", "save_gif", "save_png", "sheet_font_size", "vermilion_weight",
+           "render_strip", "render_views", "save_gif", "save_png", "shared_hits", "sheet_font_size", "vermilion_weight",
            "view_axes"]

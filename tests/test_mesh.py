@@ -290,12 +290,29 @@ def test_writer_failing_midway_keeps_old_file(tmp_path, monkeypatch):
     p.write_text("old")
     V, F = np.eye(3), np.array([[0, 1, 2]])
 
-    def savetxt_then_fail(f, *args, **kwargs):
-        f.write("v 0 0 0\n")
-        raise OSError("disk full")
+    real_fdopen = os.fdopen
+
+    class FailsOnSecondWrite:  # the header gets written, then the disk is full
+        def __init__(self, f):
+            self.f, self.writes = f, 0
+
+        def write(self, text):
+            self.writes += 1
+            if self.writes > 1:
+                raise OSError("disk full")
+            return self.f.write(text)
+
+        def __getattr__(self, name):
+            return getattr(self.f, name)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return self.f.__exit__(*exc)
 
     with monkeypatch.context() as m:
-        m.setattr(np, "savetxt", savetxt_then_fail)
+        m.setattr(os, "fdopen", lambda *a, **k: FailsOnSecondWrite(real_fdopen(*a, **k)))
         with pytest.raises(OSError, match="disk full"):
             save_obj(p, V, F)
     assert p.read_text() == "old"
@@ -353,3 +370,55 @@ def test_surface_points_roundtrip_and_follow_deformation():
 def test_surface_points_from_bad_dict(d, match):
     with pytest.raises(InputError, match=match):
         SurfacePoints.from_dict(d, source="lm.json")
+
+
+def _trimesh_glb(V, F, uv, face_uv, texture=None) -> bytes:
+    """What trimesh's exporter writes for save_glb's mesh (one vertex per (vertex, UV) pair)."""
+    from PIL import Image
+
+    pairs, inverse = np.unique(np.stack([F.ravel(), face_uv.ravel()], 1), axis=0, return_inverse=True)
+    if texture is None:
+        material = trimesh.visual.material.PBRMaterial(baseColorFactor=[204, 158, 133, 255])
+    else:
+        material = trimesh.visual.material.PBRMaterial(baseColorTexture=Image.fromarray(texture), metallicFactor=0.0,
+                                                       roughnessFactor=0.6)
+    mesh = trimesh.Trimesh(vertices=V[pairs[:, 0]], faces=inverse.reshape(-1, 3), process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=uv[pairs[:, 1]], material=material))
+    return mesh.export(file_type="glb")
+
+
+@pytest.mark.parametrize("textured", [False, True])
+def test_save_glb_writes_trimesh_bytes(tmp_path, textured):
+    """save_glb writes the glTF itself (no trimesh import): byte for byte what trimesh exports."""
+    import facewarp as fw
+
+    t = fw.default_template(0)
+    rng = np.random.default_rng(3)
+    V = t.vertices + rng.normal(0.0, 1e-3, t.vertices.shape)
+    tex = (rng.random((32, 48, 3)) * 255).astype(np.uint8) if textured else None
+    fw.save_glb(tmp_path / "a.glb", V, t.faces, t.uv, t.face_uv, texture=tex)
+    assert (tmp_path / "a.glb").read_bytes() == _trimesh_glb(V, t.faces, t.uv, t.face_uv, tex)
+    m = load_mesh(tmp_path / "a.glb")
+    assert m.corner_uv is not None and len(m.faces) == len(t.faces)
+
+
+@pytest.mark.parametrize("colors", [False, True])
+def test_plain_obj_reads_like_any_obj(tmp_path, colors):
+    """A plain OBJ (v / f / comments; read by a fast path) gives the same arrays as the same file
+    with a line that sends it through the general reader."""
+    rng = np.random.default_rng(4)
+    V = rng.normal(0.0, 0.1, (500, 3))
+    F = rng.integers(0, 500, (900, 3))
+    C = rng.random((500, 3)) if colors else None
+    save_obj(tmp_path / "plain.obj", V, F, units="mm", colors=C)
+    text = (tmp_path / "plain.obj").read_text()
+    (tmp_path / "general.obj").write_text(text.replace("\nf ", "\no part\nf ", 1))
+    a, b = load_mesh(tmp_path / "plain.obj", units="mm"), load_mesh(tmp_path / "general.obj", units="mm")
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
+    assert np.allclose(a.vertices, V, rtol=0, atol=1e-9) and np.array_equal(a.faces, F)
+    assert (a.colors is None) == (not colors) and (b.colors is None) == (not colors)
+    if colors:
+        assert np.array_equal(a.colors, b.colors)
+    (tmp_path / "bad.obj").write_text(text + "f 1 2 501\n")
+    with pytest.raises(InputError, match="face 900 refers to vertex 501, but there are 500 in the file"):
+        load_mesh(tmp_path / "bad.obj")

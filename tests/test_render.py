@@ -8,7 +8,7 @@ import trimesh
 from PIL import Image
 
 from facewarp import InputError
-from facewarp.render import colormap, render_mesh, render_views, save_png
+from facewarp.render import colormap, render_mesh, render_views, save_png, shared_hits
 
 SIZE = 64
 
@@ -311,3 +311,22 @@ def test_expression_sheet_pairs_rest_and_peak_and_wraps(head):
         expression_sheet(t.vertices, t.faces, lm, t.parts, [])
     with pytest.raises(InputError, match="shots\\[0\\] points"):
         expression_sheet(t.vertices, t.faces, lm, t.parts, [("x", t.vertices[:10], None)])
+
+
+def test_shared_hits_give_the_same_pictures():
+    """Pictures of one head from one camera with different colours inside ``shared_hits`` (one
+    ray cast, the colours applied per picture) are pixel for pixel those of separate renders;
+    a moved head, another view or size, points and an unlit picture too."""
+    V, F = unit_sphere()
+    V = V * np.array([0.08, 0.11, 0.09]) + np.random.default_rng(5).normal(0.0, 2e-3, V.shape)
+    colors = [colormap(np.abs(V[:, k]) * 1e3, 0.0, 100.0) for k in range(3)]
+    calls = [dict(width=80, height=64), dict(width=80, height=64), dict(width=80, height=64, points=V[::40]),
+             dict(width=64, height=64, view="side"), dict(width=48, height=64, unlit=True, background=(0.2, 0.3, 0.4)),
+             dict(width=80, height=64, supersample=1)]
+    alone = [render_mesh(V, F, vertex_colors=c, **kw) for kw in calls for c in colors]
+    with shared_hits():
+        shared = [render_mesh(V, F, vertex_colors=c, **kw) for kw in calls for c in colors]
+        moved = render_mesh(V + 0.01, F, vertex_colors=colors[0], **calls[0])
+    for a, b in zip(alone, shared):
+        assert np.array_equal(a, b)
+    assert np.array_equal(moved, render_mesh(V + 0.01, F, vertex_colors=colors[0], **calls[0]))

@@ -259,11 +259,65 @@ def _parse_floats(path: Path, lines: list[str], what: str, width: int) -> np.nda
         raise InputError(f"{path}: could not parse a {what} line ({e})") from None
 
 
+_DIGIT_OR_BLANK = np.zeros(256, dtype=bool)
+_DIGIT_OR_BLANK[[9, 10, 32, *range(48, 58)]] = True
+
+
+def _read_plain_obj(path: Path, text: str, look: dict | None):
+    """The common OBJ, read with whole-array NumPy passes instead of a Python loop over its
+    lines (~0.19 s -> ~0.08 s for a 30,000-vertex, 60,000-triangle scan): ASCII, every line ``v x y z`` or
+    ``v x y z r g b`` (all alike), ``f i j k`` (positive indices), a comment or blank. The
+    same arrays as the general reader (the same strings converted by NumPy); None for any other
+    file, which the general reader then reads (with its error messages)."""
+    if not text.isascii() or any(c in text for c in "\r\v\f\x1c\x1d\x1e"):  # more line breaks for str.splitlines
+        return None
+    b = np.frombuffer((text if text.endswith("\n") else text + "\n").encode("ascii"), dtype=np.uint8)
+    nl = b == 10
+    ends = np.flatnonzero(nl)
+    starts = np.concatenate([[0], ends[:-1] + 1])
+    first = b[starts]
+    second = b[np.minimum(starts + 1, len(b) - 1)]
+    empty = starts == ends
+    is_v = (first == ord("v")) & (second == 32) & ~empty
+    is_f = (first == ord("f")) & (second == 32) & ~empty
+    if not (is_v | is_f | empty | (first == ord("#"))).all() or not is_v.any() or not is_f.any():
+        return None
+    line = np.cumsum(nl) - nl  # line of each byte (its newline included)
+    blank = nl | (b == 32) | (b == 9)
+    tok = ~blank
+    tok[1:] &= blank[:-1]  # first byte of each token
+    count = np.bincount(line[tok], minlength=len(starts))  # tokens per line, the key included
+    width = int(count[np.argmax(is_v)]) - 1
+    if width not in (3, 6) or not (count[is_v] == width + 1).all() or not (count[is_f] == 4).all():
+        return None
+    body = np.ones(len(b), dtype=bool)
+    body[starts] = False  # drop the keys
+    in_v = is_v[line] & body
+    in_f = is_f[line] & body
+    f_bytes = b[in_f]
+    if not _DIGIT_OR_BLANK[f_bytes].all():
+        return None
+    try:
+        A = np.array(b[in_v].tobytes().decode("ascii").split(), dtype=np.float64).reshape(-1, width)
+        vi = np.array(f_bytes.tobytes().decode("ascii").split(), dtype=np.int64)
+    except (ValueError, OverflowError):
+        return None
+    V = np.ascontiguousarray(A[:, :3])
+    if width == 6 and look is not None:
+        look["colors"] = _as_unit_colors(np.ascontiguousarray(A[:, 3:]))
+    poly = np.repeat(np.arange(len(vi) // 3), 3)
+    vi = _resolve(path, vi, np.full(len(vi), len(V), dtype=np.int64), len(V), "vertex", poly)
+    return V, vi.reshape(-1, 3), None
+
+
 def _read_obj(path: Path, look: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError as e:
         raise InputError(f"{path}: cannot read ({e.strerror})") from None
+    plain = _read_plain_obj(path, text, look)
+    if plain is not None:
+        return plain
 
     v_lines: list[str] = []
     vt_lines: list[str] = []
@@ -582,21 +636,30 @@ def save_obj(path: str | os.PathLike, V, F, *, uv=None, face_uv=None, units: str
         if mtl is not None:
             f.write(f"mtllib {mtl}\n")
         if colors is None:
-            np.savetxt(f, V / scale, fmt="v %.10g %.10g %.10g")
+            _write_rows(f, V / scale, "v %.10g %.10g %.10g")
         else:
             C = np.asarray(colors, dtype=np.float64)
             if C.shape != V.shape or not np.isfinite(C).all():
                 raise ValueError(f"colors must have shape {V.shape} and be finite, got {C.shape}")
-            np.savetxt(f, np.hstack([V / scale, np.clip(C, 0.0, 1.0)]), fmt="v %.10g %.10g %.10g %.5g %.5g %.5g")
+            _write_rows(f, np.hstack([V / scale, np.clip(C, 0.0, 1.0)]), "v %.10g %.10g %.10g %.5g %.5g %.5g")
         if uv is None:
-            np.savetxt(f, F + 1, fmt="f %d %d %d")
+            _write_rows(f, F + 1, "f %d %d %d")
         else:
-            np.savetxt(f, uv, fmt="vt %.10g %.10g")
+            _write_rows(f, uv, "vt %.10g %.10g")
             if mtl is not None:
                 f.write("usemtl skin\n")
             T = F if face_uv is None else face_uv
             G = np.stack([F + 1, T + 1], axis=2).reshape(len(F), 6)
-            np.savetxt(f, G, fmt="f %d/%d %d/%d %d/%d")
+            _write_rows(f, G, "f %d/%d %d/%d %d/%d")
+
+
+def _write_rows(f, A: np.ndarray, fmt: str, chunk: int = 65536) -> None:
+    """``np.savetxt(f, A, fmt=fmt)`` for a 2D array (one line ``fmt % row`` per row, the same
+    text), formatted by one ``%`` per block of rows instead of one per row (3-7x faster)."""
+    A = np.asarray(A)
+    for start in range(0, len(A), chunk):
+        block = A[start:start + chunk]
+        f.write(((fmt + "\n") * len(block)) % tuple(block.ravel().tolist()))
 
 
 def save_glb(path: str | os.PathLike, V, F, uv, face_uv, *, texture=None) -> None:
@@ -614,9 +677,23 @@ def save_glb(path: str | os.PathLike, V, F, uv, face_uv, *, texture=None) -> Non
         texture: Optional base-colour image, shape (h, w, 3), uint8 (row 0 at v = 1), or a
             path of an image file; without it the material is a plain skin colour.
     """
-    import trimesh
-    from PIL import Image
+    png = None
+    if texture is not None:
+        import io
 
+        from PIL import Image
+
+        img = Image.open(texture).convert("RGB") if isinstance(texture, (str, os.PathLike)) else \
+            Image.fromarray(np.asarray(texture, dtype=np.uint8))
+        with io.BytesIO() as buf:
+            img.save(buf, format="png")
+            png = buf.getvalue()
+    _save_glb(path, V, F, uv, face_uv, png)
+
+
+def _save_glb(path, V, F, uv, face_uv, png: bytes | None) -> None:
+    """:func:`save_glb` with the texture already encoded as PNG (``png``: bytes of a PNG file
+    whose pixels PIL's default PNG encoder turned into exactly these bytes; None: untextured)."""
     from .surface import _check_VF
 
     V, F = _check_VF(V, F)
@@ -625,17 +702,73 @@ def save_glb(path: str | os.PathLike, V, F, uv, face_uv, *, texture=None) -> Non
     if face_uv.shape != F.shape or uv.ndim != 2 or uv.shape[1] != 2 or face_uv.min() < 0 or face_uv.max() >= len(uv):
         raise ValueError(f"uv (k, 2) and face_uv {F.shape} with indices into uv expected, got {uv.shape}, {face_uv.shape}")
     pairs, inverse = np.unique(np.stack([F.ravel(), face_uv.ravel()], 1), axis=0, return_inverse=True)
-    if texture is None:
-        material = trimesh.visual.material.PBRMaterial(baseColorFactor=[204, 158, 133, 255])
-    else:
-        img = Image.open(texture).convert("RGB") if isinstance(texture, (str, os.PathLike)) else \
-            Image.fromarray(np.asarray(texture, dtype=np.uint8))
-        material = trimesh.visual.material.PBRMaterial(baseColorTexture=img, metallicFactor=0.0, roughnessFactor=0.6)
-    mesh = trimesh.Trimesh(vertices=V[pairs[:, 0]], faces=inverse.reshape(-1, 3), process=False,
-                           visual=trimesh.visual.TextureVisuals(uv=uv[pairs[:, 1]], material=material))
-    data = mesh.export(file_type="glb")
+    data = _glb_bytes(V[pairs[:, 0]], inverse.reshape(-1, 3), uv[pairs[:, 1]], png)
     with atomic_write(path, "wb", encoding=None) as f:
         f.write(data)
+
+
+_GLB_SKIN = [204, 158, 133, 255]  # the untextured material's base colour (RGBA, 0-255)
+
+
+def _glb_bytes(V, F, uv, png: bytes | None = None) -> bytes:
+    """Binary glTF of one mesh with per-vertex UVs: byte for byte what trimesh's exporter
+    writes for ``trimesh.Trimesh(V, F, process=False, visual=TextureVisuals(uv, material))``
+    with ``material = PBRMaterial(baseColorFactor=_GLB_SKIN)``, or with ``png`` (the texture
+    encoded as PNG, as trimesh encodes a PIL image: ``save(format="png")``) ``PBRMaterial(
+    baseColorTexture=..., metallicFactor=0.0, roughnessFactor=0.6)`` (trimesh 4-5; a test
+    compares them). Written here in milliseconds without importing trimesh (save_glb took
+    0.2-0.4 s of ``facewarp adapt``), and the texture is not encoded a second time.
+
+    Layout: a JSON chunk (compact, padded with spaces to 4 bytes), then one BIN chunk holding
+    the indices (uint32), the positions (float32), the PNG if any, and the UVs (float32, v
+    flipped: glTF's v points down), each a buffer view padded to 4 bytes; accessors carry
+    their min / max.
+    """
+    import json
+    import struct
+
+    idx = np.ascontiguousarray(F, dtype=np.uint32)
+    pos = np.ascontiguousarray(V, dtype=np.float32)
+    tc = np.array(uv, dtype=np.float64)[:, :2]
+    tc[:, 1] = 1.0 - tc[:, 1]
+    tc = np.ascontiguousarray(tc, dtype=np.float32)
+    blobs = [idx.tobytes(), pos.tobytes()] + ([] if png is None else [bytes(png)]) + [tc.tobytes()]
+    blobs = [b + bytes(-len(b) % 4) for b in blobs]
+    accessors = [
+        {"componentType": 5125, "type": "SCALAR", "bufferView": 0, "count": int(idx.size),
+         "max": [int(idx.max())], "min": [int(idx.min())]},
+        {"componentType": 5126, "type": "VEC3", "byteOffset": 0, "bufferView": 1, "count": len(pos),
+         "max": pos.max(axis=0).tolist(), "min": pos.min(axis=0).tolist()},
+        {"componentType": 5126, "type": "VEC2", "byteOffset": 0, "bufferView": len(blobs) - 1, "count": len(tc),
+         "max": tc.max(axis=0).tolist(), "min": tc.min(axis=0).tolist()},
+    ]
+    views, at = [], 0
+    for b in blobs:
+        views.append({"buffer": 0, "byteOffset": at, "byteLength": len(b)})
+        at += len(b)
+    tree = {
+        "scene": 0, "scenes": [{"nodes": [0]}],
+        "asset": {"version": "2.0", "generator": "https://github.com/mikedh/trimesh"},
+        "accessors": accessors,
+        "meshes": [{"name": "geometry_0", "extras": {}, "primitives": [
+            {"attributes": {"POSITION": 1, "TEXCOORD_0": 2}, "indices": 0, "mode": 4, "material": 0}]}],
+    }
+    if png is None:
+        pbr = {"baseColorFactor": (np.array(_GLB_SKIN, np.uint8) / 255.0).tolist()}
+    else:
+        tree["images"] = [{"bufferView": 2, "mimeType": "image/png"}]
+        tree["textures"] = [{"source": 0}]
+        pbr = {"baseColorTexture": {"index": 0}, "roughnessFactor": 0.6, "metallicFactor": 0.0}
+    tree.update({
+        "materials": [{"pbrMetallicRoughness": pbr, "doubleSided": False}],
+        "nodes": [{"name": "geometry_0", "mesh": 0}],
+        "buffers": [{"byteLength": at}],
+        "bufferViews": views,
+    })
+    content = json.dumps(tree, separators=(",", ":"))
+    content = (content + (4 - (len(content) + 20) % 4) * " ").encode("utf-8")
+    head = struct.pack("<5I", 0x46546C67, 2, len(content) + at + 28, len(content), 0x4E4F534A)
+    return b"".join([head, content, struct.pack("<2I", at, 0x004E4942), *blobs])
 
 
 # ----------------------------------------------------------------------------------------

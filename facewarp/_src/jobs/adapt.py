@@ -249,17 +249,17 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     if detected is not None:
         save_landmarks_json(out / "detected_landmarks.json", {k: v / scale for k, v in scan_lm.items()}, units="m")
     uv = {} if tmpl is None or tmpl.uv is None else {"uv": tmpl.uv, "face_uv": tmpl.face_uv}
-    baked = None
+    baked = png = None
     if uv and scan_mesh.has_color:
         step("texture")
-        baked = _bake(out, res.vertices_scan_frame, TF, tmpl, scan_mesh, texture_size, device)
+        baked, png = _bake(out, res.vertices_scan_frame, TF, tmpl, scan_mesh, texture_size, device)
         uv["mtl"] = "adapted.mtl"
     save_obj(out / "adapted.obj", res.vertices, TF, **uv)
     if uv:
-        from ..geometry.mesh import save_glb
+        from ..geometry.mesh import _save_glb
 
-        save_glb(out / "adapted.glb", res.vertices, TF, uv["uv"], uv["face_uv"],
-                 texture=out / "texture.png" if baked is not None else None)
+        # the texture embedded as texture.png's own bytes (what encoding it again would give)
+        _save_glb(out / "adapted.glb", res.vertices, TF, uv["uv"], uv["face_uv"], png)
     save_obj(out / "adapted_scan_frame.obj", res.vertices_scan_frame / scale, TF, **uv)  # the scan's units
     # landmarks follow the adapted surface (face + barycentric on the template)
     from ..geometry.mesh import closest_surface_points
@@ -302,7 +302,10 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
 
 def _bake(out: Path, V_scan_frame, TF, tmpl, scan_mesh, size: int, device):
     """``texture.png`` (the scan's colour over the template's UVs, :mod:`~facewarp._src.adapt.bake`)
-    and ``adapted.mtl`` (material ``skin`` with it as ``map_Kd``)."""
+    and ``adapted.mtl`` (material ``skin`` with it as ``map_Kd``); returns the bake and the
+    PNG file's bytes."""
+    import io
+
     from PIL import Image
 
     from ..adapt.bake import bake_texture
@@ -311,12 +314,15 @@ def _bake(out: Path, V_scan_frame, TF, tmpl, scan_mesh, size: int, device):
     b = bake_texture(V_scan_frame, TF, tmpl.uv, tmpl.face_uv, scan_mesh.vertices, scan_mesh.faces,
                      colors=scan_mesh.colors, texture=scan_mesh.texture, corner_uv=scan_mesh.corner_uv, size=size,
                      device=device)
+    with io.BytesIO() as buf:
+        Image.fromarray(b.image).save(buf, format="PNG")
+        png = buf.getvalue()
     with atomic_write(out / "texture.png", "wb", encoding=None) as f:
-        Image.fromarray(b.image).save(f, format="PNG")
+        f.write(png)
     with atomic_write(out / "adapted.mtl", "w") as f:
         f.write("# facewarp: the skin, its colour baked from the scan\nnewmtl skin\nKa 1 1 1\nKd 1 1 1\n"
                 "Ks 0 0 0\nmap_Kd texture.png\n")
-    return b
+    return b, png
 
 
 def _likeness(out: Path, res, TF, tmpl, scan_mesh, texture, device) -> dict:
@@ -346,9 +352,22 @@ def _pictures(out, res, TF, d_show, device) -> None:
     """error_heatmap.png (distance to the scan), quality_heatmap.png (|H_adapted - H_scan| with
     folded faces as red dots), distortion_heatmap.png (stretch of the template's edges) and
     error_curve.png (E_d, E_m, E per level)."""
+    from ..present.plot import line_chart
+    from ..present.render import shared_hits
+
+    with shared_hits():  # the quality and distortion maps: one head, one camera, one ray cast
+        _heat_maps(out, res, TF, d_show, device)
+    lv = list(res.levels)
+    line_chart(out / "error_curve.png", [r.level for r in lv],
+               {"E_d [mm^2]": [r.E_d * 1e6 for r in lv], "E_m [mm^2]": [r.E_m * 1e6 for r in lv],
+                "E [mm^2]": [r.E * 1e6 for r in lv]},
+               title="adaptation error per level (Eq. 5.2.1-5.2.3)", xlabel="level", ylabel="error", log_y=True)
+
+
+def _heat_maps(out, res, TF, d_show, device) -> None:
+    """The three heat maps of :func:`_pictures`."""
     from ..geometry.surface import face_normals
     from ..present.adapt_maps import heat_map
-    from ..present.plot import line_chart
 
     V = res.vertices
     vmax = max(float(np.nanpercentile(d_show, 98)) * 1e3, 0.5)
@@ -368,8 +387,3 @@ def _pictures(out, res, TF, d_show, device) -> None:
     if res.vertex_stretch is not None:
         heat_map(out / "distortion_heatmap.png", V, TF, res.vertex_stretch * 100.0, vmax=30.0, unit="% stretch",
                  size=400, title="stretch of the template's edges (|log(l / l0)|)", device=device)
-    lv = list(res.levels)
-    line_chart(out / "error_curve.png", [r.level for r in lv],
-               {"E_d [mm^2]": [r.E_d * 1e6 for r in lv], "E_m [mm^2]": [r.E_m * 1e6 for r in lv],
-                "E [mm^2]": [r.E * 1e6 for r in lv]},
-               title="adaptation error per level (Eq. 5.2.1-5.2.3)", xlabel="level", ylabel="error", log_y=True)

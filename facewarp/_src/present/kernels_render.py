@@ -1,6 +1,7 @@
 """Warp kernels of the preview renderer (:mod:`facewarp._src.render`).
 
-One kernel: an orthographic ray cast, one ray per (supersampled) pixel, against a
+One kernel: an orthographic ray cast, one ray per (supersampled) pixel of a window of the
+image (the caller fills the rest, which no ray can hit, with the background), against a
 ``wp.Mesh`` BVH, shaded with two-sided Lambert plus ambient light; the albedo is the corner
 colours interpolated, or for the first ``textured_count`` triangles a bilinear texture sample
 at the interpolated corner UVs.
@@ -53,7 +54,9 @@ def _cast_rays(
     textured_count: int,
     inside_count: int,
     inside_color: wp.vec3,
-    # Camera:
+    # Camera (the launch covers rows row0.., columns col0.. of the image):
+    row0: int,
+    col0: int,
     origin: wp.vec3,
     step_right: wp.vec3,
     step_down: wp.vec3,
@@ -69,6 +72,8 @@ def _cast_rays(
     depth_out: wp.array2d(dtype=float),
 ):
     i, j = wp.tid()
+    i = i + row0
+    j = j + col0
     start = origin + (float(j) + 0.5) * step_right + (float(i) + 0.5) * step_down
     hit = wp.mesh_query_ray(mesh, start, forward, max_depth)
     if not hit.result:
@@ -104,3 +109,85 @@ def _cast_rays(
     shade = ambient + diffuse * wp.max(wp.dot(n, light_dir), 0.0)
     color_out[i, j] = albedo * shade
     depth_out[i, j] = hit.t
+
+
+# The same ray cast in two steps, for several pictures of one scene from one camera that differ
+# only in the corner colours (heat maps of different values on one head): ``_cast_hits`` once
+# (the hit triangle, its barycentric u, v, the shading factor, the depth), then ``_shade_hits``
+# per colour set. Each value is computed by the same expressions as in ``_cast_rays``
+# (no texture, no inside colour), so the pixels are the same (a test compares them).
+@wp.kernel
+def _cast_hits(
+    mesh: wp.uint64,
+    indices: wp.array(dtype=wp.int32),
+    vertex_normals: wp.array(dtype=wp.vec3),
+    row0: int,
+    col0: int,
+    origin: wp.vec3,
+    step_right: wp.vec3,
+    step_down: wp.vec3,
+    forward: wp.vec3,
+    max_depth: float,
+    light_dir: wp.vec3,
+    ambient: float,
+    diffuse: float,
+    face_out: wp.array2d(dtype=wp.int32),
+    u_out: wp.array2d(dtype=float),
+    v_out: wp.array2d(dtype=float),
+    shade_out: wp.array2d(dtype=float),
+    depth_out: wp.array2d(dtype=float),
+):
+    i, j = wp.tid()
+    i = i + row0
+    j = j + col0
+    start = origin + (float(j) + 0.5) * step_right + (float(i) + 0.5) * step_down
+    hit = wp.mesh_query_ray(mesh, start, forward, max_depth)
+    if not hit.result:
+        face_out[i, j] = -1
+        depth_out[i, j] = max_depth
+        return
+
+    f = hit.face
+    u = hit.u
+    v = hit.v
+    w = 1.0 - u - v
+    a = indices[3 * f + 0]
+    b = indices[3 * f + 1]
+    c = indices[3 * f + 2]
+
+    n = u * vertex_normals[a] + v * vertex_normals[b] + w * vertex_normals[c]
+    n_len = wp.length(n)
+    if n_len > 1.0e-12:
+        n = n / n_len
+    else:
+        n = hit.normal
+    if wp.dot(hit.normal, forward) > 0.0:
+        n = -n
+    face_out[i, j] = f
+    u_out[i, j] = u
+    v_out[i, j] = v
+    shade_out[i, j] = ambient + diffuse * wp.max(wp.dot(n, light_dir), 0.0)
+    depth_out[i, j] = hit.t
+
+
+@wp.kernel
+def _shade_hits(
+    face: wp.array2d(dtype=wp.int32),
+    u_in: wp.array2d(dtype=float),
+    v_in: wp.array2d(dtype=float),
+    shade_in: wp.array2d(dtype=float),
+    corner_colors: wp.array(dtype=wp.vec3),
+    background: wp.vec3,
+    color_out: wp.array2d(dtype=wp.vec3),
+):
+    i, j = wp.tid()
+    f = face[i, j]
+    if f < 0:
+        color_out[i, j] = background
+        return
+    u = u_in[i, j]
+    v = v_in[i, j]
+    w = 1.0 - u - v
+    albedo = u * corner_colors[3 * f + 0] + v * corner_colors[3 * f + 1] + w * corner_colors[3 * f + 2]
+    shade = shade_in[i, j]
+    color_out[i, j] = albedo * shade

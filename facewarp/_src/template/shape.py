@@ -48,7 +48,6 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 __all__ = ["HeadShape", "LANDMARKS_MM"]
 
@@ -82,6 +81,8 @@ LANDMARKS_MM = {
 
 
 def _pchip(knots):
+    from scipy.interpolate import PchipInterpolator  # only when a head is built (not when loaded from its cache)
+
     k = np.asarray(sorted(knots), dtype=np.float64)
     return PchipInterpolator(k[:, 0], k[:, 1], extrapolate=True)
 
