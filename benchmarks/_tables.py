@@ -472,7 +472,7 @@ def _blender_texture_row(fig: dict) -> list[str]:
     got = (f"Principled BSDF Base Color <- Image Texture `{img['file']}` ({img['size_px'][0]} x {img['size_px'][1]} px, "
            f"{img['colorspace']}, loaded) on {faces} of {total} skin faces, UV map `{st['uv_maps'][0]}`"
            if st["ok"] else "NO image texture on the skin")
-    return [f"Blender {fig['blender']} (bpy) imports `facewarp demo --quick`'s `animation.usdc`", got,
+    return [f"Blender {fig['blender']} (bpy) imports the demo's `animation.usdc` (`facewarp demo`)", got,
             "`blender_texture.json`"]
 
 
