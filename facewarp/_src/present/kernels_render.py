@@ -42,6 +42,20 @@ def _bilinear(texture: wp.array2d(dtype=wp.vec3), st: wp.vec2):
     return top * (1.0 - fy) + bottom * fy
 
 
+@wp.func
+def _smooth_normal(indices: wp.array(dtype=wp.int32), vertex_normals: wp.array(dtype=wp.vec3), f: int, u: float,
+                   v: float, geometric: wp.vec3):
+    """The hit's interpolated vertex normal n_s (unit; the geometric normal where it vanishes), not yet flipped."""
+    a = indices[3 * f + 0]
+    b = indices[3 * f + 1]
+    c = indices[3 * f + 2]
+    n = u * vertex_normals[a] + v * vertex_normals[b] + (1.0 - u - v) * vertex_normals[c]
+    n_len = wp.length(n)
+    if n_len > 1.0e-12:
+        return n / n_len
+    return geometric
+
+
 @wp.kernel
 def _cast_rays(
     # Scene:
@@ -85,16 +99,7 @@ def _cast_rays(
     u = hit.u
     v = hit.v
     w = 1.0 - u - v
-    a = indices[3 * f + 0]
-    b = indices[3 * f + 1]
-    c = indices[3 * f + 2]
-
-    n = u * vertex_normals[a] + v * vertex_normals[b] + w * vertex_normals[c]
-    n_len = wp.length(n)
-    if n_len > 1.0e-12:
-        n = n / n_len
-    else:
-        n = hit.normal
+    n = _smooth_normal(indices, vertex_normals, f, u, v, hit.normal)
     if wp.dot(hit.normal, forward) > 0.0:
         if f < inside_count:
             color_out[i, j] = inside_color
@@ -150,17 +155,7 @@ def _cast_hits(
     f = hit.face
     u = hit.u
     v = hit.v
-    w = 1.0 - u - v
-    a = indices[3 * f + 0]
-    b = indices[3 * f + 1]
-    c = indices[3 * f + 2]
-
-    n = u * vertex_normals[a] + v * vertex_normals[b] + w * vertex_normals[c]
-    n_len = wp.length(n)
-    if n_len > 1.0e-12:
-        n = n / n_len
-    else:
-        n = hit.normal
+    n = _smooth_normal(indices, vertex_normals, f, u, v, hit.normal)
     if wp.dot(hit.normal, forward) > 0.0:
         n = -n
     face_out[i, j] = f
