@@ -148,6 +148,7 @@ class IncrementalPotential:
         self.targets = targets
         self.springs = [_SpringSet(sp_) for sp_ in springs if sp_.node.shape[0] > 0]
         self.pool = _SpringPool(self.springs, dev)
+        self._energy_cmd_cache = {}  # (x, external force, h) -> the recorded launches of launch_energy
         self.x = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.z = wp.zeros(n, dtype=wp.vec3, device=dev)
         self.grad = wp.zeros(n, dtype=wp.vec3, device=dev)
@@ -284,7 +285,7 @@ class IncrementalPotential:
         recorded at the first call with these arrays and step (CUDA: plain launches, the same
         kernels, so that graph capture is unchanged)."""
         key = (x.ptr, control.external_force.ptr, float(h))
-        cache = self.__dict__.setdefault("_energy_cmd_cache", {})
+        cache = self._energy_cmd_cache
         hit = cache.get(key)
         if hit is None:
             if len(cache) >= 8:
