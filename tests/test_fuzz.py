@@ -513,3 +513,31 @@ def test_api_sizes_are_bounded(built):
     for kwargs in ({"substeps": 10**8}, {"fps": 1e6}):
         with pytest.raises(fw.InputError, match=next(iter(kwargs))):
             fw.FaceSimulator(rig, **kwargs)
+
+
+# ----------------------------------------------------------------------------- found by hand since
+def test_runs_without_a_frame_after_the_rest_pose(built, tmp_path, capsys):
+    """seconds x fps <= 0.5: no frame after the rest pose; refused (the rest pose alone was written and
+    reported as the expression)."""
+    out = tmp_path / "o"
+    _cli(capsys, ["simulate", built, "--expression", "smile", "--fps", "0.001", "--out", out],
+         needle="no frame after the rest pose", out=out)
+    _cli(capsys, ["simulate", built, "--expression", "smile", "--seconds", "0.01", "--out", out],
+         needle="0.01 s at 30 fps", out=out)
+    _cli(capsys, ["retarget", "smile", built, "--fps", "0.001", "--out", out],
+         needle="no frame after the rest pose", out=out)
+
+
+def test_marker_beyond_any_capture_volume(built, tmp_path, capsys):
+    """A single marker at 1e30 mm passed the per-frame span check (one marker spans nothing) and the
+    drive reported a 1e30 mm miss with exit 0; a point beyond 1 km is a unit or export error."""
+    rng = np.random.default_rng(_rng("far-marker").randrange(2**32))
+    far = float(10.0 ** rng.uniform(6.5, 30))  # [mm]: beyond 1,000 m
+    p = _write(tmp_path / "far.json", json.dumps({"fps": 30, "units": "mm",
+                                                  "markers": {"2.1": [[far, 0.0, 0.0], None]}}))
+    out = tmp_path / "o"
+    _cli(capsys, ["drive", built, "--markers", p, "--out", out], needle="far.json", out=out)
+    with pytest.raises(fw.InputError, match="'2.1' in frame 1 .* from the origin"):
+        fw.MarkerTrack(30.0, ["2.1"], np.array([[[0.0, 0.0, 0.0]], [[0.0, far * 1e-3, 0.0]]]))
+    track = fw.MarkerTrack(30.0, ["2.1"], np.array([[[999.0, 0.0, 0.0]], [[np.nan] * 3]]))  # a big hall: fine
+    assert track.frames == 2

@@ -15,6 +15,10 @@ from ..core.errors import InputError
 
 __all__ = ["ARKIT_NAMES", "ArkitTrack", "MarkerTrack"]
 
+MAX_POSITION_M = 1000.0
+"""Farthest a marker may be from the take's origin [m]: beyond any capture volume (a point there
+is a unit or export error, which the solve would otherwise report as a metres-wide miss)."""
+
 ARKIT_NAMES = (
     "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft",
     "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight", "eyeLookOutRight", "eyeLookUpRight",
@@ -60,6 +64,12 @@ class MarkerTrack:
                                      finite=False).astype(np.float64)
         if np.isinf(self.positions).any():
             raise InputError("positions: infinite values (use NaN for a missing point)")
+        with np.errstate(over="ignore", invalid="ignore"):
+            far = np.nan_to_num(np.linalg.norm(self.positions, axis=2), nan=0.0)  # (T, K) [m]
+        if far.max(initial=0.0) > MAX_POSITION_M:
+            t, k = np.unravel_index(int(np.argmax(far)), far.shape)
+            raise InputError(f"positions: point {self.names[k]!r} in frame {t} is {far[t, k]:.3g} m from the origin, "
+                             f"farther than any capture volume ({MAX_POSITION_M:g} m); are the units right?")
         if len(self.positions) == 0:
             raise InputError("positions: the track has no frames")
 

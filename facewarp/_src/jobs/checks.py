@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..core.errors import InputError
 
-__all__ = ["MAX_FRAMES", "check_kept_frames", "check_out_dir", "load_simulated_head", "make_out_dir"]
+__all__ = ["MAX_FRAMES", "check_kept_frames", "check_some_frames", "check_out_dir", "load_simulated_head", "make_out_dir"]
 
 MAX_FRAMES = 100_000
 """Most frames one ``simulate`` run keeps in memory (about 1 h at 30 fps; a level-0 head takes
@@ -50,6 +50,14 @@ def check_kept_frames(seconds: float, fps: float) -> None:
                          f"more than {MAX_FRAMES} per run")
 
 
+def check_some_frames(seconds: float, fps: float) -> None:
+    """A run of ``seconds`` at ``fps`` has a frame after its first (the rest pose): round(seconds * fps) >= 1.
+    Below that a command would write the rest pose alone and call it the expression."""
+    if round(seconds * fps) < 1:
+        raise InputError(f"seconds, fps: {seconds:g} s at {fps:g} fps has no frame after the rest pose "
+                         "(seconds x fps must be more than 0.5)")
+
+
 def load_simulated_head(head_path, seconds: float, fps: float, jaw: str):
     """The face rig of a build (checked to fit in memory for ``seconds`` at ``fps``) and its
     ``head.xml`` path (parsed when ``jaw`` is ``"mujoco"``). Here, beside the other checks, so that
@@ -58,6 +66,7 @@ def load_simulated_head(head_path, seconds: float, fps: float, jaw: str):
     from ..physics.face_rig import load_face_rig
     from .animation import load_mjcf
 
+    check_some_frames(seconds, fps)
     fr = load_face_rig(head_path)
     frames = round(seconds * fps) + 1  # kept in memory (a folder) or as USD time samples (a USD file)
     check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), frames, len(fr.head_vertices)),

@@ -32,7 +32,7 @@ from ..present.render import save_png
 from ..sim.play import _play
 from ..sim.simulator import FaceSimulator
 from .animation import FdpMotion, UsdAnimation, part_transforms, sim_controls
-from .checks import check_out_dir, make_out_dir
+from .checks import check_out_dir, check_some_frames, make_out_dir
 
 __all__ = ["RELAX_SECONDS", "TRACKED_FDPS", "load_rig", "retarget_files"]
 
@@ -123,6 +123,7 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
     if seconds is None:
         seconds = _default_seconds(expression)
     timeline = timeline_from_spec(expression, seconds)  # checks seconds and reads the file
+    check_some_frames(seconds, fps)
     for h in heads:  # missing heads fail before any simulation
         p = Path(str(h))
         if not (str(h) == "default" or str(h).startswith("default:")) and not p.exists():
