@@ -713,6 +713,70 @@ def fleet(r: Results) -> str:
             f"starting Ray). Per task (median CPU seconds, largest worker memory): {steps}.\n")
 
 
+@table("soak")
+def soak(r: Results) -> str:
+    """The soak (``soak_cpu.json``, ``soak_cuda.json`` of ``python -m benchmarks soak``): random legal control
+    streams switching every frame, every frame checked, per device."""
+    rows, notes = [], []
+    for name in [n for n in ("soak_cpu", "soak_cuda") if n in r.glob("soak_*")]:
+        doc = r.doc(name)
+        f = doc["figures"]
+        heads = f["heads"]
+        dev = "CPU" if doc["device"] == "cpu" else doc["device"]
+        req = f["requested"]
+        cpu = [h["frames_per_second_cpu"] for h in heads]
+        rows.append([dev, f"{len(heads)} x {req['seconds']:g} s" + ("" if f.get("complete") else " (incomplete)"),
+                     f"{f['frames']:,}", str(f["failures"]), str(f["nan_frames"]), str(f["inverted_frames"]),
+                     f"{f['min_volume_ratio']:.3f}", f"{f['substepped_frames']:,}",
+                     f"{max(h.get('max_substep_factor', 1) for h in heads)}",
+                     _span(cpu), f"`{name}.json`"])
+        notes.append(f"{dev}: {doc['machine'].get('cpu', '?')}, {doc['machine'].get('cores', '?')} cores"
+                     + (f", {doc['machine']['gpu']}" if doc["machine"].get("gpu") else "")
+                     + f", {doc['date'][:10]}, seed {f.get('seed')}, {sum(1 for h in heads if h['head'].startswith('ict'))}"
+                     " ICT-adapted heads" + (f", {sum(1 for h in heads if h['head'].startswith('synthetic'))} synthetic"
+                                             if any(h["head"].startswith("synthetic") for h in heads) else ""))
+    if not rows:
+        return "(no soak committed yet: python -m benchmarks soak)"
+    return (_rows_md(["device", "heads x length", "frames", "failures", "NaN frames", "inverted frames",
+                      "smallest V / V0", "sub-stepped frames", "largest substep factor",
+                      "frames/s a head (process CPU)", "file"], rows) + "\n" + "; ".join(notes) + ".\n")
+
+
+@table("switching")
+def switching(r: Results) -> str:
+    """The CPU solver on the soak's stream switching every frame (``switching_cpu.json`` of ``python -m
+    benchmarks switching``): speed and distance to the converged frames of each solver setting."""
+    doc = r.doc("switching_cpu")
+    f = doc["figures"]
+    acc = f.get("accuracy", {})
+
+    def row(label, m, dist):
+        pf = m["per_frame_mean"]
+        return [label, f"{m['frames_per_second_cpu']:.2f}", f"{pf['iterations']:.1f}", f"{pf['factorizations']:.1f}",
+                "-" if dist is None else f"{dist[0]:.2f} / {dist[1]:.2f}", str(m.get("retries", 0))]
+
+    rows = [row("default (L-BFGS, tolerance 3e-5 m, 4 cosine updates)", f["default"],
+                (acc["fdp_distance_to_converged_max_mm"], acc["fdp_distance_to_converged_median_mm"]) if acc else None)]
+    for name, m in f.get("modes", {}).items():
+        d = m.get("fdp_distance_to_converged_mm")
+        kind, _, arg = name.partition(":")
+        label = {"interactive": f"interactive, {arg} L-BFGS iterations a frame (`iterations={arg}`)",
+                 "newton": "Newton, a factorisation per iteration" + (f", tolerance {arg} m, 2 cosine updates" if arg
+                                                                       else "")}[kind]
+        rows.append(row(label, m, None if d is None else (d["max"], d["median"])))
+    conv = acc.get("converged_run")
+    note = (f"{f['default']['frames']} frames of the stream (seed {f['seed']}) on the default head, level 0, "
+            f"{doc['machine'].get('cores', '?')}-core {doc['machine'].get('cpu', 'CPU')}, {doc['date'][:10]}"
+            + (f" (load average {doc['machine']['load_average_1_5_15_min'][0]:.1f} at the start)"
+               if doc["machine"].get("load_average_1_5_15_min") else "") + "; the "
+            f"distance is each frame's largest FDP distance to the frame converged to 1e-7 m over the first "
+            f"{acc.get('frames', 0)} frames"
+            + (f" (that run: {conv['frames_per_second_cpu']:.2f} frames/s, {conv['per_frame_mean']['iterations']:.0f}"
+               " iterations a frame)" if conv else "") + ".")
+    return _rows_md(["solver setting", "frames/s (process CPU)", "iterations / frame", "factorisations / frame",
+                     "FDP distance to converged, max / median [mm]", "retried frames"], rows) + "\n" + note + "\n"
+
+
 def render(name: str, results: Results | None = None) -> str:
     """The Markdown of table ``name``."""
     if name not in TABLES:

@@ -1,6 +1,7 @@
 """Speed of the CPU solver on a control stream that switches every frame, and where its time goes.
 
     python -m benchmarks switching [--frames 60] [--accuracy-frames 10] [--seed 1] [--name switching_cpu]
+                                   [--modes interactive:4,interactive:8,newton,newton:3e-4]
 
 The soak's stream (``benchmarks/soak.py``: about 40 % of the muscles on with activations drawn in
 [0, 1], the jaw anywhere in 0-40 deg opening and +-5 deg side, a new angle every frame, the head
@@ -14,6 +15,11 @@ The stream is played twice, with the line search's skipping of inverting trials
 and the trials show what it saves. ``--accuracy-frames`` of the stream are played again fully
 converged (tolerance 1e-7 m, springs to 1e-4, up to 500 iterations): the largest distance of any
 FDP from the converged one per frame (the 0.5 mm criterion of ``solver_accuracy.py``).
+``--modes`` plays the same frames with other settings of the solver, each with its speed and its
+distance to the converged frames: ``interactive:K`` (``FaceSimulator(iterations=K)``: K L-BFGS
+iterations a frame whatever the residual, the fibre cosine lagged one step), ``newton`` (Newton
+with a fresh factorisation every iteration, ``method="newton"``) and ``newton:TOL`` (the same with
+the convergence step ``TOL`` [m] and 2 cosine updates).
 Writes benchmarks/results/<name>.json (default ``switching_cpu``).
 """
 
@@ -30,11 +36,13 @@ from benchmarks._streams import control_stream
 THREADS = 1
 
 
-def play(rig, frames: int, seed: int, *, step_bound: bool = True, tolerance=None, solver_options=None) -> dict:
+def play(rig, frames: int, seed: int, *, step_bound: bool = True, tolerance=None, solver_options=None,
+         iterations=None, method=None) -> dict:
     """Play ``frames`` frames of the soak's stream (seed ``seed``) on ``rig``; per-frame figures."""
     import facewarp as fw
 
-    sim = fw.FaceSimulator(rig, device="cpu", tolerance=tolerance, solver_options=solver_options)
+    sim = fw.FaceSimulator(rig, device="cpu", tolerance=tolerance, solver_options=solver_options,
+                           iterations=iterations, method=method)
     solver = sim.solver
     solver.step_bound = step_bound
     stream = control_stream(np.random.default_rng(seed), len(sim.muscle_names), sim.fps)
@@ -68,6 +76,18 @@ def play(rig, frames: int, seed: int, *, step_bound: bool = True, tolerance=None
     return out, np.asarray(fdp), sim.positions()
 
 
+def _mode(spec: str) -> dict:
+    """The :func:`play` keywords of a ``--modes`` entry."""
+    name, _, arg = spec.partition(":")
+    if name == "interactive" and arg.isdigit() and int(arg) >= 1:
+        return {"iterations": int(arg)}
+    if name == "newton" and not arg:
+        return {"method": "newton"}
+    if name == "newton":
+        return {"method": "newton", "tolerance": float(arg), "solver_options": {"spring_updates": 2}}
+    raise ValueError(spec)
+
+
 def main(argv=None) -> dict:
     import facewarp as fw
 
@@ -76,9 +96,16 @@ def main(argv=None) -> dict:
     ap.add_argument("--accuracy-frames", type=int, default=10, help="frames played fully converged too (0: none)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--name", default="switching_cpu")
+    ap.add_argument("--modes", default="", help="other solver settings to compare (module doc), comma-separated")
     args = ap.parse_args(argv)
     if args.frames < 1 or not 0 <= args.accuracy_frames <= args.frames:
         ap.error("--frames must be >= 1 and --accuracy-frames in [0, --frames]")
+    modes = [m for m in args.modes.split(",") if m]
+    for m in modes:
+        try:
+            _mode(m)
+        except ValueError:
+            ap.error(f"--modes: unknown mode {m!r} (interactive:K, newton or newton:TOL)")
     rig = fw.build_face(fw.default_template(0))
     result = {"seed": args.seed, "head": "default_level0", "nodes": int(len(rig.nodes)), "tets": int(len(rig.tets))}
     on, fdp_on, X_on = play(rig, args.frames, args.seed, step_bound=True)
@@ -93,7 +120,11 @@ def main(argv=None) -> dict:
     if args.accuracy_frames:
         conv, fdp_conv, _ = play(rig, args.accuracy_frames, args.seed, tolerance=1e-7,
                                  solver_options={"max_iterations": 500, "spring_tolerance": 1e-4})
-        d = np.linalg.norm(fdp_on[:args.accuracy_frames] - fdp_conv, axis=2).max(axis=1)
+
+        def distance(fdp):  # per frame, the largest FDP distance [m] to the converged frame
+            return np.linalg.norm(fdp[:args.accuracy_frames] - fdp_conv, axis=2).max(axis=1)
+
+        d = distance(fdp_on)
         result["accuracy"] = {
             "frames": args.accuracy_frames,
             "fdp_distance_to_converged_max_mm": float(1e3 * d.max()),
@@ -103,6 +134,17 @@ def main(argv=None) -> dict:
             "converged_run": {k: conv[k] for k in ("frames_per_second_cpu", "per_frame_mean", "retries")},
         }
         print("accuracy", {k: v for k, v in result["accuracy"].items() if "per_frame" not in k}, flush=True)
+    result["modes"] = {}
+    for m in modes:
+        row, fdp_m, _ = play(rig, args.frames, args.seed, **_mode(m))
+        row["settings"] = {k: v for k, v in _mode(m).items()}
+        if args.accuracy_frames:
+            dm = distance(fdp_m)
+            row["fdp_distance_to_converged_mm"] = {"max": float(1e3 * dm.max()), "median": float(1e3 * np.median(dm)),
+                                                   "mean": float(1e3 * dm.mean())}
+        result["modes"][m] = row
+        print(m, f"{row['frames_per_second_cpu']:.2f} frames/s (CPU time)", row.get("fdp_distance_to_converged_mm"),
+              flush=True)
     print("wrote", save(args.name, result, device="cpu", benchmark="switching"))
     return result
 
