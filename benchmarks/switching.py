@@ -100,10 +100,10 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     if args.frames < 1 or not 0 <= args.accuracy_frames <= args.frames:
         ap.error("--frames must be >= 1 and --accuracy-frames in [0, --frames]")
-    modes = [m for m in args.modes.split(",") if m]
-    for m in modes:
+    modes = {}  # --modes entry -> its play() keywords, parsed once
+    for m in (m for m in args.modes.split(",") if m):
         try:
-            _mode(m)
+            modes[m] = _mode(m)
         except ValueError:
             ap.error(f"--modes: unknown mode {m!r} (interactive:K, newton or newton:TOL)")
     rig = fw.build_face(fw.default_template(0))
@@ -135,9 +135,9 @@ def main(argv=None) -> dict:
         }
         print("accuracy", {k: v for k, v in result["accuracy"].items() if "per_frame" not in k}, flush=True)
     result["modes"] = {}
-    for m in modes:
-        row, fdp_m, _ = play(rig, args.frames, args.seed, **_mode(m))
-        row["settings"] = {k: v for k, v in _mode(m).items()}
+    for m, settings in modes.items():
+        row, fdp_m, _ = play(rig, args.frames, args.seed, **settings)
+        row["settings"] = settings
         if args.accuracy_frames:
             dm = distance(fdp_m)
             row["fdp_distance_to_converged_mm"] = {"max": float(1e3 * dm.max()), "median": float(1e3 * np.median(dm)),
