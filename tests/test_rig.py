@@ -87,7 +87,7 @@ def _glb(path):
     doc = json.loads(raw[20:20 + n])
     binary = raw[20 + n + 8:]
     types = {5126: np.float32, 5121: np.uint8, 5125: np.uint32}
-    widths = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+    widths = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
     def acc(i):
         a = doc["accessors"][i]
@@ -116,6 +116,18 @@ def test_gltf_deforms_as_the_linear_rig(made):
     P = acc(prim["attributes"]["POSITION"]).astype(np.float64)
     J, W = acc(prim["attributes"]["JOINTS_0"]), acc(prim["attributes"]["WEIGHTS_0"])
     D = np.stack([acc(t["POSITION"]) for t in prim["targets"]]).astype(np.float64)
+    # the skin's vertices are split at the UV seams: each glTF vertex is a rest vertex (same float32 position)
+    index = {r.tobytes(): i for i, r in enumerate(rig.rest.astype(np.float32))}
+    src = np.array([index[r.tobytes()] for r in P.astype(np.float32)])
+    assert len(P) > len(rig.rest) and set(src) == set(range(len(rig.rest)))
+    uv = acc(prim["attributes"]["TEXCOORD_0"])
+    assert uv.shape == (len(P), 2) and 0 <= uv.min() and uv.max() <= 1
+    # normal deltas per target: the change of the unit normals of the full target
+    from facewarp._src.bake.blendshapes import normal_offsets
+
+    ND = acc(prim["targets"][1]["NORMAL"]).astype(np.float64)
+    np.testing.assert_allclose(ND, normal_offsets(rig, rig.shapes[MUSCLES[0]][-1][1])[src], atol=1e-6)
+    assert np.abs(ND).max() > 1e-3
     skin = doc["skins"][0]
     ibm = acc(skin["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1)  # column-major
     jaw_node = doc["nodes"][skin["joints"][1]]
@@ -141,7 +153,7 @@ def test_gltf_deforms_as_the_linear_rig(made):
         for i, m in enumerate(MUSCLES):
             half, full = MW[k][2 * i], MW[k][2 * i + 1]
             acts[m] = 0.5 + 0.5 * full if full > 0 else 0.5 * half
-        np.testing.assert_allclose(out, rig.evaluate(acts, jaw), atol=2e-6)
+        np.testing.assert_allclose(out, rig.evaluate(acts, jaw)[src], atol=2e-6)
         np.testing.assert_allclose(MW[k][-1], jaw / rig.jaw_angle, atol=1e-5)
 
 
@@ -236,3 +248,134 @@ def test_rig_errors(made, tmp_path, capsys):
         assert code == 2, (argv, err)
         assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and needle in err, err
     assert not list(tmp_path.iterdir())
+
+
+# ---------------------------------------------------------------------------------------------- ARKit, one bake
+def _table(fr, rows: dict):
+    """A small ARKit table of this head: ARKit name -> ({muscle: activation}, (opening, side) [rad])."""
+    from facewarp._src.drive.arkit import ArkitTable
+
+    names = list(fw.ARKIT_NAMES)
+    muscles = list(fw.FaceSimulator(fr).muscle_names)
+    A = np.zeros((len(names), len(muscles)), np.float32)
+    J = np.zeros((len(names), 2), np.float32)
+    solved = np.zeros(len(names), bool)
+    for n, (acts, jaw) in rows.items():
+        i = names.index(n)
+        for m, a in acts.items():
+            A[i, muscles.index(m)] = a
+        J[i] = jaw
+        solved[i] = True
+    z = np.zeros((len(names), 1, 3))
+    return ArkitTable(names=tuple(names), muscle_names=muscles, activations=A, jaw=J, solved=solved,
+                      residual_m=np.zeros(len(names)), target_rms_m=np.zeros(len(names)), fdp_ids=["2.1"],
+                      rest_fdp=np.zeros((1, 3)), targets=z, reached=z, basis=np.zeros((3, len(muscles) + 2)),
+                      reasons={"cheekPuff": "air pressure"})
+
+
+ROWS = {"mouthSmileLeft": ({"zygomatic_major_L": 0.8}, (0.0, 0.0)),
+        "jawOpen": ({}, (0.25, 0.0)),
+        "mouthSmileRight": ({"zygomatic_major_R": 0.8}, (0.05, 0.01))}
+
+
+@pytest.fixture(scope="module")
+def arkit_made(made):
+    from facewarp._src.jobs.rig import rig_files
+
+    d, _ = made
+    fr = fw.load_face_rig(d / "build")
+    rep = rig_files(d / "build", d / "both", shapes="both", muscles=["zygomatic_major_L"], table=_table(fr, ROWS))
+    return d / "both", rep, fr
+
+
+@pytest.mark.slow
+def test_one_bake_writes_usd_gltf_and_report_with_arkit_names(arkit_made):
+    out, rep, fr = arkit_made
+    assert sorted(p.name for p in out.iterdir()) == ["report.json", "rig.glb", "rig.usdc", "rig_skin.png"]
+    disk = json.loads((out / "report.json").read_text())
+    assert disk["arkit"] == 3 and disk["muscles"] == 1 and disk["shapes"] == "both"
+    assert set(disk["shape_report"]) == {"zygomatic_major_L", "jaw_open", *ROWS}
+    assert disk["shape_report"]["jawOpen"]["largest_motion_mm"] > 3.0
+    assert len(disk["left_out"]) == 52 - 3 and disk["left_out"]["cheekPuff"] == "air pressure"
+    assert set(disk["timings_s"]) >= {"bake", "write", "total"}
+    doc, acc = _glb(out / "rig.glb")
+    names = doc["meshes"][0]["extras"]["targetNames"]
+    assert names == ["zygomatic_major_L", "jaw_open"] + [n for n in fw.ARKIT_NAMES if n in ROWS]
+    assert [a["name"] for a in doc["animations"]] == ["sequence", "arkit_tour"]
+    pytest.importorskip("pxr")
+    from pxr import Usd
+
+    import usd_export
+
+    assert usd_export.validate_usd(out / "rig.usdc") == []
+    stage = Usd.Stage.Open(str(out / "rig.usdc"))
+    assert stage.GetPrimAtPath("/Rig/Skeleton/ArkitTour").IsValid()
+    assert stage.GetPrimAtPath("/Rig/Skin/mouthSmileLeft").GetAttribute("normalOffsets").HasAuthoredValue()
+
+
+@pytest.mark.slow
+def test_arkit_shapes_land_the_converged_face(arkit_made, made):
+    """Each ARKit shape at weight 1, through the jaw joint at its opening, is the simulator's
+    converged face of its row's controls; the glTF clip's jaw follows the weights."""
+    from facewarp._src.bake.blendshapes import static_surface
+
+    out, rep, fr = arkit_made
+    rig = fw.bake_blendshapes(fr, shapes="arkit", arkit=_table(fr, ROWS))
+    assert rig.arkit_names == [n for n in fw.ARKIT_NAMES if n in ROWS] and rig.muscle_names == []
+    sim = fw.FaceSimulator(fr)
+    for n, (acts, jaw) in ROWS.items():
+        V, _ = static_surface(sim, acts, jaw)
+        np.testing.assert_allclose(rig.evaluate_arkit({n: 1.0}), V, atol=2e-6)
+    assert rig.arkit_opening({"jawOpen": 0.5, "mouthSmileRight": 1.0}) == pytest.approx(0.175, abs=1e-6)
+
+
+def test_one_palette_and_the_texture_in_both_formats(made):
+    from facewarp._src.present.looks import COLORS
+
+    d, _ = made
+    doc, _ = _glb(d / "rig.glb")
+    skin = next(m for m in doc["materials"] if m["name"] == "Skin")
+    assert skin["pbrMetallicRoughness"]["baseColorTexture"]["index"] == 0  # the build's texture
+    assert doc["images"][0]["mimeType"] == "image/png"
+    pytest.importorskip("pxr")
+    from pxr import Usd, UsdGeom, UsdShade
+
+    import usd_export._writer as uw
+
+    assert uw._SKIN_COLOR == COLORS["skin"] and uw._WHITE_COLOR == COLORS["sclera"]
+    stage = Usd.Stage.Open(str(d / "rig.usda"))
+    rgb = UsdShade.Shader(stage.GetPrimAtPath("/Rig/Looks/Skin/PreviewSurface")).GetInput("diffuseColor").Get()
+    np.testing.assert_allclose(rgb, COLORS["skin"], atol=1e-6)
+    skin_prim = stage.GetPrimAtPath("/Rig/Skin")
+    mat = UsdShade.MaterialBindingAPI(skin_prim).GetDirectBinding().GetMaterial()
+    assert mat.GetPath() == "/Rig/Looks/SkinTexture" and (d / "rig_skin.png").is_file()
+    st = UsdGeom.PrimvarsAPI(skin_prim).GetPrimvar("st")
+    assert st.GetInterpolation() == "faceVarying" and len(st.GetIndices()) == 3 * len(made[1].faces)
+
+
+def test_rig_refuses_up_front(made, tmp_path, capsys):
+    import fcntl
+
+    d, _ = made
+    b = str(d / "build")
+    ro = tmp_path / "ro.glb"
+    ro.write_bytes(b"old")
+    ro.chmod(0o444)
+    lock = tmp_path / ".held.glb.facewarp-lock"
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    try:
+        for argv, needle in [
+            (["rig", b, "--out", str(tmp_path / "r.glb"), "--muscles", "zygomatic_major_L,zygomatic_major_L"],
+             "twice"),
+            (["rig", b, "--out", str(ro)], "read-only"),
+            (["rig", b, "--out", str(tmp_path / "held.glb"), "--muscles", "zygomatic_major_L"], "another facewarp"),
+        ]:
+            code = main(argv)
+            err = capsys.readouterr().err
+            assert code == 2, (argv, err)
+            assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and needle in err, err
+    finally:
+        os.close(fd)
+    assert ro.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".held.glb.facewarp-lock", "ro.glb"]
