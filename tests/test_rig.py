@@ -379,3 +379,45 @@ def test_rig_refuses_up_front(made, tmp_path, capsys):
         os.close(fd)
     assert ro.read_bytes() == b"old"
     assert sorted(p.name for p in tmp_path.iterdir()) == [".held.glb.facewarp-lock", "ro.glb"]
+
+
+@pytest.mark.slow
+def test_a_driven_take_plays_on_the_rig(arkit_made, tmp_path):
+    """The baked rig read back from its folder (rig.npz), a held ARKit take recorded on it by the
+    RigTake sink: the take's last frames match the simulated face (the shape is that converged
+    face), and the rig with the take as its animation is written as glTF and UsdSkel."""
+    from facewarp._src.bake.blendshapes import load_rig
+    from facewarp._src.bake.take import RigTake
+
+    out, rep, fr = arkit_made
+    rig = load_rig(out)
+    assert rig.names == list(rep["shape_report"]) and rig.texture and Path(rig.texture).is_file()
+    table = _table(fr, ROWS)
+    T = 24
+    W = np.zeros((T, len(fw.ARKIT_NAMES)))
+    W[:, list(fw.ARKIT_NAMES).index("mouthSmileLeft")] = 1.0
+    take = RigTake(rig, W)
+    sim = fw.FaceSimulator(fr)
+    sim.reset()
+    take.start(sim, T)
+    A, J = table.controls(W)
+    for k in range(T):
+        sim.set_activations(A[k])
+        sim.set_jaw(float(J[k, 0]), float(J[k, 1]))
+        sim.step()
+        take.frame(sim, k, k / sim.fps)
+    r = take.report()
+    assert r["clip"] == "arkit" and r["frames"] == T
+    assert take.error[-1, 0] < 0.2e-3 < take.error[0, 0]  # converged onto the baked shape; the first frame lags
+    files = take.write(tmp_path / "take.glb", tmp_path / "take.usda")
+    doc, acc = _glb(files[0])
+    anim = doc["animations"][0]
+    assert anim["name"] == "take"
+    names = doc["meshes"][0]["extras"]["targetNames"]
+    MW = acc(next(anim["samplers"][c["sampler"]] for c in anim["channels"] if c["target"]["path"] == "weights")
+             ["output"]).reshape(T, len(names))
+    np.testing.assert_allclose(MW[:, names.index("mouthSmileLeft")], 1.0)
+    pytest.importorskip("pxr")
+    import usd_export
+
+    assert usd_export.validate_usd(files[1]) == []

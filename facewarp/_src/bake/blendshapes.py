@@ -38,8 +38,13 @@ import numpy as np
 
 from ..core.errors import InputError
 
-__all__ = ["RIG_SHAPE_SETS", "BlendshapeRig", "bake_blendshapes", "evaluate", "evaluate_arkit", "jaw_rotation",
-           "normal_offsets", "static_surface", "target_weights"]
+__all__ = ["RIG_FILE", "RIG_SHAPE_SETS", "BlendshapeRig", "bake_blendshapes", "evaluate", "evaluate_arkit",
+           "jaw_rotation", "load_rig", "normal_offsets", "save_rig", "static_surface", "target_weights"]
+
+RIG_FILE = "rig.npz"
+"""The baked rig's own file in a ``facewarp rig --out DIR`` folder (:func:`save_rig`), read back by
+:func:`load_rig` (to put a driven take on the rig without baking again)."""
+_RIG_VERSION = 1
 
 RIG_SHAPE_SETS = ("muscles", "arkit", "both")
 """The shape sets a rig bakes: each muscle alone (and the jaw corrective), the ARKit-named shapes, or both."""
@@ -357,3 +362,74 @@ def evaluate_arkit(rig: BlendshapeRig, weights: dict) -> np.ndarray:
             raise InputError(f"weights: {name!r} is not an ARKit shape of this rig")
     angle = rig.arkit_opening({n: w for n, w in weights.items() if n in rig.arkit_jaw})
     return _lbs(V, rig.jaw_weight, rig.jaw_pivot, rig.jaw_axis, angle) if angle else V
+
+
+def save_rig(path, rig: BlendshapeRig, *, texture_name=None) -> None:
+    """Write ``rig`` to ``path`` (``.npz``, atomically): every array and name, and the texture's path
+    (``texture_name``: a file beside ``path`` to name instead, read back relative to the file)."""
+    import json
+    import os
+    from pathlib import Path
+
+    path = Path(path)
+    arrays = {"rest": rig.rest, "faces": rig.faces, "jaw_pivot": rig.jaw_pivot, "jaw_axis": rig.jaw_axis,
+              "jaw_weight": rig.jaw_weight}
+    meta = {"version": _RIG_VERSION, "names": list(rig.names), "jaw_angle": rig.jaw_angle, "fps": rig.fps,
+            "jaw_parts": list(rig.jaw_parts), "bake_frames": rig.bake_frames, "arkit_jaw": rig.arkit_jaw,
+            "left_out": rig.left_out, "bake_seconds": rig.bake_seconds,
+            "texture": Path(texture_name).name if texture_name else rig.texture,
+            "shapes": {n: [f for f, _ in rig.shapes[n]] for n in rig.names}, "parts": list(rig.parts)}
+    for n in rig.names:
+        for i, (_, D) in enumerate(rig.shapes[n]):
+            arrays[f"shape:{n}:{i}"] = D
+    for n, (P, F) in rig.parts.items():
+        arrays[f"part:{n}:V"], arrays[f"part:{n}:F"] = P, F
+    if rig.uv is not None:
+        arrays["uv"] = rig.uv
+        if rig.face_uv is not None:
+            arrays["face_uv"] = rig.face_uv
+    tmp = path.with_name(f".{path.name}.tmp.npz")
+    try:
+        np.savez_compressed(tmp, meta=np.array(json.dumps(meta)), **arrays)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def load_rig(path) -> BlendshapeRig:
+    """Read a rig written by :func:`save_rig` (a file, or a folder holding :data:`RIG_FILE`).
+
+    Raises:
+        InputError: no such file, or not a facewarp rig (one line naming it).
+    """
+    import json
+    from pathlib import Path
+
+    path = Path(path)
+    if path.is_dir():
+        path = path / RIG_FILE
+    if not path.is_file():
+        raise InputError(f"{path}: not found (expected a `facewarp rig --out DIR` folder holding {RIG_FILE})")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            if meta.get("version") != _RIG_VERSION:
+                raise InputError(f"{path}: rig version {meta.get('version')}, this facewarp reads {_RIG_VERSION}")
+            shapes = {n: [(float(f), z[f"shape:{n}:{i}"].astype(np.float64)) for i, f in enumerate(fs)]
+                      for n, fs in meta["shapes"].items()}
+            parts = {n: (z[f"part:{n}:V"].astype(np.float64), z[f"part:{n}:F"].astype(np.int64)) for n in meta["parts"]}
+            return BlendshapeRig(
+                rest=z["rest"].astype(np.float64), faces=z["faces"].astype(np.int64), names=list(meta["names"]),
+                shapes=shapes, jaw_pivot=z["jaw_pivot"].astype(np.float64), jaw_axis=z["jaw_axis"].astype(np.float64),
+                jaw_angle=float(meta["jaw_angle"]), jaw_weight=z["jaw_weight"].astype(np.float64), parts=parts,
+                jaw_parts=tuple(meta["jaw_parts"]), fps=float(meta["fps"]), bake_frames=meta["bake_frames"],
+                arkit_jaw={k: float(v) for k, v in meta["arkit_jaw"].items()}, left_out=meta["left_out"],
+                uv=z["uv"].astype(np.float64) if "uv" in z else None,
+                face_uv=z["face_uv"].astype(np.int64) if "face_uv" in z else None,
+                texture=None if not meta["texture"] else str(path.parent / meta["texture"]),
+                bake_seconds=float(meta["bake_seconds"]))
+    except InputError:
+        raise
+    except Exception as e:  # a damaged or foreign file: one line
+        raise InputError(f"{path}: not a facewarp rig ({type(e).__name__}: {e})") from None

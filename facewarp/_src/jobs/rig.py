@@ -14,8 +14,9 @@ looks from the one palette (``present.looks``), the jaw joint, a camera and ligh
 ``sequence`` (the Fig. 6.16 sequence as muscle weights and the jaw, with muscle shapes) and
 ``arkit_tour`` (each ARKit shape in turn, 0 -> 1 -> 0, with ARKit shapes).
 
-``OUT`` is a folder (``rig.usdc``, ``rig.glb`` and ``report.json`` in it), one file (``.usda``,
-``.usdc`` or ``.glb``) or a list of files (one bake written in each). Outputs are written whole or
+``OUT`` is a folder (``rig.usdc``, ``rig.glb``, ``rig.npz`` and ``report.json`` in it), one file
+(``.usda``, ``.usdc``, ``.usdz``: the ``.usdc`` and its texture packaged for Apple's Quick Look, or
+``.glb``) or a list of files (one bake written in each). Outputs are written whole or
 not at all under a lock per output (:func:`~facewarp._src.core.outputs.staged_outputs`): a second
 run on the same output is refused, and a read-only output is refused before the bake.
 """
@@ -32,13 +33,16 @@ import numpy as np
 from ..bake.blendshapes import RIG_SHAPE_SETS, bake_blendshapes
 from ..core.errors import InputError
 
-__all__ = ["RIG_FOLDER_FILES", "RIG_SHAPES", "RIG_SUFFIXES", "arkit_tour", "demo_frames", "rig_files"]
+__all__ = ["RIG_FOLDER_FILES", "RIG_SHAPES", "RIG_SUFFIXES", "arkit_tour", "demo_frames", "rig_files",
+           "write_rig_files"]
 
-RIG_SUFFIXES = (".usda", ".usdc", ".glb")
+RIG_SUFFIXES = (".usda", ".usdc", ".usdz", ".glb")
 RIG_SHAPES = RIG_SHAPE_SETS
 """Shape sets ``facewarp rig`` bakes: ``muscles``, ``arkit`` or ``both``."""
-RIG_FOLDER_FILES = ("rig.usdc", "rig.glb", "report.json")
-"""What ``--out DIR`` holds (and ``rig_skin.png``, the texture the USD file names, for a textured head)."""
+RIG_FOLDER_FILES = ("rig.usdc", "rig.glb", "rig.npz", "report.json")
+"""What ``--out DIR`` holds (and ``rig_skin.png``, the texture the USD file names, for a textured head):
+the rig as USD and glTF, the baked rig itself (``rig.npz``: ``drive --rig DIR`` puts a take on it),
+the report."""
 TOUR_SECONDS = 0.6
 """Seconds each ARKit shape takes in the ``arkit_tour`` animation (up and down again)."""
 
@@ -96,7 +100,7 @@ def _targets(out) -> tuple[list[tuple[str, Path, str]], list[Path], bool]:
             raise InputError(f"--out: expected a folder or a .usda, .usdc or .glb file, got {out!r:.80}")
         p = Path(out)
         folder = p.is_dir() or p.suffix == ""
-        outs = [p / n for n in RIG_FOLDER_FILES[:2]] if folder else [p]
+        outs = [p / n for n in RIG_FOLDER_FILES[:3]] if folder else [p]
     for o in outs if not folder else []:
         if o.suffix.lower() not in RIG_SUFFIXES:
             raise InputError(f"--out: {str(o)!r} has extension {o.suffix!r}; expected one of "
@@ -129,7 +133,7 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
 
     Args:
         build: A ``facewarp build`` output folder (``face_rig.npz``).
-        out: A folder (``rig.usdc``, ``rig.glb``, ``report.json``), a rig file (``.usda``, ``.usdc``
+        out: A folder (``rig.usdc``, ``rig.glb``, ``rig.npz``, ``report.json``), a rig file (``.usda``, ``.usdc``
             or ``.glb``) or a list of rig files; a file's folder must exist.
         shapes: One of :data:`RIG_SHAPES`.
         inbetweens: In-between shapes per muscle (0..8).
@@ -174,7 +178,7 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
     with staged_outputs(targets) as staging:
         if folder:
             root = staging.path("out")
-            files = [root / n for n in RIG_FOLDER_FILES[:2]]
+            files = [root / n for n in RIG_FOLDER_FILES[:3]]
         else:
             files = [staging.path(name) for name, _, _ in targets]
         rep = _bake_and_write(fr, build, files, shapes=shapes, inbetweens=inbetweens, muscles=muscles,
@@ -205,9 +209,50 @@ def _arkit(fr, build: Path, device, progress, table):
     return t, (0.0 if t.info.get("from_cache") else time.perf_counter() - t0)
 
 
-def _bake_and_write(fr, build, files, *, shapes, inbetweens, muscles, device, progress, iris_color, table) -> dict:
+def write_rig_files(fr, rig, files, clips: dict, *, iris_color=None) -> None:
+    """Write a baked rig with its animations ``clips`` (name -> frames, :func:`~facewarp._src.bake.gltf.clip_arrays`;
+    the first is USD's bound clip) to each of ``files`` (``.glb``, ``.usda``, ``.usdc``), with the
+    looks of ``fr``'s head."""
     from ..present.looks import head_camera, head_looks
 
+    looks = head_looks(fr, iris_color=iris_color)
+    camera = head_camera(fr)
+    for f in files:
+        if Path(f).suffix.lower() == ".glb":
+            from ..bake.gltf import write_glb
+
+            write_glb(f, rig, looks=looks, clips=clips)
+        elif Path(f).suffix.lower() == ".usdz":
+            _write_usdz(Path(f), rig, clips, looks, camera)
+        else:
+            _write_usd(f, rig, clips, looks, camera)
+
+
+def _write_usdz(out: Path, rig, clips, looks, camera) -> None:
+    """The UsdSkel rig as a USDZ package for Apple's Quick Look (``UsdUtils.CreateNewARKitUsdzPackage``:
+    the ``.usdc`` and its texture in one file), written in a private folder beside ``out`` and renamed."""
+    import os
+    import shutil
+    import tempfile
+
+    from .animation import load_usd_export
+
+    load_usd_export()
+    from pxr import Sdf, UsdUtils
+
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    try:
+        usdc = tmp / f"{out.stem}.usdc"
+        _write_usd(usdc, rig, clips, looks, camera)
+        package = tmp / out.name
+        if not UsdUtils.CreateNewARKitUsdzPackage(Sdf.AssetPath(str(usdc)), str(package)) or not package.is_file():
+            raise InputError(f"--out: {out}: USD could not make the USDZ package")
+        os.replace(package, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _bake_and_write(fr, build, files, *, shapes, inbetweens, muscles, device, progress, iris_color, table) -> dict:
     t0 = time.perf_counter()
     table_s = 0.0
     if shapes != "muscles":
@@ -220,15 +265,12 @@ def _bake_and_write(fr, build, files, *, shapes, inbetweens, muscles, device, pr
         clips["sequence"] = demo_frames(fr, rig)
     if rig.arkit_names:
         clips["arkit_tour"] = arkit_tour(rig)
-    looks = head_looks(fr, iris_color=iris_color)
-    camera = head_camera(fr)
+    write_rig_files(fr, rig, [f for f in files if f.suffix != ".npz"], clips, iris_color=iris_color)
     for f in files:
-        if f.suffix.lower() == ".glb":
-            from ..bake.gltf import write_glb
+        if f.suffix == ".npz":
+            from ..bake.blendshapes import save_rig
 
-            write_glb(f, rig, looks=looks, clips=clips)
-        else:
-            _write_usd(f, rig, clips, looks, camera)
+            save_rig(f, rig, texture_name=f"{f.parent / 'rig'}_skin.png" if rig.texture else None)
     t2 = time.perf_counter()
     first = next(iter(clips.values()))
     return {
