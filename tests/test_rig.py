@@ -291,7 +291,7 @@ def arkit_made(made):
 @pytest.mark.slow
 def test_one_bake_writes_usd_gltf_and_report_with_arkit_names(arkit_made):
     out, rep, fr = arkit_made
-    assert sorted(p.name for p in out.iterdir()) == ["report.json", "rig.glb", "rig.usdc", "rig_skin.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["report.json", "rig.glb", "rig.npz", "rig.usdc", "rig_skin.png"]
     disk = json.loads((out / "report.json").read_text())
     assert disk["arkit"] == 3 and disk["muscles"] == 1 and disk["shapes"] == "both"
     assert set(disk["shape_report"]) == {"zygomatic_major_L", "jaw_open", *ROWS}
@@ -408,7 +408,8 @@ def test_a_driven_take_plays_on_the_rig(arkit_made, tmp_path):
         take.frame(sim, k, k / sim.fps)
     r = take.report()
     assert r["clip"] == "arkit" and r["frames"] == T
-    assert take.error[-1, 0] < 0.2e-3 < take.error[0, 0]  # converged onto the baked shape; the first frame lags
+    assert (take.error[-4:, 1] < 0.2e-3).all()  # the held shape is the baked one: the rig lands the simulated face
+    assert r["error_mm"]["p95"] < 0.2 and r["error_mm"]["max"] >= r["error_mm"]["p95"]
     files = take.write(tmp_path / "take.glb", tmp_path / "take.usda")
     doc, acc = _glb(files[0])
     anim = doc["animations"][0]
@@ -421,3 +422,26 @@ def test_a_driven_take_plays_on_the_rig(arkit_made, tmp_path):
     import usd_export
 
     assert usd_export.validate_usd(files[1]) == []
+
+
+@pytest.mark.slow
+def test_threejs_plays_the_arkit_rig_by_name(arkit_made, tmp_path):
+    """three.js (GLTFLoader, AnimationMixer) in headless Chromium: the ARKit names are morph targets,
+    the clip arkit_tour plays by name and at jawOpen's peak sets its influence and opens the face.
+    Skipped without Chromium or the three npm package (NODE_PATH / FACEWARP_THREE)."""
+    import sys
+
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.threejs_play import find_chromium, find_three, play
+
+    if find_chromium() is None or find_three() is None:
+        pytest.skip("needs Chromium (apt install chromium) and the three npm package (NODE_PATH)")
+    out, rep, fr = arkit_made
+    arkit = [n for n in rep["shape_report"] if rep["shape_report"][n]["set"] == "arkit"]
+    per = round(0.6 * 30)
+    t = (arkit.index("jawOpen") * per + per / 2) / 30
+    r = play(out / "rig.glb", clip="arkit_tour", t=t, shape="jawOpen", picture=tmp_path / "three.png")
+    assert r["ok"], r
+    assert set(ROWS) <= set(r["targets"]) and r["clip"] == "arkit_tour" and r["joints"] == ["root", "jaw"]
+    assert r["influence"] > 0.95 and r["moved_m"] > 3e-3 and r["textured"]
+    assert (tmp_path / "three.png").stat().st_size > 1000

@@ -52,8 +52,8 @@ ROOT = "/Head"
 # facewarp's one palette (``facewarp._src.present.looks.COLORS``, linear RGB; a test keeps them equal):
 _SKIN_COLOR = (0.87, 0.72, 0.62)  # skin
 _WHITE_COLOR = (0.94, 0.93, 0.89)  # sclera: parts without a colour of their own
-KEY_INTENSITY = 2.0  # the key DistantLight's irradiance, normalized (inputs:normalize = true)
-FILL_INTENSITY = 0.3  # the fill DomeLight's radiance
+KEY_INTENSITY = 1.0  # the key DistantLight's irradiance, normalized (inputs:normalize = true)
+FILL_INTENSITY = 0.25  # the fill DomeLight's radiance
 _RELAXED, _ACTIVE = np.array([0.35, 0.05, 0.05], np.float32), np.array([1.0, 0.85, 0.2], np.float32)
 
 

@@ -185,6 +185,9 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     if not usd_out and track.frames > MAX_DRIVE_FRAMES:
         raise InputError(f"{track.source}: {track.frames} frames, more than {MAX_DRIVE_FRAMES} per run")
     baked = None
+    if rig is not None and usd_out:
+        raise InputError("--rig: the take on the rig is written into an output folder (take.glb, take.usdc); "
+                         "give --out DIR")
     if rig is not None:  # the rig to put the take on, read before the heavy work
         from ..bake.blendshapes import load_rig
 
