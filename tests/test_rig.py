@@ -445,3 +445,20 @@ def test_threejs_plays_the_arkit_rig_by_name(arkit_made, tmp_path):
     assert set(ROWS) <= set(r["targets"]) and r["clip"] == "arkit_tour" and r["joints"] == ["root", "jaw"]
     assert r["influence"] > 0.95 and r["moved_m"] > 3e-3 and r["textured"]
     assert (tmp_path / "three.png").stat().st_size > 1000
+
+
+@pytest.mark.slow
+def test_gltf_validator_passes_the_textured_arkit_rig(arkit_made):
+    """The ARKit + muscle rig (texture embedded, normal deltas, two clips): Khronos glTF-Validator
+    0 errors, 0 warnings (skipped without node and the npm package)."""
+    node = shutil.which("node")
+    if not node:
+        pytest.skip("node is not installed")
+    run = subprocess.run([node, str(ROOT / "benchmarks" / "gltf_validate.js"), str(arkit_made[0] / "rig.glb")],
+                         capture_output=True, text=True, timeout=120)
+    if "Cannot find module 'gltf-validator'" in run.stderr:
+        pytest.skip("the npm package gltf-validator is not installed (npm install gltf-validator; NODE_PATH)")
+    assert run.returncode == 0, run.stderr[-2000:]
+    rep = json.loads(run.stdout)
+    assert rep["numErrors"] == 0 and rep["numWarnings"] == 0, rep
+    assert rep["info"]["hasTextures"] and rep["info"]["animationCount"] == 2
