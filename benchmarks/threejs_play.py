@@ -77,7 +77,17 @@ def play(glb, *, clip: str, t: float = 0.0, shape: str | None = None, size: int 
                 raise RuntimeError(f"the page did not report: {r.stderr[-1500:]}")
             rep = json.loads(text)
             if picture is not None and rep.get("ok"):
-                subprocess.run(flags + [f"--screenshot={picture}", url], capture_output=True, text=True, timeout=300)
+                import numpy as np
+                from PIL import Image
+
+                for attempt in range(4):  # as above: a screenshot may come before the page drew its frame
+                    subprocess.run(flags + [f"--screenshot={picture}", url], capture_output=True, text=True,
+                                   timeout=300)
+                    drawn = np.asarray(Image.open(picture).convert("L")) < 240
+                    if drawn.mean() > 0.05:  # the head covers the picture, not just the "pending" line
+                        break
+                else:
+                    raise RuntimeError("the page's frame did not come in the screenshot")
         finally:
             server.shutdown()
             server.server_close()
