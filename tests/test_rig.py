@@ -361,6 +361,10 @@ def test_rig_refuses_up_front(made, tmp_path, capsys):
     ro = tmp_path / "ro.glb"
     ro.write_bytes(b"old")
     ro.chmod(0o444)
+    take = tmp_path / "take.csv"
+    from facewarp._src.drive.formats import save_livelink_csv
+
+    save_livelink_csv(fw.ArkitTrack(30.0, np.zeros((40, len(fw.ARKIT_NAMES)))), take)
     lock = tmp_path / ".held.glb.facewarp-lock"
     fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
     fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -370,6 +374,9 @@ def test_rig_refuses_up_front(made, tmp_path, capsys):
              "twice"),
             (["rig", b, "--out", str(ro)], "read-only"),
             (["rig", b, "--out", str(tmp_path / "held.glb"), "--muscles", "zygomatic_major_L"], "another facewarp"),
+            (["drive", b, "--arkit", str(take), "--rig", str(tmp_path), "--out", str(tmp_path / "t.usdc")], "--rig"),
+            (["drive", b, "--arkit", str(take), "--rig", str(tmp_path / "none"), "--out", str(tmp_path / "t")],
+             "rig.npz"),
         ]:
             code = main(argv)
             err = capsys.readouterr().err
@@ -378,7 +385,7 @@ def test_rig_refuses_up_front(made, tmp_path, capsys):
     finally:
         os.close(fd)
     assert ro.read_bytes() == b"old"
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".held.glb.facewarp-lock", "ro.glb"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".held.glb.facewarp-lock", "ro.glb", "take.csv"]
 
 
 @pytest.mark.slow
