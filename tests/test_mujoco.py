@@ -445,7 +445,7 @@ def test_textured_skin_moves_whole_and_shows_the_texture(head, rig, tmp_path):
     from PIL import Image
 
     from facewarp.coupling import skin_vertex_split
-    from facewarp._src.geometry.surface import vertex_normals
+    from facewarp.geometry import vertex_normals
 
     uv, face_uv = rig.head_uv, rig.head_face_uv
     assert uv is not None

@@ -339,7 +339,7 @@ def test_drawn_eyeball_stays_inside_its_coarse_ball():
     import numpy as np
 
     import facewarp as fw
-    from facewarp._src.present.looks import refine_ball
+    from facewarp.render import refine_ball
 
     V, F = (np.asarray(a) for a in fw.default_template(0).parts["eye_L"])
     R, RF = refine_ball(V, F)

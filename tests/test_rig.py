@@ -123,7 +123,7 @@ def test_gltf_deforms_as_the_linear_rig(made):
     uv = acc(prim["attributes"]["TEXCOORD_0"])
     assert uv.shape == (len(P), 2) and 0 <= uv.min() and uv.max() <= 1
     # normal deltas per target: the change of the unit normals of the full target
-    from facewarp._src.bake.blendshapes import normal_offsets
+    from facewarp import normal_offsets
 
     ND = acc(prim["targets"][1]["NORMAL"]).astype(np.float64)
     np.testing.assert_allclose(ND, normal_offsets(rig, rig.shapes[MUSCLES[0]][-1][1])[src], atol=1e-6)
@@ -253,7 +253,7 @@ def test_rig_errors(made, tmp_path, capsys):
 # ---------------------------------------------------------------------------------------------- ARKit, one bake
 def _table(fr, rows: dict):
     """A small ARKit table of this head: ARKit name -> ({muscle: activation}, (opening, side) [rad])."""
-    from facewarp._src.drive.arkit import ArkitTable
+    from facewarp import ArkitTable
 
     names = list(fw.ARKIT_NAMES)
     muscles = list(fw.FaceSimulator(fr).muscle_names)
@@ -280,7 +280,7 @@ ROWS = {"mouthSmileLeft": ({"zygomatic_major_L": 0.8}, (0.0, 0.0)),
 
 @pytest.fixture(scope="module")
 def arkit_made(made):
-    from facewarp._src.jobs.rig import rig_files
+    from facewarp import rig_files
 
     d, _ = made
     fr = fw.load_face_rig(d / "build")
@@ -317,7 +317,7 @@ def test_one_bake_writes_usd_gltf_and_report_with_arkit_names(arkit_made):
 def test_arkit_shapes_land_the_converged_face(arkit_made, made):
     """Each ARKit shape at weight 1, through the jaw joint at its opening, is the simulator's
     converged face of its row's controls; the glTF clip's jaw follows the weights."""
-    from facewarp._src.bake.blendshapes import static_surface
+    from facewarp import static_surface
 
     out, rep, fr = arkit_made
     rig = fw.bake_blendshapes(fr, shapes="arkit", arkit=_table(fr, ROWS))
@@ -330,7 +330,7 @@ def test_arkit_shapes_land_the_converged_face(arkit_made, made):
 
 
 def test_one_palette_and_the_texture_in_both_formats(made):
-    from facewarp._src.present.looks import COLORS
+    from facewarp.render import COLORS
 
     d, _ = made
     doc, _ = _glb(d / "rig.glb")
@@ -362,7 +362,7 @@ def test_rig_refuses_up_front(made, tmp_path, capsys):
     ro.write_bytes(b"old")
     ro.chmod(0o444)
     take = tmp_path / "take.csv"
-    from facewarp._src.drive.formats import save_livelink_csv
+    from facewarp import save_livelink_csv
 
     save_livelink_csv(fw.ArkitTrack(30.0, np.zeros((40, len(fw.ARKIT_NAMES)))), take)
     lock = tmp_path / ".held.glb.facewarp-lock"
@@ -393,8 +393,7 @@ def test_a_driven_take_plays_on_the_rig(arkit_made, tmp_path):
     """The baked rig read back from its folder (rig.npz), a held ARKit take recorded on it by the
     RigTake sink: the take's last frames match the simulated face (the shape is that converged
     face), and the rig with the take as its animation is written as glTF and UsdSkel."""
-    from facewarp._src.bake.blendshapes import load_rig
-    from facewarp._src.bake.take import RigTake
+    from facewarp import RigTake, load_rig
 
     out, rep, fr = arkit_made
     rig = load_rig(out)
