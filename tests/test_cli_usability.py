@@ -225,3 +225,19 @@ def test_frames_show_off_a_terminal(build, tmp_path):
     lines = r.stderr.strip().splitlines()
     assert lines[0].startswith("facewarp simulate: frame 1/7 (") and lines[-1].startswith("facewarp simulate: frame 7/7, ")
     assert all(ln.startswith("facewarp simulate: ") for ln in lines), lines
+
+
+def test_no_progress_line_outlives_its_command(tmp_path, capsys, monkeypatch):
+    """A command that fails after making its progress (here: adapt on a missing scan) leaves no
+    writer behind to print "still working" into later output."""
+    import threading
+
+    monkeypatch.setenv("FACEWARP_PROGRESS", "lines")
+    assert main(["adapt", str(tmp_path / "missing.ply"), "--out", str(tmp_path / "o")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[-1].startswith("facewarp: error: ") and "missing.ply" in lines[-1], lines
+    assert all(ln.startswith("facewarp adapt: [") for ln in lines[:-1]), lines  # the stages begun, then the error
+    for t in threading.enumerate():
+        if t.name == "facewarp-progress":
+            t.join(timeout=5)
+            assert not t.is_alive()

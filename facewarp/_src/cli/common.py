@@ -20,7 +20,7 @@ from ..core.errors import FacewarpError
 from ..core.limits import MAX_FPS, MAX_SECONDS
 
 __all__ = ["DOCS_PAGE", "EXIT_USAGE", "FacewarpError", "FrameBar", "GLOBAL_TITLE", "HelpFormatter", "MAX_TEMPLATE_LEVEL",
-           "Parser", "Progress", "StageBar", "add_global_options", "amount_up_to", "command_options", "device", "docs_link",
+           "Parser", "Progress", "StageBar", "add_global_options", "amount_up_to", "close_progress", "command_options", "device", "docs_link",
            "emit", "fps", "frame_stats_lines", "jsonable", "level", "muscle_list", "number", "out_dir", "out_dir_or_usd",
            "out_file", "progress_lines", "progress_mode", "seconds", "whole_in"]
 
@@ -259,6 +259,7 @@ class _Lines:
         self.lock = threading.Lock()
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._heartbeat, name="facewarp-progress", daemon=True)
+        _WRITERS.add(self)
         self.thread.start()
 
     def line(self, text: str, *, still: bool = False) -> None:
@@ -278,6 +279,17 @@ class _Lines:
 
     def close(self) -> None:
         self.stop.set()
+        _WRITERS.discard(self)
+
+
+_WRITERS: set[_Lines] = set()
+
+
+def close_progress() -> None:
+    """Stop every line writer still running (a command that raised before closing its bars): the
+    main loop calls it after each command, so that no heartbeat outlives its command."""
+    for w in list(_WRITERS):
+        w.close()
 
 
 def progress_lines(name: str, waiting: str, enabled: bool):
