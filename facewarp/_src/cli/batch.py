@@ -15,8 +15,8 @@ def add_parser(sub) -> None:
     bt = sub.add_parser("batch", help="many scans through adapt, build, simulate and rig, in local processes or on Ray")
     btsub = bt.add_subparsers(dest="batch_command", metavar="ACTION", parser_class=Parser)
     btsub.required = True
-    br = btsub.add_parser(
-        "run", example="facewarp batch run scans/a.ply scans/b.ply --units mm --out batch --workers 2", help="run every scan through the chosen steps; a manifest makes re-runs skip finished work",
+    br = btsub.add_parser("run", example="facewarp batch run scans/a.ply scans/b.ply --units mm --out batch --workers 2",
+                          help="run every scan through the chosen steps; a manifest makes re-runs skip finished work",
         epilog="Writes DIR/manifest.json (per scan: inputs with their SHA-256, each step's status, error, outputs, "
                "seconds and worker; rewritten atomically as tasks finish), DIR/scans/NAME-KEY/{adapt,build,simulate,rig}/, "
                "DIR/report.json and DIR/report.csv. A scan is known by its content: a re-run (or a renamed copy) "
@@ -64,8 +64,8 @@ def add_parser(sub) -> None:
                     help="retries of a step whose worker process died (killed, out of memory), 0..100, default 2")
     br.add_argument("--retry-failed", action="store_true", help="run the steps that failed in an earlier run again")
     br.set_defaults(func=run_batch_run)
-    bs = btsub.add_parser(
-        "simulate", example="facewarp batch simulate build_a build_b --expression laugh --out crowd", help="many built heads played together in one FaceBatch (one step, one CUDA graph per frame for all)",
+    bs = btsub.add_parser("simulate", example="facewarp batch simulate build_a build_b --expression laugh --out crowd",
+                          help="many built heads played together in one FaceBatch (one step, one CUDA graph per frame for all)",
         epilog="Writes DIR/head_KK.usdc (one USD animation per head, in the order given) and DIR/report.json "
                "(per head: status, error, frames sub-stepped; frames/s and head-frames/s of the batch). A head that fails (NaN, inverted tet even when sub-stepped) is frozen at its "
                "last good frame and reported; the others go on. --per-head FILE.json: {\"heads\": [\"smile\", "

@@ -19,10 +19,11 @@ from pathlib import Path
 from ..core.errors import FacewarpError
 from ..core.limits import MAX_FPS, MAX_SECONDS
 
-__all__ = ["DOCS_PAGE", "EXIT_USAGE", "FacewarpError", "FrameBar", "GLOBAL_TITLE", "HelpFormatter", "MAX_TEMPLATE_LEVEL",
-           "Parser", "Progress", "StageBar", "add_global_options", "amount_up_to", "close_progress", "command_options", "device", "docs_link",
-           "emit", "fps", "frame_stats_lines", "jsonable", "level", "muscle_list", "number", "out_dir", "out_dir_or_usd",
-           "out_file", "progress_lines", "progress_mode", "seconds", "whole_in"]
+__all__ = ["DOCS_PAGE", "EXIT_USAGE", "FacewarpError", "FrameBar", "GLOBAL_TITLE", "HelpFormatter",
+           "MAX_TEMPLATE_LEVEL", "Parser", "Progress", "StageBar", "add_global_options", "amount_up_to",
+           "close_progress", "command_options", "device", "docs_link", "emit", "fps", "frame_stats_lines", "jsonable",
+           "level", "muscle_list", "number", "out_dir", "out_dir_or_usd", "out_file", "progress_lines",
+           "progress_mode", "seconds", "whole_in"]
 
 EXIT_USAGE = 2
 
@@ -360,7 +361,9 @@ class FrameBar:
 
     def _line(self, n: int) -> None:
         now = time.perf_counter()
-        what = f"{self.desc} {self.unit} {self.done}/{n}" if self.lines.name != self.desc else f"{self.unit} {self.done}/{n}"
+        what = f"{self.unit} {self.done}/{n}"
+        if self.lines.name != self.desc:  # a frame bar inside a longer job: "simulate frame 3/7"
+            what = f"{self.desc} {what}"
         if self.first_at is None:
             self.first_at = self.printed_at = now
             self.lines.line(what)

@@ -9,8 +9,8 @@ from .common import FrameBar, emit, fps, out_dir_or_usd, progress_lines
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    dr = sub.add_parser(
-        "drive", example="facewarp drive build --arkit take.csv --out take.usdc", help="drive a `build` output from data: muscle activations and jaw solved per frame from markers, "
+    dr = sub.add_parser("drive", example="facewarp drive build --arkit take.csv --out take.usdc",
+                        help="drive a `build` output from data: muscle activations and jaw solved per frame from markers, "
                       "or ARKit curves through the head's ARKit table",
         epilog="Formats (docs: guides/driving): markers JSON {\"fps\": 30, \"units\": \"mm\", \"markers\": "
                "{\"2.1\": [[x, y, z], null, ...], \"v123\": [...]}}; markers CSV: time (s) or frame column, then "

@@ -9,14 +9,16 @@ from .common import Progress, emit, muscle_list, whole_in
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    rg = sub.add_parser("rig", example="facewarp rig build --out rig.usdc --muscles zygomatic_major,corrugator_L", help="a blendshape rig baked from the physics (USD UsdSkel or glTF), the jaw as a joint")
+    rg = sub.add_parser("rig", example="facewarp rig build --out rig.usdc --muscles zygomatic_major,corrugator_L",
+                        help="a blendshape rig baked from the physics (USD UsdSkel or glTF), the jaw as a joint")
     rg.add_argument("build", type=Path, metavar="BUILD", help="a `facewarp build` output folder")
     rg.add_argument("--out", required=True, type=Path, metavar="FILE", help="rig.usdc, rig.usda or rig.glb")
     rg.add_argument("--shapes", choices=["muscles"], default="muscles", help="muscles: each muscle alone (default)")
     rg.add_argument("--inbetweens", type=whole_in(0, 8), default=0, metavar="K",
                     help="in-between shapes per muscle at k/(K+1) of full activation (0..8, default 0)")
     rg.add_argument("--muscles", type=muscle_list, default=None, metavar="A,B,...",
-                    help="bake only these muscles (default all): a Table 6.2 name bakes both sides, NAME_L or NAME_R one")
+                    help="bake only these muscles (default all): a Table 6.2 name bakes both sides, NAME_L or "
+                         "NAME_R one")
     rg.set_defaults(func=run)
 
 

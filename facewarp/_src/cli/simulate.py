@@ -10,7 +10,8 @@ from .common import FrameBar, HelpFormatter, emit, fps, frame_stats_lines, out_d
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    s = sub.add_parser("simulate", example="facewarp simulate build --expression smile --out smile.usdc", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
+    s = sub.add_parser("simulate", example="facewarp simulate build --expression smile --out smile.usdc",
+                       help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
                        epilog_factory=_simulate_epilog, formatter_class=HelpFormatter)
     s.add_argument("build", type=Path, metavar="BUILD", help="a `facewarp build` output folder")
     s.add_argument("--expression", metavar="NAME|sequence|FILE.json",
