@@ -573,7 +573,8 @@ def arkit_table(sim, *, shapes=None, source: str = "auto", solve=None, cache=Non
         if not todo:
             table.info["from_cache"] = True
             return table
-    done, total = 0, len(todo) + (M + 2 if table is None else 0)
+    solvable = any(n not in ARKIT_OUT_OF_REACH for n in data_names)
+    done, total = 0, len(todo) + (M + 2 if table is None and solvable else 0)
 
     def tick(name):
         nonlocal done
@@ -595,17 +596,20 @@ def arkit_table(sim, *, shapes=None, source: str = "auto", solve=None, cache=Non
         else:
             T_head = transfer_ict_displacements(D_ict, rest, lm, point_ids=fdp_ids, ict_dir=ict_dir, device=dev,
                                                 report=rep)
-        # 2. the linear model: one static probe per control (none when nothing is to be solved)
+        # 2. the linear model: one static probe per control (none when no shape could ever be solved)
         cols = []
-        for m in range(M):
+        for m in range(M if solvable else 0):
             a = zero_a.copy()
             a[m] = 1.0
             cols.append((statics(a, (0.0, 0.0)) - rest).ravel())
             tick(sim.muscle_names[m])
-        cols.append((statics(zero_a, (JAW_PROBE, 0.0)) - rest).ravel() / JAW_PROBE)
-        tick("jaw_open")
-        cols.append((statics(zero_a, (0.0, JAW_SIDE_PROBE)) - rest).ravel() / JAW_SIDE_PROBE)
-        tick("jaw_side")
+        if solvable:
+            cols.append((statics(zero_a, (JAW_PROBE, 0.0)) - rest).ravel() / JAW_PROBE)
+            tick("jaw_open")
+            cols.append((statics(zero_a, (0.0, JAW_SIDE_PROBE)) - rest).ravel() / JAW_SIDE_PROBE)
+            tick("jaw_side")
+        else:
+            cols = [np.zeros(rest.size)] * (M + 2)
         B = np.stack(cols, 1)
         n = len(ARKIT_NAMES)
         targets = np.zeros((n, len(fdp_ids), 3))
