@@ -376,3 +376,76 @@ def test_shipped_table_on_demand(sim, no_ict, tmp_path):
     W[:, i_blink] = [0.0, 0.5, 1.0, 1.0]
     r = fw.drive(sim, fw.ArkitTrack(30.0, W), table=t3)
     assert r.warnings == [] and r.activations[-1].max() > 0.3
+
+
+GUIDE_TAKE = '''
+import numpy as np
+import facewarp as fw
+
+t = np.arange(45) / 30.0                                       # 1.5 s at 30 fps
+w = np.zeros((len(t), 52))
+w[:, fw.ARKIT_NAMES.index("mouthSmileLeft")] = 0.5 * (1 - np.cos(2 * np.pi * t / 1.5))
+w[:, fw.ARKIT_NAMES.index("mouthSmileRight")] = w[:, fw.ARKIT_NAMES.index("mouthSmileLeft")]
+w[:, fw.ARKIT_NAMES.index("jawOpen")] = 0.3 * np.sin(np.pi * t / 1.5)
+head = np.stack([0.1 * np.sin(2 * np.pi * t / 1.5), 0 * t, 0 * t], axis=1)   # yaw, pitch, roll [rad]
+fw.save_livelink_csv(fw.ArkitTrack(30.0, w, head), "smile_livelink.csv")
+'''
+
+
+@pytest.mark.slow
+def test_guide_arkit_example_without_shared_data(no_ict, tmp_path, monkeypatch, capsys):
+    """The driving guide's ARKit example on a fresh install (no shared folder, no ICT OBJs anywhere):
+    `facewarp drive build --arkit smile_livelink.csv` moves the face and reports each shape's reach;
+    issue 40: a folder in the table's place is refused up front (exit 2, one line, nothing left in
+    the build), and a build whose cache cannot be written drives with a note."""
+    import json
+    import os
+    import shutil
+
+    from facewarp.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    exec(compile(GUIDE_TAKE, "guide", "exec"), {})
+    assert main(["build", "default", "--out", "build"]) == 0
+    # a folder where the table goes: refused before any work, nothing written into the build
+    bad = tmp_path / "bad_build"
+    shutil.copytree("build", bad)
+    (bad / "arkit_table.npz").mkdir()
+    before = sorted(os.listdir(bad))
+    capsys.readouterr()
+    assert main(["drive", str(bad), "--arkit", "smile_livelink.csv", "--out", "bad_out"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "arkit_table.npz is not a file" in err
+    assert sorted(os.listdir(bad)) == before and not (tmp_path / "bad_out").exists()
+    # the guide's command
+    assert main(["drive", "build", "--arkit", "smile_livelink.csv", "--out", "driven_arkit"]) == 0
+    out = capsys.readouterr().out
+    assert "RMS 0.00 mm" not in out and "(built now, cached for later runs)" in out
+    rep = json.loads((tmp_path / "driven_arkit" / "report.json").read_text())
+    reach = {r["name"]: r for r in rep["reach"]}
+    assert set(reach) == {"mouthSmileLeft", "mouthSmileRight", "jawOpen"} and rep["warnings"] == []
+    for r in reach.values():
+        assert r["by"] != "not reached" and 0 < r["residual_mm"] < r["target_mm"]
+    assert 0.1 < rep["error_mm"]["rms"] < 10.0
+    z = np.load(tmp_path / "driven_arkit" / "frames.npz")
+    ids = [str(i) for i in z["fdp_ids"]]
+    corner = z["fdp_points"][:, ids.index("8.3")]
+    chin = z["fdp_points"][:, ids.index("2.1")]
+    assert np.linalg.norm(corner - corner[0], axis=1).max() > 3e-3 and np.linalg.norm(chin - chin[0], axis=1).max() > 3e-3
+    # a second run reads the cache; a cache that cannot be written is a note, not a failure
+    ro = tmp_path / "ro_build"
+    shutil.copytree("build", ro)
+    (ro / "arkit_table.npz").unlink()
+
+    real = np.savez_compressed
+
+    def denied(path, **arrays):  # the table's file only (root writes into a read-only folder anyway)
+        if "arkit_table" in str(path):
+            raise PermissionError(13, "Permission denied", str(path))
+        return real(path, **arrays)
+
+    monkeypatch.setattr(np, "savez_compressed", denied)
+    assert main(["drive", str(ro), "--arkit", "smile_livelink.csv", "--out", "ro_out"]) == 0
+    out = capsys.readouterr().out
+    assert "not cached" in out and "Permission denied" in out
+    assert sorted(os.listdir(ro)) == sorted(os.listdir("build")) and not (ro / "arkit_table.npz").exists()
