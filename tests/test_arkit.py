@@ -315,6 +315,15 @@ def test_face_that_cannot_move_is_an_error(sim, no_ict):
     r = fw.drive(sim, fw.ArkitTrack(30.0, W), table=t)
     np.testing.assert_allclose(r.gaze[-1, 1], [-np.radians(30.0), 0.0])  # the right eye looks out, to -x
     assert sorted(w.split(":")[0] for w in r.warnings) == ["cheekPuff", "tongueOut"]
+    # recorded eye angles (Live Link Face's eye yaw / pitch, as a loader gives them) win over the weights
+    tr = fw.ArkitTrack(30.0, W)
+    tr.eye_rotation = np.tile([[0.1, -0.05], [0.12, -0.05]], (3, 1, 1))
+    r = fw.drive(sim, tr, table=t)
+    np.testing.assert_allclose(r.gaze, tr.eye_rotation)
+    np.testing.assert_allclose(sim.eye_gaze, tr.eye_rotation[-1], atol=1e-7)
+    tr.eye_rotation = np.zeros((2, 2, 2))
+    with pytest.raises(fw.InputError, match=r"track.eye_rotation"):
+        fw.drive(sim, tr, table=t)
 
 
 def test_cache_that_cannot_be_written(sim, no_ict, tmp_path, monkeypatch):

@@ -39,7 +39,7 @@ shook weakly seen muscles (the lip corners', the brows') by 3 to 5 mm between fr
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
