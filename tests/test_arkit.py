@@ -458,3 +458,18 @@ def test_guide_arkit_example_without_shared_data(no_ict, tmp_path, monkeypatch, 
     out = capsys.readouterr().out
     assert "not cached" in out and "Permission denied" in out
     assert sorted(os.listdir(ro)) == sorted(os.listdir("build")) and not (ro / "arkit_table.npz").exists()
+
+
+def test_docs_reach_table_lists_every_shape():
+    """docs/concepts/arkit.md's reach table (generated from benchmarks/results/arkit_basis.json) has a
+    row per ARKit shape in fw.ARKIT_NAMES order; the shapes not reached are fw.ARKIT_OUT_OF_REACH's,
+    each with its reason, and the eyeLook shapes turn the eyes."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "concepts" / "arkit.md").read_text()
+    block = text.split("<!-- table:arkit_reach -->")[1].split("<!-- /table:arkit_reach -->")[0]
+    rows = [[c.strip() for c in r.strip().strip("|").split("|")] for r in block.splitlines() if r.startswith("| `")]
+    assert [r[0].strip("`") for r in rows] == list(fw.ARKIT_NAMES)
+    not_reached = {r[0].strip("`"): r[-1] for r in rows if r[1] == "not reached"}
+    assert not_reached == fw.ARKIT_OUT_OF_REACH
+    assert all("eyes" in r[1] for r in rows if r[0].startswith("`eyeLook"))
