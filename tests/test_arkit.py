@@ -357,6 +357,7 @@ def test_cache_that_cannot_be_written(sim, no_ict, tmp_path, monkeypatch):
             cache.chmod(0o755)
 
 
+@pytest.mark.slow
 def test_shipped_table_on_demand(sim, no_ict, tmp_path):
     """With no ICT folder the table comes from the shipped basis: the shapes asked for are solved
     (the smile reached by muscles, the jaw by the jaw), the others wait; a later call adds shapes to
