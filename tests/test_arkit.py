@@ -474,3 +474,22 @@ def test_docs_reach_table_lists_every_shape():
     not_reached = {r[0].strip("`"): r[-1] for r in rows if r[1] == "not reached"}
     assert not_reached == fw.ARKIT_OUT_OF_REACH
     assert all("eyes" in r[1] for r in rows if r[0].startswith("`eyeLook"))
+
+
+@pytest.mark.slow
+def test_regenerating_the_basis_reproduces_it(tmp_path):
+    """make_arkit_basis on the whole ICT-FaceKit rig ($FACEWARP_ICT_SHAPES: the kit's FaceXModel
+    folder) writes the shipped file's arrays again."""
+    import os
+    from pathlib import Path
+
+    from facewarp._src.importers import ict_arkit
+
+    d = os.environ.get("FACEWARP_ICT_SHAPES")
+    if not d or not (Path(d) / "eyeBlink_L.obj").is_file():
+        pytest.skip("FACEWARP_ICT_SHAPES does not name the ICT-FaceKit FaceXModel folder (all expression OBJs)")
+    out = ict_arkit.make_arkit_basis(d, tmp_path / "basis.npz")
+    new, shipped = np.load(out), np.load(ict_arkit.ARKIT_BASIS_FILE)
+    for k in ("names", "fdp_ids", "skin", "fdp", "faces"):
+        np.testing.assert_array_equal(new[k], shipped[k])
+    np.testing.assert_allclose(new["vertices"], shipped["vertices"])
