@@ -240,7 +240,8 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         rep["out_of_reach"] = table.out_of_reach()
         rep["warnings"] = list(result.warnings)
         rep["reach"] = [r for r in table.reach() if r["name"] in track.names and np.max(track.curve(r["name"])) > 0]
-        rep["table"] = {"file": str(fr_dir / ARKIT_TABLE_FILE), "from_cache": bool(table.info.get("from_cache"))}
+        rep["table"] = {"file": str(fr_dir / ARKIT_TABLE_FILE), "from_cache": bool(table.info.get("from_cache")),
+                        "cached": not table.info.get("cache_note"), "source": table.info.get("source")}
     report_full = dict(rep)
     report_full["error_per_frame_mm"] = [[None if not np.isfinite(v) else round(float(v) * 1e3, 4) for v in row]
                                          for row in err]
