@@ -187,15 +187,11 @@ def test_bad_inputs(ict, sim, tmp_path):
 # ------------------------------------------------------------------ the shipped basis, no external data
 @pytest.fixture
 def no_ict(monkeypatch, tmp_path):
-    """No ICT-FaceKit folder anywhere: FACEWARP_SHARED and FACEWARP_ICT_SHAPES unset, HOME empty,
-    and the lookup itself hidden (as on a fresh install without the shared folder)."""
-    from facewarp._src.importers import ict_arkit
-
+    """No ICT-FaceKit folder anywhere, as on a fresh install without the shared folder:
+    FACEWARP_SHARED and FACEWARP_ICT_SHAPES unset and HOME empty, so the lookup finds nothing."""
     monkeypatch.delenv("FACEWARP_SHARED", raising=False)
     monkeypatch.delenv("FACEWARP_ICT_SHAPES", raising=False)
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
-    real = ict_arkit.ict_shape_dirs
-    monkeypatch.setattr(ict_arkit, "ict_shape_dirs", lambda ict_dir=None: real(ict_dir) if ict_dir else [])
     assert fw.ict_shape_dirs() == []
 
 
@@ -204,17 +200,16 @@ def test_shipped_basis_file_and_licence():
     the 51 ICT shapes (no tongueOut) on the level-1 template skin and its head FDPs."""
     from pathlib import Path
 
-    from facewarp._src.importers import ict_arkit
-
-    b = ict_arkit.load_arkit_basis()
-    f = ict_arkit.ARKIT_BASIS_FILE
+    b = fw.load_arkit_basis()
+    f = b.file
+    assert f.name == "arkit_basis.npz" and f.parent.parent.parent.parent == Path(fw.__file__).parent
     assert f.stat().st_size < 5e6
-    licence = (f.parent / "ICT-FaceKit-LICENSE.txt").read_text()
+    licence = b.licence_file.read_text()
     assert "MIT License" in licence and "Permission is hereby granted" in licence
     pyproject = (Path(__file__).resolve().parents[1] / "pyproject.toml").read_text()
     assert "_src/importers/data/arkit_basis.npz" in pyproject and "ICT-FaceKit-LICENSE.txt" in pyproject
     assert set(b.names) == {n for n, stems in fw.ICT_ARKIT_SHAPES.items() if stems} and "tongueOut" not in b.names
-    t = fw.default_template(ict_arkit.BASIS_LEVEL)
+    t = fw.default_template(b.level)
     assert b.vertices.shape == (t.vertex_count, 3) and len(b.fdp_ids) >= 60
     np.testing.assert_allclose(b.vertices, t.vertices, atol=1e-6)  # still the template it was made on
     # sizes: the jaw opens centimetres, a blink moves the lids millimetres, a smile lifts the lip corner
@@ -229,51 +224,51 @@ def test_shipped_basis_file_and_licence():
 def test_basis_transfer_identity_and_scaling():
     """Carried onto the template itself the basis comes back (FDPs exactly, other points by the skin);
     onto a copy scaled by 1.1, turned and moved, it comes back scaled and turned."""
-    from facewarp._src.importers import ict_arkit
-
-    b = ict_arkit.load_arkit_basis()
+    b = fw.load_arkit_basis()
     lm = dict(zip(b.fdp_ids, b.fdp_points))
     names = ["jawOpen", "mouthSmileLeft", "eyeBlinkRight"]
-    out = ict_arkit.transfer_basis_displacements(b, b.fdp_points, lm, names=names, point_ids=b.fdp_ids)
+    out = b.transfer(b.fdp_points, lm, names=names, point_ids=b.fdp_ids)
     for n in names:
         np.testing.assert_allclose(out[n], b.fdp[n], atol=1e-9)
     pick = np.array([100, 2000, 5000, 9000])
-    free = ict_arkit.transfer_basis_displacements(b, b.vertices[pick], lm, names=names)
+    free = b.transfer(b.vertices[pick], lm, names=names)
     for n in names:
         np.testing.assert_allclose(free[n], b.skin[n][pick], atol=1e-6)
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     moved = {k: 1.1 * R @ p + np.array([0.1, 0.2, -0.3]) for k, p in lm.items()}
     P = 1.1 * b.fdp_points @ R.T + np.array([0.1, 0.2, -0.3])
-    out2 = ict_arkit.transfer_basis_displacements(b, P, moved, names=names, point_ids=b.fdp_ids)
+    out2 = b.transfer(P, moved, names=names, point_ids=b.fdp_ids)
     for n in names:
         np.testing.assert_allclose(out2[n], 1.1 * b.fdp[n] @ R.T, atol=1e-8)
     with pytest.raises(fw.InputError, match="names: the ARKit basis has no shape 'tongueOut'"):
-        ict_arkit.transfer_basis_displacements(b, P, moved, names=["tongueOut"])
+        b.transfer(P, moved, names=["tongueOut"])
 
 
 def test_basis_matches_the_kit(ict):
     """The shipped shapes agree with the kit's own OBJs carried onto the template directly (the
     five shapes the shared folder holds): within the 2 um quantization at the FDPs."""
-    from facewarp._src.importers import ict_arkit
-
-    b = ict_arkit.load_arkit_basis()
+    b = fw.load_arkit_basis()
     D = fw.load_ict_displacements(["jawOpen", "mouthSmileLeft", "browInnerUp"], ict_dir=ict)
     direct = fw.transfer_ict_displacements(D, b.fdp_points, dict(zip(b.fdp_ids, b.fdp_points)),
                                            point_ids=b.fdp_ids, ict_dir=ict)
     for n in D:
-        np.testing.assert_allclose(b.fdp[n], direct[n], atol=ict_arkit.BASIS_STEP_M)
+        np.testing.assert_allclose(b.fdp[n], direct[n], atol=b.step_m)
     with pytest.raises(fw.InputError, match="lacks 4[0-9] ARKit shapes"):  # the regenerator wants the whole rig
-        ict_arkit.make_arkit_basis(ict, "unused.npz")
+        b.make(ict, "unused.npz")
 
 
 def test_eye_gaze_turns_the_eyeballs(sim):
     """set_eye_gaze turns each eyeball about its centre at the next step: the gaze axis follows
-    Ry(yaw) Rx(-pitch), the eye FDPs move with it, the USD transforms match, reset straightens."""
-    from facewarp._src.jobs.animation import part_transforms
-    from facewarp._src.sim.readout import eye_gaze_rotation
+    Ry(yaw) Rx(-pitch), the eye FDPs move with it, reset straightens."""
+    def eye_gaze_rotation(yaw, pitch):  # the oracle: Ry(yaw) Rx(-pitch)
+        cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+        return np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]) @ np.array([[1, 0, 0], [0, cp, sp], [0, -sp, cp]])
 
     sim.reset()
     rest = sim.part_points(frame="head")
+    eye_fdp = [i for i, p in enumerate(sim.fr.fdp_part) if str(p) == "eye_L"]
+    assert eye_fdp  # the pupil FDPs sit on the eyeballs
+    fdp0 = sim.fdp_points()[eye_fdp]
     g = np.array([[0.3, 0.0], [-0.2, 0.25]])
     sim.set_eye_gaze(g)
     np.testing.assert_array_equal(sim.eye_gaze, 0)  # reached at the end of the next step
@@ -284,9 +279,9 @@ def test_eye_gaze_turns_the_eyeballs(sim):
         c = rest[name].mean(axis=0)
         R = eye_gaze_rotation(*g[e])
         np.testing.assert_allclose(now[name], (rest[name] - c) @ R.T + c, atol=1e-6)
-        M = part_transforms(sim.fr, sim.jaw_angles, sim.eye_gaze)[name]
-        np.testing.assert_allclose(rest[name] @ M[:3, :3] + M[3, :3], now[name], atol=1e-6)
     np.testing.assert_allclose(rest["teeth_upper"], now["teeth_upper"])
+    c = rest["eye_L"].mean(axis=0)
+    np.testing.assert_allclose(sim.fdp_points()[eye_fdp], (fdp0 - c) @ eye_gaze_rotation(0.3, 0.0).T + c, atol=1e-5)
     d = eye_gaze_rotation(0.3, 0.0) @ [0.0, 0.0, 1.0]
     assert d[0] > 0.29 and abs(d[1]) < 1e-12  # yaw > 0 looks towards +x (the subject's left)
     assert eye_gaze_rotation(0.0, 0.2)[1, 2] > 0.19  # pitch > 0 looks up
@@ -488,13 +483,12 @@ def test_regenerating_the_basis_reproduces_it(tmp_path):
     import os
     from pathlib import Path
 
-    from facewarp._src.importers import ict_arkit
-
     d = os.environ.get("FACEWARP_ICT_SHAPES")
     if not d or not (Path(d) / "eyeBlink_L.obj").is_file():
         pytest.skip("FACEWARP_ICT_SHAPES does not name the ICT-FaceKit FaceXModel folder (all expression OBJs)")
-    out = ict_arkit.make_arkit_basis(d, tmp_path / "basis.npz")
-    new, shipped = np.load(out), np.load(ict_arkit.ARKIT_BASIS_FILE)
+    b = fw.load_arkit_basis()
+    out = b.make(d, tmp_path / "basis.npz")
+    new, shipped = np.load(out), np.load(b.file)
     for k in ("names", "fdp_ids", "skin", "fdp", "faces"):
         np.testing.assert_array_equal(new[k], shipped[k])
     np.testing.assert_allclose(new["vertices"], shipped["vertices"])

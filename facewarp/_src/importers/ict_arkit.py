@@ -321,6 +321,25 @@ class ArkitBasis:
     fdp: dict
     source: str
     digest: str
+    file: Path | None = None
+    step_m: float = BASIS_STEP_M
+    level: int = BASIS_LEVEL
+
+    @property
+    def licence_file(self) -> Path | None:
+        """The ICT-FaceKit licence notice shipped beside the file (None for a basis not in the package)."""
+        p = None if self.file is None else self.file.parent / "ICT-FaceKit-LICENSE.txt"
+        return p if p is not None and p.is_file() else None
+
+    def transfer(self, head_vertices, head_landmarks, **kw) -> dict:
+        """:func:`transfer_basis_displacements` of this basis (its keywords: ``names``, ``point_ids``,
+        ``max_dist``, ``device``, ``report``)."""
+        return transfer_basis_displacements(self, head_vertices, head_landmarks, **kw)
+
+    @staticmethod
+    def make(ict_dir, path=None, **kw) -> Path:
+        """:func:`make_arkit_basis`: regenerate the file from the kit's OBJs (keywords ``level``, ``source``)."""
+        return make_arkit_basis(ict_dir, path, **kw)
 
 
 def _template_head_fdps(t) -> tuple[list, np.ndarray]:
@@ -410,7 +429,8 @@ def load_arkit_basis(path=None) -> ArkitBasis:
                            skin={n: skin_q[i].astype(np.float64) * step for i, n in enumerate(names)},
                            fdp_ids=[str(i) for i in z["fdp_ids"]], fdp_points=z["fdp_points"].astype(np.float64),
                            fdp={n: fdp_q[i].astype(np.float64) * step for i, n in enumerate(names)},
-                           source=str(z["source"]), digest=h.hexdigest()[:16])
+                           source=str(z["source"]), digest=h.hexdigest()[:16], file=path, step_m=step,
+                           level=int(z["level"]))
     except InputError:
         raise
     except Exception as e:  # a damaged file: one line
