@@ -492,3 +492,29 @@ def test_regenerating_the_basis_reproduces_it(tmp_path):
     for k in ("names", "fdp_ids", "skin", "fdp", "faces"):
         np.testing.assert_array_equal(new[k], shipped[k])
     np.testing.assert_allclose(new["vertices"], shipped["vertices"])
+
+
+def test_no_import_cycle_among_the_drive_modules():
+    """Issue 35: drive/inverse and drive/arkit no longer import each other (DriveResult has its own
+    module); no import among the drive modules, at module level or inside functions, closes a cycle."""
+    import ast
+    from pathlib import Path
+
+    folder = Path(fw.__file__).parent / "_src" / "drive"
+    edges = {}
+    for p in folder.glob("*.py"):
+        deps = set()
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
+                deps.add(node.module.split(".")[0])
+        edges[p.stem] = deps & {q.stem for q in folder.glob("*.py")}
+    assert "inverse" not in edges["arkit"] and "result" in edges["arkit"] and "result" in edges["inverse"]
+
+    def reach(a, seen):
+        for b in edges.get(a, ()):
+            if b not in seen:
+                seen.add(b)
+                reach(b, seen)
+        return seen
+
+    assert not [m for m in edges if m in reach(m, set())], edges
