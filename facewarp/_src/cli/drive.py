@@ -66,13 +66,23 @@ def run(args):
         lines.append(f"  distance {what}: RMS {e['rms']:.2f} mm, max {e['max']:.2f} mm"
                      + (f" (worst point {worst[1]}: RMS {worst[0]:.2f} mm)" if worst[1] is not None else ""))
     if rep.get("table"):
-        lines.append(f"  ARKit table {rep['table']['file']}" + (" (cached)" if rep["table"]["from_cache"] else
-                                                                 " (built now, cached for later runs)"))
+        t = rep["table"]
+        lines.append(f"  ARKit table {t['file']}" + (" (cached)" if t["from_cache"] else
+                                                     " (built now, cached for later runs)" if t.get("cached", True)
+                                                     else " (built now, not cached: see the note)"))
+    reach = rep.get("reach", [])
+    for r in reach[:8]:  # each ARKit shape the take uses: what reaches it and how closely
+        lines.append(f"  reach {r['name']}: {r['by']}" + (f", {r['residual_mm']:.2f} mm RMS from its shape "
+                                                          f"({r['target_mm']:.2f} mm)" if r["residual_mm"] is not None else ""))
+    if len(reach) > 8:
+        lines.append(f"  ... {len(reach) - 8} more shapes' reach in report.json")
+    warnings = rep.get("warnings", [])
+    lines += [f"  warning: {w}" for w in warnings]
     hm = rep.get("head_motion")
     if hm:
         lines.append(f"  head motion removed by a fit of {len(hm['stable_points'])} stable points"
                      + (f" ({hm['frames_held']} frames held the pose before them)" if hm["frames_held"] else ""))
-    notes = rep.get("notes", [])
+    notes = [n for n in rep.get("notes", []) if n not in warnings]
     lines += [f"  note: {n}" for n in notes[:6]]
     if len(notes) > 6:
         lines.append(f"  ... {len(notes) - 6} more notes in report.json")
