@@ -187,10 +187,8 @@ def test_activations_take_the_same_names():
 
 
 @pytest.fixture(scope="module")
-def build(tmp_path_factory):
-    d = tmp_path_factory.mktemp("usability") / "build"
-    assert main(["--json", "build", "default", "--out", str(d)]) == 0
-    return d
+def build(default_build_dir):
+    return default_build_dir  # read only here (rig and simulate write beside it, in tmp_path)
 
 
 @pytest.mark.slow
