@@ -137,7 +137,8 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
             or ``.glb``) or a list of rig files; a file's folder must exist.
         shapes: One of :data:`RIG_SHAPES`.
         inbetweens: In-between shapes per muscle (0..8).
-        muscles: Optional muscle names to bake (default all; none twice).
+        muscles: Optional muscle names to bake (default all; none twice): instance names
+            (``corrugator_L``) or Table 6.2 names, each meaning both sides.
         device: Warp device.
         progress: Optional ``progress(done, total, name)`` per baked shape (and per ARKit table step).
         iris_color: Optional iris RGB (3,) in 0..1, linear, of the files' looks (``present.looks``).
@@ -169,12 +170,17 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
     if not (build / "face_rig.npz").is_file():
         raise InputError(f"{build}: no face_rig.npz (expected a `facewarp build` output folder)")
     fr = load_face_rig(build)
-    if muscles is not None:
-        known = list(fr.rig.names)
-        unknown = [m for m in muscles if m not in known]
-        if unknown or not muscles:
-            raise InputError(f"--muscles: {unknown[0] if unknown else 'none given'!r} is not a muscle of this rig; "
-                             f"muscles are {', '.join(known)}")
+    if muscles is not None:  # a bare name means both sides (expressions.muscle_instances)
+        from ..expressions import muscle_instances
+
+        if not muscles:
+            raise InputError("--muscles: none given")
+        expanded = [m for name in muscles for m in muscle_instances(name, fr.muscle_names, what="--muscles")]
+        twice = sorted({m for m in expanded if expanded.count(m) > 1})
+        if twice:
+            raise InputError(f"--muscles: {', '.join(twice)} named twice (a Table 6.2 name means both sides; "
+                             "each muscle is one shape)")
+        muscles = expanded
     with staged_outputs(targets) as staging:
         if folder:
             root = staging.path("out")
