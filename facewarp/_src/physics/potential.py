@@ -21,7 +21,7 @@ Energies per element (C dimensionless, see :mod:`.model`):
 * area (Eq. 6.4.7): ``k / 2 C^2``, C = A / A0 - 1;
 * volume (Eq. 6.4.8): ``k / 2 C^2``, C = V / V0 - 1 (signed volume), plus the volume barrier
   ``kappa k phi(C + 1)`` below a twentieth of the rest volume (:mod:`..volume_barrier`);
-* springs (:class:`~facewarp._src.physics.model.Springs`): ``k / 2 (|p - x| - l0)^2`` (muscles,
+* springs (:class:`~facewarp._src.physics.springs.Springs`): ``k / 2 (|p - x| - l0)^2`` (muscles,
   Eq. 6.4.1 with the fibre cosine frozen over the step) or ``k / 2 ((x - p) . a)^2`` (supports);
   one-sided (contact): ``k / 2 min(0, |x - p| - l0)^2`` (out of a ball) or
   ``k / 2 min(0, (x - p) . a)^2`` (a half-space).
