@@ -1,13 +1,13 @@
 """ModelBuilder: what is simulated, collected on the host and finalized once (thesis Sec. 6.4, Table 6.3).
 
 :class:`ModelBuilder` collects a head's parts, computes every material-dependent number and
-finalizes one :class:`Model`: :meth:`~ModelBuilder.add_tissue` (the tet mesh, below),
+finalizes one :class:`~.model.Model`: :meth:`~ModelBuilder.add_tissue` (the tet mesh, below),
 :meth:`~ModelBuilder.add_muscles` (Eq. 6.4.1), :meth:`~ModelBuilder.add_supports`,
 :meth:`~ModelBuilder.add_jaw` (Eq. 6.4.9) and :meth:`~ModelBuilder.add_contacts`, or all of them
 from a face rig with :meth:`~ModelBuilder.add_face`. The Model carries per-head ranges
-(``head_*_start``), so more heads are an append. Every array a step changes is in :class:`State`
+(``head_*_start``), so more heads are an append. Every array a step changes is in :class:`~.state.State`
 (positions, previous positions, the muscle control points, the jaw carry); the inputs are in
-:class:`Control`.
+:class:`~.state.Control`.
 
 The tissue: a generic tetrahedral mesh (numpy), validated, gives the
 elements of the deformation model (:func:`~.tissue.tissue_elements`): unique tet edges (distance energy, Eq. 6.4.4 with the
@@ -20,32 +20,8 @@ copies everything into a read-only :class:`~.model.Model` of Warp arrays on one 
 (:class:`~facewarp._src.physics.solvers.implicit.SolverImplicit`,
 :class:`~facewarp._src.physics.solvers.verlet.SolverVerlet`).
 
-Unit system
------------
-SI throughout: metre, kilogram, second (so newton and joule). Every energy term of Sec. 6.4.2
-is ``E = 1/2 k C^2`` with a *dimensionless* constraint ``C`` (relative length, area or volume
-change), so the per-element stiffness coefficients (``edge_k0``, ``face_k``, ``tet_k``) are
-energies [J] (the energy of a unit relative strain); masses are [kg]. An edge of rest length
-``D0`` acts like a linear spring of stiffness ``k0 / D0^2`` [N/m].
-
-Damping (the same for every solver)
------------------------------------
-* ``damping_rate`` alpha [1/s]: Eq. 6.4.5's ``-k_damping v`` with ``k_damping = alpha m``, on the
-  velocity relative to the cranium (``Control.cranium_velocity``), so a head carried at constant
-  velocity is not dragged. Table 6.3's 0.002 per substep is ``alpha = 0.002 / dt``.
-* per-element dashpots on the strain rate, ``F = -d dC/dt grad C`` with ``d`` [J s] per edge,
-  face and tet (``edge_damping``, ``face_damping``, ``tet_damping``): Rayleigh stiffness damping
-  ``d = beta k`` plus, on edges, the thesis profile's dashpot ``c`` [N s/m] along the edge
-  (``d = c D0^2``). They act on deformation rates only, never on a rigid motion.
-
-Shear term (physical profile, ``shear_modulus`` > 0; absent from Table 6.3)
---------------------------------------------------------------------------
-Beside the thesis's three energies, a tet may carry ``E = 1/2 k_s |G|^2`` of its Green strain
-``G = (F^T F - I) / 2``, ``F = D_s D_m^-1`` (the deformation gradient of the linear tet), with
-``k_s = 2 mu V0`` [J] (Saint Venant-Kirchhoff with lambda = 0: a shear modulus mu) and the dashpot
-``d_s = beta k_s`` on ``dG/dt``. Unlike the edge and face energies it is the same material for
-any tet shape (:func:`~facewarp._src.physics.materials.linear_stiffness`); see
-:class:`~facewarp._src.physics.materials.MaterialPhysical`.
+Units (SI; element stiffnesses the energies [J] of a unit relative strain), the damping and the
+shear term are described once, in :mod:`.model`.
 """
 
 

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.checks import check_int, describe
+from ..core.checks import check_array, check_int, describe
 from ..core.errors import InputError
 from ..physics.face_rig import FaceRig
-from .readout import activation_vector
+from .readout import activation_vector, jaw_vector
 
-__all__ = ["BACKENDS", "MAX_BATCH_HEADS", "BatchBase", "activation_rows", "muscle_count"]
+__all__ = ["BACKENDS", "MAX_BATCH_HEADS", "BatchBase", "activation_rows", "jaw_rows", "muscle_count"]
 
 BACKENDS = ("auto", "model", "heads")
 """How :class:`FaceBatch` holds its heads: ``"model"`` (N faces in one Model, one solver:
@@ -101,6 +101,29 @@ def activation_rows(activations, names: list, same_m: int | None) -> list:
     return targets
 
 
+def jaw_rows(angles, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every head's jaw angles checked: ``angles`` (N, 2) (opening, side [rad]) or (N,) openings.
+    Returns ``(as given (N, 2) float64, the targets (N, 2) float32)`` (:func:`.readout.jaw_vector`'s
+    conversion, all at once when every head is in range). Raises :class:`InputError` naming the head."""
+    a = check_array("angles", angles, shape=(count,)) if np.ndim(angles) == 1 else check_array(
+        "angles", angles, shape=(count, 2))
+    a = np.asarray(a, np.float64).reshape(count, -1)
+    if a.shape[1] == 1:
+        a = np.concatenate([a, np.zeros_like(a)], axis=1)
+    from ..expressions import JAW_U_MAX, JAW_V_MAX
+
+    ok = (a[:, 0] >= -1e-9) & (a[:, 0] <= JAW_U_MAX + 1e-9) & (np.abs(a[:, 1]) <= JAW_V_MAX + 1e-9)
+    if ok.all():  # every head in range: jaw_vector's conversion for all at once (row by row below otherwise)
+        return a, np.stack([np.maximum(a[:, 0], 0.0), a[:, 1]], 1).astype(np.float32)
+    out = np.zeros((count, 2), np.float32)
+    for i in range(count):
+        try:
+            out[i] = jaw_vector(float(a[i, 0]), float(a[i, 1]))
+        except InputError as e:
+            raise InputError(f"angles of head {i}: {e}") from None
+    return a, out
+
+
 def muscle_count(names: list) -> int | None:
     """The one muscle count of heads with these muscle names, or None when the counts differ."""
     ms = {len(m) for m in names}
@@ -109,9 +132,25 @@ def muscle_count(names: list) -> int | None:
 
 
 class BatchBase:
-    """What both backends of :class:`~facewarp.FaceBatch` share: the head indices, the placements, the
-    stream count and the frame loop over :meth:`step` (the backends define ``step``, ``count``,
-    ``failed``, ``_place_R``, ``_place_t``)."""
+    """What both backends of :class:`~facewarp.FaceBatch` share: the arguments checked, the head
+    indices, the placements, the stream count and the frame loop over :meth:`step` (the backends
+    define ``step``, ``count`` and ``failed``)."""
+
+    def _start(self, rigs, count, placements, streams, options: dict) -> list:
+        """FaceBatch's arguments checked (options, rigs, streams, placements); returns the rig list."""
+        bad = sorted(set(options) - set(_SIM_KEYS))
+        if bad:
+            raise InputError(f"{bad[0]}: not an option of FaceBatch (options: {', '.join(_SIM_KEYS)})")
+        rigs = _rig_list(rigs, count)
+        check_int("streams", streams, low=1, high=1024)
+        n = len(rigs)
+        if placements is None:
+            self._place_R, self._place_t = np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3))
+        else:
+            if not (isinstance(placements, (tuple, list)) and len(placements) == 2):
+                raise InputError(f"placements: expected (R, t), got {describe(placements)}")
+            self._place_R, self._place_t = _poses("placements", placements[0], placements[1], n)
+        return rigs
 
     @property
     def streams(self) -> int:

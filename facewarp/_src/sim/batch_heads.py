@@ -8,12 +8,11 @@ import time
 
 import numpy as np
 
-from ..core.checks import check_array, check_choice, check_int, describe
+from ..core.checks import check_choice
 from ..core.errors import InputError, SimulationError
 from ..core.warp import get_warp
 from ..physics.volume_barrier import VOLUME_FLOOR
-from .batch_common import _SIM_KEYS, BatchBase, _poses, _rig_list, activation_rows, muscle_count
-from .readout import jaw_vector
+from .batch_common import BatchBase, _poses, activation_rows, jaw_rows, muscle_count
 from .rollback import _SOLVER_HOST_STATE, _copy_host, step_frame
 from .simulator import FaceSimulator
 
@@ -35,18 +34,8 @@ class BatchHeads(BatchBase):
 
     def __init__(self, rigs, count: int | None = None, *, device: str = "cpu", fps: float = 30.0,
                  placements=None, streams: int = 1, **options):
-        bad = sorted(set(options) - set(_SIM_KEYS))
-        if bad:
-            raise InputError(f"{bad[0]}: not an option of FaceBatch (options: {', '.join(_SIM_KEYS)})")
-        rigs = _rig_list(rigs, count)
-        check_int("streams", streams, low=1, high=1024)
+        rigs = self._start(rigs, count, placements, streams, options)
         n = len(rigs)
-        if placements is None:
-            self._place_R, self._place_t = np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3))
-        else:
-            if not (isinstance(placements, (tuple, list)) and len(placements) == 2):
-                raise InputError(f"placements: expected (R, t), got {describe(placements)}")
-            self._place_R, self._place_t = _poses("placements", placements[0], placements[1], n)
         shared = options.get("solver", "implicit") == "implicit"
         builders: dict[int, object] = {}
         self.heads: list[FaceSimulator] = []
@@ -89,18 +78,7 @@ class BatchHeads(BatchBase):
         self.reset()
 
     def use_mujoco_jaws(self, mjcf) -> None:
-        """Drive every head's jaw by the MuJoCo hinge body of its ``head.xml`` (written by ``facewarp
-        build``), two-way coupled as :class:`~facewarp.coupling.MujocoJawDriver` does for one head:
-        :meth:`set_jaw`'s angles become the actuator targets, MuJoCo's angles and head pose go onto
-        the skin before each batched step and the skin's torque back after it. One CPU MuJoCo model
-        per head, stepped in a loop (module doc).
-
-        Args:
-            mjcf: One ``head.xml`` path for every head, or a list of N (one per head).
-
-        Raises:
-            InputError: a missing or broken file, a list of the wrong length, or no ``mujoco``.
-        """
+        """As :meth:`FaceBatch.use_mujoco_jaws <facewarp.FaceBatch.use_mujoco_jaws>` (its doc)."""
         from ..coupling.drivers import MujocoJawDriver
 
         paths = list(mjcf) if isinstance(mjcf, (list, tuple)) else [mjcf] * self.count
@@ -110,62 +88,25 @@ class BatchHeads(BatchBase):
         self._mjcf = paths
 
     def set_activations(self, activations) -> None:
-        """Set every head's muscle activations reached at the end of the next :meth:`step` (they
-        ramp linearly over it from the current ones).
-
-        Args:
-            activations: An array (N, M) in [0, 1] (M the heads' muscle count, the order of
-                ``heads[i].muscle_names``; heads with different rigs: a list instead), or a list of N
-                entries, each what :meth:`~facewarp.FaceSimulator.set_activations` takes (a dict
-                name -> value, an :class:`~facewarp.Expression`, an (M,) array).
-        """
+        """As :meth:`FaceBatch.set_activations <facewarp.FaceBatch.set_activations>` (its doc)."""
         for h, a in zip(self.heads, activation_rows(activations, self._names, self._same_m)):
             h.set_activation_vector(a)
 
     def set_jaw(self, angles) -> None:
-        """Set every head's jaw angles [rad] reached at the end of the next :meth:`step`.
-
-        Args:
-            angles: (N, 2) (opening 0..60 deg, side +-5 deg in radians, as
-                :meth:`~facewarp.FaceSimulator.set_jaw`), or (N,) openings with no side turn.
-        """
-        a = check_array("angles", angles, shape=(self.count,)) if np.ndim(angles) == 1 else check_array(
-            "angles", angles, shape=(self.count, 2))
-        a = np.asarray(a, np.float64).reshape(self.count, -1)
-        if a.shape[1] == 1:
-            a = np.concatenate([a, np.zeros_like(a)], axis=1)
-        from ..expressions import JAW_U_MAX, JAW_V_MAX
-
-        ok = (a[:, 0] >= -1e-9) & (a[:, 0] <= JAW_U_MAX + 1e-9) & (np.abs(a[:, 1]) <= JAW_V_MAX + 1e-9)
-        if ok.all():  # every head in range: jaw_vector's conversion for all at once (row by row below otherwise)
-            J32 = np.stack([np.maximum(a[:, 0], 0.0), a[:, 1]], 1).astype(np.float32)
-            for i, h in enumerate(self.heads):
-                h.set_jaw_vector(J32[i])
-            self._jaw_goal[:] = a
-            return
-        targets = []
-        for i in range(self.count):
-            try:
-                targets.append(jaw_vector(float(a[i, 0]), float(a[i, 1]) if a.shape[1] > 1 else 0.0))
-            except InputError as e:
-                raise InputError(f"angles of head {i}: {e}") from None
-        for i, (h, j) in enumerate(zip(self.heads, targets)):
+        """As :meth:`FaceBatch.set_jaw <facewarp.FaceBatch.set_jaw>` (its doc)."""
+        goal, J = jaw_rows(angles, self.count)
+        for h, j in zip(self.heads, J):
             h.set_jaw_vector(j)
-            self._jaw_goal[i] = (a[i, 0], a[i, 1] if a.shape[1] > 1 else 0.0)  # MuJoCo's targets, as given
+        self._jaw_goal[:] = goal  # MuJoCo's targets, as given
 
     def set_head_pose(self, R, t) -> None:
-        """Set every head's pose (in its placement) reached at the end of the next :meth:`step`:
-        R (3, 3) or (N, 3, 3) rotations, t (3,) or (N, 3) translations [m]. As
-        :meth:`~facewarp.FaceSimulator.set_head_pose`: the head, simulated in its own frame,
-        feels the loads of the accelerating frame."""
+        """As :meth:`FaceBatch.set_head_pose <facewarp.FaceBatch.set_head_pose>` (its doc)."""
         R, t = _poses("head pose", R, t, self.count)
         for h, r, x in zip(self.heads, R, t):
             h.set_head_pose(r, x)
 
     def reset(self, heads=None) -> None:
-        """Back to rest, all heads (default) or the listed ones: each head's
-        :meth:`~facewarp.FaceSimulator.reset` (and its MuJoCo jaw's model made again); a frozen
-        head is live again."""
+        """As :meth:`FaceBatch.reset <facewarp.FaceBatch.reset>` (its doc)."""
         idx = self._heads_arg(heads)
         for i in idx:
             self.heads[i].reset()
@@ -183,13 +124,7 @@ class BatchHeads(BatchBase):
                 self.failed.pop(i, None)
 
     def step(self) -> None:
-        """One frame (``1 / fps``) of every live head, the controls set since the last step
-        ramping across it (module doc: one CUDA graph on CUDA; a failing head is rolled back,
-        taken again alone with more substeps, and frozen if it still fails).
-
-        Raises:
-            InputError: a head pose jump beyond a head's motion (nothing changed).
-        """
+        """As :meth:`FaceBatch.step <facewarp.FaceBatch.step>` (its doc)."""
         t0 = time.perf_counter()
         live = self.live
         angles = {}
@@ -354,10 +289,7 @@ class BatchHeads(BatchBase):
         return out
 
     def positions(self, head: int | None = None, *, frame: str = "head"):
-        """Tet node positions [m], float64: of one head (p, 3), or of every head (a list of N
-        arrays (p_i, 3)); in the head's own frame (``"head"``, default: what a
-        :class:`~facewarp.FaceSimulator` of the rig gives alone) or the ``"world"`` frame
-        (placement and head pose applied)."""
+        """As :meth:`FaceBatch.positions <facewarp.FaceBatch.positions>` (its doc)."""
         check_choice("frame", frame, ("head", "world"))
         if head is None:
             return [self.positions(i, frame=frame) for i in range(self.count)]
@@ -366,12 +298,12 @@ class BatchHeads(BatchBase):
         return self._world(i, self.heads[i]._pose.to_world(X)) if frame == "world" else X
 
     def surface(self, head: int) -> np.ndarray:
-        """Head vertices of head ``head`` [m], (n, 3), float64, world frame (module doc)."""
+        """As :meth:`FaceBatch.surface <facewarp.FaceBatch.surface>` (its doc)."""
         i = self._head(head)
         return self._world(i, self.heads[i].surface())
 
     def fdp_points(self, head: int) -> np.ndarray:
-        """The FDPs of head ``head`` [m], (84, 3), float64, world frame (order ``rig.fdp_ids``)."""
+        """As :meth:`FaceBatch.fdp_points <facewarp.FaceBatch.fdp_points>` (its doc)."""
         i = self._head(head)
         return self._world(i, self.heads[i].fdp_points())
 

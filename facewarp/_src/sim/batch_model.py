@@ -40,12 +40,12 @@ import time
 
 import numpy as np
 
-from ..core.checks import check_array, check_choice, check_int, describe
+from ..core.checks import check_choice
 from ..core.errors import InputError, SimulationError
 from ..core.warp import get_warp
 from ..physics.volume_barrier import VOLUME_FLOOR
-from .batch_common import _SIM_KEYS, BatchBase, _poses, _rig_list, activation_rows, muscle_count
-from .readout import activation_vector, fdp_points, head_surface, jaw_vector, parts_at, surface_index
+from .batch_common import _SIM_KEYS, BatchBase, _poses, activation_rows, jaw_rows, muscle_count
+from .readout import activation_vector, fdp_points, head_surface, parts_at, surface_index
 from .rollback import MAX_REFINEMENT, FrameGuard, FrameStats
 from .simulator import FaceSimulator, check_simulator_args
 from .stepper import FrameStepper, face_stages
@@ -80,21 +80,11 @@ class BatchModel(BatchBase):
         from ..physics.builder import ModelBuilder
         from ..physics.solvers.select import select_solver
 
-        bad = sorted(set(options) - set(_SIM_KEYS))
-        if bad:
-            raise InputError(f"{bad[0]}: not an option of FaceBatch (options: {', '.join(_SIM_KEYS)})")
-        rigs = _rig_list(rigs, count)
-        check_int("streams", streams, low=1, high=1024)
+        rigs = self._start(rigs, count, placements, streams, options)
         why = model_backend_reason(options)
         if why is not None:
             raise InputError(f"backend: 'model' cannot step {why}; use backend='heads'")
         n = len(rigs)
-        if placements is None:
-            self._place_R, self._place_t = np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3))
-        else:
-            if not (isinstance(placements, (tuple, list)) and len(placements) == 2):
-                raise InputError(f"placements: expected (R, t), got {describe(placements)}")
-            self._place_R, self._place_t = _poses("placements", placements[0], placements[1], n)
         o = {k: options.get(k) for k in _SIM_KEYS}
         o["solver"] = "implicit"
         for k, v in (("material", "physical"), ("mass_scaling", True), ("contact", True)):
@@ -169,24 +159,7 @@ class BatchModel(BatchBase):
 
     def set_jaw(self, angles) -> None:
         """As :meth:`FaceBatch.set_jaw <facewarp.FaceBatch.set_jaw>`: (N, 2) or (N,) openings [rad]."""
-        a = check_array("angles", angles, shape=(self.count,)) if np.ndim(angles) == 1 else check_array(
-            "angles", angles, shape=(self.count, 2))
-        a = np.asarray(a, np.float64).reshape(self.count, -1)
-        if a.shape[1] == 1:
-            a = np.concatenate([a, np.zeros_like(a)], axis=1)
-        from ..expressions import JAW_U_MAX, JAW_V_MAX
-
-        ok = (a[:, 0] >= -1e-9) & (a[:, 0] <= JAW_U_MAX + 1e-9) & (np.abs(a[:, 1]) <= JAW_V_MAX + 1e-9)
-        if ok.all():  # every head in range: jaw_vector's conversion for all at once (row by row below otherwise)
-            self._target_j = np.stack([np.maximum(a[:, 0], 0.0), a[:, 1]], 1).astype(np.float32)
-            return
-        out = np.zeros((self.count, 2), np.float32)
-        for i in range(self.count):
-            try:
-                out[i] = jaw_vector(float(a[i, 0]), float(a[i, 1]) if a.shape[1] > 1 else 0.0)
-            except InputError as e:
-                raise InputError(f"angles of head {i}: {e}") from None
-        self._target_j = out
+        _, self._target_j = jaw_rows(angles, self.count)
 
     def set_head_pose(self, R, t) -> None:
         """Only the rest pose (R = I, t = 0) in this backend: moving heads need ``backend='heads'``."""

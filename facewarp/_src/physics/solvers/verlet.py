@@ -15,17 +15,8 @@ One substep:
 5. a guard kernel records the first substep and tet with a NaN position or an inverted tet;
    :meth:`SolverVerlet.check` (host side, between frames) raises :class:`SimulationError`.
 
-Stable time step
-----------------
-An edge of rest length D0 acts like a spring of stiffness k0 / D0^2 on a node of mass m, so
-the explicit step must stay below about 2 / omega with omega^2 ~ (sum of the node's element
-stiffnesses) / m, and the limit scales with D0. For the ``thesis`` profile the measured limit
-for tets with 1 cm edges is :data:`DT_STABLE_1CM` (0.6 ms; 1.04 ms is the linear limit at rest);
-:func:`stable_dt` scales a safe step (by default half of it: 0.3 ms for 1 cm edges) with the
-shortest edge, the lightest node and the stiffest k0. For any other material (``physical``)
-:func:`node_stable_dt` bounds every node's omega^2 and damping rate by Gershgorin's theorem on the
-rest stiffness and damping matrices and takes the explicit limit of damped Verlet,
-``dt < (sqrt(c^2 + 4 omega^2) - c) / omega^2``.
+Stable time step: :mod:`..stability` (:func:`~..stability.stable_dt`, :func:`~..stability.node_stable_dt`,
+selective mass scaling), re-exported here.
 """
 
 from __future__ import annotations
