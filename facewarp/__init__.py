@@ -81,7 +81,7 @@ _NAMES = {
     # USD animations streamed while simulating (a sink of play)
     "UsdAnimation": "jobs.animation", "play_timeline": "jobs.animation",
     # lower level
-    "ModelBuilder": "physics.model", "Model": "physics.model", "State": "physics.model", "Control": "physics.model",
+    "ModelBuilder": "physics.builder", "Model": "physics.model", "State": "physics.state", "Control": "physics.state",
     "SolverVerlet": "physics.solvers.verlet", "SolverStage": "physics.solvers.base",
     "SolverImplicit": "physics.solvers.implicit", "SolverHostImplicit": "physics.solvers.host_implicit",
     "SolverDeviceNewtonPCG": "physics.solvers.newton_pcg", "IncrementalPotential": "physics.solvers.incremental",
@@ -157,7 +157,9 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.jobs.template import export_template
     from ._src.anatomy.rig import build_face, face_rig_from_anatomy
     from ._src.physics.face_rig import FaceRig, load_face_rig, save_face_rig
-    from ._src.physics.model import Control, Model, ModelBuilder, State
+    from ._src.physics.builder import ModelBuilder
+    from ._src.physics.model import Model
+    from ._src.physics.state import Control, State
     from ._src.physics.muscle_rig import MuscleRig
     from ._src.physics.muscle_stage import MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
