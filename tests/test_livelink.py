@@ -1,0 +1,340 @@
+"""Live Link Face's UDP stream: the packet read against bytes this test lays out by hand from the
+documented layout, the socket (newest frame, drops, malformed, late and foreign packets, bad
+ports), the CSV of a take, and the live job fed by a sender that replays a generated take to
+127.0.0.1."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import struct
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import facewarp as fw
+from facewarp._src.drive.livelink import (LIVELINK_CHANNELS, LiveLink, PacketError, encode_packet, parse_packet,
+                                          write_livelink_csv)
+
+
+def layout(channels, *, version=6, device="2F6B9D3A-1C4E-4B7A-9E2D-5A8C7F1B3D60", subject="iPhone", frame=1234,
+           sub=0.5, num=60, den=1, count=None) -> bytes:
+    """A datagram laid out field by field as the module docstring documents it (big-endian)."""
+    d, s = device.encode(), subject.encode()
+    out = bytes([version])
+    out += struct.pack(">i", len(d)) + d
+    out += struct.pack(">i", len(s)) + s
+    out += struct.pack(">i", frame) + struct.pack(">f", sub) + struct.pack(">i", num) + struct.pack(">i", den)
+    out += bytes([len(channels) if count is None else count])
+    for v in channels:
+        out += struct.pack(">f", v)
+    return out
+
+
+def channels(seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.r_[rng.uniform(0, 1, 52), rng.uniform(-0.5, 0.5, 9)].astype(np.float32).astype(np.float64)
+
+
+# ---------------------------------------------------------------------------------------- packets
+def test_packet_fields_from_hand_laid_bytes():
+    ch = channels()
+    data = layout(ch, frame=3600 * 60 + 30, sub=0.25, num=60, den=1)
+    assert len(data) == 1 + 4 + 36 + 4 + 6 + 16 + 1 + 4 * 61
+    f = parse_packet(data)
+    assert (f.device_id, f.subject, f.frame_number, f.sub_frame, f.rate) == (
+        "2F6B9D3A-1C4E-4B7A-9E2D-5A8C7F1B3D60", "iPhone", 3600 * 60 + 30, 0.25, (60, 1))
+    assert f.fps == 60.0 and f.time == pytest.approx(3600.5 + 0.25 / 60)
+    np.testing.assert_array_equal(f.channels, ch)
+    np.testing.assert_array_equal(f.weights, ch[:52])  # in [0, 1]: unchanged
+    assert f.weights[fw.ARKIT_NAMES.index("jawOpen")] == ch[17]  # ARKit order, JawOpen is channel 17
+    np.testing.assert_array_equal(f.head_rotation, ch[52:55])
+    np.testing.assert_array_equal(f.eyes, ch[55:61])
+    assert LIVELINK_CHANNELS[52:55] == ("HeadYaw", "HeadPitch", "HeadRoll") and LIVELINK_CHANNELS[0] == "EyeBlinkLeft"
+    # our own writer lays out the same bytes
+    assert encode_packet(ch[:52], head=ch[52:55], eyes=ch[55:], frame_number=3600 * 60 + 30, sub_frame=0.25,
+                         device_id="2F6B9D3A-1C4E-4B7A-9E2D-5A8C7F1B3D60", subject="iPhone") == data
+    # a 30/1001-style rate and trailing bytes (a later layout appending fields) are read
+    g = parse_packet(layout(ch, num=30000, den=1001, frame=300) + b"\x00\x01")
+    assert g.fps == pytest.approx(29.97, abs=1e-2) and g.time == pytest.approx((300 + 0.5) * 1001 / 30000)
+
+
+@pytest.mark.parametrize("data, reason", [
+    (b"", "shorter"),
+    (layout(channels())[:200], "shorter"),
+    (layout(channels(), version=5), "version 5"),
+    (layout(channels())[:-10], "truncated"),
+    (layout(channels(), count=52), "52 channels"),
+    (layout(channels()[:52], count=52) + b"\x00" * 40, "52 channels"),
+    (layout(channels(), num=0), "frame rate"),
+    (layout(channels(), den=-1), "frame rate"),
+    (layout(channels(), sub=1.5), "sub-frame"),
+    (layout(np.r_[np.nan, channels()[1:]]), "EyeBlinkLeft"),
+    (layout(np.r_[channels()[:17], 1.5, channels()[18:]]), "weight JawOpen"),
+    (layout(np.r_[channels()[:52], 4.0, channels()[53:]]), "HeadYaw"),
+    (bytes([6]) + struct.pack(">i", 100000) + b"x" * 300, "device id of 100000 bytes"),
+    (bytes([6]) + struct.pack(">i", 2) + b"\xff\xfe" + layout(channels())[41:], "not UTF-8"),
+])
+def test_malformed_packets_are_refused_with_a_reason(data, reason):
+    with pytest.raises(PacketError) as e:
+        parse_packet(data)
+    assert reason in e.value.reason
+
+
+def test_weights_a_little_above_one_are_clamped_not_refused():
+    ch = channels()
+    ch[2] = np.float32(1.05)  # EyeLookInLeft, as real takes reach
+    f = parse_packet(layout(ch))
+    assert f.clamped and f.weights[2] == 1.0 and f.channels[2] == pytest.approx(1.05)
+
+
+# ---------------------------------------------------------------------------------------- the socket
+def _send(port, packets):
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    for p in packets:
+        s.sendto(p, ("127.0.0.1", port))
+    s.close()
+
+
+def _wait(link, datagrams, seconds=5.0):
+    end = time.perf_counter() + seconds
+    while link.stats.datagrams < datagrams and time.perf_counter() < end:
+        link.poll()
+        time.sleep(0.005)
+
+
+def test_newest_frame_delivered_older_dropped_bad_ones_counted():
+    with LiveLink(0, host="127.0.0.1", keep=True, timeout=0.2) as link:
+        assert link.port > 0
+        W = [channels(k) for k in range(12)]
+        pk = [layout(W[k], frame=100 + k, sub=0.0) for k in range(10)]
+        _send(link.port, pk[:4] + [b"junk", layout(W[0], version=7)] + pk[4:6] + [pk[2]]  # a late repeat
+              + [layout(W[11], device="another-phone", frame=200)] + pk[7:10])  # frame 106 never sent
+        _wait(link, 13)
+        f = link.receive(timeout=0)
+        assert f.frame_number == 109  # the newest
+        np.testing.assert_array_equal(f.channels, W[9])
+        st = link.stats
+        assert (st.datagrams, st.frames, st.delivered, st.malformed, st.late, st.other_source, st.missing) == (
+            13, 9, 1, 2, 1, 1, 1)
+        assert st.dropped == 8 and st.dropped_fraction == pytest.approx(8 / 9)
+        assert sum(st.malformed_reasons.values()) == 2 and any("version 7" in r for r in st.malformed_reasons)
+        assert [h.frame_number for h in link.history] == [100, 101, 102, 103, 104, 105, 107, 108, 109]
+        assert link.history[3].elapsed == pytest.approx(3 / 60)
+        assert link.receive(timeout=0.05) is None  # nothing new: no frame twice
+        _send(link.port, [layout(W[1], frame=110)])
+        assert [g.frame_number for g in link] == [110]  # iteration ends after the timeout
+        port = link.port
+    assert link.closed
+    with LiveLink(port, host="127.0.0.1"):  # closed: the port is free again
+        pass
+
+
+def test_a_restarted_clock_is_a_new_clock_not_late_packets():
+    with LiveLink(0, host="127.0.0.1", keep=True, timeout=0.2) as link:
+        _send(link.port, [layout(channels(), frame=5_000_000 + k, sub=0.0) for k in range(3)]
+              + [layout(channels(), frame=k, sub=0.0) for k in range(2)])  # midnight, or the app restarted
+        _wait(link, 5)
+        assert link.stats.frames == 5 and link.stats.late == 0 and link.stats.clock_resets == 1
+        np.testing.assert_allclose([h.elapsed for h in link.history], np.arange(5) / 60, atol=1e-9)
+
+
+@pytest.mark.parametrize("port", [-1, 65536, 70000, "11111", 1.5, True, None])
+def test_bad_port_numbers_are_one_line_errors(port):
+    with pytest.raises(fw.InputError, match="port: expected a UDP port number"):
+        LiveLink(port)
+
+
+def test_port_in_use_is_one_line_error():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    try:
+        with pytest.raises(fw.InputError) as e:
+            LiveLink(s.getsockname()[1], host="127.0.0.1")
+        assert "in use" in str(e.value) and "\n" not in str(e.value)
+    finally:
+        s.close()
+
+
+def test_take_csv_reads_back_with_load_arkit(tmp_path):
+    frames = [parse_packet(layout(channels(k), frame=60 * 3600 + 55 + k, sub=0.0)) for k in range(70)]
+    # elapsed as a LiveLink sets it (the test's frames did not pass through one)
+    frames = [type(f)(**{**f.__dict__, "elapsed": k / 60}) for k, f in enumerate(frames)]
+    path = write_livelink_csv(frames, tmp_path / "take.csv")
+    header = path.read_text().splitlines()[0].split(",")
+    assert header[:3] == ["Timecode", "BlendShapeCount", "EyeBlinkLeft"] and header[-1] == "RightEyeRoll"
+    assert path.read_text().splitlines()[1].startswith("01:00:00:55.000,61,")
+    back = fw.load_arkit(path)
+    assert back.frames == 70 and back.fps == pytest.approx(60.0)
+    np.testing.assert_allclose(back.weights, [f.weights for f in frames], atol=1e-6)
+    np.testing.assert_allclose(back.head_rotation, [f.head_rotation for f in frames], atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------- the live job
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    from facewarp.cli import main
+
+    out = tmp_path_factory.mktemp("build")
+    assert main(["--json", "build", "default", "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def table(built):
+    """A small ARKit table of this head (built in no time, unlike the solved one): jawOpen opens the
+    jaw, the smiles pull the zygomatic majors, every other shape is out of reach."""
+    from facewarp._src.drive.arkit import ArkitTable, rig_key
+
+    sim = fw.FaceSimulator(fw.load_face_rig(built), fps=60)
+    names, M = list(sim.muscle_names), len(sim.muscle_names)
+    A, J = np.zeros((52, M), np.float32), np.zeros((52, 2), np.float32)
+    J[fw.ARKIT_NAMES.index("jawOpen")] = (0.45, 0.0)
+    for side in "LR":
+        A[fw.ARKIT_NAMES.index(f"mouthSmile{'Left' if side == 'L' else 'Right'}"), names.index(f"zygomatic_major_{side}")] = 1
+    solved = np.zeros(52, bool)
+    solved[[fw.ARKIT_NAMES.index(n) for n in ("jawOpen", "mouthSmileLeft", "mouthSmileRight")]] = True
+    K = 3
+    return ArkitTable(names=tuple(fw.ARKIT_NAMES), muscle_names=names, activations=A, jaw=J, solved=solved,
+                      residual_m=np.zeros(52), target_rms_m=np.zeros(52), fdp_ids=["2.1", "8.3", "8.4"],
+                      rest_fdp=np.zeros((K, 3)), targets=np.zeros((52, K, 3)), reached=np.zeros((52, K, 3)),
+                      basis=np.zeros((3 * K, M + 2)),
+                      reasons={n: "not in this test's table" for n, s in zip(fw.ARKIT_NAMES, solved) if not s},
+                      info={"rig_key": rig_key(sim)})
+
+
+def generated_take(frames=60, fps=60.0):
+    """Smooth ARKit curves: the jaw opens and closes, a smile, the head turns a little."""
+    t = np.arange(frames) / fps
+    W = np.zeros((frames, 52))
+    W[:, fw.ARKIT_NAMES.index("jawOpen")] = 0.5 * np.sin(np.pi * t / t[-1]) ** 2
+    W[:, fw.ARKIT_NAMES.index("mouthSmileLeft")] = 0.6 * np.sin(np.pi * t / t[-1])
+    W[:, fw.ARKIT_NAMES.index("mouthSmileRight")] = W[:, fw.ARKIT_NAMES.index("mouthSmileLeft")]
+    W[:, fw.ARKIT_NAMES.index("eyeBlinkLeft")] = 0.3  # out of this table's reach: a note
+    H = np.stack([0.15 * np.sin(2 * np.pi * t / t[-1]), 0.05 * np.sin(np.pi * t / t[-1]), 0 * t], axis=1)
+    return fw.ArkitTrack(fps, W, H)
+
+
+def replay(csv_path, port, *, paced=True, junk=(), speed=1.0):
+    """A sender: the Live Link Face CSV ``csv_path`` replayed to 127.0.0.1:port as the app's packets,
+    at its frame rate (``paced``) or all at once; ``junk`` datagrams sent after the first packet."""
+    take = fw.load_arkit(csv_path)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    t0 = time.perf_counter()
+    for k in range(take.frames):
+        if paced:
+            while time.perf_counter() < t0 + k / take.fps / speed:
+                time.sleep(0.0005)
+        s.sendto(layout(np.r_[take.weights[k], take.head_rotation[k], np.zeros(6)], frame=90_000 + k, sub=0.0),
+                 ("127.0.0.1", port))
+        if k == 0:
+            for j in junk:
+                s.sendto(j, ("127.0.0.1", port))
+    s.close()
+
+
+def _run(built, out, table, **kw):
+    from facewarp._src.jobs.live import live_files
+
+    lines = []
+    sender = kw.pop("sender")
+    rep = live_files(built, out, port=0, host="127.0.0.1", table=table, viewer="auto", log=lines.append,
+                     ready=lambda port: threading.Thread(target=sender, args=(port,), daemon=True).start(), **kw)
+    return rep, lines
+
+
+def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(built, table, tmp_path):
+    csv = tmp_path / "sent.csv"
+    fw.save_livelink_csv(generated_take(60), csv)
+    junk = [b"", b"hello", layout(channels(), version=5), layout(channels(), count=52)]
+    rep, lines = _run(built, tmp_path / "live", table, timeout=1.5,
+                      sender=lambda port: replay(csv, port, paced=False, junk=junk))
+    out = tmp_path / "live"
+    # the sender is faster than the solver: packets were dropped, never queued, and counted
+    rec = rep["received"]
+    assert rec["frames"] == 60 and rec["malformed"] == 4 and rec["late"] == 0
+    assert rec["dropped"] > 0 and rec["dropped"] == rec["frames"] - rec["delivered"]
+    assert rep["dropped_fraction"] == pytest.approx(rec["dropped"] / 60, abs=1e-4)
+    assert rep["simulation"]["frames"] == rec["delivered"] >= 2
+    assert rep["stopped_by"].startswith("the stream stopped")
+    if not ("DISPLAY" in os.environ or "WAYLAND_DISPLAY" in os.environ):
+        assert rep["viewer"] == "headless" and sum("headless" in ln for ln in lines) == 1
+    assert any("eyeBlinkLeft: out of reach" in n for n in rep["notes"])
+    assert {p.name for p in out.iterdir()} >= {"take.csv", "frames.npz", "animation.usdc", "report.json"}
+    # the CSV as received: every packet of the take, read back as the take that was sent
+    sent, got = fw.load_arkit(csv), fw.load_arkit(out / "take.csv")
+    assert got.frames == 60 and got.fps == pytest.approx(60.0)
+    np.testing.assert_allclose(got.weights, sent.weights, atol=1e-6)
+    np.testing.assert_allclose(got.head_rotation, sent.head_rotation, atol=1e-6)
+    # the simulated frames: at their packets' stream times; the face moved (the jaw opened, the chin went down)
+    with np.load(out / "frames.npz") as z:
+        times, jaw, acts, fdp = z["times"], z["jaw"], z["activations"], z["fdp_points"]
+        ids = [str(i) for i in z["fdp_ids"]]
+    assert len(times) == rep["simulation"]["frames"] and (np.diff(times) > 0).all() and times[-1] <= 1.0
+    assert times[-1] == pytest.approx(59 / 60)  # the last packet is always simulated (the newest)
+    k = int(np.argmin(np.abs(times - 0.5)))
+    if abs(times[k] - 0.5) < 0.2:
+        assert jaw[k, 0] > 0.1 and acts[k, sim_index(built, "zygomatic_major_L")] > 0.2
+    chin = fdp[:, ids.index("2.1")]
+    rest = fw.FaceSimulator(fw.load_face_rig(built)).fdp("2.1")
+    assert np.linalg.norm(chin - rest, axis=1).max() > 2e-3
+    ua = __import__("usd_export").read_animation(out / "animation.usdc")
+    assert len(ua["times"]) == len(times)
+    report = json.loads((out / "report.json").read_text())
+    assert report["received"]["dropped"] == rec["dropped"] and report["frame_cost_ms"]["step"]["median"] > 0
+
+
+def sim_index(built, name):
+    return fw.load_face_rig(built).rig.names.index(name)
+
+
+def test_live_take_stops_on_sigterm_and_on_seconds(built, table, tmp_path):
+    csv = tmp_path / "sent.csv"
+    fw.save_livelink_csv(generated_take(240), csv)  # 4 s at 60 fps
+    timer = threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGTERM))
+    before = signal.getsignal(signal.SIGTERM)
+    timer.start()
+    try:
+        rep, _ = _run(built, tmp_path / "a", table, timeout=5.0, sender=lambda port: replay(csv, port))
+    finally:
+        timer.cancel()
+    assert signal.getsignal(signal.SIGTERM) is before  # the job's handler is gone again
+    assert rep["stopped_by"] == "SIGTERM" and 30 < rep["received"]["frames"] < 240
+    assert (tmp_path / "a" / "report.json").is_file()
+    rep, _ = _run(built, tmp_path / "b", table, timeout=5.0, seconds=0.5, sender=lambda port: replay(csv, port))
+    assert rep["stopped_by"] == "0.5 s of stream" and rep["seconds"] < 0.5
+    with np.load(tmp_path / "b" / "frames.npz") as z:
+        assert z["times"].max() < 0.5
+
+
+def test_nothing_arriving_is_an_input_error_naming_the_port_and_writes_nothing(built, table, tmp_path):
+    from facewarp._src.jobs.live import live_files
+
+    t0 = time.perf_counter()
+    with pytest.raises(fw.InputError, match=r"nothing arrived on port \d+ in 0.5 s") as e:
+        live_files(built, tmp_path / "none", port=0, host="127.0.0.1", table=table, timeout=0.5, viewer="off")
+    assert "\n" not in str(e.value) and time.perf_counter() - t0 < 60
+    assert not (tmp_path / "none").exists()
+
+
+def test_mujoco_view_puts_face_jaw_and_head_turn_into_the_model(built):
+    from facewarp._src.drive.arkit import head_rotation_matrix
+    from facewarp._src.jobs.live import MujocoView
+
+    sim = fw.FaceSimulator(fw.load_face_rig(built))
+    sim.set_activations({"zygomatic_major_L": 1.0})
+    sim.set_jaw(0.2, 0.0)
+    sim.step()
+    view = MujocoView(built / "head.xml", sim)
+    R = head_rotation_matrix(0.3, -0.1, 0.05)
+    view.show(R)
+    np.testing.assert_allclose(view.skin.vertices(), sim.surface(frame="head"), atol=1e-6)
+    Rb = view.data.xmat[view.cranium].reshape(3, 3)
+    np.testing.assert_allclose(Rb, view._R0 @ R, atol=1e-9)  # the head turned about its own axes
+    assert view.data.qpos[view.qadr[0]] == pytest.approx(float(sim.jaw_angles[0]))
+    assert math.isclose(np.linalg.det(Rb), 1.0, abs_tol=1e-9) and view.running
