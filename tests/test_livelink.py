@@ -220,17 +220,19 @@ def generated_take(frames=60, fps=60.0):
     return fw.ArkitTrack(fps, W, H)
 
 
-def replay(csv_path, port, *, paced=True, junk=(), speed=1.0):
+def replay(csv_path, port, *, burst=1, gap=None, junk=()):
     """A sender: the Live Link Face CSV ``csv_path`` replayed to 127.0.0.1:port as the app's packets,
-    at its frame rate (``paced``) or all at once; ``junk`` datagrams sent after the first packet."""
-    take = fw.load_arkit(csv_path)
+    ``burst`` packets at a time every ``gap`` seconds (default ``burst`` frames of the take's rate:
+    the app's pace); ``junk`` datagrams sent after the first packet."""
+    take = fw.load_arkit(csv_path, fps=60.0)
+    gap = burst / take.fps if gap is None else gap
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     t0 = time.perf_counter()
     for k in range(take.frames):
-        if paced:
-            while time.perf_counter() < t0 + k / take.fps / speed:
+        if k % burst == 0:
+            while time.perf_counter() < t0 + (k // burst) * gap:
                 time.sleep(0.0005)
-        s.sendto(layout(np.r_[take.weights[k], take.head_rotation[k], np.zeros(6)], frame=90_000 + k, sub=0.0),
+        s.sendto(layout(np.r_[take.weights[k], take.head_rotation[k], np.zeros(6)], frame=90_030 + k, sub=0.0),
                  ("127.0.0.1", port))
         if k == 0:
             for j in junk:
@@ -253,9 +255,10 @@ def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(bui
     fw.save_livelink_csv(generated_take(60), csv)
     junk = [b"", b"hello", layout(channels(), version=5), layout(channels(), count=52)]
     rep, lines = _run(built, tmp_path / "live", table, timeout=1.5,
-                      sender=lambda port: replay(csv, port, paced=False, junk=junk))
+                      sender=lambda port: replay(csv, port, burst=10, gap=0.25, junk=junk))
     out = tmp_path / "live"
-    # the sender is faster than the solver: packets were dropped, never queued, and counted
+    # bursts of 10 packets within a millisecond: faster than any solver, so packets were dropped
+    # (never queued) and counted, and each burst's newest frame was simulated
     rec = rep["received"]
     assert rec["frames"] == 60 and rec["malformed"] == 4 and rec["late"] == 0
     assert rec["dropped"] > 0 and rec["dropped"] == rec["frames"] - rec["delivered"]
@@ -267,7 +270,7 @@ def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(bui
     assert any("eyeBlinkLeft: out of reach" in n for n in rep["notes"])
     assert {p.name for p in out.iterdir()} >= {"take.csv", "frames.npz", "animation.usdc", "report.json"}
     # the CSV as received: every packet of the take, read back as the take that was sent
-    sent, got = fw.load_arkit(csv), fw.load_arkit(out / "take.csv")
+    sent, got = fw.load_arkit(csv, fps=60.0), fw.load_arkit(out / "take.csv")
     assert got.frames == 60 and got.fps == pytest.approx(60.0)
     np.testing.assert_allclose(got.weights, sent.weights, atol=1e-6)
     np.testing.assert_allclose(got.head_rotation, sent.head_rotation, atol=1e-6)
