@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 import facewarp as fw
-from facewarp._src.drive.livelink import (LIVELINK_CHANNELS, LiveLink, PacketError, encode_packet, parse_packet,
-                                          write_livelink_csv)
+LiveLink = fw.LiveLink
+parse_packet, encode_packet, LIVELINK_CHANNELS = fw.LiveLink.parse, fw.LiveLink.packet, fw.LiveLink.CHANNELS
 
 
 def layout(channels, *, version=6, device="2F6B9D3A-1C4E-4B7A-9E2D-5A8C7F1B3D60", subject="iPhone", frame=1234,
@@ -81,9 +81,9 @@ def test_packet_fields_from_hand_laid_bytes():
     (bytes([6]) + struct.pack(">i", 2) + b"\xff\xfe" + layout(channels())[41:], "not UTF-8"),
 ])
 def test_malformed_packets_are_refused_with_a_reason(data, reason):
-    with pytest.raises(PacketError) as e:
+    with pytest.raises(fw.InputError) as e:
         parse_packet(data)
-    assert reason in e.value.reason
+    assert reason in e.value.reason and str(e.value).startswith("not a Live Link Face packet: ")
 
 
 def test_weights_a_little_above_one_are_clamped_not_refused():
@@ -162,17 +162,20 @@ def test_port_in_use_is_one_line_error():
 
 
 def test_take_csv_reads_back_with_load_arkit(tmp_path):
-    frames = [parse_packet(layout(channels(k), frame=60 * 3600 + 55 + k, sub=0.0)) for k in range(70)]
-    # elapsed as a LiveLink sets it (the test's frames did not pass through one)
-    frames = [type(f)(**{**f.__dict__, "elapsed": k / 60}) for k, f in enumerate(frames)]
-    path = write_livelink_csv(frames, tmp_path / "take.csv")
+    W = [channels(k) for k in range(70)]
+    with LiveLink(0, host="127.0.0.1", keep=True) as link:
+        _send(link.port, [layout(W[k], frame=60 * 3600 + 55 + k, sub=0.0) for k in range(70)])  # crosses 01:00:01
+        _wait(link, 70)
+        path = link.save_csv(tmp_path / "take.csv")
+    with pytest.raises(fw.InputError, match="keep=True"), LiveLink(0, host="127.0.0.1") as other:
+        other.save_csv(tmp_path / "no.csv")
     header = path.read_text().splitlines()[0].split(",")
     assert header[:3] == ["Timecode", "BlendShapeCount", "EyeBlinkLeft"] and header[-1] == "RightEyeRoll"
     assert path.read_text().splitlines()[1].startswith("01:00:00:55.000,61,")
     back = fw.load_arkit(path)
     assert back.frames == 70 and back.fps == pytest.approx(60.0)
-    np.testing.assert_allclose(back.weights, [f.weights for f in frames], atol=1e-6)
-    np.testing.assert_allclose(back.head_rotation, [f.head_rotation for f in frames], atol=1e-6)
+    np.testing.assert_allclose(back.weights, [w[:52] for w in W], atol=1e-6)
+    np.testing.assert_allclose(back.head_rotation, [w[52:55] for w in W], atol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------- the live job
@@ -189,9 +192,10 @@ def built(tmp_path_factory):
 def table(built):
     """A small ARKit table of this head (built in no time, unlike the solved one): jawOpen opens the
     jaw, the smiles pull the zygomatic majors, every other shape is out of reach."""
-    from facewarp._src.drive.arkit import ArkitTable, rig_key
+    import dataclasses
 
     sim = fw.FaceSimulator(fw.load_face_rig(built), fps=60)
+    zero = fw.arkit_table(sim, shapes={}, max_frames=3)  # this head's table with no shape: every entry zero
     names, M = list(sim.muscle_names), len(sim.muscle_names)
     A, J = np.zeros((52, M), np.float32), np.zeros((52, 2), np.float32)
     J[fw.ARKIT_NAMES.index("jawOpen")] = (0.45, 0.0)
@@ -199,13 +203,8 @@ def table(built):
         A[fw.ARKIT_NAMES.index(f"mouthSmile{'Left' if side == 'L' else 'Right'}"), names.index(f"zygomatic_major_{side}")] = 1
     solved = np.zeros(52, bool)
     solved[[fw.ARKIT_NAMES.index(n) for n in ("jawOpen", "mouthSmileLeft", "mouthSmileRight")]] = True
-    K = 3
-    return ArkitTable(names=tuple(fw.ARKIT_NAMES), muscle_names=names, activations=A, jaw=J, solved=solved,
-                      residual_m=np.zeros(52), target_rms_m=np.zeros(52), fdp_ids=["2.1", "8.3", "8.4"],
-                      rest_fdp=np.zeros((K, 3)), targets=np.zeros((52, K, 3)), reached=np.zeros((52, K, 3)),
-                      basis=np.zeros((3 * K, M + 2)),
-                      reasons={n: "not in this test's table" for n, s in zip(fw.ARKIT_NAMES, solved) if not s},
-                      info={"rig_key": rig_key(sim)})
+    return dataclasses.replace(zero, activations=A, jaw=J, solved=solved,
+                               reasons={n: "not in this test's table" for n, s in zip(fw.ARKIT_NAMES, solved) if not s})
 
 
 def generated_take(frames=60, fps=60.0):
@@ -326,15 +325,16 @@ def test_nothing_arriving_is_an_input_error_naming_the_port_and_writes_nothing(b
 
 
 def test_mujoco_view_puts_face_jaw_and_head_turn_into_the_model(built):
-    from facewarp._src.drive.arkit import head_rotation_matrix
-    from facewarp._src.jobs.live import MujocoView
-
     sim = fw.FaceSimulator(fw.load_face_rig(built))
     sim.set_activations({"zygomatic_major_L": 1.0})
     sim.set_jaw(0.2, 0.0)
     sim.step()
-    view = MujocoView(built / "head.xml", sim)
-    R = head_rotation_matrix(0.3, -0.1, 0.05)
+    view = fw.coupling.MujocoView(built / "head.xml", sim)
+    y, p, r = 0.3, -0.1, 0.05  # yaw about y, pitch about x, roll about z (the head frame: y up, +z forward)
+    Ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    Rx = np.array([[1, 0, 0], [0, np.cos(p), -np.sin(p)], [0, np.sin(p), np.cos(p)]])
+    Rz = np.array([[np.cos(r), -np.sin(r), 0], [np.sin(r), np.cos(r), 0], [0, 0, 1]])
+    R = Ry @ Rx @ Rz
     view.show(R)
     np.testing.assert_allclose(view.skin.vertices(), sim.surface(frame="head"), atol=1e-6)
     Rb = view.data.xmat[view.cranium].reshape(3, 3)

@@ -80,11 +80,12 @@ MIN_PACKET_BYTES = 1 + 4 + 4 + _HEADER_TAIL.size + _CHANNELS.size
 """The shortest valid datagram (empty device id and subject name): 270 bytes."""
 
 
-class PacketError(ValueError):
-    """A datagram that is not a Live Link Face packet; ``reason`` is a short text naming what is wrong."""
+class PacketError(InputError):
+    """A datagram that is not a Live Link Face packet (an :class:`~facewarp.InputError`);
+    ``reason`` is a short text naming what is wrong."""
 
     def __init__(self, reason: str):
-        super().__init__(reason)
+        super().__init__(f"not a Live Link Face packet: {reason}")
         self.reason = reason
 
 
@@ -316,9 +317,18 @@ class LiveLink:
         history: Every frame taken in, in frame-time order (with ``keep=True``).
         device_id: The source's device id (None before the first packet).
 
+    Reading and writing single packets (a captured datagram, a test stream): :meth:`parse`,
+    :meth:`packet`; :attr:`CHANNELS` names the 61 channels.
+
     Raises:
         InputError: a bad port or host, a port in use or not allowed (one line).
     """
+
+    CHANNELS = LIVELINK_CHANNELS
+    """The 61 channels of a packet, in order (the 52 ARKit weights, head yaw/pitch/roll, eyes)."""
+
+    parse = staticmethod(parse_packet)
+    packet = staticmethod(encode_packet)
 
     def __init__(self, port: int = DEFAULT_PORT, *, host: str = "0.0.0.0", timeout: float | None = 10.0,
                  keep: bool = False):
@@ -422,6 +432,20 @@ class LiveLink:
         self._pending = self._last = fr
         if self.keep:
             self.history.append(fr)
+
+    def flush(self) -> int:
+        """Discard what waits on the socket, uncounted (packets from before the consumer was
+        ready: not part of the take); returns how many datagrams."""
+        self._check_open()
+        n = 0
+        while True:
+            try:
+                self._sock.recv(_MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return n
+            except ConnectionResetError:
+                continue
+            n += 1
 
     def poll(self) -> int:
         """Read every datagram waiting on the socket without blocking; returns how many."""
