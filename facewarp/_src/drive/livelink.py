@@ -370,7 +370,13 @@ class LiveLink:
 
     @property
     def closed(self) -> bool:
+        """The socket is closed."""
         return self._closed
+
+    @property
+    def last(self) -> LiveLinkFrame | None:
+        """The newest frame taken in (delivered or not), None before the first."""
+        return self._last
 
     def __enter__(self) -> LiveLink:
         return self

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.fileio import write_json
-from ..drive.livelink import DEFAULT_PORT, LiveLink
+from ..drive.livelink import DEFAULT_PORT, LiveLink, write_livelink_csv
 
 __all__ = ["LIVE_FILES", "MAX_LIVE_FRAMES", "VIEWER_MODES", "live_files"]
 
@@ -298,21 +298,24 @@ def live_files(build, out, *, port: int = DEFAULT_PORT, host: str = "0.0.0.0", s
                                           f"{next(iter(stats.malformed_reasons), 'another source')})"))
         frames = rec.frames(sim, rep["simulation"])
         files = [out / n for n in LIVE_FILES]
-        link.save_csv(files[0])
+        take = [f for f in link.history if seconds is None or f.elapsed < seconds]  # the take, up to its end
+        write_livelink_csv(take, files[0])
         save_frames_npz(files[1], frames)
         _write_usd(files[2], sim, frames, rec.rest_curves)
-        first = link.history[0]
+        files[3:3] = sorted(out.glob("animation_*.png"))  # the USD's skin texture, where the build has one
+        first = take[0]
         rep.update({"build": str(build), "port": link.port, "host": link.host, "device_id": first.device_id,
-                    "subject": first.subject, "stream_fps": first.fps, "received": stats.as_dict(),
+                    "subject": first.subject, "stream_fps": first.fps, "take_frames": len(take),
+                    "received": stats.as_dict(),
                     "dropped_fraction": round(stats.dropped_fraction, 4), "files": [str(f) for f in files]})
-    used = np.max([f.weights for f in link.history], axis=0)
+    used = np.max([f.weights for f in take], axis=0)
     rep["notes"] += [f"{n}: out of reach ({table.reasons[n]}); weight up to {used[i]:.2f}"
                      for i, n in enumerate(table.names) if n in table.reasons and used[i] > 0]
     if abs(first.fps - fps) > 0.01 * fps:
         rep["notes"].append(f"the stream is at {first.fps:g} fps, the simulator at {fps:g} (--fps {first.fps:g} "
                             "steps it at the stream's rate)")
     rep["wall_s"] = round(time.perf_counter() - t_start, 3)
-    write_json(files[3], rep)
+    write_json(files[-1], rep)
     return rep
 
 
@@ -345,7 +348,7 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
                 now = time.perf_counter()
                 if stats.frames == 0 and now - t_listen > timeout:
                     stop.set("nothing arrived")
-                elif stats.frames > 0 and now - link._last.received > timeout:
+                elif stats.frames > 0 and now - link.last.received > timeout:
                     stop.set(f"the stream stopped (nothing for {timeout:g} s)")
                 if view is not None and not view.running:
                     stop.set("the viewer was closed")
@@ -384,7 +387,6 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
                 next_status += STATUS_EVERY_S
                 log(f"live: {f.elapsed:.1f} s of stream, {stats.frames} frames in, {len(rec)} simulated, "
                     f"{stats.dropped} dropped ({100 * stats.dropped_fraction:.1f} %), {stats.malformed} malformed")
-    link.poll()  # what came while the last frame was simulated belongs to the take
     n = len(rec)
     span = rec.times[-1] - rec.times[0] if n > 1 else 0.0
     stepping = max(stepping, 1e-9)
