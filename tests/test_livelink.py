@@ -239,13 +239,18 @@ def replay(csv_path, port, *, burst=1, gap=None, junk=()):
     s.close()
 
 
-def _run(built, out, table, **kw):
+def _run(built, out, table, *, sender, after_ready=None, **kw):
     from facewarp._src.jobs.live import live_files
 
     lines = []
-    sender = kw.pop("sender")
+
+    def ready(port):
+        threading.Thread(target=sender, args=(port,), daemon=True).start()
+        if after_ready is not None:
+            after_ready()
+
     rep = live_files(built, out, port=0, host="127.0.0.1", table=table, viewer="auto", log=lines.append,
-                     ready=lambda port: threading.Thread(target=sender, args=(port,), daemon=True).start(), **kw)
+                     ready=ready, **kw)
     return rep, lines
 
 
@@ -300,13 +305,13 @@ def test_live_take_stops_on_sigterm_and_on_seconds(built, table, tmp_path):
     fw.save_livelink_csv(generated_take(240), csv)  # 4 s at 60 fps
     timer = threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGTERM))
     before = signal.getsignal(signal.SIGTERM)
-    timer.start()
-    try:
-        rep, _ = _run(built, tmp_path / "a", table, timeout=5.0, sender=lambda port: replay(csv, port))
+    try:  # the signal 1 s after the job listens (its handler is in place then)
+        rep, _ = _run(built, tmp_path / "a", table, timeout=5.0, sender=lambda port: replay(csv, port),
+                      after_ready=timer.start)
     finally:
         timer.cancel()
     assert signal.getsignal(signal.SIGTERM) is before  # the job's handler is gone again
-    assert rep["stopped_by"] == "SIGTERM" and 30 < rep["received"]["frames"] < 240
+    assert rep["stopped_by"] == "SIGTERM" and 0 < rep["received"]["frames"] < 240  # ended mid-take
     assert (tmp_path / "a" / "report.json").is_file()
     rep, _ = _run(built, tmp_path / "b", table, timeout=5.0, seconds=0.5, sender=lambda port: replay(csv, port))
     assert rep["stopped_by"] == "0.5 s of stream" and rep["seconds"] < 0.5
