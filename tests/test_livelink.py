@@ -290,10 +290,32 @@ def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(bui
     chin = fdp[:, ids.index("2.1")]
     rest = fw.FaceSimulator(fw.load_face_rig(built)).fdp("2.1")
     assert np.linalg.norm(chin - rest, axis=1).max() > 2e-3
+    # the recorded frames are the simulator's own: the same controls stepped again give the same faces
+    replay_sim = fw.FaceSimulator(fw.load_face_rig(built), fps=60)
+    with np.load(out / "frames.npz") as z:
+        points = z["points"]
+    take_times = np.arange(got.frames) / 60
+    for k in range(len(times)):
+        i = int(np.argmin(np.abs(take_times - times[k])))
+        replay_sim.set_activations(acts[k])
+        replay_sim.set_jaw(float(jaw[k, 0]), float(jaw[k, 1]))
+        replay_sim.set_head_pose(rot(*got.head_rotation[i].astype(np.float32).astype(np.float64)), np.zeros(3))
+        replay_sim.step()
+        np.testing.assert_allclose(replay_sim.surface(), points[k], atol=1e-6, err_msg=f"frame {k}")
     ua = __import__("usd_export").read_animation(out / "animation.usdc")
     assert len(ua["times"]) == len(times)
     report = json.loads((out / "report.json").read_text())
     assert report["received"]["dropped"] == rec["dropped"] and report["frame_cost_ms"]["step"]["median"] > 0
+
+
+def rot(yaw, pitch, roll):
+    """ARKit's head rotation in the head frame (y up, +z forward): Ry(yaw) Rx(pitch) Rz(roll)."""
+    cy, sy, cp, sp, cr, sr = (math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch), math.cos(roll),
+                              math.sin(roll))
+    Ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
+    Rz = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
+    return Ry @ Rx @ Rz
 
 
 def sim_index(built, name):

@@ -527,7 +527,8 @@ def write_livelink_csv(frames, path) -> Path:
     ``Timecode`` is ``HH:MM:SS:FF.fff`` from each frame's frame number and sub-frame at its
     rate (the app's timecode as it sent it; after a clock reset, the first frame's clock continued
     by :attr:`LiveLinkFrame.elapsed`), ``BlendShapeCount`` 61, then the 61 channels as
-    sent (:data:`LIVELINK_CHANNELS`). :func:`~facewarp.load_arkit` reads it.
+    sent (:data:`LIVELINK_CHANNELS`; the shortest decimals that give the packet's float32 back).
+    :func:`~facewarp.load_arkit` reads it.
 
     Args:
         frames: :class:`LiveLinkFrame` objects in time order (at least one).
@@ -553,7 +554,7 @@ def write_livelink_csv(frames, path) -> Path:
         whole, sub = divmod(ticks, 1000)
         secs, ff = divmod(whole, rate)
         tc = f"{secs // 3600:02d}:{secs // 60 % 60:02d}:{secs % 60:02d}:{ff:02d}.{sub:03d}"
-        w.writerow([tc, len(LIVELINK_CHANNELS), *(f"{v:.7g}" for v in f.channels)])
+        w.writerow([tc, len(LIVELINK_CHANNELS), *(str(np.float32(v)) for v in f.channels)])  # float32 exactly
     with atomic_write(path, "w") as fh:
         fh.write(out.getvalue())
     return Path(path)

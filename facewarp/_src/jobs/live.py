@@ -128,36 +128,48 @@ def _open_view(build_dir: Path, sim, mode: str, log):
 
 # ------------------------------------------------------------------------------------ recording
 class _Recorder:
-    """The simulated frames kept in memory (growing lists), made into :class:`~facewarp.Frames` at the end."""
+    """The simulated frames kept in memory: per frame only what the step produced (the tet nodes,
+    the muscles' control points, activations, jaw angles and head rotation; two host copies), the
+    surfaces, parts and fibres read out after the take (:meth:`frames`), so that recording costs
+    the live loop little."""
 
     def __init__(self, sim, samples: int = 24):
         self.samples = samples
         self.rest_curves = sim.muscle_curves(samples).astype(np.float32)
-        self.times, self.points, self.acts, self.jaw, self.curves, self.heads = [], [], [], [], [], []
-        self.parts = {k: [] for k in sim.fr.parts}
+        self.times, self.nodes, self.ctrl, self.acts, self.jaw, self.heads = [], [], [], [], [], []
 
     def __len__(self) -> int:
         return len(self.times)
 
     def frame(self, sim, t: float, R) -> None:
         self.times.append(t)
-        self.points.append(sim.surface().astype(np.float32))
+        self.nodes.append(sim.state.positions.numpy().astype(np.float32))
+        self.ctrl.append(sim.state.muscle_ctrl.numpy().copy())
         self.acts.append(sim.activations)
         self.jaw.append(sim.jaw_angles)
-        self.curves.append(sim.muscle_curves(self.samples).astype(np.float32))
         self.heads.append(np.asarray(R, np.float64))
-        for name, P in sim.part_points().items():
-            self.parts[name].append(P.astype(np.float32))
 
     def frames(self, sim, stats: dict):
+        """The take as :class:`~facewarp.Frames` (world frame: the head rotation applied, as
+        :meth:`~facewarp.FaceSimulator.surface` gives it)."""
         from ..sim.frames import Frames
-        from ..sim.readout import fdp_points
+        from ..sim.readout import fdp_points, head_surface, muscle_curves, parts_at, surface_index
 
         fr = sim.fr
-        pts = np.stack(self.points)
-        parts = {k: np.stack(v) for k, v in self.parts.items()}
+        index = surface_index(fr)
+        n = len(self.times)
+        pts = np.empty((n, len(fr.head_vertices), 3), np.float32)
+        curves = np.empty((n, len(sim.muscle_names), self.samples, 3), np.float32)
+        parts = {k: np.empty((n, len(V), 3), np.float32) for k, (V, _) in fr.parts.items()}
+        for k in range(n):
+            R, j = self.heads[k], self.jaw[k]
+            pts[k] = head_surface(fr, self.nodes[k].astype(np.float64), j, index) @ R.T
+            C = muscle_curves(fr.rig, self.ctrl[k], self.samples)
+            curves[k] = (C.reshape(-1, 3) @ R.T).reshape(C.shape)
+            for name, P in parts_at(fr, j).items():
+                parts[name][k] = np.asarray(P, np.float64) @ R.T
         return Frames(np.asarray(self.times, np.float64), pts, fr.head_faces, fr.fdp_ids, fdp_points(fr, pts, parts),
-                      {k: (v, fr.parts[k][1]) for k, v in parts.items()}, list(sim.muscle_names), np.stack(self.curves),
+                      {k: (v, fr.parts[k][1]) for k, v in parts.items()}, list(sim.muscle_names), curves,
                       np.stack(self.acts), np.stack(self.jaw), stats.get("steps_per_second", 0.0), sim.substeps, sim.dt,
                       frames_per_second=stats.get("frames_per_second", 0.0),
                       realtime_factor=stats.get("realtime_factor", 0.0), solver=sim.solver_name, material=sim.material.name)
