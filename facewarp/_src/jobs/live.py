@@ -9,8 +9,8 @@ weights blended into muscle activations and jaw angles; the head's yaw, pitch an
 head pose, :func:`~facewarp._src.drive.arkit.head_rotation_matrix`), and the simulator takes one
 step of ``1 / fps``. Where a frame takes longer than the stream's period the packets in between
 are dropped and counted, so the face shows the newest expression, late by at most one frame's
-cost. A packet that moves the head faster than a head moves (a tracking glitch) keeps the
-previous head pose for that frame (counted).
+cost. A packet that turns the head faster than a head turns (a tracking glitch, the face found
+again elsewhere) moves the head part of the way this frame and on in the next (counted).
 
 The take ends on Ctrl-C or SIGTERM, after ``seconds`` of stream, when the viewer window is
 closed, when the stream stops for ``timeout`` seconds, or when the memory for frames is full;
@@ -210,6 +210,36 @@ def _write_usd(path: Path, sim, frames, rest_curves) -> None:
             last = t
 
 
+EASE_FRACTIONS = (0.5, 0.25, 0.125, 0.0)
+"""Where a packet turns the head faster than a head turns (a tracking glitch, the face found
+again elsewhere), the frame goes this part of the way from the last pose instead, the first that
+the simulator takes (0: the last pose held); the next frames go on towards the stream's pose."""
+
+
+def _step_easing_head(sim, R_prev, R):
+    """Step ``sim`` with its controls and the head pose ``R`` (set); where that pose is a jump
+    (:class:`~facewarp.InputError` from the step, nothing changed), with a pose part of the way
+    from ``R_prev`` (:data:`EASE_FRACTIONS`). Returns None, or the pose used instead."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    try:
+        sim.step()
+        return None
+    except InputError:
+        pass
+    ends = Rotation.from_matrix(np.stack([R_prev, R]))
+    for f in EASE_FRACTIONS:
+        Rf = Slerp([0.0, 1.0], ends)([f]).as_matrix()[0]
+        sim.set_head_pose(Rf, np.zeros(3))
+        try:
+            sim.step()
+            return Rf
+        except InputError:
+            if f == 0.0:
+                raise
+    return None
+
+
 def _memory_frames(sim) -> int:
     """Frames the memory holds (half of what is available), at most :data:`MAX_LIVE_FRAMES`."""
     from ..core.limits import BYTES_PER_FRAME, BYTES_PER_FRAME_VERTEX, available_memory
@@ -337,7 +367,7 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
     rec = _Recorder(sim)
     cap = _memory_frames(sim)
     cost = {k: [] for k in ("receive", "controls", "step", "record", "view", "frame", "latency")}
-    held = 0
+    eased = 0
     R_prev = np.eye(3)
     stop = _Stop()
     sim.reset()
@@ -374,14 +404,9 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
             sim.set_jaw(float(j[0, 0]), float(j[0, 1]))
             sim.set_head_pose(R, np.zeros(3))
             t2 = time.perf_counter()
-            try:
-                sim.step()
-            except InputError:  # a head jump no head makes (a tracking glitch): keep the last pose this frame
-                held += 1
-                R = R_prev
-                sim.set_head_pose(R, np.zeros(3))
-                sim.step()
-            R_prev = R
+            if _step_easing_head(sim, R_prev, R) is not None:
+                eased += 1
+            R = R_prev = sim.head_pose[0]  # the pose the frame reached
             t3 = time.perf_counter()
             stepping += t3 - t2
             rec.frame(sim, f.elapsed, R)
@@ -405,7 +430,7 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
     sim_stats = {"frames": n, "frames_per_second": n / stepping, "steps_per_second": n * sim.substeps / stepping,
                  "realtime_factor": n / sim.fps / stepping, "stream_frames_per_second": (n - 1) / span if span else None,
                  "fps": sim.fps, "dt_s": sim.dt, "substeps": int(sim.substeps), "device": str(sim.device),
-                 "iterations": getattr(sim.solver, "iterations", None), "head_jumps_held": held,
+                 "iterations": getattr(sim.solver, "iterations", None), "head_jumps_eased": eased,
                  "frame_stats": sim.stats.as_dict()}
     return {"kind": "livelink", "stopped_by": stop.reason, "discarded_before_start": before, "seconds": round(span, 4),
             "viewer": "window" if view is not None else "headless", "simulation": sim_stats,
