@@ -1,4 +1,4 @@
-"""Live Link Face in real time: a 60 fps stream replayed to `facewarp live` on 127.0.0.1, the share of frames dropped and what a frame costs.
+"""Live Link Face in real time: a 60 fps stream to `facewarp live`, the frames dropped, what a frame costs.
 
     python -m benchmarks live [--device cpu] [--seconds 10] [--modes default interactive:4 interactive:1] [--build DIR]
 
@@ -120,7 +120,8 @@ def run_mode(build: Path, out: Path, mode: str, *, seconds: float, device: str, 
         raise SystemExit(f"live ({mode}) failed with exit {proc.returncode}: {stderr.strip()[-2000:]}")
     rep = json.loads(stdout)
     rec, sim, cost = rep["received"], rep["simulation"], rep["frame_cost_ms"]
-    return {"mode": mode, "iterations": sim["iterations"], "load_average_at_start": load, "stream_fps": rep["stream_fps"],
+    return {"mode": mode, "iterations": sim["iterations"], "load_average_at_start": load,
+            "stream_fps": rep["stream_fps"],
             "seconds": rep["seconds"], "packets_sent": sent[0] if sent else None, "frames_in": rec["frames"],
             "simulated": sim["frames"], "dropped": rec["dropped"], "dropped_fraction": rep["dropped_fraction"],
             "malformed": rec["malformed"], "missing": rec["missing"], "late": rec["late"],

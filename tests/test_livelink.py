@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import facewarp as fw
+
 LiveLink = fw.LiveLink
 parse_packet, encode_packet, LIVELINK_CHANNELS = fw.LiveLink.parse, fw.LiveLink.packet, fw.LiveLink.CHANNELS
 
@@ -200,7 +201,8 @@ def table(built):
     A, J = np.zeros((52, M), np.float32), np.zeros((52, 2), np.float32)
     J[fw.ARKIT_NAMES.index("jawOpen")] = (0.45, 0.0)
     for side in "LR":
-        A[fw.ARKIT_NAMES.index(f"mouthSmile{'Left' if side == 'L' else 'Right'}"), names.index(f"zygomatic_major_{side}")] = 1
+        smile = fw.ARKIT_NAMES.index(f"mouthSmile{'Left' if side == 'L' else 'Right'}")
+        A[smile, names.index(f"zygomatic_major_{side}")] = 1
     solved = np.zeros(52, bool)
     solved[[fw.ARKIT_NAMES.index(n) for n in ("jawOpen", "mouthSmileLeft", "mouthSmileRight")]] = True
     return dataclasses.replace(zero, activations=A, jaw=J, solved=solved,

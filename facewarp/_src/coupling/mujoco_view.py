@@ -43,7 +43,8 @@ class MujocoView:
         try:
             self.model = mj.MjModel.from_xml_path(str(mjcf))
         except Exception as e:  # a damaged file: one line
-            raise InputError(f"{mjcf}: MuJoCo cannot load it ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+            why = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise InputError(f"{mjcf}: MuJoCo cannot load it ({why})") from None
         self.data = mj.MjData(self.model)
         self.skin = MujocoSkin(sim, self.model)
         p = self.skin.prefix

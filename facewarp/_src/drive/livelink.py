@@ -50,8 +50,18 @@ import numpy as np
 from ..core.errors import InputError
 from .tracks import ARKIT_NAMES
 
-__all__ = ["DEFAULT_PORT", "LIVELINK_CHANNELS", "LiveLink", "LiveLinkFrame", "LiveLinkStats", "PACKET_VERSION",
-           "PacketError", "encode_packet", "parse_packet", "write_livelink_csv"]
+__all__ = [
+    "DEFAULT_PORT",
+    "LIVELINK_CHANNELS",
+    "PACKET_VERSION",
+    "LiveLink",
+    "LiveLinkFrame",
+    "LiveLinkStats",
+    "PacketError",
+    "encode_packet",
+    "parse_packet",
+    "write_livelink_csv",
+]
 
 DEFAULT_PORT = 11111
 """Live Link Face's default target port."""
@@ -511,7 +521,8 @@ class LiveLink:
 def _bind_error(host: str, port: int, e: Exception) -> str:
     code = getattr(e, "errno", None)
     if code == errno.EADDRINUSE:
-        return f"port {port}: in use by another program (a second facewarp live, or Unreal's Live Link?); choose another"
+        return (f"port {port}: in use by another program (a second facewarp live, or Unreal's Live Link?); "
+                "choose another")
     if code == errno.EACCES:
         return f"port {port}: not allowed (ports below 1024 need administrator rights); choose another"
     if code == errno.EADDRNOTAVAIL:

@@ -119,9 +119,10 @@ def _open_view(build_dir: Path, sim, mode: str, log):
     try:
         view.open()
     except Exception as e:  # no GL, mjpython needed on macOS, ...: headless
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
         if mode == "on":
-            raise InputError(f"viewer: MuJoCo's viewer did not open ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
-        log(f"MuJoCo's viewer did not open ({str(e).splitlines()[0] if str(e) else type(e).__name__}): running headless")
+            raise InputError(f"viewer: MuJoCo's viewer did not open ({why})") from None
+        log(f"MuJoCo's viewer did not open ({why}): running headless")
         return None
     return view
 
@@ -172,7 +173,8 @@ class _Recorder:
                       {k: (v, fr.parts[k][1]) for k, v in parts.items()}, list(sim.muscle_names), curves,
                       np.stack(self.acts), np.stack(self.jaw), stats.get("steps_per_second", 0.0), sim.substeps, sim.dt,
                       frames_per_second=stats.get("frames_per_second", 0.0),
-                      realtime_factor=stats.get("realtime_factor", 0.0), solver=sim.solver_name, material=sim.material.name)
+                      realtime_factor=stats.get("realtime_factor", 0.0), solver=sim.solver_name,
+                      material=sim.material.name)
 
 
 class _Replay:
@@ -428,7 +430,8 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
     span = rec.times[-1] - rec.times[0] if n > 1 else 0.0
     stepping = max(stepping, 1e-9)
     sim_stats = {"frames": n, "frames_per_second": n / stepping, "steps_per_second": n * sim.substeps / stepping,
-                 "realtime_factor": n / sim.fps / stepping, "stream_frames_per_second": (n - 1) / span if span else None,
+                 "realtime_factor": n / sim.fps / stepping,
+                 "stream_frames_per_second": (n - 1) / span if span else None,
                  "fps": sim.fps, "dt_s": sim.dt, "substeps": int(sim.substeps), "device": str(sim.device),
                  "iterations": getattr(sim.solver, "iterations", None), "head_jumps_eased": eased,
                  "frame_stats": sim.stats.as_dict()}
