@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import signal
 import socket
 import struct
@@ -244,27 +245,51 @@ def replay(csv_path, port, *, burst=1, gap=None, junk=()):
     s.close()
 
 
-def _run(built, out, table, *, sender, after_ready=None, **kw):
-    from facewarp._src.jobs.live import live_files
-
-    lines = []
-
-    def ready(port):
-        threading.Thread(target=sender, args=(port,), daemon=True).start()
-        if after_ready is not None:
-            after_ready()
-
-    rep = live_files(built, out, port=0, host="127.0.0.1", table=table, viewer="auto", log=lines.append,
-                     ready=ready, **kw)
-    return rep, lines
+@pytest.fixture(scope="module")
+def table_file(table, tmp_path_factory):
+    return table.save(tmp_path_factory.mktemp("table") / "arkit_table.npz")
 
 
-def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(built, table, tmp_path):
+def _free_port():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def live(built, out, table_file, *extra, sender, signal_after=None):
+    """``facewarp --json live`` as a user runs it (a subprocess) on a free port of 127.0.0.1; the sender
+    starts when the command says it listens (its "listening on" line on stderr), and ``signal_after``
+    = (seconds, signal) is sent to the command that long after. Returns (exit code, report, stderr)."""
+    import subprocess
+    import sys
+
+    port = _free_port()
+    argv = [sys.executable, "-m", "facewarp", "--json", "live", str(built), "--livelink", str(port), "--host",
+            "127.0.0.1", "--table", str(table_file), "--viewer", "auto", "--out", str(out), *extra]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    err = []
+    for line in proc.stderr:
+        err.append(line)
+        if "listening on" in line:
+            threading.Thread(target=sender, args=(port,), daemon=True).start()
+            if signal_after is not None:
+                threading.Timer(signal_after[0], lambda: proc.send_signal(signal_after[1])).start()
+            break
+    text, rest = proc.communicate(timeout=600)
+    err = "".join(err) + rest
+    return proc.returncode, (json.loads(text) if proc.returncode == 0 else None), err
+
+
+def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(built, table_file, tmp_path):
     csv = tmp_path / "sent.csv"
     fw.save_livelink_csv(generated_take(60, jump_at=35), csv)
     junk = [b"", b"hello", layout(channels(), version=5), layout(channels(), count=52)]
-    rep, lines = _run(built, tmp_path / "live", table, timeout=1.5,
-                      sender=lambda port: replay(csv, port, burst=10, gap=0.25, junk=junk))
+    code, rep, err = live(built, tmp_path / "live", table_file, "--timeout", "1.5",
+                          sender=lambda port: replay(csv, port, burst=10, gap=0.25, junk=junk))
+    assert code == 0, err
     out = tmp_path / "live"
     # bursts of 10 packets within a millisecond: faster than any solver, so packets were dropped
     # (never queued) and counted, and each burst's newest frame was simulated
@@ -275,7 +300,7 @@ def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(bui
     assert rep["simulation"]["frames"] == rec["delivered"] >= 2
     assert rep["stopped_by"].startswith("the stream stopped")
     if not ("DISPLAY" in os.environ or "WAYLAND_DISPLAY" in os.environ):
-        assert rep["viewer"] == "headless" and sum("headless" in ln for ln in lines) == 1
+        assert rep["viewer"] == "headless" and err.count("headless") == 1
     assert any("eyeBlinkLeft: out of reach" in n for n in rep["notes"])
     assert {p.name for p in out.iterdir()} >= {"take.csv", "frames.npz", "animation.usdc", "report.json"}
     # the CSV as received: every packet of the take, read back as the take that was sent
@@ -330,26 +355,24 @@ def sim_index(built, name):
     return fw.load_face_rig(built).rig.names.index(name)
 
 
-def test_live_take_stops_on_sigterm_and_on_seconds(built, table, tmp_path):
+def test_live_take_stops_on_sigterm_and_on_seconds(built, table_file, tmp_path):
     csv = tmp_path / "sent.csv"
     fw.save_livelink_csv(generated_take(240), csv)  # 4 s at 60 fps
-    timer = threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGTERM))
-    before = signal.getsignal(signal.SIGTERM)
-    try:  # the signal 1 s after the job listens (its handler is in place then)
-        rep, _ = _run(built, tmp_path / "a", table, timeout=5.0, sender=lambda port: replay(csv, port),
-                      after_ready=timer.start)
-    finally:
-        timer.cancel()
-    assert signal.getsignal(signal.SIGTERM) is before  # the job's handler is gone again
-    assert rep["stopped_by"] == "SIGTERM" and 0 < rep["received"]["frames"] < 240  # ended mid-take
-    assert (tmp_path / "a" / "report.json").is_file()
-    rep, _ = _run(built, tmp_path / "b", table, timeout=5.0, seconds=0.5, sender=lambda port: replay(csv, port))
+    code, rep, err = live(built, tmp_path / "a", table_file, "--timeout", "5", sender=lambda port: replay(csv, port),
+                          signal_after=(1.0, signal.SIGTERM))
+    assert code == 0, err
+    assert rep["stopped_by"] == "SIGTERM" and 0 < rep["received"]["frames"] < 240  # ended mid-take, recorded
+    assert (tmp_path / "a" / "report.json").is_file() and fw.load_arkit(tmp_path / "a" / "take.csv").frames > 0
+    code, rep, err = live(built, tmp_path / "b", table_file, "--timeout", "5", "--seconds", "0.5",
+                          sender=lambda port: replay(csv, port))
+    assert code == 0, err
     assert rep["stopped_by"] == "0.5 s of stream" and rep["seconds"] < 0.5
     with np.load(tmp_path / "b" / "frames.npz") as z:
         assert z["times"].max() < 0.5
+    assert fw.load_arkit(tmp_path / "b" / "take.csv", fps=60.0).seconds <= 0.5 + 1e-9
 
 
-def test_a_head_jump_is_eased_over_frames(built, table, tmp_path):
+def test_a_head_jump_is_eased_over_frames(built, table_file, tmp_path):
     csv = tmp_path / "sent.csv"
     take = generated_take(120, jump_at=61)  # 2.5 rad of yaw from frame 61 on
     fw.save_livelink_csv(take, csv)
@@ -362,7 +385,8 @@ def test_a_head_jump_is_eased_over_frames(built, table, tmp_path):
             s.sendto(layout(ch, frame=90_000 + k, sub=0.0), ("127.0.0.1", port))
         s.close()
 
-    rep, _ = _run(built, tmp_path / "jump", table, timeout=3.0, iterations=2, sender=sender)
+    code, rep, err = live(built, tmp_path / "jump", table_file, "--timeout", "3", "--iterations", "2", sender=sender)
+    assert code == 0, err
     assert rep["received"]["frames"] == 6
     if rep["simulation"]["frames"] == 6:  # no frame took over 1 s (a very loaded machine may merge two)
         assert rep["simulation"]["head_jumps_eased"] >= 1
@@ -373,13 +397,27 @@ def test_a_head_jump_is_eased_over_frames(built, table, tmp_path):
             np.testing.assert_allclose(z["fdp_points"][-1, nose], sim.fdp_points()[nose] @ R.T, atol=2e-3)
 
 
-def test_nothing_arriving_is_an_input_error_naming_the_port_and_writes_nothing(built, table, tmp_path):
-    from facewarp._src.jobs.live import live_files
+def test_nothing_arriving_or_a_bad_port_is_exit_2_in_one_line_and_writes_nothing(built, table_file, tmp_path, capsys):
+    from facewarp.cli import main
 
+    base = ["live", str(built), "--host", "127.0.0.1", "--table", str(table_file), "--out", str(tmp_path / "none")]
     t0 = time.perf_counter()
-    with pytest.raises(fw.InputError, match=r"nothing arrived on port \d+ in 0.5 s") as e:
-        live_files(built, tmp_path / "none", port=0, host="127.0.0.1", table=table, timeout=0.5, viewer="off")
-    assert "\n" not in str(e.value) and time.perf_counter() - t0 < 60
+    assert main([*base, "--livelink", "0", "--timeout", "0.5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]  # after the status lines (listening, headless)
+    assert re.fullmatch(r"facewarp: error: nothing arrived on port \d+ in 0.5 s: .*", err), err
+    assert time.perf_counter() - t0 < 120 and not (tmp_path / "none").exists()
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    try:
+        assert main([*base, "--livelink", str(s.getsockname()[1])]) == 2
+    finally:
+        s.close()
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "in use by another program" in err, err
+    for bad in ("70000", "-1", "http"):
+        assert main([*base, "--livelink", bad]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "--livelink" in err, err
     assert not (tmp_path / "none").exists()
 
 
@@ -400,3 +438,12 @@ def test_mujoco_view_puts_face_jaw_and_head_turn_into_the_model(built):
     np.testing.assert_allclose(Rb, view._R0 @ R, atol=1e-9)  # the head turned about its own axes
     assert view.data.qpos[view.qadr[0]] == pytest.approx(float(sim.jaw_angles[0]))
     assert math.isclose(np.linalg.det(Rb), 1.0, abs_tol=1e-9) and view.running
+
+
+def test_livelink_without_a_port_is_the_apps_default_port():
+    import inspect
+
+    from facewarp.cli import build_parser
+
+    args = build_parser().parse_args(["live", "build", "--livelink", "--out", "take"])
+    assert args.livelink == inspect.signature(fw.LiveLink).parameters["port"].default == 11111

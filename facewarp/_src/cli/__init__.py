@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import argparse
 
-from . import adapt, batch, build, demo, drive, landmarks, mesh, morph, retarget, rig, simulate, template
+from . import adapt, batch, build, demo, drive, landmarks, live, mesh, morph, retarget, rig, simulate, template
 from .common import Parser, device
 
 __all__ = ["COMMAND_MODULES", "build_parser"]
 
 # in the order of ``facewarp --help``
-COMMAND_MODULES = (template, mesh, landmarks, adapt, build, rig, simulate, drive, demo, morph, retarget, batch)
+COMMAND_MODULES = (template, mesh, landmarks, adapt, build, rig, simulate, drive, live, demo, morph, retarget, batch)
 
 
 def add_global_options(p: argparse.ArgumentParser) -> None:
