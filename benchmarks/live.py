@@ -10,7 +10,9 @@ or ``interactive:K`` (``--iterations K``, a fixed solver cost per frame). From t
 report.json: packets taken in, frames simulated, dropped (count and share: the target is at most
 5 % at 60 fps on the CPU at level 0), malformed, and what a frame costs (median / p90 [ms] of
 reading the socket, the controls, the solver's step, recording, the whole frame; the latency
-from a packet's arrival to its frame done). The build (``facewarp build default``, level 0) and
+from a packet's arrival to its frame done) in wall time and in process CPU time (which other
+processes' load on a shared box stretches far less: on an idle machine a frame's wall time is
+about its CPU time where the solver runs on one core). The build (``facewarp build default``, level 0) and
 its ARKit table (built on the first run, cached in the build) are made in a temporary folder
 unless ``--build`` names one. Results: benchmarks/results/live_<device>.json, with the machine's
 load average at the start of each run (other processes on a shared box slow every figure).
@@ -127,6 +129,7 @@ def run_mode(build: Path, out: Path, mode: str, *, seconds: float, device: str, 
             "malformed": rec["malformed"], "missing": rec["missing"], "late": rec["late"],
             "simulated_frames_per_stream_second": sim["stream_frames_per_second"],
             "step_frames_per_second": sim["frames_per_second"], "frame_cost_ms": cost,
+            "frame_cpu_ms": rep["frame_cpu_ms"],
             "frame_stats": sim["frame_stats"], "stopped_by": rep["stopped_by"]}
 
 
@@ -158,7 +161,8 @@ def main(argv=None) -> int:
                   f"({r['simulated_frames_per_stream_second']:.1f} a second of stream), dropped "
                   f"{100 * r['dropped_fraction']:.1f} %; a frame {c['frame']['median']:.1f} ms median (step "
                   f"{c['step']['median']:.1f}, record {c['record']['median']:.1f}, read {c['receive']['median']:.2f}); "
-                  f"load {r['load_average_at_start']}", flush=True)
+                  f"CPU time a frame {r['frame_cpu_ms']['frame']['median']:.1f} ms median, "
+                  f"{r['frame_cpu_ms']['frame']['p90']:.1f} p90; load {r['load_average_at_start']}", flush=True)
             runs.append(r)
     figures = {"head": "default, level 0" if args.build is None else str(args.build), "seconds": args.seconds,
                "stream_fps": args.fps, "target_dropped_fraction": 0.05, "runs": runs}

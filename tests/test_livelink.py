@@ -339,6 +339,7 @@ def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(bui
     assert len(ua["times"]) == len(times)
     report = json.loads((out / "report.json").read_text())
     assert report["received"]["dropped"] == rec["dropped"] and report["frame_cost_ms"]["step"]["median"] > 0
+    assert report["frame_cpu_ms"]["step"]["median"] > 0 and report["take_frames"] == 60
 
 
 def rot(yaw, pitch, roll):

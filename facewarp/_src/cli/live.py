@@ -75,7 +75,8 @@ def run(args):
         f"({100 * rep['dropped_fraction']:.1f} %), {rec['malformed']} malformed, {rec['late']} late, "
         f"{rec['missing']} missing in the stream",
         f"  stopped by {rep['stopped_by']}; {rep['viewer']}; a frame costs {cost['frame']['median']:.1f} ms median, "
-        f"{cost['frame']['p90']:.1f} ms p90 (the solver's step {cost['step']['median']:.1f} ms median)",
+        f"{cost['frame']['p90']:.1f} ms p90 (the solver's step {cost['step']['median']:.1f} ms median; CPU time "
+        f"{rep['frame_cpu_ms']['frame']['median']:.1f} ms a frame)",
     ]
     notes = rep.get("notes", [])
     lines += [f"  note: {n}" for n in notes[:6]]

@@ -369,6 +369,7 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
     rec = _Recorder(sim)
     cap = _memory_frames(sim)
     cost = {k: [] for k in ("receive", "controls", "step", "record", "view", "frame", "latency")}
+    cpu = {"step": [], "frame": []}  # process CPU time [ms]: what another process's load does not stretch
     eased = 0
     R_prev = np.eye(3)
     stop = _Stop()
@@ -400,22 +401,25 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
             if seconds is not None and f.elapsed >= seconds:
                 stop.set(f"{seconds:g} s of stream")
                 break
+            c1 = time.process_time()
             a, j = table.controls(f.weights)
             R = rotation(*f.head_rotation)
             sim.set_activations(a[0])
             sim.set_jaw(float(j[0, 0]), float(j[0, 1]))
             sim.set_head_pose(R, np.zeros(3))
-            t2 = time.perf_counter()
+            t2, c2 = time.perf_counter(), time.process_time()
             if _step_easing_head(sim, R_prev, R) is not None:
                 eased += 1
             R = R_prev = sim.head_pose[0]  # the pose the frame reached
-            t3 = time.perf_counter()
+            t3, c3 = time.perf_counter(), time.process_time()
             stepping += t3 - t2
             rec.frame(sim, f.elapsed, R)
             t4 = time.perf_counter()
             if view is not None:
                 view.show(R)
-            t5 = time.perf_counter()
+            t5, c5 = time.perf_counter(), time.process_time()
+            cpu["step"].append(1e3 * (c3 - c2))
+            cpu["frame"].append(1e3 * (c5 - c1))
             for k, v in (("receive", t1 - max(t0, f.received)), ("controls", t2 - t1), ("step", t3 - t2),
                          ("record", t4 - t3), ("view", t5 - t4), ("frame", t5 - max(t0, f.received)),
                          ("latency", t5 - f.received)):
@@ -437,4 +441,5 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
                  "frame_stats": sim.stats.as_dict()}
     return {"kind": "livelink", "stopped_by": stop.reason, "discarded_before_start": before, "seconds": round(span, 4),
             "viewer": "window" if view is not None else "headless", "simulation": sim_stats,
-            "frame_cost_ms": {k: _profile(v) for k, v in cost.items()}, "notes": [], "_recorder": rec}
+            "frame_cost_ms": {k: _profile(v) for k, v in cost.items()},
+            "frame_cpu_ms": {k: _profile(v) for k, v in cpu.items()}, "notes": [], "_recorder": rec}
