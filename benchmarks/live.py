@@ -164,8 +164,14 @@ def main(argv=None) -> int:
                   f"CPU time a frame {r['frame_cpu_ms']['frame']['median']:.1f} ms median, "
                   f"{r['frame_cpu_ms']['frame']['p90']:.1f} p90; load {r['load_average_at_start']}", flush=True)
             runs.append(r)
-    figures = {"head": "default, level 0" if args.build is None else str(args.build), "seconds": args.seconds,
-               "stream_fps": args.fps, "target_dropped_fraction": 0.05, "runs": runs}
+        import facewarp as fw
+
+        rig = fw.load_face_rig(build)
+        table = fw.load_arkit_table(build)  # made by the first run
+        head = {"head": "default, level 0" if args.build is None else f"the build {args.build.name}",
+                "tets": int(len(rig.tets)), "skin_vertices": int(len(rig.head_vertices)),
+                "arkit_shapes_solved": [n for n, ok in zip(table.names, table.solved) if ok]}
+    figures = {**head, "seconds": args.seconds, "stream_fps": args.fps, "target_dropped_fraction": 0.05, "runs": runs}
     print("wrote", save(f"live_{args.device.split(':')[0]}", figures, device=args.device))
     return 0
 

@@ -340,6 +340,8 @@ def live_files(build, out, *, port: int = DEFAULT_PORT, host: str = "0.0.0.0", s
                              "network" + ("" if stats.datagrams == 0 else
                                           f" ({stats.datagrams} datagrams came, none a Live Link Face packet: "
                                           f"{next(iter(stats.malformed_reasons), 'another source')})"))
+        if len(rec) == 0:  # stopped between the first packet and its frame
+            raise InputError(f"the take ended ({rep['stopped_by']}) before a frame was simulated: nothing to record")
         frames = rec.frames(sim, rep["simulation"])
         files = [out / n for n in LIVE_FILES]
         take = [f for f in link.history if seconds is None or f.elapsed < seconds]  # the take, up to its end
