@@ -9,7 +9,9 @@ weights blended into muscle activations and jaw angles; the head's yaw, pitch an
 head pose, :func:`~facewarp._src.drive.arkit.head_rotation_matrix`), and the simulator takes one
 step of ``1 / fps``. Where a frame takes longer than the stream's period the packets in between
 are dropped and counted, so the face shows the newest expression, late by at most one frame's
-cost. A packet that turns the head faster than a head turns (a tracking glitch, the face found
+cost; the simulator's head then turns only as far as the real head turned in one step's time
+(:func:`_head_goal`: its inertial loads those of the real motion), while the face is shown and
+recorded at the stream's head pose. A packet that turns the head faster than a head turns (a tracking glitch, the face found
 again elsewhere) moves the head part of the way this frame and on in the next (counted).
 
 The take ends on Ctrl-C or SIGTERM, after ``seconds`` of stream, when the viewer window is
@@ -218,6 +220,20 @@ again elsewhere), the frame goes this part of the way from the last pose instead
 the simulator takes (0: the last pose held); the next frames go on towards the stream's pose."""
 
 
+def _head_goal(R_sim, R, gap, h):
+    """The head pose the simulator steps to: the stream's ``R`` where the frame before was simulated
+    ``h`` [s] of stream ago (no packet dropped; ``gap`` None: the first frame); after a gap of dropped
+    packets, the share ``h / gap`` of the way from the simulator's pose ``R_sim``, so that the head
+    turns in the simulator's step of ``h`` about as fast as it turned in the stream (its inertial
+    loads those of the real motion, not of the whole gap's turn squeezed into one step), catching up
+    over the frames that follow. The face is shown and recorded at the stream's pose all the same."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    if gap is None or gap <= h * 1.0001:
+        return R
+    return Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([R_sim, R])))([h / gap]).as_matrix()[0]
+
+
 def _step_easing_head(sim, R_prev, R):
     """Step ``sim`` with its controls and the head pose ``R`` (set); where that pose is a jump
     (:class:`~facewarp.InputError` from the step, nothing changed), with a pose part of the way
@@ -373,7 +389,9 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
     cost = {k: [] for k in ("receive", "controls", "step", "record", "view", "frame", "latency")}
     cpu = {"step": [], "frame": []}  # process CPU time [ms]: what another process's load does not stretch
     eased = 0
-    R_prev = np.eye(3)
+    R_sim = np.eye(3)  # the head pose the simulator holds (its inertial loads come from its motion)
+    last_t = None  # stream time of the frame simulated before [s]
+    sim_heads, packets = [], []
     stop = _Stop()
     sim.reset()
     if view is not None:
@@ -406,16 +424,19 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
             c1 = time.process_time()
             a, j = table.controls(f.weights)
             R = rotation(*f.head_rotation)
+            R_goal = _head_goal(R_sim, R, (f.elapsed - last_t) if last_t is not None else None, 1.0 / sim.fps)
             sim.set_activations(a[0])
             sim.set_jaw(float(j[0, 0]), float(j[0, 1]))
-            sim.set_head_pose(R, np.zeros(3))
+            sim.set_head_pose(R_goal, np.zeros(3))
             t2, c2 = time.perf_counter(), time.process_time()
-            if _step_easing_head(sim, R_prev, R) is not None:
+            if _step_easing_head(sim, R_sim, R_goal) is not None:
                 eased += 1
-            R = R_prev = sim.head_pose[0]  # the pose the frame reached
+            R_sim, last_t = sim.head_pose[0], f.elapsed  # the pose the frame reached
             t3, c3 = time.perf_counter(), time.process_time()
             stepping += t3 - t2
-            rec.frame(sim, f.elapsed, R)
+            rec.frame(sim, f.elapsed, R)  # shown and recorded at the stream's pose
+            sim_heads.append(R_sim)
+            packets.append(f.frame_number)
             t4 = time.perf_counter()
             if view is not None:
                 view.show(R)
@@ -444,4 +465,7 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
     return {"kind": "livelink", "stopped_by": stop.reason, "discarded_before_start": before, "seconds": round(span, 4),
             "viewer": "window" if view is not None else "headless", "simulation": sim_stats,
             "frame_cost_ms": {k: _profile(v) for k, v in cost.items()},
-            "frame_cpu_ms": {k: _profile(v) for k, v in cpu.items()}, "notes": [], "_recorder": rec}
+            "frame_cpu_ms": {k: _profile(v) for k, v in cpu.items()}, "notes": [], "_recorder": rec,
+            "frames": [{"time_s": round(float(t), 6), "frame_number": int(k),
+                        "head_rotation_simulated": Rs.tolist()}
+                       for t, k, Rs in zip(rec.times, packets, sim_heads)]}
