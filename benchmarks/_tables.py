@@ -793,7 +793,8 @@ def live(r: Results) -> str:
                      f"{run['frame_cost_ms']['step']['median']:.1f} ms"])
     loads = [run["load_average_at_start"] for run in f["runs"] if run.get("load_average_at_start") is not None]
     note = (f"{f['seconds']:g} s of a {f['stream_fps']:g} fps stream per setting, {f['head']}"
-            + (f" ({f['tets']} tets; ARKit table: {len(f['arkit_shapes_solved'])} shapes solved)" if "tets" in f else "")
+            + (f" ({f['tets']} tets; ARKit table: {len(f['arkit_shapes_solved'])} shapes solved)"
+               if "tets" in f else "")
             + ", "
             f"{doc['machine'].get('cores', '?')}-core {doc['machine'].get('cpu', 'CPU')}, {doc['date'][:10]}"
             + (f", load average {min(loads):.0f}-{max(loads):.0f} at the starts" if loads else "") + ".")

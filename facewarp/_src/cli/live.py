@@ -27,7 +27,8 @@ def add_parser(sub) -> None:
                     help=f"listen for Live Link Face on this UDP port (default {DEFAULT_PORT}, the app's; 0: any free "
                          "port, named on stderr)")
     lv.add_argument("--host", default="0.0.0.0", metavar="ADDR",
-                    help="address to listen on (default 0.0.0.0: every network interface; 127.0.0.1: this machine only)")
+                    help="address to listen on (default 0.0.0.0: every network interface; 127.0.0.1: this machine "
+                         "only)")
     lv.add_argument("--seconds", type=seconds, metavar="S", default=None,
                     help="end the take after this many seconds of stream (default: Ctrl-C ends it)")
     lv.add_argument("--timeout", type=seconds, metavar="S", default=10.0,

@@ -11,8 +11,9 @@ step of ``1 / fps``. Where a frame takes longer than the stream's period the pac
 are dropped and counted, so the face shows the newest expression, late by at most one frame's
 cost; the simulator's head then turns only as far as the real head turned in one step's time
 (:func:`_head_goal`: its inertial loads those of the real motion), while the face is shown and
-recorded at the stream's head pose. A packet that turns the head faster than a head turns (a tracking glitch, the face found
-again elsewhere) moves the head part of the way this frame and on in the next (counted).
+recorded at the stream's head pose. A packet that turns the head faster than a head turns (a
+tracking glitch, the face found again elsewhere) moves the head part of the way this frame and on
+in the next (counted).
 
 The take ends on Ctrl-C or SIGTERM, after ``seconds`` of stream, when the viewer window is
 closed, when the stream stops for ``timeout`` seconds, or when the memory for frames is full;
