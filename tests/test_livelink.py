@@ -287,7 +287,7 @@ def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(bui
     csv = tmp_path / "sent.csv"
     fw.save_livelink_csv(generated_take(60, jump_at=35), csv)
     junk = [b"", b"hello", layout(channels(), version=5), layout(channels(), count=52)]
-    code, rep, err = live(built, tmp_path / "live", table_file, "--timeout", "1.5",
+    code, rep, err = live(built, tmp_path / "live", table_file, "--timeout", "4",
                           sender=lambda port: replay(csv, port, burst=10, gap=0.25, junk=junk))
     assert code == 0, err
     out = tmp_path / "live"
@@ -371,7 +371,8 @@ def sim_index(built, name):
     return fw.load_face_rig(built).rig.names.index(name)
 
 
-def test_live_take_stops_on_sigterm_and_on_seconds(built, table_file, tmp_path):
+@pytest.mark.slow
+def test_live_take_stops_on_sigterm_ctrl_c_and_on_seconds(built, table_file, tmp_path):
     csv = tmp_path / "sent.csv"
     fw.save_livelink_csv(generated_take(240), csv)  # 4 s at 60 fps
     code, rep, err = live(built, tmp_path / "a", table_file, "--timeout", "5", sender=lambda port: replay(csv, port),
@@ -379,6 +380,10 @@ def test_live_take_stops_on_sigterm_and_on_seconds(built, table_file, tmp_path):
     assert code == 0, err
     assert rep["stopped_by"] == "SIGTERM" and 0 < rep["received"]["frames"] < 240  # ended mid-take, recorded
     assert (tmp_path / "a" / "report.json").is_file() and fw.load_arkit(tmp_path / "a" / "take.csv").frames > 0
+    code, rep, err = live(built, tmp_path / "c", table_file, "--timeout", "5", sender=lambda port: replay(csv, port),
+                          signal_after=(1.0, signal.SIGINT))  # Ctrl-C
+    assert code == 0, err
+    assert rep["stopped_by"] == "Ctrl-C" and (tmp_path / "c" / "frames.npz").is_file()
     code, rep, err = live(built, tmp_path / "b", table_file, "--timeout", "5", "--seconds", "0.5",
                           sender=lambda port: replay(csv, port))
     assert code == 0, err
