@@ -182,12 +182,9 @@ def test_take_csv_reads_back_with_load_arkit(tmp_path):
 
 # ---------------------------------------------------------------------------------------- the live job
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    from facewarp.cli import main
-
-    out = tmp_path_factory.mktemp("build")
-    assert main(["--json", "build", "default", "--out", str(out)]) == 0
-    return out
+def built(default_build_dir):
+    """The run's default build (read only here: the ARKit table is given with --table)."""
+    return default_build_dir
 
 
 @pytest.fixture(scope="module")

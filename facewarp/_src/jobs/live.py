@@ -397,9 +397,9 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
     sim.reset()
     if view is not None:
         view.show()
+    before = link.flush()  # what came while the face was made up is not the take
     log(f"listening on {link.host}:{link.port} for Live Link Face (the app's Live Link target: this machine's "
         f"IP address, port {link.port}); Ctrl-C ends and records the take")
-    before = link.flush()  # what came while the face was made up is not the take
     if ready is not None:
         ready(link.port)
     t_listen = time.perf_counter()
