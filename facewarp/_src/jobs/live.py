@@ -322,6 +322,8 @@ def live_files(build, out, *, port: int = DEFAULT_PORT, host: str = "0.0.0.0", s
     timeout = check_number("timeout", timeout, low=0.0, high=MAX_SECONDS, low_open=True)
     fps = check_number("fps", fps, low=0.0, high=MAX_FPS, low_open=True)
     viewer = check_choice("viewer", viewer, VIEWER_MODES)
+    if viewer == "on" and not has_display():  # before the slow part
+        raise InputError("viewer: no display (DISPLAY / WAYLAND_DISPLAY unset); run with the viewer off")
     if iterations is not None:
         iterations = check_int("iterations", iterations, low=1, high=1000)
     out = check_out_dir(out)
