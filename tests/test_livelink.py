@@ -439,6 +439,9 @@ def test_nothing_arriving_or_a_bad_port_is_exit_2_in_one_line_and_writes_nothing
         assert main([*base, "--livelink", bad]) == 2
         err = capsys.readouterr().err.strip()
         assert "\n" not in err and "--livelink" in err, err
+    if not ("DISPLAY" in os.environ or "WAYLAND_DISPLAY" in os.environ):
+        assert main([*base, "--livelink", "0", "--viewer", "on"]) == 2
+        assert "viewer: no display" in capsys.readouterr().err
     assert not (tmp_path / "none").exists()
 
 
