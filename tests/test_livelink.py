@@ -375,16 +375,16 @@ def test_live_take_stops_on_sigterm_ctrl_c_and_on_seconds(built, table_file, tmp
     code, rep, err = live(built, tmp_path / "a", table_file, "--timeout", "5", sender=lambda port: replay(csv, port),
                           signal_after=(1.0, signal.SIGTERM))
     assert code == 0, err
-    assert rep["stopped_by"] == "SIGTERM" and 0 < rep["received"]["frames"] < 240  # ended mid-take, recorded
+    assert rep["stopped_by"] == "SIGTERM" and 0 < rep["received"]["frames"] < 240, (rep["received"], err)
     assert (tmp_path / "a" / "report.json").is_file() and fw.load_arkit(tmp_path / "a" / "take.csv").frames > 0
     code, rep, err = live(built, tmp_path / "c", table_file, "--timeout", "5", sender=lambda port: replay(csv, port),
                           signal_after=(1.0, signal.SIGINT))  # Ctrl-C
     assert code == 0, err
-    assert rep["stopped_by"] == "Ctrl-C" and (tmp_path / "c" / "frames.npz").is_file()
+    assert rep["stopped_by"] == "Ctrl-C" and (tmp_path / "c" / "frames.npz").is_file(), (rep["received"], err)
     code, rep, err = live(built, tmp_path / "b", table_file, "--timeout", "5", "--seconds", "0.5",
                           sender=lambda port: replay(csv, port))
     assert code == 0, err
-    assert rep["stopped_by"] == "0.5 s of stream" and rep["seconds"] < 0.5
+    assert rep["stopped_by"] == "0.5 s of stream" and rep["seconds"] < 0.5, (rep["received"], err)
     with np.load(tmp_path / "b" / "frames.npz") as z:
         assert z["times"].max() < 0.5
     assert fw.load_arkit(tmp_path / "b" / "take.csv", fps=60.0).seconds <= 0.5 + 1e-9

@@ -354,7 +354,8 @@ def live_files(build, out, *, port: int = DEFAULT_PORT, host: str = "0.0.0.0", s
             if made:  # nothing to record: leave no empty folder behind
                 with contextlib.suppress(OSError):
                     out.rmdir()
-            raise InputError(f"nothing arrived on port {link.port} in {timeout:g} s: set Live Link Face's target "
+            when = f"in {timeout:g} s" if rep["stopped_by"] == "nothing arrived" else f"before {rep['stopped_by']}"
+            raise InputError(f"nothing arrived on port {link.port} {when}: set Live Link Face's target "
                              f"(Settings > Live Link) to this machine's IP address and port {link.port}, on the same "
                              "network" + ("" if stats.datagrams == 0 else
                                           f" ({stats.datagrams} datagrams came, none a Live Link Face packet: "
@@ -399,15 +400,15 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
     sim.reset()
     if view is not None:
         view.show()
-    before = link.flush()  # what came while the face was made up is not the take
-    log(f"listening on {link.host}:{link.port} for Live Link Face (the app's Live Link target: this machine's "
-        f"IP address, port {link.port}); Ctrl-C ends and records the take")
-    if ready is not None:
-        ready(link.port)
-    t_listen = time.perf_counter()
     next_status = STATUS_EVERY_S
     stepping = 0.0
-    with _signals_stop(stop):
+    with _signals_stop(stop):  # from here a signal ends the take (and the take is recorded)
+        before = link.flush()  # what came while the face was made up is not the take
+        log(f"listening on {link.host}:{link.port} for Live Link Face (the app's Live Link target: this machine's "
+            f"IP address, port {link.port}); Ctrl-C ends and records the take")
+        if ready is not None:
+            ready(link.port)
+        t_listen = time.perf_counter()
         while stop.reason is None:
             t0 = time.perf_counter()
             f = link.receive(timeout=POLL_S)
