@@ -96,6 +96,7 @@ _NAMES = {
     "load_ict_displacements": "importers.ict_arkit", "transfer_ict_displacements": "importers.ict_arkit",
     "ict_shape_dirs": "importers.ict_arkit", "load_arkit_basis": "importers.ict_arkit",
     "Tracker": "drive.inverse", "drive": "drive.inverse", "DriveResult": "drive.inverse",
+    "LiveLink": "drive.livelink",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
@@ -164,6 +165,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.physics.muscle_stage import MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
     from ._src.drive.inverse import DriveResult, Tracker, drive
+    from ._src.drive.livelink import LiveLink
     from ._src.drive.tracks import ARKIT_NAMES, ArkitTrack, MarkerTrack
     from ._src.drive.formats import (load_arkit, load_markers, markers_from_frames, save_livelink_csv,
                                      save_markers_json)
