@@ -13,7 +13,7 @@ DEFAULT_PORT = 11111  # facewarp._src.drive.livelink.DEFAULT_PORT (a test keeps 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
     lv = sub.add_parser(
-        "live", help="drive a `build` output's face in real time from Live Link Face (the iPhone app's Live Link "
+        "live", example="facewarp live build --livelink 11111 --out take", help="drive a `build` output's face in real time from Live Link Face (the iPhone app's Live Link "
                      "target) and record the take",
         epilog="In Live Link Face: Settings > Live Link > add a target: this machine's IP address and the port "
                f"(default {DEFAULT_PORT}). Each frame simulates the newest packet through the head's ARKit table "
