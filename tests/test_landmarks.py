@@ -185,8 +185,7 @@ def _ict_68(ict_dir):
 def test_ibug68_round_trip_on_the_ict_head(ict_dir, tmp_path):
     """68 points taken from a known head (ICT's landmark vertices) written as a JSON list and as
     an iBUG .pts file (mm) come back as the FDPs at the same vertices (the ICT FDP map)."""
-    from facewarp import IBUG68_TO_FDP, landmarks_from_scheme
-    from facewarp._src.template.likeness import ICT_FDP_VERTICES
+    from facewarp import ICT_FDP_VERTICES, IBUG68_TO_FDP, landmarks_from_scheme
 
     V, idx = _ict_68(ict_dir)
     P_mm = V[idx] * 1e3
@@ -210,9 +209,8 @@ def test_ibug68_round_trip_on_the_ict_head(ict_dir, tmp_path):
 def test_ibug68_table_matches_the_template_fdps_on_the_ict_head(ict_dir):
     """The documented correspondence: the default template adapted to the ICT head with its 12
     ICT FDPs puts each tabled FDP within IBUG68_FDP_OFFSET_MM (+0.3 mm) of ICT's 68-point vertex."""
-    from facewarp import closest_surface_points, default_template
-    from facewarp._src.geometry.landmarks import IBUG68_FDP_OFFSET_MM, IBUG68_TO_FDP
-    from facewarp._src.template.likeness import ICT_FDP_VERTICES
+    from facewarp import ICT_FDP_VERTICES, closest_surface_points, default_template
+    from facewarp.geometry import IBUG68_FDP_OFFSET_MM, IBUG68_TO_FDP
     from facewarp.adaptation import adapt
 
     V, idx = _ict_68(ict_dir)
