@@ -416,7 +416,7 @@ def main(argv=None) -> int:
         print(f"part {args.part}: {len(cases)} cases kept in {args.part_dir}")
         return 0
     heat = []
-    folder = out / "adapt_unseen"
+    folder = out / args.name  # the heat maps beside the run's JSON, by its name
     folder.mkdir(parents=True, exist_ok=True)
     for old in folder.glob("case*.png"):
         old.unlink()

@@ -127,3 +127,30 @@ def test_adapt_bad_arguments(scan, sphere, tmp_path, capsys):
         assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
         assert needle in err, (needle, err)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_adapt_takes_68_point_landmarks(ict_dir, tmp_path, capsys):
+    """Round trip through the command: a known head (the ICT neutral, mm) with its 68 landmarks
+    (ICT's own vertices) as an iBUG .pts file gives the same head as its FDPs named in JSON."""
+    from facewarp import IBUG68_TO_FDP
+
+    n = 11248
+    ict = load_mesh(ict_dir / "generic_neutral_mesh.obj", units="cm")
+    V, F = ict.vertices[:n], ict.faces[(ict.faces < n).all(axis=1)]
+    save_obj(tmp_path / "scan.obj", V, F, units="mm")
+    idx = json.loads((ict_dir / "vertex_indices.json").read_text())["idx_to_landmark_verts"]
+    P = V[idx] * 1e3
+    (tmp_path / "lm68.pts").write_text("version: 1\nn_points: 68\n{\n" + "".join(f"{x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in P)
+                                       + "}\n")
+    (tmp_path / "fdp.json").write_text(json.dumps({f: P[i].tolist() for i, f in IBUG68_TO_FDP.items()}))
+    heads = []
+    for name in ("lm68.pts", "fdp.json"):
+        out = tmp_path / f"out_{name}"
+        assert main(["adapt", str(tmp_path / "scan.obj"), "--landmarks", str(tmp_path / name), "--out", str(out),
+                     "--units", "mm", "--levels", "1"]) == 0
+        rep = json.loads((out / "report.json").read_text())
+        assert rep["distance_to_scan_m"]["median"] < 0.5e-3
+        heads.append(load_mesh(out / "adapted.obj").vertices)
+    np.testing.assert_allclose(heads[0], heads[1], atol=1e-9)
+    capsys.readouterr()
