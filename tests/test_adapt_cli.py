@@ -145,12 +145,18 @@ def test_adapt_takes_68_point_landmarks(ict_dir, tmp_path, capsys):
                                        + "}\n")
     (tmp_path / "fdp.json").write_text(json.dumps({f: P[i].tolist() for i, f in IBUG68_TO_FDP.items()}))
     heads = []
-    for name in ("lm68.pts", "fdp.json"):
+    for name, scheme in (("lm68.pts", "ibug68"), ("fdp.json", "auto")):
         out = tmp_path / f"out_{name}"
         assert main(["adapt", str(tmp_path / "scan.obj"), "--landmarks", str(tmp_path / name), "--out", str(out),
-                     "--units", "mm", "--levels", "1"]) == 0
+                     "--units", "mm", "--levels", "1", "--landmark-scheme", scheme]) == 0
         rep = json.loads((out / "report.json").read_text())
         assert rep["distance_to_scan_m"]["median"] < 0.5e-3
         heads.append(load_mesh(out / "adapted.obj").vertices)
     np.testing.assert_allclose(heads[0], heads[1], atol=1e-9)
     capsys.readouterr()
+    # the wrong scheme named: one line, exit 2, nothing written
+    assert main(["adapt", str(tmp_path / "scan.obj"), "--landmarks", str(tmp_path / "lm68.pts"), "--out",
+                 str(tmp_path / "bad"), "--units", "mm", "--landmark-scheme", "ibug51"]) == 2
+    err = capsys.readouterr().err
+    assert "the ibug51 scheme has 51 points, got 68" in err and err.count("\n") == 1
+    assert not (tmp_path / "bad").exists()

@@ -164,8 +164,12 @@ def _naming_calibration(landmarks: str, template: str):
 
 def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, template_landmarks=None,
                 method="multilevel", levels=None, markers=None, units=None, template_units="m", device="cpu",
-                progress=None, texture_size: int = 2048) -> dict:
+                progress=None, texture_size: int = 2048, landmark_scheme: str = "auto") -> dict:
     """Run the adaptation on files and write the outputs; returns the report dict.
+
+    ``landmark_scheme``: the scheme of the ``landmarks`` file (:func:`~facewarp.load_landmarks`'s
+    ``scheme``: "auto", "fdp", "ibug68" or "ibug51"; the 68- and 51-point schemes give the FDPs of
+    :data:`~facewarp.IBUG68_TO_FDP`).
 
     ``levels`` is :func:`~facewarp.adapt`'s: refinement levels after the FDP level (None: its
     default). ``landmarks`` None: the FDPs are found on the scan
@@ -200,7 +204,7 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     auto = units == "auto"
     detected = None
     if landmarks is not None:
-        raw_lm = load_landmarks(landmarks, units="m")
+        raw_lm = load_landmarks(landmarks, units="m", scheme=landmark_scheme)
         _check_units(raw.vertices, raw_lm, landmarks, f"the scan {scan}")
     TV, TF, tlm, groups, tmpl = _load_template(template_dir, template_mesh, template_landmarks, template_units)
     if landmarks is None:
