@@ -143,7 +143,7 @@ def pictures(path: Path, scan_V, scan_F, head_V, head_F, d_mm, title: str) -> No
 
     rows = []
     for view in ("front", "side"):
-        kw = {"view": view, "width": 360, "height": 360, "frame_points": scan_V}
+        kw = {"view": view, "width": 270, "height": 270, "frame_points": scan_V}
         rows.append(np.concatenate([render_mesh(scan_V, scan_F, **kw), render_mesh(head_V, head_F, **kw),
                                     render_mesh(scan_V, scan_F, vertex_colors=colormap(d_mm, 0.0, 2.0), **kw)], axis=1))
     save_png(path, np.concatenate(rows, axis=0), title=title, colorbar=(0.0, 2.0, "mm (right: scan -> head distance)"))
