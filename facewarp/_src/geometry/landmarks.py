@@ -45,6 +45,7 @@ __all__ = [
     "LANDMARK_SUFFIXES",
     "fapu",
     "landmarks_from_scheme",
+    "load_scheme_points",
     "fdp_sort_key",
     "load_landmarks",
     "save_landmarks_json",
@@ -375,6 +376,41 @@ def _read_pts(path: Path, text: str) -> np.ndarray:
     return P
 
 
+def _read_points(path: Path, text: str, suffix: str):
+    """The list of points of a numbered-scheme file (``.pts``, or a JSON list), or None for named FDPs."""
+    if suffix == ".pts":
+        return _read_pts(path, text)
+    if suffix == ".json" and text.lstrip().startswith("["):
+        try:
+            return json.loads(text)
+        except json.JSONDecodeError as e:
+            raise InputError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    return None
+
+
+def load_scheme_points(path: str | os.PathLike, *, units: str = "m", scheme: str = "auto"):
+    """The points of a 68- or 51-point landmark file in their order, or None for a file of named FDPs.
+
+    Args:
+        path: A file :func:`load_landmarks` reads.
+        units: Unit of the file's coordinates: "mm", "cm" or "m".
+        scheme: As in :func:`load_landmarks`.
+
+    Returns:
+        None, or (scheme "ibug68" / "ibug51", points [m] shape (68, 3) or (51, 3) float64).
+
+    Raises:
+        InputError: As :func:`load_landmarks`.
+    """
+    load_landmarks(path, units=units, scheme=scheme)  # every check, one message
+    path = Path(path)
+    points = _read_points(path, path.read_text(encoding="utf-8"), path.suffix.lower())
+    if points is None:
+        return None
+    P = np.asarray(points, dtype=np.float64) * unit_scale(units)
+    return ("ibug68" if len(P) == 68 else "ibug51"), P
+
+
 def _read_pp(path: Path, text: str) -> dict[str, np.ndarray]:
     try:
         root = ET.fromstring(text)
@@ -444,14 +480,7 @@ def load_landmarks(path: str | os.PathLike, *, units: str = "m", scheme: str = "
         raise InputError(f"{path}: cannot read ({getattr(e, 'strerror', None) or e})") from None
     if not text.strip():
         raise InputError(f"{path}: file is empty")
-    points = None
-    if suffix == ".pts":
-        points = _read_pts(path, text)
-    elif suffix == ".json" and text.lstrip().startswith("["):
-        try:
-            points = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise InputError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    points = _read_points(path, text, suffix)
     if points is not None:
         if scheme == "fdp":
             raise InputError(f"{path}: holds a list of points, not named FDPs (scheme 'fdp')")
