@@ -21,7 +21,8 @@ Every run draws new cases from a new seed (printed and stored; ``--seed`` repeat
   face vertices 0-9408 is exact. Its tangential part (the error's component in the truth's
   tangent plane) is reported too: it is what a distance-to-scan heat map cannot show.
 
-The user's path, ``facewarp adapt scan.obj --landmarks lm.json --units mm`` with the DEFAULT
+The user's path, ``facewarp adapt scan.obj --landmarks lm.json --units mm`` (``--landmarks68``: the
+68-point scheme, ICT's 68 landmark vertices of the true shape, for the command and its nricp peer) with the DEFAULT
 template (3,415 vertices), runs in a fresh process per case (wall and CPU seconds from process
 start to every file written). Its truth: each template vertex's place on the ICT neutral head
 (where facewarp puts it there with the true FDPs, found once per run) carried to the case's shape
@@ -112,7 +113,7 @@ def _stats(e: np.ndarray) -> dict:
             "E_v_p95_mm": float(np.percentile(e, 95)), "E_v_max_mm": float(e.max())}
 
 
-def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path) -> tuple[dict, np.ndarray]:
+def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path, lm68: bool = False) -> tuple[dict, np.ndarray]:
     """``facewarp adapt scan.obj --landmarks lm.json --units mm`` (the default template) in a
     fresh process: wall and CPU seconds from process start to files written, E_v of the
     template's measured vertices against their true places (scan frame, mm)."""
@@ -125,6 +126,9 @@ def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path) ->
     tmp.mkdir(parents=True, exist_ok=True)
     save_obj(tmp / "scan.obj", case.scan_V_mm * 1e-3, case.scan_F, units="mm")
     (tmp / "lm.json").write_text(json.dumps({k: np.asarray(v).tolist() for k, v in case.landmarks_mm.items()}))
+    if lm68:  # the 68-point scheme: ICT's 68 landmark vertices of the true shape, as a JSON list
+        P = case.truth_scan_mm[np.asarray(model.markers)]
+        (tmp / "lm.json").write_text(json.dumps(P.tolist()))
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     cmd = [sys.executable, "-m", "facewarp", "adapt", str(tmp / "scan.obj"), "--landmarks", str(tmp / "lm.json"),
            "--units", "mm", "--out", str(tmp / "out")]
@@ -142,9 +146,10 @@ def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path) ->
             "regions_rms_mm": region_rms(e, truth.region, TEMPLATE_REGION_GROUPS, truth.mask)}, e
 
 
-def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case) -> tuple[dict, np.ndarray]:
+def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case, lm68: bool = False) -> tuple[dict, np.ndarray]:
     """nricp_amberg with the default template (the same 12 landmarks as surface points, 10 mm
-    threshold, pre-aligned by facewarp's calibration); in-process seconds (no process start)."""
+    threshold, pre-aligned by facewarp's calibration; ``lm68``: the 68 points of the scheme at their
+    places on the template, ``facewarp.IBUG68_TEMPLATE``); in-process seconds (no process start)."""
     import trimesh
     from trimesh.registration import nricp_amberg
 
@@ -155,10 +160,16 @@ def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case) -> tup
     sl = {k: case.landmarks_mm[k] * 1e-3 for k in ids}
     T = calibrate(sl, truth.landmarks).transform
     t0, c0 = time.perf_counter(), time.process_time()
-    cpl = MeshQuery(truth.vertices, truth.faces).closest_point(np.array([truth.landmarks[k] for k in ids]))
+    src_pts = np.array([truth.landmarks[k] for k in ids])
+    tgt_pts = np.array([sl[k] for k in ids])
+    if lm68:
+        from facewarp import IBUG68_TEMPLATE
+
+        src_pts, tgt_pts = IBUG68_TEMPLATE, case.truth_scan_mm[np.asarray(model.markers)] * 1e-3
+    cpl = MeshQuery(truth.vertices, truth.faces).closest_point(src_pts)
     out = nricp_amberg(trimesh.Trimesh(truth.vertices * 1e3, truth.faces, process=False),
                        trimesh.Trimesh(T.apply(case.scan_V_mm * 1e-3) * 1e3, case.scan_F, process=False),
-                       source_landmarks=(cpl.face, cpl.bary), target_positions=T.apply(np.array([sl[k] for k in ids])) * 1e3,
+                       source_landmarks=(cpl.face, cpl.bary), target_positions=T.apply(tgt_pts) * 1e3,
                        distance_threshold=10.0)
     sec, cpu = time.perf_counter() - t0, time.process_time() - c0
     e = np.linalg.norm(T.inverse().apply(np.asarray(out) * 1e-3) * 1e3 - truth.truth_scan_mm(model, case), axis=1)
@@ -224,7 +235,8 @@ def write_markdown(result: dict, path: Path, doc: dict) -> None:
     cmd = [c for c in result["cases"] if "command" in c]
     if cmd:
         lines += ["", "## The `facewarp adapt` command with the default template", "",
-                  "`facewarp adapt scan.obj --landmarks lm.json --units mm` (the default template, 3,415 vertices) in a fresh",
+                  "`facewarp adapt scan.obj --landmarks lm.json --units mm` (the default template, 3,415 vertices; landmarks: "
+                  f"{result.get('command_landmarks', '12 FDPs')}) in a fresh",
                   "process per case: wall and CPU seconds from process start to every file written (OBJ, glTF, report, pictures).",
                   "Truth: each template vertex's place on the ICT neutral head (where facewarp puts it there with the true FDPs,",
                   "fixed once per run) carried to the case's shape by the ICT model's own correspondence (same triangle,",
@@ -334,6 +346,9 @@ def main(argv=None) -> int:
                     help="folder of the ICT identity OBJs (the public rig's FaceXModel: all 100 modes); default "
                          "$FACEWARP_ICT_IDENTITIES, else the shared folder's identity000-009")
     ap.add_argument("--no-detect", action="store_true", help="skip the automatic landmarks")
+    ap.add_argument("--landmarks68", action="store_true",
+                    help="the command and its nricp peer get the 68-point scheme (ICT's 68 landmark vertices of the "
+                         "true shape, a JSON list) instead of the 12 FDPs")
     ap.add_argument("--no-command", action="store_true", help="skip the `facewarp adapt` command with the default template")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--heat-maps", type=int, default=2, help="heat maps of the N worst cases")
@@ -387,10 +402,10 @@ def main(argv=None) -> int:
                            "refine": res.refine, "regions_rms_mm": region_rms(e[:FACE_VERTS], ict_reg[:FACE_VERTS])}
         row["_e"] = (e, tang)
         if truth is not None:
-            row["command"], ec = run_command(truth, model, case, scratch / f"case{i:02d}")
+            row["command"], ec = run_command(truth, model, case, scratch / f"case{i:02d}", args.landmarks68)
             row["_ec"] = ec
             if not args.no_peers:
-                row["nricp_amberg_template"], _ = run_nricp_template(truth, model, case)
+                row["nricp_amberg_template"], _ = run_nricp_template(truth, model, case, args.landmarks68)
         if not args.no_detect:
             row["detect"], row["facewarp_detected"] = run_detected(model, case)
         if not args.no_peers and not args.no_ict_peers:
@@ -444,7 +459,8 @@ def main(argv=None) -> int:
         c.pop("_ec", None)
     methods = [m for m in ("facewarp", "facewarp_detected", "facewarp_levels_only", "nricp_amberg", "command",
                            "nricp_amberg_template") if m in cases[0]]
-    result = {"seed": seed, "threads": args.threads, "identity_modes": int(len(model.offsets)), "targets": TARGETS, "cases": cases,
+    result = {"seed": seed, "threads": args.threads, "identity_modes": int(len(model.offsets)),
+              "command_landmarks": "68-point scheme" if args.landmarks68 else "12 FDPs", "targets": TARGETS, "cases": cases,
               "summary": {m: summarise([c[m] for c in cases]) for m in methods}, "verdict": verdict(cases), "heat_maps": heat}
     out.mkdir(parents=True, exist_ok=True)
     path = save(args.name, result, folder=out)
