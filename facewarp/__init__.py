@@ -83,7 +83,7 @@ _NAMES = {
     # USD animations streamed while simulating (a sink of play)
     "UsdAnimation": "jobs.animation", "play_timeline": "jobs.animation",
     # lower level
-    "ModelBuilder": "physics.model", "Model": "physics.model", "State": "physics.model", "Control": "physics.model",
+    "ModelBuilder": "physics.builder", "Model": "physics.model", "State": "physics.state", "Control": "physics.state",
     "SolverVerlet": "physics.solvers.verlet", "SolverStage": "physics.solvers.base",
     "SolverImplicit": "physics.solvers.implicit", "SolverHostImplicit": "physics.solvers.host_implicit",
     "SolverDeviceNewtonPCG": "physics.solvers.newton_pcg", "IncrementalPotential": "physics.solvers.incremental",
@@ -96,7 +96,7 @@ _NAMES = {
     "ArkitTable": "drive.arkit", "arkit_table": "drive.arkit", "load_arkit_table": "drive.arkit",
     "ARKIT_OUT_OF_REACH": "drive.arkit", "ICT_ARKIT_SHAPES": "importers.ict_arkit",
     "load_ict_displacements": "importers.ict_arkit", "transfer_ict_displacements": "importers.ict_arkit",
-    "ict_shape_dirs": "importers.ict_arkit",
+    "ict_shape_dirs": "importers.ict_arkit", "load_arkit_basis": "importers.ict_arkit",
     "Tracker": "drive.inverse", "drive": "drive.inverse", "DriveResult": "drive.inverse",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
@@ -161,7 +161,9 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.jobs.template import export_template
     from ._src.anatomy.rig import build_face, face_rig_from_anatomy
     from ._src.physics.face_rig import FaceRig, load_face_rig, save_face_rig
-    from ._src.physics.model import Control, Model, ModelBuilder, State
+    from ._src.physics.builder import ModelBuilder
+    from ._src.physics.model import Model
+    from ._src.physics.state import Control, State
     from ._src.physics.muscle_rig import MuscleRig
     from ._src.physics.muscle_stage import MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
@@ -171,7 +173,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
                                      save_markers_json)
     from ._src.drive.rigid import STABLE_POINTS, HeadMotion, remove_head_motion
     from ._src.drive.arkit import ARKIT_OUT_OF_REACH, ArkitTable, arkit_table, load_arkit_table
-    from ._src.importers.ict_arkit import (ICT_ARKIT_SHAPES, ict_shape_dirs, load_ict_displacements,
+    from ._src.importers.ict_arkit import (ICT_ARKIT_SHAPES, ict_shape_dirs, load_arkit_basis, load_ict_displacements,
                                            transfer_ict_displacements)
     from ._src.physics.solvers.base import SolverStage
     from ._src.physics.solvers.host_implicit import SolverHostImplicit

@@ -10,14 +10,15 @@ from .common import FacewarpError, Progress, emit, out_dir, whole_in
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    a = sub.add_parser("adapt", help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)",
+    a = sub.add_parser("adapt", example="facewarp adapt scan.ply --landmarks scan_landmarks.json --units mm --out head",
+                       help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)",
                        epilog="Inputs are checked before the adaptation: scan and landmarks in the same units, at "
                               "least 4 FDPs shared with the template and not coplanar, every landmark near the scan "
                               "surface.")
     a.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
     a.add_argument("--landmarks", type=Path, metavar="LM.json", help="landmarks on the scan, in --units: FDPs (JSON or .pp), or the "
-                   "68- or 51-point scheme (a JSON list of [x, y, z] or an iBUG .pts file; the points that mark an FDP "
-                   "are used, see --landmark-scheme) (default: found on the scan as by `facewarp landmarks detect`, "
+                   "68- or 51-point scheme (a JSON list of [x, y, z] or an iBUG .pts file: with the default template every "
+                   "point is used, else the points that mark an FDP; see --landmark-scheme) (default: found on the scan as by `facewarp landmarks detect`, "
                    "written to detected_landmarks.json)")
     a.add_argument("--landmark-scheme", choices=["auto", "fdp", "ibug68", "ibug51"], default="auto",
                    help="scheme of --landmarks: auto (default: named FDPs, or a list of 68 or 51 points), fdp, ibug68 "
