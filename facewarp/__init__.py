@@ -44,6 +44,8 @@ _NAMES = {
     "MeshQuery": "geometry.surface", "mean_curvature": "geometry.surface", "vertex_normals": "geometry.surface",
     "FDP_CATALOGUE": "geometry.landmarks", "FDP_IDS": "geometry.landmarks", "fapu": "geometry.landmarks",
     "load_landmarks": "geometry.landmarks", "save_landmarks_json": "geometry.landmarks",
+    "landmarks_from_scheme": "geometry.landmarks", "IBUG68_TO_FDP": "geometry.landmarks",
+    "IBUG68_TEMPLATE": "template.ibug68",
     "Similarity": "geometry.similarity", "fit_similarity": "geometry.similarity",
     # heads
     "FRONTAL_REGIONS": "template.head", "REGIONS": "template.head", "THICKNESS_FACTOR": "template.head",
@@ -149,6 +151,8 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.expressions import (MUSCLES, PRESETS, Expression, Segment, Timeline, blend, load_sequence, preset,
                                    thesis_sequence, timeline_for, timeline_from_spec)
     from ._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
+    from ._src.geometry.landmarks import IBUG68_TO_FDP, landmarks_from_scheme
+    from ._src.template.ibug68 import IBUG68_TEMPLATE
     from ._src.geometry.mesh import (Mesh, SurfacePoints, closest_surface_points, load_mesh, mesh_report, save_glb,
                                      save_obj)
     from ._src.geometry.similarity import Similarity, fit_similarity
