@@ -38,7 +38,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["Interrupted", "Staging", "interrupted_by", "raise_if_interrupted", "signals_as_exceptions",
+__all__ = ["Interrupted", "Staging", "interrupted_by", "output_lock", "raise_if_interrupted", "signals_as_exceptions",
            "signals_deferred", "staged_outputs"]
 
 PARTIAL_TAG = ".facewarp-partial-"
@@ -222,12 +222,7 @@ class Staging:
 
     def release(self) -> None:
         for t in self.targets:
-            if t.lock_fd is not None:
-                with contextlib.suppress(OSError):
-                    os.unlink(_lock_path(t))
-                with contextlib.suppress(OSError):
-                    os.close(t.lock_fd)
-                t.lock_fd = None
+            _release_target(t)
 
 
 def _move_entries(src: Path, dst: Path) -> None:
@@ -311,6 +306,65 @@ def _prepare(t: _Target) -> None:
         t.stage_root.mkdir()
     except OSError as e:
         raise InputError(f"{arg} {t.path}: cannot write beside it ({e.strerror or e})") from None
+
+
+@contextlib.contextmanager
+def output_lock(name: str, path: os.PathLike | str) -> Iterator[Path]:
+    """Hold the lock of the output ``path`` (the argument ``name``, e.g. ``"out"``) while the body runs.
+
+    For an output a job writes in place rather than staged (``batch run --out DIR``, a folder
+    continued from run to run): the same lock file ``.NAME.facewarp-lock`` beside it as
+    :func:`staged_outputs` takes, so a second run on ``path`` (of any command) is refused with one
+    line. The folders made to hold the lock file are removed again when the body raises and
+    ``path`` was not made. Yields ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        InputError: ``path`` exists and is not a folder, its parent cannot be made or written, or
+            another run holds the lock.
+    """
+    t = _Target(name, Path(path), "dir")
+    if t.dest.exists() and not t.dest.is_dir():
+        raise InputError(f"{name} {t.path}: exists and is not a folder")
+    missing = []
+    q = t.dest.parent
+    while not q.exists() and q != q.parent:
+        missing.append(q)
+        q = q.parent
+    if not q.is_dir():
+        raise InputError(f"{name} {t.path}: cannot create the folder ({q} is not a folder)")
+    for m in reversed(missing):
+        try:
+            m.mkdir()
+        except OSError as e:
+            for made in reversed(t.created_parents):
+                with contextlib.suppress(OSError):
+                    made.rmdir()
+            raise InputError(f"{name} {t.path}: cannot create the folder {m} ({e.strerror or e})") from None
+        t.created_parents.append(m)
+    existed = t.dest.exists()
+    try:
+        if not os.access(t.dest.parent, os.W_OK | os.X_OK):
+            raise InputError(f"{name} {t.path}: the folder {t.dest.parent} is not writable")
+        _lock(t)
+        yield Path(path)
+    except BaseException:
+        _release_target(t)
+        if not existed and not t.dest.exists():
+            for made in reversed(t.created_parents):
+                with contextlib.suppress(OSError):
+                    made.rmdir()
+        raise
+    _release_target(t)
+
+
+def _release_target(t: _Target) -> None:
+    """Release the lock of one output (remove its lock file, close it)."""
+    if t.lock_fd is not None:
+        with contextlib.suppress(OSError):
+            os.unlink(_lock_path(t))
+        with contextlib.suppress(OSError):
+            os.close(t.lock_fd)
+        t.lock_fd = None
 
 
 @contextlib.contextmanager
