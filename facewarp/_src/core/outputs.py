@@ -38,7 +38,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["Interrupted", "Staging", "interrupted_by", "output_lock", "raise_if_interrupted", "signals_as_exceptions",
+__all__ = ["Interrupted", "Staging", "destination", "interrupted_by", "output_lock", "raise_if_interrupted", "signals_as_exceptions",
            "signals_deferred", "staged_outputs"]
 
 PARTIAL_TAG = ".facewarp-partial-"
@@ -385,15 +385,53 @@ def staged_outputs(outputs: list[tuple[str, os.PathLike | str, str]]) -> Iterato
     for name, path, kind in outputs:
         if kind not in ("dir", "file"):
             raise ValueError(f"kind must be 'dir' or 'file', got {kind!r}")
+        if not str(path).strip():
+            raise InputError(f"{name}: expected a {'folder' if kind == 'dir' else 'file'} path, got an empty one")
         targets.append(_Target(name, Path(path), kind))
+    _check_apart(targets)
     staging = Staging(targets)
     try:
         for t in targets:
             _prepare(t)
+        _active.append(staging)
         yield staging
         staging.commit()
     except BaseException:
         staging.discard()
         raise
     finally:
+        if staging in _active:
+            _active.remove(staging)
         staging.release()
+
+
+_active: list[Staging] = []
+"""The stagings of the runs in progress in this process (:func:`destination`)."""
+
+
+def destination(path: os.PathLike | str) -> Path:
+    """Where ``path`` ends up: a path inside a staged output of a run in progress is mapped to its
+    destination (a job that gets ``.out.facewarp-partial-PID/x`` compares ``out/x`` with its
+    inputs); any other path is returned as it is."""
+    p = Path(path)
+    for st in _active:
+        for t in st.targets:
+            root, dest = t.stage_root, (t.dest if t.kind == "dir" else t.dest.parent)
+            for a in (root, root.absolute()):
+                try:
+                    rel = p.relative_to(a) if p.is_absolute() == a.is_absolute() else None
+                except ValueError:
+                    rel = None
+                if rel is not None:
+                    return dest / rel if str(rel) != "." else dest
+    return p
+
+
+def _check_apart(targets: list[_Target]) -> None:
+    """Two outputs of one run must not be one path or one inside the other."""
+    for i, a in enumerate(targets):
+        for b in targets[i + 1:]:
+            pa, pb = a.dest.absolute(), b.dest.absolute()
+            if pa == pb or pa in pb.parents or pb in pa.parents:
+                raise InputError(f"{b.name} {b.path}: is the same path as {a.name} {a.path} or inside it (or the other "
+                                 f"way round); choose outputs apart")

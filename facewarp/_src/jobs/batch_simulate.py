@@ -21,9 +21,11 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.fileio import write_json
-from ..core.limits import MAX_FPS, MAX_SECONDS
+from ..core.limits import MAX_FPS, MAX_SECONDS, check_work, estimate_frames_bytes
+from ..core.outputs import destination
 from ..expressions import timeline_from_spec
 from ..physics.face_rig import load_face_rig
+from .checks import check_apart, check_some_frames
 
 __all__ = ["MAX_CLI_HEADS", "batch_simulate_files", "read_per_head", "simulate_group_files"]
 
@@ -124,14 +126,30 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     for key, v, high in (("seconds", seconds, MAX_SECONDS), ("fps", fps, MAX_FPS)):
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and 0 < v <= high):
             raise InputError(f"{key}: expected a finite number > 0 and <= {high:g}, got {v!r}")
-    if stage is not None and (Path(stage).name != str(stage) or Path(stage).suffix not in (".usda", ".usdc")):
-        raise InputError(f"stage: expected a file name ending in .usda or .usdc (written in the output folder), got {stage!r}")
+    check_some_frames(float(seconds), float(fps))
+    nf = int(round(seconds * fps)) + 1
+    width = max(2, len(str(len(heads) - 1)))
+    names = [f"head_{i:0{width}d}.usdc" for i in range(len(heads))]
+    if stage is not None:
+        if not isinstance(stage, str) or Path(stage).name != stage or Path(stage).suffix not in (".usda", ".usdc"):
+            raise InputError(f"stage: expected a file name ending in .usda or .usdc (written in the output folder), "
+                             f"got {stage!r}")
+        taken = {n.lower() for n in names} | {"report.json"}
+        if stage.lower() in taken:
+            raise InputError(f"stage: {stage!r} is the name of a head's animation file in the output folder "
+                             f"(head_00.usdc .. {names[-1]}); choose another name, e.g. crowd.usda")
     if jaw not in ("kinematic", "mujoco"):
         raise InputError(f"jaw: expected kinematic or mujoco, got {jaw!r}")
     if jaw == "mujoco":
         for h in heads:
             if not (h / "head.xml").is_file():
                 raise InputError(f"{h}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, or use --jaw kinematic)")
+    out = Path(out)
+    outputs = [("out", out, "dir")] + [("out", out / n, "file") for n in names + ["report.json"]]
+    if stage is not None:
+        outputs.append(("stage", out / stage, "file"))
+    expr_file = Path(str(expression)) if str(expression).lower().endswith(".json") else None
+    check_apart(outputs, [("BUILD_DIR", h) for h in heads] + [("per_head", per_head), ("expression", expr_file)])
     specs = read_per_head(per_head, len(heads)) if per_head is not None else [str(expression)] * len(heads)
     timelines = {s: timeline_from_spec(s, float(seconds)) for s in dict.fromkeys(specs)}
     rigs, loaded = [], {}
@@ -140,7 +158,9 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
         if key not in loaded:
             loaded[key] = load_face_rig(h)
         rigs.append(loaded[key])
-    out = Path(out)
+    V = max(len(fr.head_vertices) for fr in rigs)
+    check_work(f"seconds, fps: {len(heads)} heads x {nf} frames", head_frames=len(heads) * (nf - 1), vertex_count=V,
+               device=str(device), disk_bytes=len(heads) * estimate_frames_bytes(nf, V), folder=destination(out))
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     batch = FaceBatch(rigs, device=device, fps=fps, backend="heads")  # its heads stream USD
@@ -148,9 +168,6 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
         batch.use_mujoco_jaws([h / "head.xml" for h in heads])
     build_s = time.perf_counter() - t0
     per = [timelines[s].for_head(fr) for s, fr in zip(specs, rigs)]
-    nf = int(round(seconds * fps)) + 1
-    width = max(2, len(str(len(heads) - 1)))
-    names = [f"head_{i:0{width}d}.usdc" for i in range(len(heads))]
     anims = [UsdAnimation(out / n, sim) for n, sim in zip(names, batch.heads)]
     try:
         # a frozen head's animation ends at its last good frame

@@ -7,7 +7,8 @@ from pathlib import Path
 
 from ..core.errors import InputError
 
-__all__ = ["MAX_FRAMES", "check_kept_frames", "check_some_frames", "check_out_dir", "load_simulated_head", "make_out_dir"]
+__all__ = ["MAX_FRAMES", "check_apart", "check_kept_frames", "check_some_frames", "check_out_dir", "load_simulated_head",
+           "make_out_dir"]
 
 MAX_FRAMES = 100_000
 """Most frames one ``simulate`` run keeps in memory (about 1 h at 30 fps; a level-0 head takes
@@ -78,3 +79,35 @@ def load_simulated_head(head_path, seconds: float, fps: float, jaw: str):
     if jaw == "mujoco":
         load_mjcf(mjcf)  # a broken head.xml fails before the simulator is made
     return fr, mjcf
+
+
+def _real(p) -> Path:
+    from ..core.outputs import destination
+
+    return Path(destination(p)).resolve()
+
+
+def _within(p: Path, folder: Path) -> bool:
+    return p == folder or folder in p.parents
+
+
+def check_apart(outputs, inputs) -> None:
+    """Outputs that would replace or write into an input, refused before any work.
+
+    ``outputs``: ``[(name, path, "dir" | "file")]`` what the job writes (a staged path is taken
+    where it ends up, :func:`~facewarp._src.core.outputs.destination`); ``inputs``: ``[(name,
+    path)]`` the files and folders it reads. Refused: an output that is an input or lies inside an
+    input folder (``batch simulate --out BUILD`` would replace the build's ``report.json``), and an
+    output folder inside which an input lies where the job writes a file (checked by the file
+    outputs). Two outputs that are one path are refused too. One line naming both.
+    """
+    outs = [(n, _real(p), k) for n, p, k in outputs]
+    ins = [(n, Path(p).resolve(), Path(p).is_dir()) for n, p in inputs if p is not None and Path(p).exists()]
+    for i, (n, p, k) in enumerate(outs):
+        for m, q, folder in ins:
+            if p == q or (folder and _within(p, q)):
+                raise InputError(f"{n} {p}: would {'replace' if p == q else 'write into'} the input {m} {q}; "
+                                 "choose an output apart from the inputs")
+        for n2, p2, _ in outs[i + 1:]:
+            if p == p2:
+                raise InputError(f"{n2} {p2}: is also {n}; choose outputs of their own")
