@@ -45,19 +45,19 @@ def read_per_head(path, count: int) -> list[str]:
     try:
         doc = json.loads(p.read_text())
     except OSError as e:
-        raise InputError(f"{p}: cannot be read ({e.strerror or e})") from None
+        raise InputError(f"per_head {p}: cannot be read ({e.strerror or e})") from None
     except ValueError as e:
-        raise InputError(f"{p}: not valid JSON ({e})") from None
+        raise InputError(f"per_head {p}: not valid JSON ({' '.join(str(e).split())})") from None
     heads = doc.get("heads") if isinstance(doc, dict) else None
     if not isinstance(heads, list):
-        raise InputError(f'{p}: expected {{"heads": [expression, ...]}} with one entry per head')
+        raise InputError(f'per_head {p}: expected {{"heads": [expression, ...]}} with one entry per head')
     if len(heads) != count:
-        raise InputError(f"{p}: {len(heads)} entries for {count} heads (one per BUILD_DIR, in order)")
+        raise InputError(f"per_head {p}: {len(heads)} entries for {count} heads (one per BUILD_DIR, in order)")
     out = []
     for i, h in enumerate(heads):
         spec = h.get("expression") if isinstance(h, dict) else h
         if not isinstance(spec, str) or not spec.strip():
-            raise InputError(f'{p}: heads[{i}]: expected an expression name or {{"expression": NAME}}, got {h!r:.60}')
+            raise InputError(f'per_head {p}: heads[{i}]: expected an expression name or {{"expression": NAME}}, got {h!r:.60}')
         if spec.lower().endswith(".json") and not Path(spec).is_absolute():
             spec = str(p.parent / spec)
         out.append(spec)

@@ -126,8 +126,14 @@ def _check_batch_memory(rigs: list, what: str) -> None:
 
 def _poses(name: str, R, t, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Rotations (n, 3, 3) and translations (n, 3) from one pose or one per head, checked."""
-    R = np.asarray(R, dtype=np.float64) if R is not None else np.eye(3)
-    t = np.asarray(t, dtype=np.float64) if t is not None else np.zeros(3)
+    try:
+        R = np.asarray(R, dtype=np.float64) if R is not None else np.eye(3)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: rotations must be numbers, shape (3, 3) or ({n}, 3, 3), got {describe(R)}") from None
+    try:
+        t = np.asarray(t, dtype=np.float64) if t is not None else np.zeros(3)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: translations must be numbers [m], shape (3,) or ({n}, 3), got {describe(t)}") from None
     if R.shape == (3, 3):
         R = np.broadcast_to(R, (n, 3, 3))
     if t.shape == (3,):
