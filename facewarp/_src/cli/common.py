@@ -20,7 +20,7 @@ from ..core.limits import MAX_FPS, MAX_SECONDS
 
 __all__ = ["EXIT_USAGE", "FacewarpError", "FrameBar", "HelpFormatter", "MAX_TEMPLATE_LEVEL", "Parser", "Progress",
            "StageBar", "amount_up_to", "device", "emit", "fps", "frame_stats_lines", "jsonable", "level", "number",
-           "out_dir", "out_dir_or_usd", "out_file", "seconds", "whole_in"]
+           "out_dir", "out_dir_or_usd", "out_file", "path", "seconds", "whole_in"]
 
 EXIT_USAGE = 2
 
@@ -76,6 +76,14 @@ def amount_up_to(high: float):
 seconds = amount_up_to(MAX_SECONDS)
 fps = amount_up_to(MAX_FPS)
 level = number(int, lambda v: 0 <= v <= MAX_TEMPLATE_LEVEL, f"a level 0..{MAX_TEMPLATE_LEVEL}")
+
+
+def path(text: str) -> Path:
+    """An argparse ``type=`` for a file or folder path: an empty one (``--out ''``, which ``Path``
+    reads as the current folder) is a usage error."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return Path(text)
 
 
 def device(text: str) -> str:
