@@ -760,3 +760,35 @@ def test_play_and_mujoco_skin_refuse_junk(sim):
     for kwargs, needle in [({"prefix": 3}, "prefix"), ({"mesh": ""}, "mesh"), ({}, "mesh")]:
         with pytest.raises(fw.InputError, match=needle):
             fw.MujocoSkin(sim, model, **kwargs)
+
+
+@pytest.mark.parametrize("command", ["batch simulate", "morph", "retarget", "batch run"])
+def test_second_run_on_one_out_is_refused(command, built, tmp_path, capsys):
+    """A run in progress holds its --out (as staged_outputs / output_lock hold it for a real run):
+    a second run of a writing command on it is refused with exit 2 and one line, and what the first
+    has written so far is intact and is moved into place when the first finishes."""
+    from facewarp._src.core.outputs import output_lock, staged_outputs
+
+    out = tmp_path / ("o.usda" if command == "morph" else "o")
+    argv = {"batch simulate": ["batch", "simulate", built, "--seconds", "0.1", "--out", out],
+            "morph": ["morph", "default", "default", "--steps", "1", "--out", out],
+            "retarget": ["retarget", "smile", built, "--seconds", "0.1", "--out", out],
+            "batch run": ["batch", "run", _octahedron_obj(tmp_path / "s.obj"), "--steps", "adapt", "--out", out]}[command]
+    if command == "batch run":  # written in place, not staged: the first run's folder as it has it
+        out.mkdir()
+        (out / "manifest.json").write_text('{"first": "run"}')
+        with output_lock("out", out):
+            _cli(capsys, argv, needle="another facewarp run is writing it")
+        assert (out / "manifest.json").read_text() == '{"first": "run"}'
+        assert not [p.name for p in tmp_path.iterdir() if ".facewarp-" in p.name]
+        return
+    kind = "file" if command == "morph" else "dir"
+    with staged_outputs([("out", out, kind)]) as first:
+        staged = first.path("out")
+        (staged if kind == "dir" else staged.parent).mkdir(exist_ok=True)
+        mine = staged / "first.txt" if kind == "dir" else staged
+        mine.write_text("the first run's")
+        _cli(capsys, argv, needle="another facewarp run is writing it")
+        assert mine.read_text() == "the first run's" and not out.exists()
+    assert (out / "first.txt" if kind == "dir" else out).read_text() == "the first run's"
+    assert not [p.name for p in tmp_path.iterdir() if ".facewarp-" in p.name]

@@ -131,6 +131,7 @@ class _Target:
     staged: Path = field(init=False)  # what the job gets instead of ``path``
     lock_fd: int | None = None
     created_parents: list[Path] = field(default_factory=list)
+    staged_here: bool = False  # this run made stage_root (a run refused before that must not delete it)
 
     def __post_init__(self):
         p = self.path
@@ -213,7 +214,8 @@ class Staging:
     def discard(self) -> None:
         """Delete everything staged, the locks and the folders made for it."""
         for t in self.targets:
-            shutil.rmtree(t.stage_root, ignore_errors=True)
+            if t.staged_here:
+                shutil.rmtree(t.stage_root, ignore_errors=True)
         self.release()
         for t in self.targets:
             for p in reversed(t.created_parents):
@@ -304,6 +306,7 @@ def _prepare(t: _Target) -> None:
             shutil.rmtree(stale, ignore_errors=True)
     try:
         t.stage_root.mkdir()
+        t.staged_here = True
     except OSError as e:
         raise InputError(f"{arg} {t.path}: cannot write beside it ({e.strerror or e})") from None
 
