@@ -19,7 +19,8 @@ A lock file ``.NAME.facewarp-lock`` beside each output (``fcntl.flock``, release
 when the process dies) makes a second run on the same output refuse with one line.
 
 :func:`signals_as_exceptions` turns SIGINT and SIGTERM into :class:`Interrupted` (a
-``KeyboardInterrupt``) and remembers that they came, so that a library that swallows the
+``KeyboardInterrupt``; one that lands inside an import is raised when the import is over, since a
+compiled module's init would turn it into an ``ImportError``) and remembers that they came, so that a library that swallows the
 exception (USD's Python bindings turn it into a warning in some callbacks) cannot make an
 interrupted run look finished: :func:`raise_if_interrupted` raises again at the next progress
 callback, and the CLI checks :func:`interrupted_by` once the job returns.
@@ -77,9 +78,45 @@ def raise_if_interrupted() -> None:
         raise Interrupted(_received[0])
 
 
+RETRY_SECONDS = 0.02
+"""While an import runs, a signal is raised this long after it, or when the import has ended."""
+
+
+def _importing(frame) -> bool:
+    """Whether ``frame`` runs inside an import (a module's top level, or importlib's own code)."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _handler(signum, frame):
     _received.append(signum)
+    if _importing(frame):
+        # Raised inside an import, the interrupt can come out as another error: a C extension's
+        # module init (NumPy's ``import_array`` in every compiled module of SciPy and others) turns
+        # any exception into ``ImportError: ... failed to import`` -- an internal error (exit 1)
+        # instead of exit 130 / 143. Raise it once the import is over (SIGALRM retries).
+        _arm_retry()
+        return
     raise Interrupted(signum)
+
+
+def _arm_retry() -> None:
+    try:
+        signal.setitimer(signal.ITIMER_REAL, RETRY_SECONDS)
+    except (AttributeError, OSError, ValueError):  # no interval timers here: the next check raises it
+        pass
+
+
+def _retry(signum, frame):
+    if not _received:
+        return
+    if _importing(frame):
+        _arm_retry()
+        return
+    raise Interrupted(_received[0])
 
 
 @contextlib.contextmanager
@@ -96,9 +133,15 @@ def signals_as_exceptions() -> Iterator[None]:
     old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     for s in old:
         signal.signal(s, _handler)
+    alarm = getattr(signal, "SIGALRM", None)
+    old_alarm = signal.signal(alarm, _retry) if alarm is not None else None
     try:
         yield
     finally:
+        if alarm is not None:
+            with contextlib.suppress(AttributeError, OSError, ValueError):
+                signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(alarm, old_alarm if old_alarm is not None else signal.SIG_DFL)
         for s, h in old.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
 
