@@ -500,7 +500,10 @@ def _run_batch_locked(scans: list[ScanInput], out: Path, *, t0: float, steps, ex
                 bar.show(counts["done"], counts["failed"], len(inflight), advance=len(group))
             saver.tick()
     except KeyboardInterrupt as e:  # SIGINT or SIGTERM (core.outputs.Interrupted keeps which)
-        interrupted = e
+        from ..core.outputs import Interrupted, interrupted_by
+
+        # a library on the way (Ray's wait) may re-raise a bare KeyboardInterrupt: the signal that came says which
+        interrupted = Interrupted(interrupted_by()) if not isinstance(e, Interrupted) and interrupted_by() else e
     finally:
         bar.close()
         executor.close(abort=bool(inflight) or interrupted is not None, handles=list(inflight))
