@@ -317,6 +317,36 @@ def test_ray_physics_steps_device(scans, tmp_path, capsys, monkeypatch, gpus, fl
     assert _manifest(tmp_path / "out")["good1"]["steps"]["rig"]["device"] == want
 
 
+@pytest.mark.parametrize("error, words", [
+    (ConnectionError("ray client connection timeout"), "cannot connect to the Ray cluster"),
+    (RuntimeError("Ray Client requires pip package `ray[client]`. If you installed the minimal Ray (e.g. `pip "
+                  "install ray`), please reinstall by executing `pip install ray[client]`."), "facewarp[ray]")])
+def test_ray_cluster_that_cannot_start_leaves_nothing(scans, tmp_path, capsys, monkeypatch, error, words):
+    """`--ray ray://HOST:PORT` that cannot connect (or a Ray without its client): one line, exit 2, no
+    manifest, no lock (the [ray] extra installs ray[client], which the documented ray:// form needs)."""
+    ray = _FakeRay(0)
+
+    def init(**kw):
+        raise error
+
+    ray.init = init
+    monkeypatch.setitem(sys.modules, "ray", ray)
+    out = tmp_path / "out"
+    code = main(["batch", "run", str(scans / "good1.obj"), "--out", str(out), "--ray", "ray://127.0.0.1:9"])
+    err = capsys.readouterr().err
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ray_extra_installs_the_client():
+    import tomllib
+    from pathlib import Path
+
+    extras = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"]
+    assert any(r.replace(" ", "").startswith(("ray[client]", "ray[default]")) for r in extras["ray"]), extras["ray"]
+
+
 def test_ray_gpu_groups_the_simulations(scans, tmp_path, capsys, monkeypatch):
     """On a Ray cluster with a GPU the scans' simulations go as one group task (default up to 64)
     asking for the GPU; --simulate-batch 1 keeps a task per scan."""

@@ -372,24 +372,25 @@ def _run_batch_locked(scans: list[ScanInput], out: Path, *, t0: float, steps, ex
         s, need = missing[keys[0]]
         raise InputError(f"--steps {','.join(steps)}: {s} needs {need} done first, and no scan has it done in "
                          f"{manifest.path} (add {need} to --steps)")
+    # the workers (or the Ray cluster) before anything is written: a cluster that cannot be reached
+    # leaves no manifest
+    if ray is None:
+        from .executors import LocalExecutor
+
+        n = workers or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+        executor = LocalExecutor(n, gpus_per_task=gpus_per_task)
+    else:
+        from .executors import RayExecutor
+
+        executor = RayExecutor(None if ray == "local" else ray, workers=workers, gpus_per_task=gpus_per_task,
+                               max_retries=max_retries)
     try:
         manifest.save()
     except OSError as e:
+        executor.close()
         raise InputError(f"out {out}: cannot write the manifest ({e.strerror or e})") from None
-
-    try:
-        if ray is None:
-            from .executors import LocalExecutor
-
-            n = workers or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-            executor = LocalExecutor(n, gpus_per_task=gpus_per_task)
-        else:
-            from .executors import RayExecutor
-
-            executor = RayExecutor(None if ray == "local" else ray, workers=workers, gpus_per_task=gpus_per_task,
-                                   max_retries=max_retries)
-    except KeyboardInterrupt:  # while Ray started: nothing ran, the reports say so
-        write_reports(manifest, keys)
+    except BaseException:
+        executor.close()
         raise
 
     if simulate_batch is None:

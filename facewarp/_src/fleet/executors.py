@@ -198,9 +198,14 @@ def _init_ray(ray, address, kw: dict) -> None:
     inherit the blocked mask and not stop on ``ray.shutdown``.)"""
     from ..core.outputs import Interrupted
 
+    import logging
+    import warnings
+
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        ray.init(**kw)
+        with warnings.catch_warnings():  # Ray Client's UserWarnings (a connection timeout): our one line says it
+            warnings.simplefilter("ignore")
+            ray.init(**kw, logging_level=logging.ERROR)
     except SystemExit as e:
         if e.code == signal.SIGTERM:
             raise Interrupted(signal.SIGTERM) from None
