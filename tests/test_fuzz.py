@@ -792,3 +792,35 @@ def test_second_run_on_one_out_is_refused(command, built, tmp_path, capsys):
         assert mine.read_text() == "the first run's" and not out.exists()
     assert (out / "first.txt" if kind == "dir" else out).read_text() == "the first run's"
     assert not [p.name for p in tmp_path.iterdir() if ".facewarp-" in p.name]
+
+
+def test_file_jobs_api_refuse_junk(built, tmp_path):
+    """The jobs behind batch simulate and retarget, called from Python: junk is an InputError naming
+    the argument, before anything is written."""
+    from facewarp._src.jobs.batch_simulate import batch_simulate_files
+    from facewarp._src.jobs.retarget import retarget_files
+
+    out = tmp_path / "o"
+    for call, needle in [
+        (lambda: batch_simulate_files(str(built), "smile", out), "heads"),
+        (lambda: batch_simulate_files([3], "smile", out), "heads"),
+        (lambda: batch_simulate_files([built], None, out), "expression"),
+        (lambda: batch_simulate_files([built], "smile", out, per_head=5), "per_head"),
+        (lambda: batch_simulate_files([built], "smile", ""), "out"),
+        (lambda: batch_simulate_files([built], "smile", out, progress=5), "progress"),
+        (lambda: batch_simulate_files([built], "smile", out, seconds=0.001), "no frame"),
+        (lambda: batch_simulate_files([built], "smile", out, stage="head_00.usdc"), "stage"),
+        (lambda: batch_simulate_files([built], "smile", built), "input BUILD_DIR"),
+        (lambda: retarget_files("smile", str(built), out), "heads"),
+        (lambda: retarget_files(None, [built], out), "expression"),
+        (lambda: retarget_files("smile", [built], out, size=10**6), "size"),
+        (lambda: retarget_files("smile", [3], out), "heads"),
+        (lambda: retarget_files("smile", [built], out, fps=float("nan")), "fps"),
+        (lambda: retarget_files("smile", [built], out, seconds=1e9), "seconds"),
+        (lambda: retarget_files("smile", [built], out, progress=5), "progress"),
+        (lambda: retarget_files("smile", [built], built), "input HEAD"),
+    ]:
+        with pytest.raises(fw.InputError, match=needle) as e:
+            call()
+        assert "\n" not in str(e.value)
+        assert not out.exists() and list(tmp_path.iterdir()) == []

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -118,9 +119,24 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     from ..sim.batch import FaceBatch
     from .animation import UsdAnimation
 
+    if isinstance(heads, (str, bytes, os.PathLike)) or not hasattr(heads, "__iter__"):
+        raise InputError(f"heads: expected a list of `facewarp build` folders, got {type(heads).__name__} {heads!r:.60}")
+    heads = list(heads)
+    bad = next((h for h in heads if not isinstance(h, (str, os.PathLike)) or not str(h).strip()), None)
+    if bad is not None:
+        raise InputError(f"heads: expected `facewarp build` folder paths, got {type(bad).__name__} {bad!r:.40}")
     heads = [Path(h) for h in heads]
     if not heads:
         raise InputError("BUILD_DIR: give at least one `facewarp build` folder")
+    if not isinstance(expression, (str, os.PathLike)) or not str(expression).strip():
+        raise InputError(f"expression: expected a preset, 'sequence', a sequence file or 'muscle=value,...', "
+                         f"got {expression!r:.60}")
+    if per_head is not None and (not isinstance(per_head, (str, os.PathLike)) or not str(per_head).strip()):
+        raise InputError(f"per_head: expected a file path or None, got {per_head!r:.60}")
+    if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
+        raise InputError(f"out: expected a folder path, got {out!r:.60}")
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(k, frame_count) or None, got {type(progress).__name__}")
     if len(heads) > MAX_CLI_HEADS:
         raise InputError(f"BUILD_DIR: at most {MAX_CLI_HEADS} heads, got {len(heads)}")
     for key, v, high in (("seconds", seconds, MAX_SECONDS), ("fps", fps, MAX_FPS)):

@@ -15,6 +15,7 @@ in memory.
 from __future__ import annotations
 
 import math
+import os
 import re
 from pathlib import Path
 
@@ -109,8 +110,25 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
         InputError: a missing or bad sequence file or head, a bad number.
     """
     step = progress or (lambda msg: None)
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(message) or None, got {type(progress).__name__}")
+    if frame_progress is not None and not callable(frame_progress):
+        raise InputError(f"frame_progress: expected a callable frame_progress(k, frame_count) or None, got "
+                         f"{type(frame_progress).__name__}")
+    if not isinstance(expression, (str, os.PathLike)) or not str(expression).strip():
+        raise InputError(f"expression: expected a sequence file, a preset name or 'sequence', got {expression!r:.60}")
+    if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
+        raise InputError(f"out: expected a folder path, got {out!r:.60}")
+    if isinstance(heads, (str, bytes, os.PathLike)) or not hasattr(heads, "__iter__"):
+        raise InputError(f"heads: expected a list of heads (build folders, template folders, 'default[:LEVEL]'), "
+                         f"got {type(heads).__name__} {heads!r:.60}")
+    if not (isinstance(size, int) and not isinstance(size, bool) and 32 <= size <= 4096):
+        raise InputError(f"size: expected a whole number of pixels 32..4096, got {size!r}")
     out = check_out_dir(out)
     heads = list(heads)
+    bad = next((h for h in heads if not isinstance(h, (str, os.PathLike))), None)
+    if bad is not None:
+        raise InputError(f"heads: expected head paths or 'default[:LEVEL]', got {type(bad).__name__} {bad!r:.40}")
     if not heads:
         raise InputError("heads: expected at least one head")
     if len(heads) > MAX_HEADS:
