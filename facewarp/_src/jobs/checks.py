@@ -81,14 +81,15 @@ def load_simulated_head(head_path, seconds: float, fps: float, jaw: str):
     return fr, mjcf
 
 
-def _real(p) -> Path:
+def _real(p, parents: dict) -> Path:
+    """Where ``p`` ends up, its folder's links resolved (the file itself is replaced, not its link's
+    target); ``parents`` caches the folders (10,000 files of one folder resolve it once)."""
     from ..core.outputs import destination
 
-    return Path(destination(p)).resolve()
-
-
-def _within(p: Path, folder: Path) -> bool:
-    return p == folder or folder in p.parents
+    d = Path(destination(p))
+    if d.parent not in parents:
+        parents[d.parent] = d.parent.resolve()
+    return parents[d.parent] / d.name
 
 
 def check_apart(outputs, inputs) -> None:
@@ -101,13 +102,19 @@ def check_apart(outputs, inputs) -> None:
     output folder inside which an input lies where the job writes a file (checked by the file
     outputs). Two outputs that are one path are refused too. One line naming both.
     """
-    outs = [(n, _real(p), k) for n, p, k in outputs]
-    ins = [(n, Path(p).resolve(), Path(p).is_dir()) for n, p in inputs if p is not None and Path(p).exists()]
-    for i, (n, p, k) in enumerate(outs):
-        for m, q, folder in ins:
-            if p == q or (folder and _within(p, q)):
-                raise InputError(f"{n} {p}: would {'replace' if p == q else 'write into'} the input {m} {q}; "
+    ins: dict[Path, tuple[str, bool]] = {}
+    for q, m in {str(q): m for m, q in reversed(list(inputs)) if q is not None}.items():  # a folder named twice once
+        if Path(q).exists():
+            ins.setdefault(Path(q).resolve(), (m, Path(q).is_dir()))
+    seen: dict[Path, str] = {}
+    parents: dict = {}
+    for n, p, _ in outputs:  # a set lookup per output and per parent: 10,000 heads' files check at once
+        p = _real(p, parents)
+        for q in (p, *p.parents):
+            if q in ins and (q == p or ins[q][1]):
+                m = ins[q][0]
+                raise InputError(f"{n} {p}: would {'replace' if q == p else 'write into'} the input {m} {q}; "
                                  "choose an output apart from the inputs")
-        for n2, p2, _ in outs[i + 1:]:
-            if p == p2:
-                raise InputError(f"{n2} {p2}: is also {n}; choose outputs of their own")
+        if p in seen:
+            raise InputError(f"{n} {p}: is also {seen[p]}; choose outputs of their own")
+        seen[p] = n
