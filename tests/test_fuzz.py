@@ -43,10 +43,19 @@ def _leftovers(folder: Path) -> list[str]:
 
 def _cli(capsys, argv, *, needle: str, out: Path | None = None, ok_codes=(2,), what: str = ""):
     """Run ``facewarp argv`` in-process; the promised failure (or an allowed success)."""
-    code = main([str(a) for a in argv])
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main([str(a) for a in argv])
     stdout, err = capsys.readouterr()
     label = _why(f"{what or ' '.join(map(str, argv))}: exit {code}, stderr {err!r}")
     assert code in ok_codes, label
+    # no library's warning reaches the user (those Python shows by default: not the deprecations)
+    shown = [f"{w.category.__name__}: {w.message}" for w in caught
+             if not issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning, ImportWarning,
+                                            ResourceWarning))]
+    assert not shown and "Warning" not in err and "LAPACK" not in err, _why(f"{label}: {shown}")
     if code == 2:
         lines = err.strip().splitlines()
         assert stdout == "", label
