@@ -16,7 +16,7 @@ import pytest
 from conftest import grid_tets
 from facewarp.anatomy import lip_crossings, separate_lips
 from facewarp.geometry import signed_tet_volumes
-from facewarp.physics import (ContactStage, ModelBuilder, SolverImplicit, SolverVerlet, Springs, StepPotential,
+from facewarp.physics import (ContactStage, ModelBuilder, SolverVerlet, Springs, StepPotential, select_solver,
                               lip_contact_geometry)
 
 CM = 0.01
@@ -96,6 +96,7 @@ class _Springs:
         pass
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["lbfgs", "newton-pcg"])
 def test_kernels_evaluate_one_sided_springs_like_the_reference(method):
     import warp as wp
@@ -113,7 +114,7 @@ def test_kernels_evaluate_one_sided_springs_like_the_reference(method):
                             rest_length=None if r is None else wp.array(r.astype(np.float32), dtype=float, device=dev),
                             axis=None if a is None else wp.array(a.astype(np.float32), dtype=wp.vec3, device=dev),
                             one_sided=True))
-    solver = SolverImplicit(model, method=method, stages=[_Springs(tuple(sets))])
+    solver = select_solver(model, method=method, stages=[_Springs(tuple(sets))])
     state, control = model.state(), model.control()
     e, G, H = solver.potential(state, control, 0.01, X, hessian=True)
     P = StepPotential(model)
@@ -142,7 +143,7 @@ def _settle(model, stages, f, steps, method="lbfgs"):
     ``"newton-pcg"``: the device method at a fixed 2 Newton x 25 CG iterations (its launches are
     slow on the CPU); ``"newton-pcg-adaptive"``: the device method as by default."""
     opts = dict(iterations=2, linear_iterations=25) if method == "newton-pcg" else {}
-    solver = SolverImplicit(model, method=method.removesuffix("-adaptive"), stages=stages, **opts)
+    solver = select_solver(model, method=method.removesuffix("-adaptive"), stages=stages, **opts)
     a, b, c = model.state(), model.state(), model.control()
     c.external_force.assign(f)
     for _ in range(steps):
@@ -267,6 +268,7 @@ def default_rig():
     return an, face_rig_from_anatomy(an)
 
 
+@pytest.mark.slow
 def test_lips_pushed_into_the_teeth_stay_outside(default_rig):
     """The inner sheet of the lips and cheeks near the teeth, pushed toward the nearest dental
     arch by 6 N a node, crosses into it without contact (6 nodes, 0.27 mm deep on the default
@@ -408,6 +410,7 @@ def test_the_default_head_keeps_both_lids_of_each_eye_to_their_side(default_rig)
     assert rest["lid_lid"] == 0 and rest["lid_lid_depth_m"] == 0.0
 
 
+@pytest.mark.slow
 def test_a_gliding_lid_node_is_held_on_its_sphere_by_the_verlet_forces():
     """The inner lid sheet over the eyeball glides on it: a gliding node lifted off its sphere
     (its rest distance from the centre) is pulled back with the glide stiffness, one pushed in
@@ -453,6 +456,7 @@ def test_a_gliding_lid_node_is_held_on_its_sphere_by_the_verlet_forces():
     assert np.abs(dF[mid[2]]).max() == 0.0  # contact only: lifting off is free
 
 
+@pytest.mark.slow
 def test_the_lids_inner_sheet_over_the_eyeballs_glides_on_them(default_rig):
     """The default head's inner lid sheet over each eyeball has no planar sliding support (a plane
     tangent at rest pushed the closing lid medially and held it off the ball) but glides on the
