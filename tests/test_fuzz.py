@@ -842,3 +842,27 @@ def test_file_jobs_api_refuse_junk(built, tmp_path):
             call()
         assert "\n" not in str(e.value)
         assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_tracker_constructor_refuses_junk(sim):
+    """Tracker(sim, points, ...): junk arguments are InputErrors naming them (the values update takes
+    are the recordings' side: MarkerTrack and the take loaders check them)."""
+    rng = _rng("Tracker")
+    junk = [None, "a", 0, -1, 1.5, float("nan"), 10**9, True, [], ["x"], object(), np.zeros((2, 2)), {"a": 1}, b"x"]
+    for name, make in [("sim", lambda v: fw.Tracker(v, ["2.1"])), ("points", lambda v: fw.Tracker(sim, v)),
+                       ("mode", lambda v: fw.Tracker(sim, ["2.1"], mode=v)),
+                       ("smoothness", lambda v: fw.Tracker(sim, ["2.1"], smoothness=v)),
+                       ("refine", lambda v: fw.Tracker(sim, ["2.1"], refine=v))]:
+        for v in rng.sample(junk, 8):
+            if v is None and name in ("refine",):
+                continue  # the default
+            try:
+                make(v)
+            except fw.InputError as e:
+                assert "\n" not in str(e), _why(f"{name}={v!r}: {e}")
+            except Exception as e:
+                pytest.fail(_why(f"{name}={v!r:.40}: {type(e).__name__}: {e}"))
+            else:
+                if not (name in ("smoothness", "refine") and isinstance(v, (int, float)) and not isinstance(v, bool)
+                        and v == v and v >= 0):
+                    pytest.fail(_why(f"{name}={v!r:.40} was accepted"))
