@@ -387,7 +387,7 @@ def test_ray_local_two_workers(scans, tmp_path, capsys, monkeypatch):
     assert v["status"] == "failed" and "died 2 times" in v["error"]
 
 
-@pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
+@pytest.mark.parametrize("sig, code", [("SIGINT", 130), pytest.param("SIGTERM", 143, marks=pytest.mark.slow)])
 def test_ctrl_c_leaves_finished_work_and_a_valid_manifest(scans, tmp_path, sig, code):
     import os
     import signal
@@ -433,6 +433,7 @@ def test_exit_code_and_summary_line_say_what_happened(first, scans, capsys):
     assert "broken" in out and "failed" in out
 
 
+@pytest.mark.slow
 def test_a_second_run_on_one_out_is_refused_and_mm_scans_are_read_as_adapt_reads_them(scans, tmp_path, capsys):
     """The first run (a scan in millimetres, no --units: read as `facewarp adapt` reads it) holds
     --out: a second batch run, and a simulate, on it are refused with one line, exit 2, and touch
