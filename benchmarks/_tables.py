@@ -695,6 +695,61 @@ def _drive_rows(doc: dict, dev: str) -> list:
     return rows
 
 
+@table("arkit_reach")
+def arkit_reach(r: Results) -> str:
+    """What reaches each of the 52 ARKit shapes and how closely (``arkit_basis.json`` of ``python -m benchmarks
+    arkit_basis``): per head the converged static face at the shape's controls against the full ICT-FaceKit rig's
+    target carried onto that head (FDP RMS over the head FDPs), with the shipped basis and with the full rig."""
+    doc = r.doc("arkit_basis")
+    heads = doc["figures"]["heads"]
+    first = next(iter(heads.values()))
+    header = ["ARKit shape", "reached by"]
+    for h in heads:
+        header.append(f"{head_tag(h) or h}: reach, shipped / full rig [mm]")
+    header.append("why not reached")
+    rows = []
+    for name, row in first["shapes"].items():
+        cells = [f"`{name}`", row["by"]]
+        for h in heads.values():
+            x = h["shapes"][name]
+
+            def mm(key):
+                v = x.get(key)
+                return "-" if v is None else f"{v['rms']:.2f}"
+
+            cells.append("-" if x["by"] == "not reached" or ("reach_shipped_mm" not in x and "reach_full_rig_mm" not in x)
+                         else f"{mm('reach_shipped_mm')} / {mm('reach_full_rig_mm')}")
+        cells.append(row["reason"] or "")
+        rows.append(cells)
+    return _rows_md(header, rows) + f"\n{machine_note(doc)}\n"
+
+
+@table("arkit_smile")
+def arkit_smile(r: Results) -> str:
+    """The driving guide's smile through the shipped basis and the full rig (``arkit_basis.json``): each head FDP's
+    distance from the full rig's blended targets over the 45 frames."""
+    doc = r.doc("arkit_basis")
+    rows = []
+    for h, x in doc["figures"]["heads"].items():
+        s = x["smile"]
+        for src, label in (("shipped", "shipped basis"), ("full_rig", "full ICT-FaceKit rig")):
+            e = s[src]["vs_full_rig_targets_mm"]
+            rows.append([head_tag(h) or h, label, f"{e['rms']:.2f}", f"{e['max']:.2f} ({e['worst_fdp']})",
+                         f"{s[src]['moved_mm']:.1f}",
+                         f"{x['summary'][src]['median_rms']:.2f} / {x['summary'][src]['max_rms']:.2f}",
+                         f"{x['summary']['target_diff_rms_max_mm']:.2f} / {x['summary']['target_diff_max_mm']:.2f}"
+                         if src == "shipped" else "-"])
+    header = ["head", "ARKit data", "guide's smile: RMS [mm]", "max [mm] (FDP)", "largest FDP motion [mm]",
+              "solved shapes' reach, median / worst RMS [mm]", "shipped vs full-rig targets, worst RMS / max [mm]"]
+    return _rows_md(header, rows) + f"\n{machine_note(doc)}\n"
+
+
+def machine_note(doc: dict) -> str:
+    """One line: where and when a result was measured."""
+    m = doc.get("machine", {})
+    return f"Measured {doc['date'][:10]} on {m.get('cores', '?')} CPU cores (shared with other jobs), level 0, refine {doc['figures'].get('refine')}."
+
+
 @table("fleet")
 def fleet(r: Results) -> str:
     """``facewarp batch run`` on the 2-core box (``fleet_cpu.json`` of ``python -m benchmarks fleet``): one scan

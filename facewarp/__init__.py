@@ -94,7 +94,7 @@ _NAMES = {
     "ArkitTable": "drive.arkit", "arkit_table": "drive.arkit", "load_arkit_table": "drive.arkit",
     "ARKIT_OUT_OF_REACH": "drive.arkit", "ICT_ARKIT_SHAPES": "importers.ict_arkit",
     "load_ict_displacements": "importers.ict_arkit", "transfer_ict_displacements": "importers.ict_arkit",
-    "ict_shape_dirs": "importers.ict_arkit",
+    "ict_shape_dirs": "importers.ict_arkit", "load_arkit_basis": "importers.ict_arkit",
     "Tracker": "drive.inverse", "drive": "drive.inverse", "DriveResult": "drive.inverse",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
@@ -169,7 +169,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
                                      save_markers_json)
     from ._src.drive.rigid import STABLE_POINTS, HeadMotion, remove_head_motion
     from ._src.drive.arkit import ARKIT_OUT_OF_REACH, ArkitTable, arkit_table, load_arkit_table
-    from ._src.importers.ict_arkit import (ICT_ARKIT_SHAPES, ict_shape_dirs, load_ict_displacements,
+    from ._src.importers.ict_arkit import (ICT_ARKIT_SHAPES, ict_shape_dirs, load_arkit_basis, load_ict_displacements,
                                            transfer_ict_displacements)
     from ._src.physics.solvers.base import SolverStage
     from ._src.physics.solvers.host_implicit import SolverHostImplicit

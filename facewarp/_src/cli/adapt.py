@@ -10,7 +10,8 @@ from .common import FacewarpError, Progress, emit, out_dir, whole_in
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    a = sub.add_parser("adapt", help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)",
+    a = sub.add_parser("adapt", example="facewarp adapt scan.ply --landmarks scan_landmarks.json --units mm --out head",
+                       help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)",
                        epilog="Inputs are checked before the adaptation: scan and landmarks in the same units, at "
                               "least 4 FDPs shared with the template and not coplanar, every landmark near the scan "
                               "surface.")

@@ -128,6 +128,21 @@ class FaceSimulator:
         already checked (:func:`.readout.jaw_vector`'s)."""
         self._target_j = np.asarray(j, np.float32)
 
+    def set_eye_gaze(self, gaze) -> None:
+        """Turn the eyeballs (rigid parts about their centres) at the end of the next :meth:`step`:
+        ``gaze`` (2, 2) [rad], per eye (left at +x, right) its yaw (> 0 towards +x) and pitch (> 0 up),
+        each within +-90 deg (:func:`.readout.eye_gaze_rotation`). The lids rest on the eyeball's
+        sphere, which turning leaves in place: the gaze changes what is drawn and the eyes' FDPs."""
+        g = check_array("gaze", gaze, shape=(2, 2)).astype(np.float32)
+        if np.abs(g).max() > np.pi / 2:
+            raise InputError(f"gaze: eye angles lie within +-90 deg, got {np.degrees(np.abs(g).max()):.1f} deg")
+        self._target_g = g
+
+    @property
+    def eye_gaze(self) -> np.ndarray:
+        """The eyes' (yaw, pitch) [rad] reached by the last step, (2, 2) float32 (left, right)."""
+        return getattr(self, "_g", np.zeros((2, 2), np.float32)).copy()
+
     def set_head_pose(self, R, t) -> None:
         """Set the cranium's pose (R (3, 3) rotation, t (3,) [m]) reached at the end of the next
         step; the face, simulated in the head's frame, feels the loads of the accelerating frame
@@ -146,6 +161,7 @@ class FaceSimulator:
         self.solver.reset()
         self._a, self._j = np.zeros(len(self.fr.rig.names), np.float32), np.zeros(2, np.float32)
         self._target_a, self._target_j = self._a.copy(), self._j.copy()
+        self._g, self._target_g = np.zeros((2, 2), np.float32), np.zeros((2, 2), np.float32)
         self._steps_taken = 0
         self.stats = FrameStats()
 
@@ -179,6 +195,7 @@ class FaceSimulator:
     def _frame_done(self, n: int) -> None:
         """After a frame of ``n`` substeps was taken: the controls reached, the pose and the clock advanced."""
         self._a, self._j = self._target_a.copy(), self._target_j.copy()
+        self._g = getattr(self, "_target_g", self.eye_gaze).copy()
         self._pose.advance()
         self._steps_taken += n
 
@@ -262,7 +279,7 @@ class FaceSimulator:
         return self._pose.to_world(C.reshape(-1, 3)).reshape(C.shape)
 
     def _parts_now(self, j, *, frame: str = "world") -> dict:
-        out = parts_at(self.fr, j)
+        out = parts_at(self.fr, j, getattr(self, "_g", None))
         return {k: self._pose.to_world(P) for k, P in out.items()} if frame == "world" else out
 
     def _curves(self, samples: int) -> np.ndarray:
