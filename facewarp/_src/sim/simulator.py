@@ -118,16 +118,6 @@ class FaceSimulator:
         (:func:`.readout.jaw_vector`: ``opening`` 0..60 deg, ``side`` +-5 deg)."""
         self._target_j = jaw_vector(opening, side)
 
-    def set_activation_vector(self, a) -> None:
-        """Set the activations reached at the end of the next :meth:`step` from an (M,) float32 array
-        already checked (:meth:`activation_vector`'s; :class:`~facewarp.FaceBatch` checks every head's at once)."""
-        self._target_a = np.asarray(a, np.float32)
-
-    def set_jaw_vector(self, j) -> None:
-        """Set the jaw angles [rad] reached at the end of the next :meth:`step` from a (2,) float32 array
-        already checked (:func:`.readout.jaw_vector`'s)."""
-        self._target_j = np.asarray(j, np.float32)
-
     def set_eye_gaze(self, gaze) -> None:
         """Turn the eyeballs (rigid parts about their centres) at the end of the next :meth:`step`:
         ``gaze`` (2, 2) [rad], per eye (left at +x, right) its yaw (> 0 towards +x) and pitch (> 0 up),
@@ -142,6 +132,16 @@ class FaceSimulator:
     def eye_gaze(self) -> np.ndarray:
         """The eyes' (yaw, pitch) [rad] reached by the last step, (2, 2) float32 (left, right)."""
         return getattr(self, "_g", np.zeros((2, 2), np.float32)).copy()
+
+    def set_activation_vector(self, a) -> None:
+        """Set the activations reached at the end of the next :meth:`step` from an (M,) float32 array
+        already checked (:meth:`activation_vector`'s; :class:`~facewarp.FaceBatch` checks every head's at once)."""
+        self._target_a = np.asarray(a, np.float32)
+
+    def set_jaw_vector(self, j) -> None:
+        """Set the jaw angles [rad] reached at the end of the next :meth:`step` from a (2,) float32 array
+        already checked (:func:`.readout.jaw_vector`'s)."""
+        self._target_j = np.asarray(j, np.float32)
 
     def set_head_pose(self, R, t) -> None:
         """Set the cranium's pose (R (3, 3) rotation, t (3,) [m]) reached at the end of the next
