@@ -36,6 +36,9 @@ SRC = "facewarp." + "_src" + "."  # spelled so that the public-names test does n
 KNOWN_CYCLES = [
     {SRC + "drive.arkit", SRC + "drive.inverse"},
     {SRC + "cli_reference", "facewarp.cli"},
+    # sim/play's argument check imports sim/simulator for an isinstance test while the simulator's run()
+    # plays through sim/play (main 6092e95): play's to check by the simulator's methods instead
+    {SRC + "sim.play", SRC + "sim.simulator"},
 ]
 
 
