@@ -10,7 +10,8 @@ import time
 import numpy as np
 import pytest
 
-from facewarp import default_template, load_mesh, save_obj
+from facewarp import default_template, load_mesh
+from facewarp.geometry import save_obj
 from facewarp.cli import main
 
 

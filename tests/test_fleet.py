@@ -30,8 +30,8 @@ def scans(tmp_path_factory):
     d = tmp_path_factory.mktemp("scans")
     for i in (1, 2):
         s = fw.synthetic_scan(i, faces=4000)
-        fw.save_obj(d / f"good{i}.obj", s.vertices, s.faces)
-        fw.save_landmarks_json(d / f"good{i}_landmarks.json", s.landmarks)
+        fw.geometry.save_obj(d / f"good{i}.obj", s.vertices, s.faces)
+        fw.geometry.save_landmarks_json(d / f"good{i}_landmarks.json", s.landmarks)
     (d / "broken.obj").write_text("this is not a mesh\n")
     return d
 

@@ -8,7 +8,8 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from facewarp import FDP_CATALOGUE, FDP_IDS, InputError, fapu, load_landmarks, load_mesh, save_landmarks_json
+from facewarp.geometry import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
+from facewarp import InputError, load_mesh
 
 # ----------------------------------------------------------------------------------------
 # catalogue

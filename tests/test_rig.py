@@ -29,7 +29,7 @@ def made(tmp_path_factory):
     for ext in ("glb", "usda"):
         assert main(["--json", "rig", str(d / "build"), "--out", str(d / f"rig.{ext}"), "--muscles", ",".join(MUSCLES),
                      "--inbetweens", "1"]) == 0
-    rig = fw.bake_blendshapes(fw.load_face_rig(d / "build"), muscles=MUSCLES, inbetweens=1)
+    rig = fw.blendshapes.bake_blendshapes(fw.load_face_rig(d / "build"), muscles=MUSCLES, inbetweens=1)
     return d, rig
 
 

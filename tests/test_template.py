@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from facewarp import FDP_IDS, FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, default_template, human_likeness, mesh_report
+from facewarp.geometry import FDP_IDS, mesh_report
+from facewarp.heads import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, human_likeness
+from facewarp import default_template
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +126,7 @@ def test_human_likeness_ict(ict_dir, t0):
 
 def _edge_crossings(V, F):
     """Edges that pierce a triangle they do not belong to (any self-intersection has one)."""
-    from facewarp import MeshQuery
+    from facewarp.geometry import MeshQuery
 
     E = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
     a, b = V[E[:, 0]], V[E[:, 1]]

@@ -249,6 +249,6 @@ def play_timeline(sim, timeline: Timeline, seconds: float, *, on_frame=(), progr
                   mjcf=None) -> dict:
     """:func:`~facewarp.play` under its old name: ``on_frame`` are the sinks, ``jaw`` one of
     :data:`JAWS` (``mjcf``: the head's ``head.xml`` for ``"mujoco"``); returns the
-    :class:`~facewarp.PlayStats` as a dict."""
+    :class:`~facewarp.takes.PlayStats` as a dict."""
     sinks = [on_frame] if callable(on_frame) else list(on_frame)
     return play(sim, timeline, seconds, sinks=sinks, jaw=jaw_driver(sim, jaw, mjcf=mjcf), progress=progress).to_dict()
