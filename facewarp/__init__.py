@@ -1,26 +1,32 @@
 """facewarp: personalized, physically simulated faces.
 
-The pipeline, in the order data flows (thesis chapters 4-6):
+The pipeline at the top level, in the order data flows (thesis chapters 4-6):
 
-1. a head: :func:`default_template` (authored in code, levels 0-4), :func:`load_head` (a template
-   folder, an ``adapt`` output, ``"default:LEVEL"``), :func:`import_ict`;
-2. adaptation to a range scan: :func:`adapt` (FDP calibration, global RBF, multi-level CSRBF);
-3. anatomy: :func:`build_anatomy` (skin tetrahedra, Bezier muscles), or :func:`build_face`
-   which also packs the solver inputs (:class:`FaceRig`);
-4. simulation: :class:`FaceSimulator` (``set_activations``, ``set_jaw``, ``step``, ``reset``,
-   ``surface``, ``fdp``), :class:`FaceBatch` (N heads stepped together) and expressions (:func:`preset`, :class:`Timeline`, ...);
-5. output: :func:`play` (a timeline on a simulator, each frame to sinks: :class:`FrameRecorder`
-   -> :class:`Frames`, :class:`UsdAnimation`), :func:`save_frames_npz`, pictures (:func:`render_mesh`, ...), and
-   the ``usd_export`` package.
+1. a head: :func:`default_template` (authored in code, levels 0-4) or :func:`load_head` (a template
+   folder, an ``adapt`` output, ``"default:LEVEL"``), a :class:`Template`; meshes: :func:`load_mesh`,
+   :class:`Mesh`; a synthetic scan of another face: :func:`synthetic_scan`;
+2. adaptation to a range scan: :func:`adapt` (:class:`AdaptOptions` -> :class:`AdaptResult`);
+3. anatomy and the rig: :func:`build_anatomy`, :func:`build_face` -> :class:`FaceRig`
+   (:func:`save_face_rig`, :func:`load_face_rig`);
+4. simulation: :class:`FaceSimulator`, :class:`FaceBatch` (N heads stepped together); expressions:
+   :class:`Expression`, :class:`Timeline`, :func:`preset`, :data:`PRESETS`, :data:`MUSCLES`,
+   :func:`timeline_for`, :func:`thesis_sequence`; the jaw on MuJoCo: :class:`MujocoJaw`, :class:`MujocoSkin`,
+   :func:`head_mjcf`;
+5. output: :func:`play` (any control source on a simulator, each frame to sinks: :class:`FrameRecorder`
+   -> :class:`Frames`, :class:`UsdAnimation`), pictures (:func:`render_mesh`, :func:`save_png`);
+6. performances: :func:`drive` (a take through the inverse solve, :class:`Tracker`), :func:`load_markers`,
+   :class:`MarkerTrack`, :func:`load_arkit`, :data:`ARKIT_NAMES`, :func:`arkit_table`.
 
-Lower level, after Newton's layout: :class:`ModelBuilder` -> :class:`Model` / :class:`State` /
-:class:`Control` -> :class:`SolverImplicit` (backward Euler, the default: :class:`SolverHostImplicit`'s
-factorised L-BFGS / Newton or :class:`SolverDeviceNewtonPCG`, sharing one :class:`IncrementalPotential`)
-or :class:`SolverVerlet` (the explicit reference) with their stages; material profiles :class:`MaterialPhysical` (default) and
-:class:`MaterialThesis` (Table 6.3). Detailed free functions live in the
-public submodules :mod:`facewarp.geometry`, :mod:`facewarp.adaptation`, :mod:`facewarp.anatomy`,
-:mod:`facewarp.physics`, :mod:`facewarp.coupling` and :mod:`facewarp.render`. Everything under ``facewarp._src`` is
-private and may change.
+Errors: :class:`FacewarpError`, :class:`InputError`, :class:`SimulationError`.
+
+Everything else lives in one public submodule each: :mod:`facewarp.geometry` (meshes, landmarks,
+similarity), :mod:`facewarp.heads` (template files, ICT-FaceKit import, UV layouts, likeness),
+:mod:`facewarp.adaptation`, :mod:`facewarp.anatomy`, :mod:`facewarp.expressions` (segments, blends, sequence
+files, jaw helpers), :mod:`facewarp.physics` (after Newton: ``ModelBuilder`` -> ``Model`` / ``State`` /
+``Control`` -> the solvers and their stages, materials), :mod:`facewarp.coupling` (MJCF, head pose, jaw
+stages and drivers), :mod:`facewarp.takes` (take files, tracks, ARKit tables and basis, the sources and sinks
+of :func:`play`), :mod:`facewarp.blendshapes` (rigs baked from the physics) and :mod:`facewarp.render`.
+Everything under ``facewarp._src`` is private and may change.
 
 Units are SI inside (metres, seconds, radians); convert at file edges with ``units=``. Names
 are imported lazily, so ``import facewarp`` is fast and Warp starts only when first used.
@@ -64,9 +70,8 @@ _NAMES = {
     "play": "sim.play", "FrameRecorder": "sim.play",
     # USD animations streamed while simulating (a sink of play)
     "UsdAnimation": "jobs.animation",
-    # lower level
+    # performances: takes in, the inverse solve
     "MarkerTrack": "drive.tracks", "ARKIT_NAMES": "drive.tracks",
-    # performance files in and out, rigid head motion out of a take
     "load_markers": "drive.formats", "load_arkit": "drive.formats",
     "arkit_table": "drive.arkit",
     "Tracker": "drive.inverse", "drive": "drive.inverse",
@@ -75,10 +80,10 @@ _NAMES = {
     "MujocoSkin": "coupling.mujoco_skin",
     # pictures
     "render_mesh": "present.render", "save_png": "present.render",
-
 }
 
-_SUBMODULES = ("geometry", "adaptation", "anatomy", "physics", "coupling", "render", "heads", "expressions", "takes", "blendshapes")
+_SUBMODULES = ("geometry", "heads", "adaptation", "anatomy", "expressions", "physics", "coupling", "takes", "blendshapes",
+               "render")
 
 __all__ = sorted([*_NAMES, "__version__"])
 

@@ -107,7 +107,7 @@ def test_interrupted_animation_leaves_nothing(demo, tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         with facewarp.UsdAnimation(tmp_path / "take.usdc", sim) as usd:
-            facewarp.play_timeline(sim, facewarp.timeline_for("smile"), 1.0, on_frame=(lambda s, k, t: usd.add(s, t), boom))
+            facewarp.play(sim, facewarp.timeline_for("smile"), 1.0, sinks=[usd, boom])
     assert list(tmp_path.iterdir()) == []
 
 
