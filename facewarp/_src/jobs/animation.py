@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
-from ..coupling.drivers import JAWS, jaw_driver, load_mjcf
+from ..coupling.drivers import JAWS, load_mjcf
 from ..expressions import Timeline
-from ..sim.play import Sink, play
+from ..sim.play import Sink
 from ..sim.readout import eye_transforms
 
 __all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "FdpMotion", "UsdAnimation", "check_usd_path", "load_mjcf",
