@@ -15,7 +15,8 @@ The pipeline at the top level, in the order data flows (thesis chapters 4-6):
 5. output: :func:`play` (any control source on a simulator, each frame to sinks: :class:`FrameRecorder`
    -> :class:`Frames`, :class:`UsdAnimation`), pictures (:func:`render_mesh`, :func:`save_png`);
 6. performances: :func:`drive` (a take through the inverse solve, :class:`Tracker`), :func:`load_markers`,
-   :class:`MarkerTrack`, :func:`load_arkit`, :data:`ARKIT_NAMES`, :func:`arkit_table`.
+   :class:`MarkerTrack`, :func:`load_arkit`, :data:`ARKIT_NAMES`, :func:`arkit_table`, :class:`LiveLink`
+   (a Live Link Face stream).
 
 Errors: :class:`FacewarpError`, :class:`InputError`, :class:`SimulationError`.
 
@@ -70,11 +71,12 @@ _NAMES = {
     "play": "sim.play", "FrameRecorder": "sim.play",
     # USD animations streamed while simulating (a sink of play)
     "UsdAnimation": "jobs.animation",
-    # performances: takes in, the inverse solve
+    # performances: takes in, the inverse solve, a live stream
     "MarkerTrack": "drive.tracks", "ARKIT_NAMES": "drive.tracks",
     "load_markers": "drive.formats", "load_arkit": "drive.formats",
     "arkit_table": "drive.arkit",
     "Tracker": "drive.inverse", "drive": "drive.inverse",
+    "LiveLink": "drive.livelink",
     # MuJoCo coupling, moving head
     "MujocoJaw": "coupling.mujoco", "head_mjcf": "coupling.mjcf",
     "MujocoSkin": "coupling.mujoco_skin",
@@ -117,6 +119,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.anatomy.rig import build_face
     from ._src.physics.face_rig import FaceRig, load_face_rig, save_face_rig
     from ._src.drive.inverse import Tracker, drive
+    from ._src.drive.livelink import LiveLink
     from ._src.drive.tracks import ARKIT_NAMES, MarkerTrack
     from ._src.drive.formats import load_arkit, load_markers
     from ._src.drive.arkit import arkit_table

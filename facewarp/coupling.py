@@ -26,9 +26,10 @@ from ._src.coupling.mjcf import (  # noqa: F401
     write_head_mjcf,
 )
 from ._src.coupling.mujoco import STIFF_SKIN_RATIO, mujoco_warnings  # noqa: F401
+from ._src.coupling.mujoco_view import MujocoView  # noqa: F401
 
 __all__ = ["BONE_DENSITY", "CarryStage", "check_pose", "GRAVITY", "HEAD_MASS", "HEAD_MOTION_LIMITS", "HeadPose",
            "jaw_driver", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "JAWS", "JawStage", "KinematicJawDriver",
            "mandible_geometry", "mandible_inertia", "MANDIBLE_PLATE", "MandibleInertia", "mujoco_warnings",
-           "MujocoJawDriver", "scene_mjcf", "SCENE_NAME", "STIFF_SKIN_RATIO", "up_rotation", "UPS",
+           "MujocoJawDriver", "MujocoView", "scene_mjcf", "SCENE_NAME", "STIFF_SKIN_RATIO", "up_rotation", "UPS",
            "write_head_mjcf", "Z_UP"]

@@ -11,7 +11,8 @@ from ._src.importers.ict import ICT_INNER_LIP_VERTICES, ICT_PART_RANGES, ICT_SKI
 from ._src.template.likeness import human_likeness, ICT_FDP_VERTICES  # noqa: F401
 from ._src.template.uv import face_uv_layout, uv_distortion, UVLayout  # noqa: F401
 from ._src.template.synthetic import FaceProportions, SyntheticScan  # noqa: F401
+from ._src.template.ibug68 import IBUG68_TEMPLATE  # noqa: F401
 __all__ = ["export_template", "face_uv_layout", "FaceProportions", "FRONTAL_REGIONS", "human_likeness",
-           "ICT_FDP_VERTICES", "ICT_INNER_LIP_VERTICES", "ICT_PART_RANGES", "ICT_SKIN_VERTICES", "import_ict",
-           "load_template_dir", "REGIONS", "save_template", "SyntheticScan", "THICKNESS_FACTOR", "uv_distortion",
-           "UVLayout"]
+           "IBUG68_TEMPLATE", "ICT_FDP_VERTICES", "ICT_INNER_LIP_VERTICES", "ICT_PART_RANGES", "ICT_SKIN_VERTICES",
+           "import_ict", "load_template_dir", "REGIONS", "save_template", "SyntheticScan", "THICKNESS_FACTOR",
+           "uv_distortion", "UVLayout"]

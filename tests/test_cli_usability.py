@@ -74,6 +74,17 @@ def test_bare_facewarp_prints_the_usage_and_the_commands(capsys):
 
 
 # ----------------------------------------------------------------------------- global options after the command
+def _value_for(a) -> str:
+    """A value the option's type accepts: a file name, or a number for numeric options."""
+    for v in ("x.usda" if "usd" in str(a.metavar).lower() else "x", "1"):
+        try:
+            if a.type is None or a.type(v) is not None:
+                return v
+        except (argparse.ArgumentTypeError, ValueError, TypeError):
+            continue
+    return "x"
+
+
 @pytest.mark.parametrize("words, p", leaves(), ids=[" ".join(w) for w, _ in leaves()])
 def test_global_options_parse_after_the_command(words, p):
     """Every command takes --device, --json and --verbose after its own arguments too, with the
@@ -86,7 +97,7 @@ def test_global_options_parse_after_the_command(words, p):
         if not a.option_strings:
             required += [] if a.nargs == "*" else ["x"]
         elif a.required:
-            required += [a.option_strings[-1], "x.usda" if "usd" in str(a.metavar).lower() else "x"]
+            required += [a.option_strings[-1], _value_for(a)]
     groups = [g for g in p._mutually_exclusive_groups if g.required]
     for g in groups:
         required += [g._group_actions[0].option_strings[-1], "x"]
@@ -157,7 +168,7 @@ def test_the_build_folder_is_BUILD_everywhere():
                 assert a.metavar == "BUILD", (words, a.metavar)
                 seen.append(" ".join(words))
             assert a.metavar not in ("BUILD_DIR", "head", "build"), (words, a.metavar)
-    assert set(seen) == {"rig", "simulate", "drive", "batch simulate"}, seen
+    assert set(seen) == {"rig", "simulate", "drive", "live", "batch simulate"}, seen
 
 
 # ----------------------------------------------------------------------------- one muscle-name rule

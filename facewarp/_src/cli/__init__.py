@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import argparse
 
-from . import adapt, batch, build, demo, drive, landmarks, mesh, morph, retarget, rig, simulate, template
+from . import adapt, batch, build, demo, drive, landmarks, live, mesh, morph, retarget, rig, simulate, template
 from .common import Parser, add_global_options
 
 __all__ = ["COMMAND_MODULES", "build_parser", "leaf_commands"]
 
 # in the order of ``facewarp --help``
-COMMAND_MODULES = (template, mesh, landmarks, adapt, build, rig, simulate, drive, demo, morph, retarget, batch)
+COMMAND_MODULES = (template, mesh, landmarks, adapt, build, rig, simulate, drive, live, demo, morph, retarget, batch)
 
 
 def leaf_commands(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.ArgumentParser]]:

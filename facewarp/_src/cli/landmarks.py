@@ -13,8 +13,9 @@ def add_parser(sub) -> None:
     lsub = lmp.add_subparsers(dest="landmarks_command", metavar="ACTION", parser_class=Parser)
     lsub.required = True
     c = lsub.add_parser("check", example="facewarp landmarks check scan_landmarks.json --units mm",
-                        help="load and validate a landmark file (JSON or MeshLab .pp)")
-    c.add_argument("landmarks", type=Path, metavar="LANDMARKS.json|.pp", help='JSON {"3.7": [x, y, z], ...} or MeshLab picked points .pp')
+                        help="load and validate a landmark file (JSON, MeshLab .pp, or the 68/51-point scheme)")
+    c.add_argument("landmarks", type=Path, metavar="LANDMARKS.json|.pp|.pts", help='JSON {"3.7": [x, y, z], ...}, MeshLab picked points .pp, or the '
+                   "68- or 51-point scheme (a JSON list of [x, y, z] or an iBUG .pts file; shown as the FDPs they mark)")
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=run_check)
     dt = lsub.add_parser("detect", example="facewarp landmarks detect scan.ply --units mm --out scan_landmarks.json",
