@@ -832,6 +832,31 @@ def switching(r: Results) -> str:
                      "FDP distance to converged, max / median [mm]", "retried frames"], rows) + "\n" + note + "\n"
 
 
+@table("live")
+def live(r: Results) -> str:
+    """``facewarp live`` fed a 60 fps Live Link Face stream (``live_cpu.json`` of ``python -m benchmarks live``):
+    per solver setting the frames simulated and dropped, a frame's wall and process CPU time."""
+    doc = r.doc("live_cpu")
+    f = doc["figures"]
+    rows = []
+    for run in f["runs"]:
+        mode, _, k = run["mode"].partition(":")
+        label = "converged (the default)" if mode == "default" else f"`--iterations {k}`"
+        wall, cpu = run["frame_cost_ms"]["frame"], run["frame_cpu_ms"]["frame"]
+        rows.append([label, f"{run['simulated']} of {run['frames_in']} / {100 * run['dropped_fraction']:.1f} %",
+                     f"{wall['median']:.1f} ms", f"{cpu['median']:.1f} / {cpu['p90']:.1f} ms",
+                     f"{run['frame_cost_ms']['step']['median']:.1f} ms"])
+    loads = [run["load_average_at_start"] for run in f["runs"] if run.get("load_average_at_start") is not None]
+    note = (f"{f['seconds']:g} s of a {f['stream_fps']:g} fps stream per setting, {f['head']}"
+            + (f" ({f['tets']} tets; ARKit table: {len(f['arkit_shapes_solved'])} shapes solved)"
+               if "tets" in f else "")
+            + ", "
+            f"{doc['machine'].get('cores', '?')}-core {doc['machine'].get('cpu', 'CPU')}, {doc['date'][:10]}"
+            + (f", load average {min(loads):.0f}-{max(loads):.0f} at the starts" if loads else "") + ".")
+    return _rows_md(["solver setting", "frames simulated of those in / dropped", "wall time a frame, median",
+                     "CPU time a frame, median / p90", "the solver's step (wall), median"], rows) + "\n" + note + "\n"
+
+
 def render(name: str, results: Results | None = None) -> str:
     """The Markdown of table ``name``."""
     if name not in TABLES:

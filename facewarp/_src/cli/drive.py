@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import FrameBar, emit, fps, out_dir_or_usd
+from .common import FrameBar, emit, fps, out_dir_or_usd, progress_lines
 
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    dr = sub.add_parser(
-        "drive", help="drive a `build` output from data: muscle activations and jaw solved per frame from markers, "
+    dr = sub.add_parser("drive", example="facewarp drive build --arkit take.csv --out take.usdc",
+                        help="drive a `build` output from data: muscle activations and jaw solved per frame from markers, "
                       "or ARKit curves through the head's ARKit table",
         epilog="Formats (docs: guides/driving): markers JSON {\"fps\": 30, \"units\": \"mm\", \"markers\": "
                "{\"2.1\": [[x, y, z], null, ...], \"v123\": [...]}}; markers CSV: time (s) or frame column, then "
@@ -44,8 +44,10 @@ def add_parser(sub) -> None:
 def run(args):
     from ..jobs.drive import drive_files
 
-    bar = FrameBar(not args.json)
-    table_bar = FrameBar(not args.json, desc="ARKit table (once per build)", unit="shape")
+    writer = progress_lines("drive", "reading the take and the build (the first run on a machine compiles Warp's "
+                                    "kernels)", not args.json)  # off a terminal: one writer for both bars
+    bar = FrameBar(not args.json, lines=writer)
+    table_bar = FrameBar(not args.json, desc="ARKit table (once per build)", unit="shape", lines=writer)
     try:
         rep = drive_files(args.build, args.out, markers=args.markers, arkit=args.arkit, mediapipe=args.mediapipe,
                           map=args.map, units=args.units, fps=args.fps, rigid=not args.no_rigid, device=args.device,
@@ -53,6 +55,8 @@ def run(args):
     finally:
         table_bar.close()
         bar.close()
+        if writer is not None:
+            writer.close()
     lines = [f"drove {args.build} from {rep['source']} ({rep['kind']}): {rep['frames']} frames at {rep['fps']:g} fps "
              f"in {rep['seconds']:.1f} s on {rep['device']}"]
     e = rep.get("error_mm")

@@ -160,12 +160,12 @@ def activation_vector(names: list[str], activations) -> np.ndarray:
     if hasattr(activations, "activation") and hasattr(activations, "jaw_u"):
         return expression_activations(names, activations)
     if isinstance(activations, dict):
+        from ..expressions import muscle_instances
+
         out = np.zeros(len(names), np.float32)
         for key, value in activations.items():
-            hit = [i for i, n in enumerate(names) if n == key or (n.endswith(("_L", "_R")) and n[:-2] == key)]
-            if not hit:
-                raise InputError(f"activations: unknown muscle {key!r} (known: {', '.join(sorted(set(names)))})")
-            out[hit] = _unit_value(f"activations[{key!r}]", value)
+            hit = set(muscle_instances(key, names, what="activations"))
+            out[[i for i, n in enumerate(names) if n in hit]] = _unit_value(f"activations[{key!r}]", value)
         return out
     a = np.asarray(activations, dtype=np.float64)
     if a.shape != (len(names),):
