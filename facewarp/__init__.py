@@ -107,6 +107,8 @@ _NAMES = {
     "write_head_mjcf": "coupling.mjcf", "scene_mjcf": "coupling.mjcf", "MujocoSkin": "coupling.mujoco_skin",
     # blendshape rigs baked from the physics
     "BlendshapeRig": "bake.blendshapes", "bake_blendshapes": "bake.blendshapes", "static_surface": "bake.blendshapes",
+    "load_rig": "bake.blendshapes", "save_rig": "bake.blendshapes", "normal_offsets": "bake.blendshapes",
+    "RigTake": "bake.take", "rig_files": "jobs.rig",
     # pictures
     "colormap": "present.render", "render_mesh": "present.render", "save_png": "present.render",
     "render_strip": "present.strips", "render_anatomy": "present.anatomy", "render_previews": "present.template",
@@ -146,7 +148,10 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.coupling.mjcf import head_mjcf, scene_mjcf, write_head_mjcf
     from ._src.coupling.mujoco import MujocoJaw
     from ._src.coupling.mujoco_skin import MujocoSkin
-    from ._src.bake.blendshapes import BlendshapeRig, bake_blendshapes, static_surface
+    from ._src.bake.blendshapes import (BlendshapeRig, bake_blendshapes, load_rig, normal_offsets, save_rig,
+                                        static_surface)
+    from ._src.bake.take import RigTake
+    from ._src.jobs.rig import rig_files
     from ._src.expressions import REFERENCE_JAW_LEVER, expression_from_activations, jaw_angle_for_drop, jaw_lever
     from ._src.expressions import (MUSCLES, PRESETS, Expression, Segment, Timeline, blend, load_sequence, preset,
                                    thesis_sequence, timeline_for, timeline_from_spec)

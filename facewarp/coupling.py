@@ -23,6 +23,7 @@ from ._src.coupling.mjcf import (  # noqa: F401
     mandible_geometry,
     mandible_inertia,
     scene_mjcf,
+    skin_vertex_split,
     up_rotation,
     write_head_mjcf,
 )

@@ -47,6 +47,10 @@ from ._src.present.template import (  # noqa: F401
 from ._src.present.plot import (  # noqa: F401
     line_chart,
 )
+from ._src.present.looks import (  # noqa: F401
+    COLORS,
+    refine_ball,
+)
 from ._src.present.animation import (  # noqa: F401
     FACE_HEIGHT,
     FaceView,
@@ -55,6 +59,7 @@ from ._src.present.animation import (  # noqa: F401
 )
 
 __all__ = ["color_difference", "flat_color_difference", "likeness_views", "srgb_to_lab",
+           "COLORS", "refine_ball",
            "CAVITY", "FACE_HEIGHT", "GUMS", "LIPS", "MOUTH", "SKIN", "SKIN_COLOR", "TEETH", "TONGUE", "VIEWS",
            "FaceView",
            "colored_scene", "colormap", "displacement_max", "expression_sheet", "frames_sheet", "head_colors",

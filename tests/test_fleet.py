@@ -179,9 +179,10 @@ def test_rig_step_after_build_then_skipped_when_done(first, scans, capsys):
     assert r["seconds"] > 0 and r["worker"]["pid"] > 0 and r["worker"]["host"]
     assert r["params"] == {"formats": ["usda", "glb"], "inbetweens": 0, "muscles": RIG[1].split(",")}
     folder = first / e["folder"] / "rig"
-    assert sorted(p.name for p in folder.iterdir()) == ["report.json", "rig.glb", "rig.usda"]
+    # the USD file's skin texture beside it (rig_skin.png, named by the file; the glTF embeds its own)
+    assert sorted(p.name for p in folder.iterdir()) == ["report.json", "rig.glb", "rig.usda", "rig_skin.png"]
     assert sorted(r["outputs"]) == sorted(str((folder / n).relative_to(first)) for n in ("report.json", "rig.glb",
-                                                                                           "rig.usda"))
+                                                                                           "rig.usda", "rig_skin.png"))
     assert (folder / "rig.glb").read_bytes()[:4] == b"glTF" and (folder / "rig.usda").read_text().startswith("#usda")
     job = json.loads((folder / "report.json").read_text())  # the rig job's own report, its figures in the summary
     assert job["targets"] == 3 and job["muscles"] == 2 and job["files"] == [str(folder / "rig.usda"),

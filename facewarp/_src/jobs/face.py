@@ -83,7 +83,8 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     step("writing")
     write_anatomy(anatomy, out)
     save_face_rig(out / "face_rig.npz", fr)
-    write_head_mjcf(out / "head.xml", head, jaw=fr.jaw, up=up, prefix=prefix, skin=(fr.head_vertices, fr.head_faces))
+    write_head_mjcf(out / "head.xml", head, jaw=fr.jaw, up=up, prefix=prefix, skin=(fr.head_vertices, fr.head_faces),
+                    skin_texture="texture.png" if getattr(head, "uv", None) is not None else None)  # _copy_texture's
     _copy_texture(head, out)
     q = dict(anatomy.quality)
     q["boundary_conditions"] = {"fixed_nodes": int(fr.fixed.sum()), "held_nodes": int(fr.held.sum()),

@@ -201,6 +201,11 @@ class _Replay:
     def jaw_angles(self):
         return self._f.jaw[self.k] if self.k is not None else np.zeros(2, np.float32)
 
+    @property
+    def eye_gaze(self):
+        """The eyes' (yaw, pitch) [rad], (2, 2) float32: the live loop does not turn the eyes yet (rest)."""
+        return np.zeros((2, 2), np.float32)
+
 
 def _write_usd(path: Path, sim, frames, rest_curves) -> None:
     from .animation import UsdAnimation
