@@ -438,7 +438,8 @@ def test_guide_arkit_example_without_shared_data(no_ict, tmp_path, monkeypatch, 
     ids = [str(i) for i in z["fdp_ids"]]
     corner = z["fdp_points"][:, ids.index("8.3")]
     chin = z["fdp_points"][:, ids.index("2.1")]
-    assert np.linalg.norm(corner - corner[0], axis=1).max() > 3e-3 and np.linalg.norm(chin - chin[0], axis=1).max() > 3e-3
+    assert np.linalg.norm(corner - corner[0], axis=1).max() > 3e-3
+    assert np.linalg.norm(chin - chin[0], axis=1).max() > 3e-3
     # a take needing one more shape on a build whose cache cannot be written: solved, driven, a note
     ro = tmp_path / "ro_build"
     shutil.copytree("build", ro)
