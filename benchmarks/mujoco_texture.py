@@ -1,7 +1,7 @@
 """MuJoCo shows the person: a head's head.xml with its skin texture, rendered offscreen, against the texture.
 
 A head (an ``adapt`` output folder, or ``default``) and its ``build`` folder: head.xml is written
-with the skin's texture coordinates and ``texture.png`` (``fw.write_head_mjcf(skin=(V, F, uv,
+with the skin's texture coordinates and ``texture.png`` (``fw.coupling.write_head_mjcf(skin=(V, F, uv,
 face_uv), skin_texture=...)``) and scene.xml's camera renders it (MUJOCO_GL, egl by default) lit,
 as a user sees it (the picture), and unlit (lights and headlight off, the skin's material
 emissive: a pixel is the colour MuJoCo samples from the texture), plus a depth image. Each skin
@@ -66,7 +66,7 @@ def run(head_dir: str, build: Path, size: int, picture: Path | None) -> dict:
         tmp = Path(tmp)
         shutil.copyfile(tex, tmp / "texture.png")
         skin = (fr.head_vertices, fr.head_faces, fr.head_uv, fr.head_face_uv)
-        fw.write_head_mjcf(tmp / "head.xml", head, jaw=fr.jaw, skin=skin, skin_texture="texture.png")
+        fw.coupling.write_head_mjcf(tmp / "head.xml", head, jaw=fr.jaw, skin=skin, skin_texture="texture.png")
         m = mujoco.MjModel.from_xml_path(str(tmp / "scene.xml"))
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)

@@ -1,11 +1,11 @@
 """The ARKit rig against the simulator: one bake of the ARKit-named and the muscle shapes, and how far its linear blend lands from the simulated face.
 
 For a build folder and its ARKit table (``fw.arkit_table``, cached in the build; built here when
-missing: minutes), the rig is baked once with ``shapes="both"`` (``fw.bake_blendshapes``: the
+missing: minutes), the rig is baked once with ``shapes="both"`` (``fw.blendshapes.bake_blendshapes``: the
 shapes the table solved, every muscle, the jaw corrective), timed. Then random sparse blends (a
 generator of our own, ``--seed``): each picks 1..``--max-active`` of the baked ARKit shapes with
 weights uniform in [0.2, 1]; the simulated face is the converged static face
-(``fw.static_surface``) of the table's blended controls (``ArkitTable.controls``: activations and
+(``fw.blendshapes.static_surface``) of the table's blended controls (``ArkitTable.controls``: activations and
 jaw blended in control space, clamped), the rig's face is its linear blend
 (``BlendshapeRig.evaluate_arkit``: offsets summed in the bind pose, the jaw joint at the blended
 opening). Reported: per blend the p95 and the largest vertex distance [mm] over the skin, and the
@@ -34,7 +34,7 @@ def run(build: Path, blends: int, max_active: int, seed: int, device: str) -> di
     table = fw.arkit_table(sim, cache=build)
     table_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    rig = fw.bake_blendshapes(fr, shapes="both", arkit=table, device=device)
+    rig = fw.blendshapes.bake_blendshapes(fr, shapes="both", arkit=table, device=device)
     bake_s = time.perf_counter() - t0
     names = rig.arkit_names
     rng = np.random.default_rng(seed)
@@ -49,7 +49,7 @@ def run(build: Path, blends: int, max_active: int, seed: int, device: str) -> di
             W[list(fw.ARKIT_NAMES).index(n)] = v
         a, j = table.controls(W)
         acts = {sim.muscle_names[m]: float(a[0, m]) for m in np.flatnonzero(a[0] > 0)}
-        V_sim, frames = fw.static_surface(sim, acts, (float(j[0, 0]), float(j[0, 1])))
+        V_sim, frames = fw.blendshapes.static_surface(sim, acts, (float(j[0, 0]), float(j[0, 1])))
         V_rig = rig.evaluate_arkit(w)
         d = 1e3 * np.linalg.norm(V_rig - V_sim, axis=1)
         moved = 1e3 * np.linalg.norm(V_sim - rig.rest, axis=1).max()

@@ -1,7 +1,7 @@
 """A driven ARKit take as an animation of the ARKit rig: how far the rig's clip lands from the simulated take.
 
 A take of our own (``--seconds`` at 30 fps: sine bumps of a left and a right smile, the jaw, the
-inner brows and a blink, overlapping; written as a Live Link Face CSV with ``fw.save_livelink_csv``)
+inner brows and a blink, overlapping; written as a Live Link Face CSV with ``fw.takes.save_livelink_csv``)
 is driven on a build through its ARKit table (``facewarp drive BUILD --arkit take.csv --rig RIGDIR
 --out DIR``, the CLI as a user runs it), with a ``facewarp rig --shapes arkit|both --out RIGDIR``
 rig of the same build. The drive's report holds ``rig_take``: the distance of each skin vertex of
@@ -31,12 +31,12 @@ BUMPS = (("mouthSmileLeft", 0.6, 1.0, 0.9), ("mouthSmileRight", 0.7, 1.0, 0.8), 
 """(ARKit name, centre [s], width [s], peak weight) of each curve of the take."""
 
 
-def take(seconds: float, fps: float = 30.0) -> fw.ArkitTrack:
+def take(seconds: float, fps: float = 30.0) -> fw.takes.ArkitTrack:
     t = np.arange(int(round(seconds * fps))) / fps
     W = np.zeros((len(t), len(fw.ARKIT_NAMES)))
     for name, c, w, a in BUMPS:
         W[:, list(fw.ARKIT_NAMES).index(name)] = a * np.sin(np.pi * np.clip((t - c + w / 2) / w, 0, 1)) ** 2
-    return fw.ArkitTrack(fps, W, source="rig_take")
+    return fw.takes.ArkitTrack(fps, W, source="rig_take")
 
 
 def main(argv=None) -> int:
@@ -48,7 +48,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / "take.csv"
-        fw.save_livelink_csv(take(a.seconds), csv)
+        fw.takes.save_livelink_csv(take(a.seconds), csv)
         out = Path(tmp) / "take"
         r = subprocess.run([sys.executable, "-m", "facewarp", "drive", str(a.build), "--arkit", str(csv), "--rig",
                             str(a.rig), "--out", str(out)], capture_output=True, text=True)

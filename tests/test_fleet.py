@@ -30,8 +30,8 @@ def scans(tmp_path_factory):
     d = tmp_path_factory.mktemp("scans")
     for i in (1, 2):
         s = fw.synthetic_scan(i, faces=4000)
-        fw.save_obj(d / f"good{i}.obj", s.vertices, s.faces)
-        fw.save_landmarks_json(d / f"good{i}_landmarks.json", s.landmarks)
+        fw.geometry.save_obj(d / f"good{i}.obj", s.vertices, s.faces)
+        fw.geometry.save_landmarks_json(d / f"good{i}_landmarks.json", s.landmarks)
     (d / "broken.obj").write_text("this is not a mesh\n")
     return d
 
@@ -445,8 +445,8 @@ def test_a_second_run_on_one_out_is_refused_and_mm_scans_are_read_as_adapt_reads
     import time
 
     s = fw.synthetic_scan(3, faces=4000)
-    fw.save_obj(tmp_path / "mm.obj", s.vertices * 1e3, s.faces)
-    fw.save_landmarks_json(tmp_path / "mm_landmarks.json", {k: v * 1e3 for k, v in s.landmarks.items()})
+    fw.geometry.save_obj(tmp_path / "mm.obj", s.vertices * 1e3, s.faces)
+    fw.geometry.save_landmarks_json(tmp_path / "mm_landmarks.json", {k: v * 1e3 for k, v in s.landmarks.items()})
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "facewarp", "--json", "batch", "run", str(tmp_path / "mm.obj"),
                              "--out", str(out), "--steps", "adapt", "--levels", "1", "--workers", "1"],

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import facewarp as fw
-from facewarp.coupling import Z_UP, HeadPose, head_mjcf, mandible_geometry, mandible_inertia, scene_mjcf, write_head_mjcf
+from facewarp.coupling import Z_UP, HeadPose, mandible_geometry, mandible_inertia, scene_mjcf, write_head_mjcf
+from facewarp import head_mjcf
 
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     # headless: MuJoCo's offscreen renderer through EGL or OSMesa, where the library is there
@@ -54,7 +55,7 @@ def test_mandible_mass_is_a_human_mandible(head, model):
     # a wet adult mandible weighs about 0.1-0.2 kg; its centre lies below and in front of the condyles
     assert 0.05 < inert.mass < 0.3, inert.mass
     assert model.body("mandible").mass[0] == pytest.approx(inert.mass, rel=1e-5)
-    jaw = fw.JawKinematic.from_landmarks(head.condyles, head.landmarks())
+    jaw = fw.anatomy.JawKinematic.from_landmarks(head.condyles, head.landmarks())
     assert inert.center[1] < jaw.pivot[1] and inert.center[2] > jaw.pivot[2]
     assert np.all(np.linalg.eigvalsh(inert.inertia) > 0)
 
@@ -65,7 +66,7 @@ def test_hinge_moves_the_chin_as_the_kinematic_jaw(head, model, angle):
     d.qpos[0] = angle
     mujoco.mj_kinematics(model, d)
     b = model.body("mandible").id
-    jaw = fw.JawKinematic.from_landmarks(head.condyles, head.landmarks())
+    jaw = fw.anatomy.JawKinematic.from_landmarks(head.condyles, head.landmarks())
     chin = head.landmarks()["2.1"]
     moved = d.xmat[b].reshape(3, 3) @ (chin - jaw.pivot) + d.xpos[b]  # Z-up world: the head frame turned by Z_UP
     np.testing.assert_allclose(moved, Z_UP @ jaw.apply(chin[None], np.ones(1), angle)[0], atol=1e-9)

@@ -8,7 +8,8 @@ import trimesh
 from PIL import Image
 
 from facewarp import InputError
-from facewarp.render import colormap, render_mesh, render_views, save_png, shared_hits
+from facewarp.render import colormap, render_views, shared_hits
+from facewarp import render_mesh, save_png
 
 SIZE = 64
 

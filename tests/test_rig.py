@@ -29,7 +29,7 @@ def made(tmp_path_factory):
     for ext in ("glb", "usda"):
         assert main(["--json", "rig", str(d / "build"), "--out", str(d / f"rig.{ext}"), "--muscles", ",".join(MUSCLES),
                      "--inbetweens", "1"]) == 0
-    rig = fw.bake_blendshapes(fw.load_face_rig(d / "build"), muscles=MUSCLES, inbetweens=1)
+    rig = fw.blendshapes.bake_blendshapes(fw.load_face_rig(d / "build"), muscles=MUSCLES, inbetweens=1)
     return d, rig
 
 
@@ -123,7 +123,7 @@ def test_gltf_deforms_as_the_linear_rig(made):
     uv = acc(prim["attributes"]["TEXCOORD_0"])
     assert uv.shape == (len(P), 2) and 0 <= uv.min() and uv.max() <= 1
     # normal deltas per target: the change of the unit normals of the full target
-    from facewarp import normal_offsets
+    from facewarp.blendshapes import normal_offsets
 
     ND = acc(prim["targets"][1]["NORMAL"]).astype(np.float64)
     np.testing.assert_allclose(ND, normal_offsets(rig, rig.shapes[MUSCLES[0]][-1][1])[src], atol=1e-6)
@@ -253,7 +253,7 @@ def test_rig_errors(made, tmp_path, capsys):
 # ---------------------------------------------------------------------------------------------- ARKit, one bake
 def _table(fr, rows: dict):
     """A small ARKit table of this head: ARKit name -> ({muscle: activation}, (opening, side) [rad])."""
-    from facewarp import ArkitTable
+    from facewarp.takes import ArkitTable
 
     names = list(fw.ARKIT_NAMES)
     muscles = list(fw.FaceSimulator(fr).muscle_names)
@@ -280,7 +280,7 @@ ROWS = {"mouthSmileLeft": ({"zygomatic_major_L": 0.8}, (0.0, 0.0)),
 
 @pytest.fixture(scope="module")
 def arkit_made(made):
-    from facewarp import rig_files
+    from facewarp.blendshapes import rig_files
 
     d, _ = made
     fr = fw.load_face_rig(d / "build")
@@ -317,10 +317,10 @@ def test_one_bake_writes_usd_gltf_and_report_with_arkit_names(arkit_made):
 def test_arkit_shapes_land_the_converged_face(arkit_made, made):
     """Each ARKit shape at weight 1, through the jaw joint at its opening, is the simulator's
     converged face of its row's controls; the glTF clip's jaw follows the weights."""
-    from facewarp import static_surface
+    from facewarp.blendshapes import static_surface
 
     out, rep, fr = arkit_made
-    rig = fw.bake_blendshapes(fr, shapes="arkit", arkit=_table(fr, ROWS))
+    rig = fw.blendshapes.bake_blendshapes(fr, shapes="arkit", arkit=_table(fr, ROWS))
     assert rig.arkit_names == [n for n in fw.ARKIT_NAMES if n in ROWS] and rig.muscle_names == []
     sim = fw.FaceSimulator(fr)
     for n, (acts, jaw) in ROWS.items():
@@ -362,9 +362,9 @@ def test_rig_refuses_up_front(made, tmp_path, capsys):
     ro.write_bytes(b"old")
     ro.chmod(0o444)
     take = tmp_path / "take.csv"
-    from facewarp import save_livelink_csv
+    from facewarp.takes import save_livelink_csv
 
-    save_livelink_csv(fw.ArkitTrack(30.0, np.zeros((40, len(fw.ARKIT_NAMES)))), take)
+    save_livelink_csv(fw.takes.ArkitTrack(30.0, np.zeros((40, len(fw.ARKIT_NAMES)))), take)
     lock = tmp_path / ".held.glb.facewarp-lock"
     fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
     fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -393,7 +393,7 @@ def test_a_driven_take_plays_on_the_rig(arkit_made, tmp_path):
     """The baked rig read back from its folder (rig.npz), a held ARKit take recorded on it by the
     RigTake sink: the take's last frames match the simulated face (the shape is that converged
     face), and the rig with the take as its animation is written as glTF and UsdSkel."""
-    from facewarp import RigTake, load_rig
+    from facewarp.blendshapes import RigTake, load_rig
 
     out, rep, fr = arkit_made
     rig = load_rig(out)

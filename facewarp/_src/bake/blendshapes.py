@@ -14,7 +14,7 @@ is a corrective shape ``jaw_open`` driven by ``angle / jaw_angle`` (in the bind 
 through the per-vertex skinning matrix so that it lands the baked opening exactly).
 
 **ARKit shapes** (``shapes="arkit"`` or ``"both"``, with the head's
-:class:`~facewarp.ArkitTable`): each of the 52 ARKit-named shapes the table solved is the converged
+:class:`~facewarp.takes.ArkitTable`): each of the 52 ARKit-named shapes the table solved is the converged
 face of its row's activations and jaw (opening, side), baked like the jaw corrective: in the bind
 pose, through the skinning of its own opening, so that ``LBS_jaw(rest + D_i)`` at the opening
 ``jaw_i`` lands the converged face exactly. A frame of ARKit weights ``w`` is then
@@ -196,7 +196,7 @@ def bake_blendshapes(fr, *, muscles=None, inbetweens: int = 0, jaw_angle: float 
         jaw_angle: Opening [rad] of the jaw corrective (0 < angle <= 60 deg).
         shapes: ``"muscles"`` (each muscle alone and the jaw corrective), ``"arkit"`` (the ARKit
             shapes of ``arkit``) or ``"both"`` (:data:`RIG_SHAPE_SETS`).
-        arkit: The head's :class:`~facewarp.ArkitTable` (:func:`~facewarp.arkit_table`); needed for
+        arkit: The head's :class:`~facewarp.takes.ArkitTable` (:func:`~facewarp.arkit_table`); needed for
             the ARKit shapes.
         device: Warp device.
         tol, max_frames: Convergence of each static shape (:func:`static_surface`).

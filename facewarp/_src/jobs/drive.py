@@ -4,7 +4,7 @@
 Steps: the take is read and checked first (:mod:`~facewarp._src.drive.formats`), then the face
 rig; a marker take's points are checked against the head (FDP ids it has, vertices in range), its
 rigid head motion removed when it has three or more stable points
-(:func:`~facewarp.remove_head_motion`), and :func:`~facewarp.drive` solves and plays it through
+(:func:`~facewarp.takes.remove_head_motion`), and :func:`~facewarp.drive` solves and plays it through
 the sinks (frames kept, the USD animation streamed). ARKit curves go through the head's ARKit
 table (built once and cached in the build folder).
 

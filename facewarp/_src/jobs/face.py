@@ -66,7 +66,7 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
 
     Writes ``tets.npz``, ``muscles.json``, ``anatomy.json``, ``face_rig.npz``, ``head.xml`` (the
     MuJoCo cranium, mandible and skin for a world with ``up`` axis "z" or "y", names after
-    ``prefix``; :func:`~facewarp.write_head_mjcf`), ``scene.xml`` (the standalone scene that
+    ``prefix``; :func:`~facewarp.coupling.write_head_mjcf`), ``scene.xml`` (the standalone scene that
     includes it), ``texture.png`` (the head's skin texture: baked from its scan, else its preview
     colours with the lips) and ``anatomy.png``; returns the quality report.
     """
@@ -132,7 +132,7 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
 
     ``expression`` is a :class:`~facewarp.Timeline` (what ``facewarp simulate`` builds from its
     ``--expression`` or ``--activations``), an :class:`~facewarp.Expression` (held over the run,
-    :meth:`~facewarp.Timeline.held`), or what :func:`~facewarp.timeline_from_spec` reads: a preset,
+    :meth:`~facewarp.Timeline.held`), or what :func:`~facewarp.expressions.timeline_from_spec` reads: a preset,
     ``"sequence"``, a sequence file, or ``"muscle=value,...,jaw_drop_mm=D"``; ``name`` labels it in
     the report and picture (default: the string, or the expression's name). Chin drops become
     this head's jaw angles by its condyle-to-chin lever, once, where :func:`~facewarp.play` meets

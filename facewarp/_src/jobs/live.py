@@ -4,7 +4,7 @@ take is recorded when it ends.
 
 Each frame the newest packet of the stream (:class:`~facewarp.LiveLink`: what arrived while the
 last frame was simulated is read and dropped, never queued) becomes controls through the head's
-ARKit table, as the offline ARKit drive does (:meth:`~facewarp.ArkitTable.controls`: the 52
+ARKit table, as the offline ARKit drive does (:meth:`~facewarp.takes.ArkitTable.controls`: the 52
 weights blended into muscle activations and jaw angles; the head's yaw, pitch and roll into the
 head pose, :func:`~facewarp._src.drive.arkit.head_rotation_matrix`), and the simulator takes one
 step of ``1 / fps``. Where a frame takes longer than the stream's period the packets in between
@@ -300,7 +300,7 @@ def live_files(build, out, *, port: int = DEFAULT_PORT, host: str = "0.0.0.0", s
         device: Warp device.
         iterations: A fixed solver iteration count per frame (the interactive mode: a fixed cost
             per frame, further from the converged face); None: converged frames.
-        table: The head's :class:`~facewarp.ArkitTable` (default: :func:`~facewarp.arkit_table`
+        table: The head's :class:`~facewarp.takes.ArkitTable` (default: :func:`~facewarp.arkit_table`
             of the build, cached there).
         log: ``f(line)`` for status lines (listening, headless, every few seconds of stream).
         table_progress: ``f(done, total, name)`` while the ARKit table is built (first run on a build).

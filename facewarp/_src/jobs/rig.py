@@ -142,7 +142,7 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
         device: Warp device.
         progress: Optional ``progress(done, total, name)`` per baked shape (and per ARKit table step).
         iris_color: Optional iris RGB (3,) in 0..1, linear, of the files' looks (``present.looks``).
-        table: Optional :class:`~facewarp.ArkitTable` of this head (default: the build's cached
+        table: Optional :class:`~facewarp.takes.ArkitTable` of this head (default: the build's cached
             ``arkit_table.npz``, built when missing).
 
     Raises:

@@ -146,7 +146,7 @@ class FaceSimulator:
     def set_head_pose(self, R, t) -> None:
         """Set the cranium's pose (R (3, 3) rotation, t (3,) [m]) reached at the end of the next
         step; the face, simulated in the head's frame, feels the loads of the accelerating frame
-        (:class:`~facewarp.HeadPose`). :meth:`surface` and :meth:`fdp` answer in the world frame."""
+        (:class:`~facewarp.coupling.HeadPose`). :meth:`surface` and :meth:`fdp` answer in the world frame."""
         self._pose.set(R, t)
 
     def reset(self) -> None:
