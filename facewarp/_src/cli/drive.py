@@ -77,8 +77,9 @@ def run(args):
                                                      else " (built now, not cached: see the note)"))
     reach = rep.get("reach", [])
     for r in reach[:8]:  # each ARKit shape the take uses: what reaches it and how closely
-        lines.append(f"  reach {r['name']}: {r['by']}" + (f", {r['residual_mm']:.2f} mm RMS from its shape "
-                                                          f"({r['target_mm']:.2f} mm)" if r["residual_mm"] is not None else ""))
+        how = ("" if r["residual_mm"] is None
+               else f", {r['residual_mm']:.2f} mm RMS from its shape ({r['target_mm']:.2f} mm)")
+        lines.append(f"  reach {r['name']}: {r['by']}{how}")
     if len(reach) > 8:
         lines.append(f"  ... {len(reach) - 8} more shapes' reach in report.json")
     warnings = rep.get("warnings", [])

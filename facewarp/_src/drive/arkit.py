@@ -265,7 +265,8 @@ class ArkitTable:
         a, j = self.controls(W)
         statics = _Statics(sim, _head_fdps(sim.fr)[1], tol, max_frames)
         target = self.targets_for(W)[0]
-        x, res, _ = _refine_static(statics, self.basis, self._effort(), np.r_[a[0], j[0]].astype(np.float64), target, rounds)
+        x0 = np.r_[a[0], j[0]].astype(np.float64)
+        x, res, _ = _refine_static(statics, self.basis, self._effort(), x0, target, rounds)
         sim.reset()
         return x[:-2].astype(np.float32), x[-2:].astype(np.float32), res
 
@@ -373,7 +374,8 @@ def _resolve_source(shapes, source: str, ict_dir):
                 raise InputError(f"shapes: {n!r} is not an ARKit blendshape name")
             D = np.asarray(D, np.float64) if not isinstance(D, str) else None
             if D is None or D.shape != (11248, 3) or not np.isfinite(D).all():
-                raise InputError(f"shapes[{n!r}]: expected an ICT-skin displacement, shape (11248, 3), finite, in metres")
+                raise InputError(f"shapes[{n!r}]: expected an ICT-skin displacement, shape (11248, 3), finite, "
+                                 "in metres")
             out[n] = D
         return "custom", out
     names = list(ARKIT_NAMES) if shapes is None else _names_arg(shapes, "shapes")
@@ -751,7 +753,8 @@ def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, track
     warnings, moves = arkit_warnings(track, table)
     if not moves:
         used = [n for n, w in zip(table.names, np.asarray(track.weights).max(axis=0)) if w > 0]
-        what = (f"none of the {len(used)} ARKit shapes it uses ({', '.join(used[:4])}{', ...' if len(used) > 4 else ''})"
+        listed = ", ".join(used[:4]) + (", ..." if len(used) > 4 else "")
+        what = (f"none of the {len(used)} ARKit shapes it uses ({listed})"
                 " is mapped on this head" if used else "every ARKit weight is 0")
         raise InputError(f"{track.source or 'track'}: the face cannot move: {what}, and the head and eyes do not turn")
     nf = track.frames

@@ -418,7 +418,8 @@ def load_arkit_basis(path=None) -> ArkitBasis:
     try:
         with np.load(path, allow_pickle=False) as z:
             if int(z["version"]) != _BASIS_VERSION:
-                raise InputError(f"{path}: ARKit basis version {int(z['version'])}, this facewarp reads {_BASIS_VERSION}")
+                raise InputError(f"{path}: ARKit basis version {int(z['version'])}, "
+                                 f"this facewarp reads {_BASIS_VERSION}")
             names = tuple(str(n) for n in z["names"])
             step = float(z["step_m"])
             skin_q, fdp_q = z["skin"], z["fdp"]
@@ -435,7 +436,8 @@ def load_arkit_basis(path=None) -> ArkitBasis:
         raise
     except Exception as e:  # a damaged file: one line
         raise InputError(f"{path}: not a facewarp ARKit basis ({type(e).__name__}: {e})") from None
-    if any(n not in ICT_ARKIT_SHAPES for n in names) or b.skin and next(iter(b.skin.values())).shape != b.vertices.shape:
+    wrong = b.skin and next(iter(b.skin.values())).shape != b.vertices.shape
+    if any(n not in ICT_ARKIT_SHAPES for n in names) or wrong:
         raise InputError(f"{path}: not a facewarp ARKit basis (unknown names or wrong shapes)")
     _BASIS_MEMO[memo] = b
     return b

@@ -186,7 +186,8 @@ class UsdAnimation(Sink):
         """Write the simulator's current state as the frame at ``time_s`` [s]."""
         a, j = sim_controls(sim)
         try:
-            self.writer.add_frame(time_s, sim.surface(), part_transforms=part_transforms(self.fr, j, sim.eye_gaze),
+            parts = part_transforms(self.fr, j, getattr(sim, "eye_gaze", None))
+            self.writer.add_frame(time_s, sim.surface(), part_transforms=parts,
                                   muscle_points=muscle_curves(sim, self.samples), activations=a,
                                   tet_points=sim.positions() if self.tets else None)
         except self._error as e:

@@ -214,7 +214,7 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
 
         step = table_progress or (lambda done, total, name: None)
         used = [n for n, w in zip(track.names, np.asarray(track.weights).max(axis=0)) if w > 0]
-        table = arkit_table(sim, cache=fr_dir, progress=step, solve=used)  # the shapes the take uses, added to the cache
+        table = arkit_table(sim, cache=fr_dir, progress=step, solve=used)  # the take's shapes, added to the cache
     from ..drive.inverse import drive
 
     keep = None if usd_out else FrameRecorder()

@@ -436,6 +436,7 @@ def _stream(link, sim, table, view, *, seconds, timeout, log, ready, rotation) -
             R_goal = _head_goal(R_sim, R, (f.elapsed - last_t) if last_t is not None else None, 1.0 / sim.fps)
             sim.set_activations(a[0])
             sim.set_jaw(float(j[0, 0]), float(j[0, 1]))
+            sim.set_eye_gaze(table.gaze_for(f.weights)[0])  # the eyeLook weights turn the eyeballs
             sim.set_head_pose(R_goal, np.zeros(3))
             t2, c2 = time.perf_counter(), time.process_time()
             if _step_easing_head(sim, R_sim, R_goal) is not None:
