@@ -78,6 +78,7 @@ _NAMES = {
     "FaceBatch": "sim.batch",
     # one playback path: a timeline played on a simulator, each frame handed to sinks
     "play": "sim.play", "FrameRecorder": "sim.play", "PlayStats": "sim.play", "Sink": "sim.play",
+    "Source": "sim.play",
     # USD animations streamed while simulating (a sink of play)
     "UsdAnimation": "jobs.animation", "play_timeline": "jobs.animation",
     # lower level
@@ -95,7 +96,7 @@ _NAMES = {
     "ARKIT_OUT_OF_REACH": "drive.arkit", "ICT_ARKIT_SHAPES": "importers.ict_arkit",
     "load_ict_displacements": "importers.ict_arkit", "transfer_ict_displacements": "importers.ict_arkit",
     "ict_shape_dirs": "importers.ict_arkit",
-    "Tracker": "drive.inverse", "drive": "drive.inverse", "DriveResult": "drive.inverse",
+    "Tracker": "drive.inverse", "drive": "drive.perform", "DriveResult": "drive.inverse",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
@@ -161,7 +162,8 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.physics.muscle_rig import MuscleRig
     from ._src.physics.muscle_stage import MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
-    from ._src.drive.inverse import DriveResult, Tracker, drive
+    from ._src.drive.inverse import DriveResult, Tracker
+    from ._src.drive.perform import drive
     from ._src.drive.tracks import ARKIT_NAMES, ArkitTrack, MarkerTrack
     from ._src.drive.formats import (load_arkit, load_markers, markers_from_frames, save_livelink_csv,
                                      save_markers_json)
@@ -179,7 +181,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.present.render import colormap, render_mesh, save_png
     from ._src.present.strips import render_strip
     from ._src.present.template import render_previews
-    from ._src.sim.play import FrameRecorder, PlayStats, Sink, play
+    from ._src.sim.play import FrameRecorder, PlayStats, Sink, Source, play
     from ._src.sim.batch import FaceBatch
     from ._src.sim.simulator import FaceSimulator, Frames, save_frames_npz
     from ._src.template.files import load_template_dir, save_template

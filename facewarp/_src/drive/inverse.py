@@ -393,6 +393,10 @@ class Tracker:
         T = check_array("targets", targets, shape=(self.count, 3), finite=False)
         if np.isinf(T).any():
             raise InputError("targets: infinite values (use NaN for a missing point)")
+        with np.errstate(over="ignore", invalid="ignore"):  # 1e308: an infinite distance, refused below
+            far = np.nan_to_num(np.abs(T), nan=0.0).max(initial=0.0)
+        if far > 1000.0:  # as MarkerTrack's MAX_POSITION_M: no face is a kilometre from the origin
+            raise InputError(f"targets: a point {far:.3g} m from the head's origin (metres expected, head frame)")
         visible = np.isfinite(T).all(axis=1)
         T = np.where(visible[:, None], T, 0.0)
         sim, snap = self.sim, self._snap
@@ -458,6 +462,9 @@ class DriveResult:
         mode: The tracker's mode.
         stats: The tracker's :class:`TrackerStats` as a dict.
         head_poses: (T, 4, 4) float64 rigid head poses removed from the targets, when the caller gives them; else None.
+        targets: (T, K, 3) float64 [m] the targets the error is measured against (head frame), when known.
+        retarget: The retargeting's map and notes (:class:`~facewarp._src.drive.retarget.RetargetMap` as a
+            dict) when the take was retargeted; else None.
     """
 
     fps: float
@@ -473,6 +480,8 @@ class DriveResult:
     mode: str
     stats: dict = field(default_factory=dict)
     head_poses: np.ndarray | None = None
+    targets: np.ndarray | None = None
+    retarget: dict | None = None
 
     @property
     def frames(self) -> int:

@@ -25,7 +25,7 @@ from ..expressions import Timeline
 from .frames import Frames
 from .readout import fdp_points
 
-__all__ = ["FrameRecorder", "PlayStats", "Sink", "check_seconds", "play"]
+__all__ = ["FrameRecorder", "PlayStats", "Sink", "Source", "TimelineSource", "check_seconds", "play", "progress_lines"]
 
 
 # ------------------------------------------------------------------------------------- sinks
@@ -152,6 +152,106 @@ class FrameRecorder(Sink):
                              solver=sim.solver_name, material=sim.material.name)
 
 
+# ------------------------------------------------------------------------------------ sources
+class Source:
+    """What a frame of :func:`play` does to the simulator: set its controls (activations, jaw,
+    head pose) and step it one frame. A :class:`~facewarp.Timeline` (through :class:`TimelineSource`),
+    a marker take (a :class:`~facewarp.Tracker` solving each frame), ARKit curves (through the
+    head's ARKit table) and a live stream are sources.
+
+    Attributes:
+        fps: The source's frame rate [1/s], or None when it plays at any (a timeline): the
+            simulator must run at it.
+        frames: Frames the source has (None: as many as ``seconds`` asks, a timeline or a stream).
+        steps_first: Frame 0 is stepped too (a take's frame 0 is a recorded frame); False: frame
+            0 is the rest (a timeline).
+        name: A short name for :class:`PlayStats` (``jaw``).
+    """
+
+    fps: float | None = None
+    frames: int | None = None
+    steps_first: bool = False
+    name: str = "source"
+
+    def start(self, sim, frame_count: int) -> None:
+        """Called once after the reset, before frame 0."""
+
+    def apply(self, sim, k: int, t: float) -> None:
+        """Set frame ``k``'s controls (time ``t`` [s]) and step ``sim`` one frame."""
+        raise NotImplementedError
+
+    def finish(self, sim) -> None:
+        """Called once after the last frame, before the sinks' ``finish``."""
+
+    @property
+    def steps(self) -> int | None:
+        """Solver frames stepped (re-takes included), when the source steps more than once a frame."""
+        return None
+
+    @property
+    def events(self) -> list:
+        """Warnings met on the way (MuJoCo's), for :class:`PlayStats`."""
+        return []
+
+
+class TimelineSource(Source):
+    """A :class:`~facewarp.Timeline` as a :class:`Source`: per frame the timeline's activations
+    (:meth:`~facewarp.FaceSimulator.set_activations`), then the jaw driver sets the jaw and steps.
+
+    Args:
+        timeline: The expressions over time (converted for the head once, :meth:`~facewarp.Timeline.for_head`).
+        jaw: A jaw driver (``step(expression)``; default the kinematic jaw).
+    """
+
+    def __init__(self, timeline: Timeline, jaw=None):
+        if not isinstance(timeline, Timeline):
+            raise InputError(f"timeline: expected a facewarp Timeline, got {type(timeline).__name__}")
+        self.timeline = timeline
+        self.jaw = jaw
+        self._converted = None
+
+    def start(self, sim, frame_count: int) -> None:
+        if self.jaw is None:
+            from ..coupling.drivers import KinematicJawDriver
+
+            self.jaw = KinematicJawDriver(sim)
+        self._converted = self.timeline.for_head(sim.fr)  # chin drops -> this head's jaw angles (once)
+        self.name = str(getattr(self.jaw, "name", type(self.jaw).__name__))
+
+    def apply(self, sim, k: int, t: float) -> None:
+        e = self._converted.sample(t)
+        sim.set_activations(e)
+        self.jaw.step(e)
+
+    @property
+    def events(self) -> list:
+        return list(getattr(getattr(self.jaw, "coupler", None), "events", ()))
+
+
+PROGRESS_EVERY_S = 5.0
+"""Seconds of take between two progress lines off a terminal (:func:`progress_lines`)."""
+
+
+def progress_lines(what: str, fps: float, *, every_s: float = PROGRESS_EVERY_S, stream=None):
+    """A ``progress(k, frame_count)`` that writes one line per ``every_s`` seconds of take (and at
+    the end) to ``stream`` (default stderr): for logs, CI and ``| tee``, where a bar cannot draw."""
+    import sys
+
+    out = stream if stream is not None else sys.stderr
+    step = max(1, int(round(every_s * fps)))
+    t0 = time.perf_counter()
+
+    def progress(k: int, n: int) -> None:
+        if (k + 1) % step and k + 1 != n:
+            return
+        wall = time.perf_counter() - t0
+        out.write(f"{what}: frame {k + 1}/{n} ({(k + 1) / fps:.1f} of {n / fps:.1f} s of take), "
+                  f"{(k + 1) / max(wall, 1e-9):.1f} frames/s\n")
+        out.flush()
+
+    return progress
+
+
 # -------------------------------------------------------------------------------------- play
 def check_seconds(seconds) -> float:
     """``seconds`` as a float if it is a finite number > 0, else :class:`InputError`."""
@@ -161,67 +261,111 @@ def check_seconds(seconds) -> float:
     return float(seconds)
 
 
-def play(sim, timeline: Timeline, seconds: float, *, sinks=(), jaw=None, progress=None) -> PlayStats:
-    """Play ``seconds`` of ``timeline`` on ``sim`` from rest, handing every frame to ``sinks``.
+def play(sim, source, seconds: float | None = None, *, sinks=(), jaw=None, progress=None) -> PlayStats:
+    """Play ``source`` on ``sim`` from rest for ``seconds``, handing every frame to ``sinks``: the
+    one frame loop of the package (``drive`` and the ARKit player are sources played here).
 
-    Frame ``k`` is at ``k / sim.fps`` s; frame 0 is the rest (:meth:`~facewarp.FaceSimulator.reset`:
-    no activation, jaw closed), then each frame sets the timeline's activations
-    (:meth:`~facewarp.FaceSimulator.set_activations`) and lets the jaw driver set the jaw and step
-    (the controls ramp across the step, :meth:`~facewarp.FaceSimulator.step`).
+    Frame ``k`` is at ``k / sim.fps`` s. For a :class:`~facewarp.Timeline`, frame 0 is the rest
+    (:meth:`~facewarp.FaceSimulator.reset`: no activation, jaw closed), then each frame sets the
+    timeline's activations and lets the jaw driver set the jaw and step (the controls ramp across
+    the step, :meth:`~facewarp.FaceSimulator.step`). A take's source (a marker take, ARKit curves)
+    steps its frame 0 too, and plays all its frames unless ``seconds`` asks for fewer.
 
     Args:
         sim: The :class:`~facewarp.FaceSimulator`.
-        timeline: The expressions over time; its chin drops become this head's jaw angles
-            (:meth:`~facewarp.Timeline.for_head`) unless it is already converted for it.
-        seconds: Length [s], > 0.
+        source: A :class:`~facewarp.Timeline` (its chin drops become this head's jaw angles,
+            :meth:`~facewarp.Timeline.for_head`) or a :class:`Source`.
+        seconds: Length [s], > 0 and at least one frame after the rest (required for a timeline;
+            for a take, default its length).
         sinks: :class:`Sink` objects or callables ``f(sim, k, t)``, called in order after each frame.
-        jaw: A jaw driver (``step(expression)`` sets the jaw and steps ``sim`` one frame; ``name``):
-            default the kinematic jaw (:class:`~facewarp.coupling.KinematicJawDriver`); the
-            MuJoCo jaw is :class:`~facewarp.coupling.MujocoJawDriver`.
-        progress: Optional ``progress(k, frame_count)`` after each frame.
+        jaw: For a timeline: a jaw driver (``step(expression)`` sets the jaw and steps ``sim`` one
+            frame; ``name``): default the kinematic jaw (:class:`~facewarp.coupling.KinematicJawDriver`);
+            the MuJoCo jaw is :class:`~facewarp.coupling.MujocoJawDriver`.
+        progress: Optional ``progress(k, frame_count)`` after each frame (:func:`progress_lines`
+            writes a line per few seconds of take).
 
     Returns:
         The :class:`PlayStats` (also handed to every sink's ``finish``).
 
     Raises:
-        InputError: ``seconds`` not a finite number > 0, ``timeline`` not a Timeline, a bad sink.
+        InputError: a bad ``sim``, ``source``, ``seconds`` (not a finite number > 0, no frame after
+        the rest, more solver steps than a run may take), ``jaw``, sink or ``progress``; a source at
+        another frame rate than ``sim``.
     """
-    seconds = check_seconds(seconds)
-    if not isinstance(timeline, Timeline):
-        raise InputError(f"timeline: expected a facewarp Timeline, got {type(timeline).__name__}")
-    return _play(sim, timeline, seconds, [_as_sink(s) for s in sinks], jaw, progress)
+    from ..core.limits import MAX_SECONDS, check_steps
+    from .simulator import FaceSimulator
+
+    if not isinstance(sim, FaceSimulator):
+        raise InputError(f"sim: expected a facewarp FaceSimulator, got {type(sim).__name__}")
+    if isinstance(source, Timeline):
+        if seconds is None:
+            raise InputError("seconds: a timeline is played for a given length; give seconds")
+        if jaw is not None and not callable(getattr(jaw, "step", None)):
+            raise InputError(f"jaw: expected a jaw driver with step(expression) (facewarp.coupling), "
+                             f"got {type(jaw).__name__}")
+        source = TimelineSource(source, jaw)
+    elif isinstance(source, Source):
+        if jaw is not None:
+            raise InputError("jaw: only with a timeline (a take's source sets the jaw itself)")
+    else:
+        raise InputError(f"timeline: expected a facewarp Timeline or a play source (Source), got {type(source).__name__}")
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(k, frame_count), got {type(progress).__name__}")
+    if source.fps is not None and abs(source.fps - sim.fps) > 1e-6 * sim.fps:
+        raise InputError(f"source: {source.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
+                         f"make the FaceSimulator with fps={source.fps:g}")
+    if seconds is None:
+        if source.frames is None:
+            raise InputError("seconds: this source has no length of its own; give seconds")
+        nf = int(source.frames)
+        seconds = (nf - 1) / sim.fps if nf > 1 else 1.0 / sim.fps
+    else:
+        seconds = check_seconds(seconds)
+        if seconds > MAX_SECONDS:
+            raise InputError(f"seconds: {seconds:g} s is longer than a run may be ({MAX_SECONDS:g} s)")
+        nf = int(round(seconds * sim.fps)) + 1
+        if nf < 2 and not source.steps_first:
+            raise InputError(f"seconds: {seconds:g} s at {sim.fps:g} frames/s is no frame after the rest pose "
+                             f"(at least {0.5 / sim.fps:.3g} s)")
+        if source.frames is not None:
+            nf = min(nf, int(source.frames))
+    check_steps(seconds, sim.fps, sim.substeps, what="seconds")
+    return _run(sim, source, seconds, nf, [_as_sink(s) for s in sinks], progress)
 
 
 def _play(sim, timeline: Timeline, seconds: float, sinks: list, jaw, progress) -> PlayStats:
-    """:func:`play` on checked inputs."""
-    if jaw is None:
-        from ..coupling.drivers import KinematicJawDriver
+    """A timeline played on checked inputs (the jobs' entry): :func:`play`'s loop."""
+    return _run(sim, TimelineSource(timeline, jaw), seconds, int(round(seconds * sim.fps)) + 1, sinks, progress)
 
-        jaw = KinematicJawDriver(sim)
-    timeline = timeline.for_head(sim.fr)  # chin drops -> this head's jaw angles (once per timeline)
+
+def _run(sim, source: Source, seconds: float, nf: int, sinks: list, progress) -> PlayStats:
+    """:func:`play` on checked inputs: ``nf`` frames."""
     sim.reset()
-    nf = int(round(seconds * sim.fps)) + 1
+    source.start(sim, nf)
     for s in sinks:
         s.start(sim, nf)
     t0 = time.perf_counter()
     stepping = 0.0
     for k in range(nf):
         t = k / sim.fps
-        if k > 0:
-            e = timeline.sample(t)
-            sim.set_activations(e)
+        if k > 0 or source.steps_first:
             s0 = time.perf_counter()
-            jaw.step(e)  # the stepping: what frames_per_second measures
+            source.apply(sim, k, t)  # the stepping: what frames_per_second measures
             stepping += time.perf_counter() - s0
         for s in sinks:
             s.frame(sim, k, t)
         if progress:
             progress(k, nf)
+    source.finish(sim)
     wall = time.perf_counter() - t0
     stepping = max(stepping, 1e-9)
-    stats = PlayStats.measured(sim, frames=nf, seconds=seconds, wall_s=wall, stepping_s=stepping,
-                               jaw=str(getattr(jaw, "name", type(jaw).__name__)),
-                               mujoco_events=getattr(getattr(jaw, "coupler", None), "events", ()))
+    stepped = nf if source.steps_first else nf - 1
+    steps = source.steps if source.steps is not None else stepped
+    stats = PlayStats(frames=nf, seconds=seconds, wall_s=wall, simulation_wall_s=stepping,
+                      frames_per_second=stepped / stepping, steps_per_second=steps * sim.substeps / stepping,
+                      realtime_factor=stepped / sim.fps / stepping, substeps=int(sim.substeps), dt_s=float(sim.dt),
+                      device=str(sim.device), jaw=source.name, frame_stats=sim.stats.as_dict(),
+                      mujoco_events=source.events)
     for s in sinks:
         s.finish(sim, stats)
     return stats
