@@ -671,7 +671,7 @@ def _grid(path: Path, t: np.ndarray, what: str, *, resolution: float = 0.0, row0
 
 def _check_rate(path: Path, rate: float, what: str) -> float:
     if not MIN_TAKE_FPS <= rate <= MAX_TAKE_FPS:
-        raise InputError(f"{path}: the {what} give {rate:.4g} frames/s, outside a take's {MIN_TAKE_FPS:g}.."
+        raise InputError(f"{path}: the {what} give {rate:.6g} frames/s, outside a take's {MIN_TAKE_FPS:g}.."
                          f"{MAX_TAKE_FPS:g} (are the timestamps' units right?)")
     return rate
 
@@ -820,6 +820,10 @@ _FACE_KEYS = ("face_blendshapes", "faceBlendshapes", "blendshapes", "blendShapes
 _NAME_KEYS = ("category_name", "categoryName", "name", "display_name", "displayName")
 _MS_KEYS = ("timestamp_ms", "timestampMs", "time_ms")
 _US_KEYS = ("timestamp_us", "timestampUs", "time_us")
+VIDEO_FPS = (10.0, 240.0)
+"""Frame rates [1/s] of video a face tracker runs on: ``timestamp_ms`` steps that give under 1 fps
+in milliseconds but a rate in this range in microseconds are read as microseconds."""
+
 MEDIAPIPE_MISSING_OK = ("tongueOut",)
 """ARKit shapes a MediaPipe take may lack: the Face Landmarker's 52 categories are ``_neutral``
 and 51 ARKit names, without ``tongueOut`` (read as 0, and said in the track's notes)."""
@@ -939,9 +943,9 @@ def _mediapipe_json(path: Path, text: str, fps: float | None) -> ArkitTrack:
         x = np.asarray(stamps)
         unit = 1e-6 if us else 1e-3
         step = float(np.median(np.diff(x))) * unit
-        if ms and step > 0 and 1.0 / step < MIN_TAKE_FPS and MIN_TAKE_FPS <= 1e-3 / step <= MAX_TAKE_FPS:
+        if ms and step > 0 and 1.0 / step < MIN_TAKE_FPS and VIDEO_FPS[0] <= 1.0 / (step * 1e-3) <= VIDEO_FPS[1]:
             unit = 1e-6  # microseconds under a millisecond key (MediaPipe's C++ and graph timestamps)
-            notes.append(f"timestamp_ms read as microseconds: in milliseconds the take would be {1e3 / (step * 1e3):.3g} "
+            notes.append(f"timestamp_ms read as microseconds: in milliseconds the take would be {1.0 / step:.3g} "
                          "frames/s")
             info["timestamps_in_microseconds"] = True
         rate, idx, gaps = _grid(path, x * unit, "timestamps", resolution=unit, row0=0,

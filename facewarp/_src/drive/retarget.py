@@ -15,8 +15,9 @@ it. What carries over is the motion. The take's *neutral* (its first frame, or t
    - ``"affine"`` (default): the actor's neutral markers are aligned to the head's points by one
      similarity (Umeyama, Eq. 4.3.3: rotation ``R0``, scale ``s0``), then each region's markers by
      an affine map fitted in least squares, ``A_r = argmin sum_i |A (x_i - x_c) - (q_i - q_c)|^2
-     + lambda |A - I|^2`` (``lambda`` = :data:`AFFINE_PRIOR` times the region's spread, so a
-     region of few or flat markers stays near the similarity); ``L_r = A_r s0 R0``.
+     + lambda |A - A_face|^2`` (``lambda`` = :data:`AFFINE_PRIOR` times the region's spread, so a
+     region of few or flat markers stays near ``A_face``, the whole face's affine map, fitted the
+     same way towards the identity); ``L_r = A_r s0 R0``.
    - ``"fapu"``: MPEG-4 face animation parameter units (thesis §4.1, ``docs/MPEG4_FDP.md``):
      ``L_r = diag(f_x, f_y, f_z) R0`` with each factor the head's unit over the actor's: across
      the face (x) MW (mouth width, 8.3-8.4) for the mouth and jaw, ES (eye separation) elsewhere;
@@ -52,8 +53,8 @@ REGIONS = {
 """The regions of the face that get a map of their own, by FDP id prefix (MPEG-4 groups; the
 inner lip points 2.2-2.9 with the mouth, the chin and jaw line with the jaw)."""
 
-AFFINE_PRIOR = 0.05
-"""Weight of a region's affine map's pull towards the global similarity, as a fraction of the
+AFFINE_PRIOR = 0.01
+"""Weight of a region's affine map's pull towards the whole face's (and of that towards the similarity), as a fraction of the
 region's spread (the trace of its centred neutral points' scatter)."""
 
 _MOUTH = ("mouth", "jaw")
@@ -172,16 +173,20 @@ def retarget_map(neutral, names, head_rest: dict, *, method: str = "affine") -> 
     linear = np.zeros((len(names), 3, 3))
     notes, units = [], {}
     if method == "affine":
+        def fit(idx, prior):
+            X = aligned[idx] - aligned[idx].mean(0)
+            Y = Q[idx] - Q[idx].mean(0)
+            lam = AFFINE_PRIOR * float(np.trace(X.T @ X)) + 1e-12
+            return (Y.T @ X + lam * prior) @ np.linalg.inv(X.T @ X + lam * np.eye(3))
+
+        A_all = fit(np.flatnonzero(seen), np.eye(3))  # the whole face's affine: what a small region leans on
         for r in sorted(set(regions)):
             idx = np.array([i for i, g in enumerate(regions) if g == r and seen[i]], dtype=np.int64)
-            A = np.eye(3)
             if len(idx) >= 2:
-                X = aligned[idx] - aligned[idx].mean(0)
-                Y = Q[idx] - Q[idx].mean(0)
-                lam = AFFINE_PRIOR * float(np.trace(X.T @ X)) + 1e-12
-                A = (Y.T @ X + lam * np.eye(3)) @ np.linalg.inv(X.T @ X + lam * np.eye(3))
+                A = fit(idx, A_all)
             else:
-                notes.append(f"region {r}: {len(idx)} point(s) in the neutral, the global similarity used")
+                A = A_all
+                notes.append(f"region {r}: {len(idx)} point(s) in the neutral, the whole face's map used")
             for i, g in enumerate(regions):
                 if g == r:
                     linear[i] = A @ (s0 * R0)
