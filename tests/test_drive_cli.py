@@ -157,7 +157,7 @@ def test_drive_retarget_a_larger_actor(built, take, tmp_path, capsys):
     fw.save_markers_json(actor, tmp_path / "actor.json", units="cm")
     out = tmp_path / "retargeted"
     rep = drive_files(built, out, markers=tmp_path / "actor.json", retarget=True)
-    assert rep["retarget"]["method"] == "affine" and rep["error_is"].startswith("distance of each simulated point")
+    assert rep["retarget"]["method"] == "fapu" and rep["error_is"].startswith("distance of each simulated point")
     assert rep["error_mm"]["rms"] < 1.0, rep["error_mm"]
     assert rep["head_motion"]["relative_to"] == "the actor's neutral"
     full = json.loads((out / "report.json").read_text())

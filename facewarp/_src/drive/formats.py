@@ -32,22 +32,33 @@ ARKit formats (:func:`load_arkit`):
 
 - Live Link Face CSV (Epic's iPhone app): ``Timecode, BlendShapeCount, EyeBlinkLeft, ...,
   TongueOut, HeadYaw, HeadPitch, HeadRoll, LeftEyeYaw, ..., RightEyeRoll``; all 52 blendshape
-  columns (the ARKit names with a capital first letter, any order), weights in [0, 1]. The
-  timecode is ``HH:MM:SS:FF.fff`` (``;`` also accepted): the frame field ``FF`` with its
+  columns (ARKit's names, any order, matched without case: exports spell ``BlendshapeCount`` too).
+  The timecode is ``HH:MM:SS:FF.fff`` (``;`` also accepted): the frame field ``FF`` with its
   sub-frame fraction counts at the timecode rate, read as the smallest of 24, 25, 30, 48, 50, 60,
-  100, 120 that exceeds the largest frame number seen before a whole second turns over; the
-  take's fps is 1 / the median step of the times so made (``fps=`` when the take does not cross
-  a whole second). HeadYaw, HeadPitch and HeadRoll are radians; eye rotation columns are read
-  and ignored (gaze is beyond the muscle model).
-- MediaPipe Face Landmarker JSON: a list of frames as the Tasks API's results are dumped,
-  ``[{"timestamp_ms": 0, "face_blendshapes": [[{"category_name": "_neutral", "score": 0.0},
-  {"category_name": "browDownLeft", "score": 0.01}, ...]]}, ...]`` (or the same under
-  ``{"frames": [...]}``); the JavaScript spellings ``timestampMs``, ``faceBlendshapes``,
-  ``categoryName`` and a face given as ``{"categories": [...]}`` are accepted too. Per frame the
-  first face is used; it must have all 52 ARKit categories (``_neutral`` is ignored). A frame with
-  no face (an empty ``face_blendshapes``) holds the previous frame's weights (zero before the
-  first face). fps = 1000 / the median step of ``timestamp_ms`` (``fps=`` when the frames have
-  no timestamps).
+  100, 120 that exceeds the largest frame number seen before a whole second turns over
+  (``fps=`` when the take does not cross a whole second). HeadYaw, HeadPitch, HeadRoll and the
+  eye angles are radians.
+- MediaPipe Face Landmarker JSON: the Tasks API's results as dumped, ``[{"timestamp_ms": 0,
+  "face_blendshapes": [[{"category_name": "_neutral", "score": 0.0}, {"category_name":
+  "browDownLeft", "score": 0.01}, ...]]}, ...]`` (or under ``{"frames": [...]}``), and what other
+  exporters write: the JavaScript spellings (``timestampMs``, ``faceBlendshapes``,
+  ``categoryName``, a face as ``{"categories": [...]}``), ``{"people": [[{"name", "score"}]]}``
+  per frame, a flat list of categories per frame (``"blendshapes"``, or the frame itself: then
+  ``fps=``), scores as numbers or strings, ``timestamp_us``. The model's 52 categories are
+  ``_neutral`` (ignored) and 51 ARKit names without ``tongueOut`` (read as 0, said in the notes);
+  another missing name is an error. Per frame the first face is used; a frame with no face
+  holds the previous frame's weights (zero before the first face).
+
+Real takes (both formats and marker CSVs): the take's rate is the median step of its times, every
+step a whole number of it (a 30 fps take on a 60 fps timecode that drops frames steps by 2 to 8
+timecode frames); the frames skipped are interpolated at their real times, counted and said
+(:data:`MAX_GAP_S` at most), and the rate is the frames over the span, snapped to a whole or NTSC
+rate within the times' rounding (MediaPipe's whole milliseconds give 30 fps, not 30.303). A rate
+outside :data:`~facewarp._src.drive.tracks.MIN_TAKE_FPS`..``MAX_TAKE_FPS`` is an error, except
+MediaPipe ``timestamp_ms`` steps that are microseconds (:data:`VIDEO_FPS`). ARKit weights up to
+:data:`WEIGHT_SLACK` beyond [0, 1] are clamped and counted per shape (Live Link Face writes
+EyeLookIn up to about 1.05); farther is an error naming the row (frame) and column (category).
+``start=`` / ``end=`` keep a part of a take.
 """
 
 from __future__ import annotations

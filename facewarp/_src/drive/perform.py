@@ -150,7 +150,7 @@ def _notes_off(names, err, limit) -> list:
 
 
 def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offline", head_poses=None,
-          unreachable_limit: float = 2e-3, retarget: bool = False, method: str = "affine", rigid: bool = True,
+          unreachable_limit: float = 2e-3, retarget: bool = False, method: str = "fapu", rigid: bool = True,
           **options) -> DriveResult:
     """Solve a performance's activations and jaw per frame and play them on ``sim`` (through
     :func:`~facewarp.play`: the sinks see frame ``k`` at ``t = k / fps``; a
@@ -170,7 +170,8 @@ def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offli
         retarget: The marker take is of another face (an actor): its displacements from its neutral
             (:attr:`~facewarp.MarkerTrack.neutral`, default the first frame) are carried to this head
             (:mod:`retargeting <facewarp._src.drive.retarget>`), the actor's head motion removed first.
-        method: The retargeting's map: ``"affine"`` (per region, default) or ``"fapu"`` (MPEG-4 units).
+        method: The retargeting's map: ``"fapu"`` (MPEG-4 face animation parameter units, default) or
+            ``"affine"`` (per region).
         rigid: With ``retarget``: remove the actor's head motion (default True).
         **options: Further keywords of :class:`~facewarp.Tracker` (``smoothness``, ``effort``, ``robust``, ...).
 

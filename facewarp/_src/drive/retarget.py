@@ -12,13 +12,15 @@ it. What carries over is the motion. The take's *neutral* (its first frame, or t
 3. Carried to the head: ``target_i(t) = q_i + L_r d_i(t)`` with ``q_i`` the head's rest point and
    ``L_r`` the linear map of the marker's region ``r`` (:data:`REGIONS`):
 
-   - ``"affine"`` (default): the actor's neutral markers are aligned to the head's points by one
+   - ``"affine"``: the actor's neutral markers are aligned to the head's points by one
      similarity (Umeyama, Eq. 4.3.3: rotation ``R0``, scale ``s0``), then each region's markers by
      an affine map fitted in least squares, ``A_r = argmin sum_i |A (x_i - x_c) - (q_i - q_c)|^2
      + lambda |A - A_face|^2`` (``lambda`` = :data:`AFFINE_PRIOR` times the region's spread, so a
-     region of few or flat markers stays near ``A_face``, the whole face's affine map, fitted the
-     same way towards the identity); ``L_r = A_r s0 R0``.
-   - ``"fapu"``: MPEG-4 face animation parameter units (thesis §4.1, ``docs/MPEG4_FDP.md``):
+     region stays near ``A_face``, the whole face's affine map, fitted the same way towards the
+     identity with :data:`FACE_PRIOR`); ``L_r = A_r s0 R0``. Follows an actor whose face is
+     stretched as a whole; a face that differs in shape (a wider jaw, a deeper chin) does not
+     move the more for it, which the large :data:`AFFINE_PRIOR` keeps in check.
+   - ``"fapu"`` (default): MPEG-4 face animation parameter units (thesis §4.1, ``docs/MPEG4_FDP.md``):
      ``L_r = diag(f_x, f_y, f_z) R0`` with each factor the head's unit over the actor's: across
      the face (x) MW (mouth width, 8.3-8.4) for the mouth and jaw, ES (eye separation) elsewhere;
      up (y) MNS (mouth-nose, 9.15-2.2) for the mouth and jaw, IRISD (upper to lower lid, 3.1-3.3)
@@ -42,7 +44,7 @@ from .tracks import MarkerTrack
 
 __all__ = ["AFFINE_PRIOR", "METHODS", "REGIONS", "RetargetMap", "region_of", "retarget_map", "retarget_track"]
 
-METHODS = ("affine", "fapu")
+METHODS = ("fapu", "affine")
 """How displacements are carried from the actor to the head (module doc)."""
 
 REGIONS = {
@@ -53,9 +55,15 @@ REGIONS = {
 """The regions of the face that get a map of their own, by FDP id prefix (MPEG-4 groups; the
 inner lip points 2.2-2.9 with the mouth, the chin and jaw line with the jaw)."""
 
-AFFINE_PRIOR = 0.01
-"""Weight of a region's affine map's pull towards the whole face's (and of that towards the similarity), as a fraction of the
-region's spread (the trace of its centred neutral points' scatter)."""
+AFFINE_PRIOR = 3.0
+"""Weight of a region's affine map's pull towards the whole face's, as a fraction of the region's
+spread (the trace of its centred neutral points' scatter). Large: an actor's face differs from the
+head in shape more than its motion differs (an ICT identity driving the default head: the whole
+face's map alone is 1.25 mm RMS from the head's own motion at worst, free regional maps 2.5 mm)."""
+
+FACE_PRIOR = 0.01
+"""The same weight for the whole face's affine map towards the similarity: small, so that a face
+wider or shorter than the head as a whole is followed."""
 
 _MOUTH = ("mouth", "jaw")
 
@@ -142,14 +150,14 @@ def _unit(points: dict, which: str):
     raise ValueError(which)
 
 
-def retarget_map(neutral, names, head_rest: dict, *, method: str = "affine") -> RetargetMap:
+def retarget_map(neutral, names, head_rest: dict, *, method: str = "fapu") -> RetargetMap:
     """The map of a take's displacements onto a head (module doc).
 
     Args:
         neutral: (K, 3) float64 [m], the actor's neutral markers (NaN: not seen in the neutral).
         names: The K point names (FDP ids, ``v<index>``).
         head_rest: Point name -> (3,) [m], the head at rest (its own frame), holding every name.
-        method: ``"affine"`` or ``"fapu"``.
+        method: ``"fapu"`` (default) or ``"affine"``.
 
     Raises:
         InputError: fewer than four points seen in the neutral, or spread over less than a plane.
@@ -173,17 +181,17 @@ def retarget_map(neutral, names, head_rest: dict, *, method: str = "affine") -> 
     linear = np.zeros((len(names), 3, 3))
     notes, units = [], {}
     if method == "affine":
-        def fit(idx, prior):
+        def fit(idx, prior, weight):
             X = aligned[idx] - aligned[idx].mean(0)
             Y = Q[idx] - Q[idx].mean(0)
-            lam = AFFINE_PRIOR * float(np.trace(X.T @ X)) + 1e-12
+            lam = weight * float(np.trace(X.T @ X)) + 1e-12
             return (Y.T @ X + lam * prior) @ np.linalg.inv(X.T @ X + lam * np.eye(3))
 
-        A_all = fit(np.flatnonzero(seen), np.eye(3))  # the whole face's affine: what a small region leans on
+        A_all = fit(np.flatnonzero(seen), np.eye(3), FACE_PRIOR)  # the whole face's stretch
         for r in sorted(set(regions)):
             idx = np.array([i for i, g in enumerate(regions) if g == r and seen[i]], dtype=np.int64)
             if len(idx) >= 2:
-                A = fit(idx, A_all)
+                A = fit(idx, A_all, AFFINE_PRIOR)
             else:
                 A = A_all
                 notes.append(f"region {r}: {len(idx)} point(s) in the neutral, the whole face's map used")
@@ -218,7 +226,7 @@ def retarget_map(neutral, names, head_rest: dict, *, method: str = "affine") -> 
                        neutral_residual_mm=resid, units=units, notes=notes)
 
 
-def retarget_track(track: MarkerTrack, head_rest: dict, *, method: str = "affine", rigid: bool = True,
+def retarget_track(track: MarkerTrack, head_rest: dict, *, method: str = "fapu", rigid: bool = True,
                    points=None) -> tuple[MarkerTrack, HeadMotion | None, RetargetMap]:
     """An actor's take as target points on this head (module doc).
 
@@ -226,7 +234,7 @@ def retarget_track(track: MarkerTrack, head_rest: dict, *, method: str = "affine
         track: The take (:class:`~facewarp.MarkerTrack`, metres, any frame); its
             :attr:`~facewarp.MarkerTrack.neutral` (default its first frame) is the actor at rest.
         head_rest: Point name -> (3,) [m], the head at rest, holding every name of the take.
-        method: ``"affine"`` (default) or ``"fapu"``.
+        method: ``"fapu"`` (default) or ``"affine"``.
         rigid: Remove the actor's head motion first (needs three stable points; without them the
             take is taken as still, and the notes say so).
         points: The stable point names (default :data:`~facewarp.STABLE_POINTS`).

@@ -155,7 +155,7 @@ def _activation_picture(path: Path, times, muscles, A, J) -> None:
 
 
 def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=None, units=None,  # noqa: A002
-                fps=None, rigid: bool = True, retarget: bool = False, method: str = "affine", neutral=None,
+                fps=None, rigid: bool = True, retarget: bool = False, method: str | None = None, neutral=None,
                 start=None, end=None, device: str = "cpu", progress=None, table_progress=None) -> dict:
     """Drive the face of a ``build`` output from a performance file and write the results.
 
@@ -171,7 +171,7 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
             taken as already in the head's frame, and the report says so).
         retarget: The marker take is of another face: its displacements from its neutral are
             carried to this head (:func:`~facewarp.drive` ``retarget=True``); ``method`` the map
-            (``"affine"`` or ``"fapu"``), ``neutral`` the neutral's span (``(START, END)`` or
+            (``"fapu"``, the default, or ``"affine"``), ``neutral`` the neutral's span (``(START, END)`` or
             ``"START:END"`` seconds; default the first frame).
         start, end: Drive the part of the take from ``start`` to ``end`` seconds.
         device: Warp device.
@@ -192,7 +192,7 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         raise InputError("out: empty (give an output folder or a .usda/.usdc/.usdz file)")
     if not isinstance(retarget, bool):
         raise InputError(f"retarget: expected True or False, got {retarget!r}")
-    if (neutral is not None or method != "affine") and not retarget:
+    if (neutral is not None or method is not None) and not retarget:
         raise InputError("neutral, method: they go with retarget (a take of another face)")
     track = load_performance(markers=markers, arkit=arkit, mediapipe=mediapipe, map=map, units=units, fps=fps,
                              start=start, end=end, neutral=neutral)
@@ -244,7 +244,7 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         poses[:, :3, 3] = motion.translation
     kw = {"head_poses": poses} if poses is not None else {}
     if retarget:
-        kw.update(retarget=True, method=method, rigid=rigid)
+        kw.update(retarget=True, method=method or "fapu", rigid=rigid)
     with anim:
         result = drive(sim, track, table=table, sinks=sinks, progress=progress, **kw)
     A = np.asarray(result.activations, dtype=np.float64)
