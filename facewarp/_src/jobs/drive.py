@@ -175,7 +175,7 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
             ``"START:END"`` seconds; default the first frame).
         start, end: Drive the part of the take from ``start`` to ``end`` seconds.
         device: Warp device.
-        progress: ``f(k, n)`` per frame (default off a terminal: a line per few seconds of take on stderr).
+        progress: ``f(k, n)`` per frame; off a terminal a line per few seconds of take goes to stderr too.
         table_progress: ``f(done, total, name)`` while the head's ARKit table is built (the first
             ARKit run on a build: minutes; later runs read ``arkit_table.npz`` from the build folder).
 
@@ -228,8 +228,13 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
 
         step = table_progress or (lambda done, total, name: None)
         table = arkit_table(sim, cache=fr_dir, progress=step)
-    if progress is None and not sys.stderr.isatty():
-        progress = progress_lines("drive", track.fps)
+    if not sys.stderr.isatty():  # a log, CI, | tee: a line per few seconds of take (a bar cannot draw there)
+        lines, given = progress_lines("drive", track.fps), progress
+
+        def progress(k, n):
+            if given is not None:
+                given(k, n)
+            lines(k, n)
 
     keep = None if usd_out else FrameRecorder()
     usd_path = out if usd_out else out / USD_NAME
