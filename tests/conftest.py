@@ -84,3 +84,86 @@ def step_together(batch, alone, es):
         sim.set_activations(e)
         sim.set_jaw(e.jaw_u, e.jaw_v)
         sim.step()
+
+
+# --- builds made once per test run -------------------------------------------------------------------------------
+# `facewarp build default` takes ~8 s and a dozen modules need one; under pytest-xdist every worker is its own
+# process, so the build is made once under a file lock in the run's shared temporary folder and each module gets a
+# private copy (tests may damage their copy: permissions, truncated files).
+
+
+def _run_root(tmp_path_factory) -> Path:
+    """The temporary folder shared by every xdist worker of this run (the worker's own base folder's parent)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
+class _FileLock:
+    """An exclusive lock on a file (fcntl on POSIX; on other systems a lock directory polled every 0.1 s)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def __enter__(self):
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - Windows
+            import time
+
+            while True:
+                try:
+                    os.mkdir(self.path)
+                    break
+                except FileExistsError:
+                    time.sleep(0.1)
+            self._fd = None
+            return self
+        self._fd = open(self.path, "w")
+        fcntl.flock(self._fd, fcntl.LOCK_EX)
+        return self
+
+    def __exit__(self, *exc):
+        if self._fd is None:  # pragma: no cover - Windows
+            os.rmdir(self.path)
+        else:
+            self._fd.close()
+
+
+def shared_build(tmp_path_factory, name: str, argv: list[str]) -> Path:
+    """The output folder of ``facewarp <argv> --out DIR``, made once per run for every worker (``name`` keys it)."""
+    import shutil
+
+    from facewarp.cli import main
+
+    root = _run_root(tmp_path_factory)
+    target = root / f"shared-{name}"
+    with _FileLock(root / f"shared-{name}.lock"):
+        if not target.is_dir():
+            partial = root / f"shared-{name}.partial"
+            shutil.rmtree(partial, ignore_errors=True)
+            assert main([*argv, "--out", str(partial)]) == 0, f"facewarp {' '.join(argv)} failed"
+            partial.rename(target)
+    return target
+
+
+@pytest.fixture(scope="session")
+def default_build_dir(tmp_path_factory) -> Path:
+    """`facewarp build default` made once per run; read-only by convention (copy it with :func:`fresh_build`)."""
+    return shared_build(tmp_path_factory, "build-default", ["build", "default"])
+
+
+def fresh_build(tmp_path_factory, default_build_dir: Path, name: str = "build") -> Path:
+    """A private copy of the run's default build, for a module that writes into or damages its build."""
+    import shutil
+
+    out = tmp_path_factory.mktemp(name) / "build"
+    shutil.copytree(default_build_dir, out)
+    return out
+
+
+@pytest.fixture(scope="session")
+def default_rig():
+    """``fw.build_face(fw.default_template(0))``, made once per worker process (treat it as read-only)."""
+    import facewarp as fw
+
+    return fw.build_face(fw.default_template(0))

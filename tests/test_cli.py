@@ -196,7 +196,16 @@ def test_internal_error_is_one_line(monkeypatch, capsys):
     def boom(args):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(facewarp.cli, "cmd_template_info", boom)
+    real = facewarp.cli.build_parser
+
+    def build():  # the real parser, with `template info` running boom
+        top = real()
+        sub = next(a for a in top._actions if a.__class__.__name__ == "_SubParsersAction")
+        tsub = next(a for a in sub.choices["template"]._actions if a.__class__.__name__ == "_SubParsersAction")
+        tsub.choices["info"].set_defaults(func=boom)
+        return top
+
+    monkeypatch.setattr(facewarp.cli, "build_parser", build)
     code, out, err = run(capsys, "template", "info")
     assert code == 1 and out == "" and len(err.strip().splitlines()) == 1
     assert "RuntimeError: boom" in err and "--verbose" in err

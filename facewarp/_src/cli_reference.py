@@ -31,7 +31,7 @@ def _subparsers(p: argparse.ArgumentParser):
 def commands(parser: argparse.ArgumentParser | None = None) -> list[tuple[str, argparse.ArgumentParser]]:
     """(``"adapt"``, its parser), (``"template export"``, ...) for every leaf command, in order."""
     if parser is None:
-        from ..cli import build_parser
+        from .cli import build_parser
 
         parser = build_parser()
     out = []
@@ -97,7 +97,7 @@ def _values(a: argparse.Action) -> str:
 
 def reference(parser: argparse.ArgumentParser | None = None) -> str:
     """The generated README block (without the marker lines)."""
-    from ..cli import build_parser
+    from .cli import build_parser
 
     top = parser or build_parser()
     cmds = commands(top)

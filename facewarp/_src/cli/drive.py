@@ -1,0 +1,77 @@
+"""``facewarp drive``: drive a ``build`` output from data (markers, ARKit curves)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .common import FrameBar, emit, fps, out_dir_or_usd
+
+
+# ----------------------------------------------------------------------------- options
+def add_parser(sub) -> None:
+    dr = sub.add_parser(
+        "drive", help="drive a `build` output from data: muscle activations and jaw solved per frame from markers, "
+                      "or ARKit curves through the head's ARKit table",
+        epilog="Formats (docs: guides/driving): markers JSON {\"fps\": 30, \"units\": \"mm\", \"markers\": "
+               "{\"2.1\": [[x, y, z], null, ...], \"v123\": [...]}}; markers CSV: time (s) or frame column, then "
+               "NAME_x, NAME_y, NAME_z per marker; C3D (pip install 'facewarp[mocap]') with --map; points are FDP "
+               "ids or v<vertex index>. Live Link Face CSV (Timecode, BlendShapeCount, EyeBlinkLeft, ..., HeadYaw, "
+               "HeadPitch, HeadRoll, ...); MediaPipe Face Landmarker JSON [{\"timestamp_ms\": .., "
+               "\"face_blendshapes\": [[{\"category_name\": .., \"score\": ..}, ...]]}, ...]. Writes "
+               "DIR/activations.csv, frames.npz, animation.usdc, report.json, drive.png (markers), activations.png; "
+               "a .usd[a|c|z] --out is the animation alone.")
+    dr.add_argument("build", type=Path, metavar="BUILD", help="a `facewarp build` output folder")
+    src = dr.add_mutually_exclusive_group(required=True)
+    src.add_argument("--markers", type=Path, metavar="FILE", help="a marker take: .json, .csv or .c3d")
+    src.add_argument("--arkit", type=Path, metavar="FILE.csv", help="ARKit curves: a Live Link Face CSV")
+    src.add_argument("--mediapipe", type=Path, metavar="FILE.json", help="ARKit curves: MediaPipe Face Landmarker "
+                     "blendshapes")
+    dr.add_argument("--map", type=Path, metavar="MAP.json", help='marker labels to points: {"LBRO": "4.1", '
+                    '"CHIN": "2.1", "M12": "v966"}; labels not in it are left out')
+    dr.add_argument("--units", choices=["mm", "cm", "m"], default=None,
+                    help="units of the marker coordinates (CSV: default m; JSON and C3D say their own)")
+    dr.add_argument("--fps", type=fps, metavar="F", default=None,
+                    help="frames per second, for files that do not carry it (a CSV with a frame column)")
+    dr.add_argument("--no-rigid", action="store_true",
+                    help="keep the take as it is (already in the head's frame): no fit of forehead, nose bridge and "
+                         "ear roots to remove head motion")
+    dr.add_argument("--out", required=True, type=Path, metavar="DIR|FILE.usd[a|c|z]",
+                    help="output folder, or a USD file (the animation alone)")
+    dr.set_defaults(func=run, outputs=out_dir_or_usd)
+
+
+# ----------------------------------------------------------------------------- run and report
+def run(args):
+    from ..jobs.drive import drive_files
+
+    bar = FrameBar(not args.json)
+    table_bar = FrameBar(not args.json, desc="ARKit table (once per build)", unit="shape")
+    try:
+        rep = drive_files(args.build, args.out, markers=args.markers, arkit=args.arkit, mediapipe=args.mediapipe,
+                          map=args.map, units=args.units, fps=args.fps, rigid=not args.no_rigid, device=args.device,
+                          progress=bar, table_progress=lambda done, total, name: table_bar(done, total))
+    finally:
+        table_bar.close()
+        bar.close()
+    lines = [f"drove {args.build} from {rep['source']} ({rep['kind']}): {rep['frames']} frames at {rep['fps']:g} fps "
+             f"in {rep['seconds']:.1f} s on {rep['device']}"]
+    e = rep.get("error_mm")
+    if e and e.get("rms") is not None:
+        worst = max(((v, k) for k, v in e["per_point_rms"].items() if v is not None), default=(None, None))
+        what = "simulated to target" if rep["kind"] == "markers" else "head FDPs to the blended ARKit targets"
+        lines.append(f"  distance {what}: RMS {e['rms']:.2f} mm, max {e['max']:.2f} mm"
+                     + (f" (worst point {worst[1]}: RMS {worst[0]:.2f} mm)" if worst[1] is not None else ""))
+    if rep.get("table"):
+        lines.append(f"  ARKit table {rep['table']['file']}" + (" (cached)" if rep["table"]["from_cache"] else
+                                                                 " (built now, cached for later runs)"))
+    hm = rep.get("head_motion")
+    if hm:
+        lines.append(f"  head motion removed by a fit of {len(hm['stable_points'])} stable points"
+                     + (f" ({hm['frames_held']} frames held the pose before them)" if hm["frames_held"] else ""))
+    notes = rep.get("notes", [])
+    lines += [f"  note: {n}" for n in notes[:6]]
+    if len(notes) > 6:
+        lines.append(f"  ... {len(notes) - 6} more notes in report.json")
+    lines.append("  wrote " + ", ".join(rep["files"]))
+    emit(args, rep, lines)
+
