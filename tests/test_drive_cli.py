@@ -192,3 +192,19 @@ def test_drive_one_marker_take_draws_its_picture(built, tmp_path, capsys):
     rep = drive_files(built, tmp_path / "o", markers=tmp_path / "one.json")
     assert (tmp_path / "o" / "drive.png").is_file() and rep["frames"] == 3
     assert "drive: frame 3/3" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--out", ""], "--out: expected an output folder"),
+    (["--neutral", "2:1", "--out", "o"], "--neutral"),
+    (["--start", "-1", "--out", "o"], "--start"),
+    (["--start", "50", "--out", "o"], "start 50 s is beyond the take's"),
+    (["--neutral", "0:0.1", "--out", "o"], "neutral, method: they go with retarget"),
+])
+def test_drive_cli_cut_and_retarget_options_refused(built, take, tmp_path, capsys, monkeypatch, extra, words):
+    path, _ = take
+    monkeypatch.chdir(tmp_path)
+    code = main(["drive", str(built), "--markers", str(path), *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []

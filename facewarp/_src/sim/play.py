@@ -239,14 +239,16 @@ def progress_lines(what: str, fps: float, *, every_s: float = PROGRESS_EVERY_S, 
 
     out = stream if stream is not None else sys.stderr
     step = max(1, int(round(every_s * fps)))
-    t0 = time.perf_counter()
+    t0 = [None]
 
     def progress(k: int, n: int) -> None:
+        now = time.perf_counter()
+        if k == 0 or t0[0] is None:
+            t0[0] = now  # from the end of the first frame: the rate of the frames after it
         if (k + 1) % step and k + 1 != n:
             return
-        wall = time.perf_counter() - t0
-        out.write(f"{what}: frame {k + 1}/{n} ({(k + 1) / fps:.1f} of {n / fps:.1f} s of take), "
-                  f"{(k + 1) / max(wall, 1e-9):.1f} frames/s\n")
+        rate = f", {k / (now - t0[0]):.1f} frames/s" if k > 0 and now > t0[0] else ""
+        out.write(f"{what}: frame {k + 1}/{n} ({(k + 1) / fps:.1f} of {n / fps:.1f} s of take){rate}\n")
         out.flush()
 
     return progress
