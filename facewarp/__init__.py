@@ -97,6 +97,7 @@ _NAMES = {
     "load_ict_displacements": "importers.ict_arkit", "transfer_ict_displacements": "importers.ict_arkit",
     "ict_shape_dirs": "importers.ict_arkit",
     "Tracker": "drive.inverse", "drive": "drive.perform", "DriveResult": "drive.inverse",
+    "retarget_markers": "drive.retarget",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
@@ -164,6 +165,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
     from ._src.drive.inverse import DriveResult, Tracker
     from ._src.drive.perform import drive
+    from ._src.drive.retarget import retarget_markers
     from ._src.drive.tracks import ARKIT_NAMES, ArkitTrack, MarkerTrack
     from ._src.drive.formats import (load_arkit, load_markers, markers_from_frames, save_livelink_csv,
                                      save_markers_json)

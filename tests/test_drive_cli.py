@@ -141,13 +141,11 @@ def test_drive_bad_input(built, take, tmp_path, capsys, case):
     assert not out.exists() and not list(tmp_path.glob(".o*")), list(tmp_path.iterdir())
 
 
-# ----------------------------------------------------------------------------- API edges of the job
+# ----------------------------------------------------------------------------- retargeting and edges
 def test_drive_retarget_a_larger_actor(built, take, tmp_path, capsys):
     """The same smile on an actor 12 % larger across and 5 % shorter, in cm, turned and standing in
     the room: retargeted, its displacements drive this head; the report gives the map and the
     error against the retargeted targets."""
-    from facewarp._src.jobs.drive import drive_files
-
     _, truth = take
     S = np.diag([1.12, 0.95, 1.0])
     c, s = np.cos(0.4), np.sin(0.4)
@@ -156,7 +154,11 @@ def test_drive_retarget_a_larger_actor(built, take, tmp_path, capsys):
     actor = fw.MarkerTrack(truth.fps, truth.names, P)
     fw.save_markers_json(actor, tmp_path / "actor.json", units="cm")
     out = tmp_path / "retargeted"
-    rep = drive_files(built, out, markers=tmp_path / "actor.json", retarget=True)
+    code = main(["--json", "drive", str(built), "--markers", str(tmp_path / "actor.json"), "--retarget",
+                 "--out", str(out)])
+    o, err = capsys.readouterr()
+    assert code == 0, err
+    rep = json.loads(o)
     assert rep["retarget"]["method"] == "fapu" and rep["error_is"].startswith("distance of each simulated point")
     assert rep["error_mm"]["rms"] < 1.0, rep["error_mm"]
     assert rep["head_motion"]["relative_to"] == "the actor's neutral"
@@ -165,33 +167,19 @@ def test_drive_retarget_a_larger_actor(built, take, tmp_path, capsys):
     A = np.loadtxt(out / "activations.csv", delimiter=",", skiprows=1)[:, 2:-2]
     zyg = [i for i, n in enumerate(rep["muscles"]) if n.startswith("zygomatic_major")]
     assert A[-1, zyg].max() > 0.1, A[-1]
-    # in absolute mode the same take is another face: centimetres off, which is what retargeting is for
-    with pytest.raises(fw.InputError):
-        drive_files(built, tmp_path / "x", markers=tmp_path / "actor.json", neutral="0:0.1")  # neutral needs retarget
-    assert not (tmp_path / "x").exists()
-
-
-def test_drive_out_empty_is_refused(built, take, tmp_path, monkeypatch):
-    from facewarp._src.jobs.drive import drive_files
-
-    path, _ = take
-    monkeypatch.chdir(tmp_path)
-    with pytest.raises(fw.InputError, match="out: empty"):
-        drive_files(built, "", markers=path)
-    assert list(tmp_path.iterdir()) == []
 
 
 def test_drive_one_marker_take_draws_its_picture(built, tmp_path, capsys):
     """A legal one-marker take (the chin, three frames): solved, and drive.png framed on the face
     (no picture of zero extent), with a progress line on stderr off a terminal."""
-    from facewarp._src.jobs.drive import drive_files
-
     sim = fw.FaceSimulator(fw.load_face_rig(built))
-    chin = np.array([sim.fdp_points()[[str(i) for i in sim.fr.fdp_ids].index("2.1")]] * 3)
+    chin = np.array([sim.fdp_points()[[str(i) for i in fw.load_face_rig(built).fdp_ids].index("2.1")]] * 3)
     fw.save_markers_json(fw.MarkerTrack(30.0, ["2.1"], chin[:, None]), tmp_path / "one.json")
-    rep = drive_files(built, tmp_path / "o", markers=tmp_path / "one.json")
-    assert (tmp_path / "o" / "drive.png").is_file() and rep["frames"] == 3
-    assert "drive: frame 3/3" in capsys.readouterr().err
+    code = main(["--json", "drive", str(built), "--markers", str(tmp_path / "one.json"), "--out", str(tmp_path / "o")])
+    o, err = capsys.readouterr()
+    assert code == 0, err
+    assert (tmp_path / "o" / "drive.png").is_file() and json.loads(o)["frames"] == 3
+    assert "drive: frame 3/3 (0.1 of 0.1 s of take)" in err
 
 
 @pytest.mark.parametrize("extra, words", [

@@ -178,17 +178,3 @@ def test_play_takes_a_source(sim):
     assert times == pytest.approx([0.0, 1 / sim.fps, 2 / sim.fps])
     with pytest.raises(fw.InputError, match="frames/s"):
         fw.play(sim, Pulse(sim.fps * 2))
-
-
-def test_progress_lines_off_a_terminal():
-    import io
-
-    from facewarp._src.sim.play import progress_lines
-
-    out = io.StringIO()
-    p = progress_lines("drive", 30.0, every_s=1.0, stream=out)
-    for k in range(75):
-        p(k, 75)
-    lines = out.getvalue().splitlines()
-    assert len(lines) == 3 and lines[0].startswith("drive: frame 30/75 (1.0 of 2.5 s of take)")
-    assert lines[-1].startswith("drive: frame 75/75")

@@ -14,7 +14,6 @@ import pytest
 
 import facewarp as fw
 from benchmarks import _takes
-from facewarp._src.drive.retarget import region_of, retarget_map, retarget_track
 
 
 def _one_line_error(fn, *words):
@@ -254,9 +253,13 @@ def _face(rng):
     return names, {n: rng.uniform(-0.07, 0.07, 3) for n in names}
 
 
-def test_region_of():
-    assert region_of("8.3") == "mouth" and region_of("2.2") == "mouth" and region_of("2.1") == "jaw"
-    assert region_of("4.1") == "brows" and region_of("11.1") == "forehead" and region_of("10.9") == "ears"
+def test_retarget_regions():
+    rng = np.random.default_rng(2)
+    names, head = _face(rng)
+    _, _, m = fw.retarget_markers(fw.MarkerTrack(30, names, np.array([[head[n] for n in names]] * 2)), head)
+    region = dict(zip(m.names, m.regions))
+    assert region["8.3"] == "mouth" and region["2.2"] == "mouth" and region["2.1"] == "jaw"
+    assert region["4.1"] == "brows" and region["11.1"] == "forehead" and region["10.9"] == "ears"
 
 
 @pytest.mark.parametrize("method", ["affine", "fapu"])
@@ -275,7 +278,7 @@ def test_retarget_undoes_a_stretched_actor(method):
     mov = [i for i, n in enumerate(names) if n not in fw.STABLE_POINTS]
     D[:, mov] = rng.normal(scale=0.003, size=(T, len(mov), 3)) * np.linspace(0, 1, T)[:, None, None]
     take = fw.MarkerTrack(30, names, np.array([to_actor(Q + D[t]) for t in range(T)]))
-    targets, motion, m = retarget_track(take, head, method=method)
+    targets, motion, m = fw.retarget_markers(take, head, method=method)
     assert motion is not None and np.allclose(motion.rotation, np.eye(3), atol=1e-9)  # the actor stood still
     got = targets.positions - Q[None]
     err = np.linalg.norm(got - D, axis=2).max()
@@ -292,16 +295,18 @@ def test_retarget_removes_actor_head_motion():
     T = 20
     R, t = _takes.head_motion(T, 30.0, rng)
     P = np.einsum("tij,kj->tki", R, Q * 1.1) + t[:, None] + np.array([0.0, 1.6, 0.0])
-    targets, motion, m = retarget_track(fw.MarkerTrack(30, names, P), head)
+    targets, motion, m = fw.retarget_markers(fw.MarkerTrack(30, names, P), head)
     np.testing.assert_allclose(targets.positions, np.broadcast_to(Q, P.shape), atol=1e-9)  # no expression: rest
     np.testing.assert_allclose(motion.rotation, R, atol=1e-9)
 
 
-def test_retarget_map_needs_a_neutral():
+def test_retarget_needs_a_neutral_and_a_method():
     names = ["2.1", "8.3", "8.4"]
     head = {n: np.random.default_rng(1).normal(size=3) for n in names}
-    _one_line_error(lambda: retarget_map(np.zeros((3, 3)), names, head), "four or more points")
-    _one_line_error(lambda: retarget_map(np.ones((3, 3)), names, head, method="x"), "method")
+    take = fw.MarkerTrack(30, names, np.zeros((2, 3, 3)))
+    _one_line_error(lambda: fw.retarget_markers(take, head, rigid=False), "four or more points")
+    _one_line_error(lambda: fw.retarget_markers(take, head, method="x"), "method")
+    _one_line_error(lambda: fw.retarget_markers(take, {"2.1": np.zeros(3)}, rigid=False), "no point '8.3'")
 
 
 # ----------------------------------------------------------------------------- left and right

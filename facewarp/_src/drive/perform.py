@@ -223,6 +223,8 @@ def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offli
     if abs(track.fps - sim.fps) > 1e-6 * sim.fps:
         raise InputError(f"track: {track.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
                          f"make the FaceSimulator with fps={track.fps:g}")
+    if not retarget and method != "fapu":
+        raise InputError(f"method: {method!r} goes with retarget=True (a take of another face)")
     nf = track.frames
     tracker = Tracker(sim, track.names, mode=mode, **options)  # checks the point names against the head
     notes = []

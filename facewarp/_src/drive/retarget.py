@@ -42,7 +42,8 @@ from ..geometry.similarity import fit_similarity, point_spread
 from .rigid import STABLE_POINTS, HeadMotion, remove_head_motion
 from .tracks import MarkerTrack
 
-__all__ = ["AFFINE_PRIOR", "METHODS", "REGIONS", "RetargetMap", "region_of", "retarget_map", "retarget_track"]
+__all__ = ["AFFINE_PRIOR", "FACE_PRIOR", "METHODS", "REGIONS", "RetargetMap", "region_of", "retarget_map", "retarget_markers",
+           "retarget_track"]
 
 METHODS = ("fapu", "affine")
 """How displacements are carried from the actor to the head (module doc)."""
@@ -275,3 +276,33 @@ def retarget_track(track: MarkerTrack, head_rest: dict, *, method: str = "fapu",
     out = MarkerTrack(track.fps, list(track.names), targets, source=track.source, notes=notes,
                       info=dict(track.info, retarget=m.method))
     return out, motion, m
+
+
+def retarget_markers(track: MarkerTrack, rest, *, method: str = "fapu", rigid: bool = True):
+    """An actor's marker take as target points on a head, without simulating: what
+    :func:`~facewarp.drive` with ``retarget=True`` solves towards (to look at them, or to drive a
+    rig of one's own).
+
+    Args:
+        track: The actor's take (:class:`~facewarp.MarkerTrack`, metres, any frame); its
+            ``neutral`` (default its first frame) is the actor at rest.
+        rest: The head at rest: a mapping from point name to position [m], shape (3,), holding
+            every name of the take (e.g. ``dict(zip(rig.fdp_ids, sim.fdp_points()))``).
+        method: ``"fapu"`` (MPEG-4 face animation parameter units, default) or ``"affine"``.
+        rigid: Remove the actor's head motion against its neutral first (three stable points needed).
+
+    Returns:
+        ``(targets, motion, map)``: the targets in the head's frame (a MarkerTrack, NaN where a
+        marker is missing), the actor's head motion relative to its neutral (a
+        :class:`~facewarp.HeadMotion`, or None when not removed) and the map (``method``,
+        ``regions``, ``linear`` (K, 3, 3), ``rotation``, ``scale``, ``units``, ``notes``, ``to_dict()``).
+
+    Raises:
+        InputError: a bad argument, a name the head lacks, fewer than four points in the neutral,
+        stable points that cannot give the head motion.
+    """
+    from ..core.checks import check_bool
+
+    rigid = check_bool("rigid", rigid)
+    method = check_choice("method", method, METHODS)
+    return retarget_track(track, rest, method=method, rigid=rigid)
