@@ -5,8 +5,12 @@ Steps: the take is read and checked first (:mod:`~facewarp._src.drive.formats`),
 rig; a marker take's points are checked against the head (FDP ids it has, vertices in range), its
 rigid head motion removed when it has three or more stable points
 (:func:`~facewarp.remove_head_motion`), and :func:`~facewarp.drive` solves and plays it through
-the sinks (frames kept, the USD animation streamed). ARKit curves go through the head's ARKit
-table (built once and cached in the build folder).
+the sinks (frames kept, the USD animation streamed) in the one frame loop (:func:`~facewarp.play`).
+A take of another face (``retarget=True``) is carried to this head from its neutral
+(:mod:`..drive.retarget`: the actor's head motion removed against the neutral). ARKit curves go
+through the head's ARKit table (built once and cached in the build folder). What the loader
+changed or filled in (frames interpolated, weights clamped, a cut) is in the report's ``notes``
+and ``take``.
 
 Outputs (a folder): ``activations.csv`` (per frame the time, every muscle's activation and the jaw's
 opening and side angles), ``frames.npz`` (as ``simulate`` writes), ``animation.usdc``,
