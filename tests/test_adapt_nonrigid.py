@@ -53,6 +53,7 @@ def test_tangential_shift_is_undone(head, fitted):
     assert fitted.to_dict()["quality"]["surface"]["folds"] == 0
 
 
+@pytest.mark.slow
 def test_rotation_invariance(head, fitted):
     t, tl, truth, SV, SF, sl = head
     c, s = np.cos(2.4), np.sin(2.4)
@@ -106,6 +107,7 @@ def test_bad_inputs_name_the_argument(head):
         detect_landmarks(SV * 1000.0, SF)
 
 
+@pytest.mark.slow
 def test_detects_fdps_in_any_pose(head):
     t, tl, truth, SV, SF, sl = head
     c, s = np.cos(-2.0), np.sin(-2.0)
@@ -118,6 +120,7 @@ def test_detects_fdps_in_any_pose(head):
     assert all(0.0 <= conf[k] <= 1.0 for k in conf)
 
 
+@pytest.mark.slow
 def test_cli_detects_then_adapts_without_landmarks(head, tmp_path, capsys):
     """`facewarp landmarks detect` writes loadable landmarks with confidences; `facewarp adapt` without
     --landmarks finds them itself and writes the quality pictures."""

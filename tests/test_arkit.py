@@ -75,6 +75,7 @@ def test_transfer_onto_template_head(ict, sim):
     assert max(rep["warp_fdp_residual_m"]) < 1e-9  # the warp interpolates the shared FDPs
 
 
+@pytest.mark.slow
 def test_table_build_cache_and_controls(ict, sim, built):
     t, cache = built
     assert (cache / "arkit_table.npz").is_file() and not t.info["from_cache"]

@@ -100,6 +100,7 @@ def test_flat_color_difference_is_the_distance_to_the_mean_lab():
     assert grey["delta_e_mean"] > r["delta_e_mean"] + 1.0, (grey, r)
 
 
+@pytest.mark.slow
 def test_adapt_bakes_a_likeness(tmp_path, capsys):
     """The synthetic scan with its colour: adapt writes texture.png and adapted.mtl, and the textured
     head's renders match the scan's (front, three-quarter) within Delta E 4, L* correlation >= 0.6,
@@ -176,6 +177,7 @@ def _textured_scan(scan, size=512):
     return uv, face_uv, tex, keep
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["obj", "glb"])
 def test_adapt_bakes_from_a_textured_scan(tmp_path, capsys, fmt):
     """OBJ + MTL + PNG, or GLB with a base-colour texture: the colour comes from the texture."""

@@ -9,6 +9,7 @@ import pytest
 
 import facewarp as fw
 from conftest import step_together
+from conftest import fresh_build
 
 FRAMES = 12  # 0.4 s at 30 fps: the laugh ramping in with its jaw
 
@@ -70,6 +71,7 @@ def test_batch_gives_each_head_its_own_answer(rigs, device):
     assert np.abs(batch.positions(1) - b.nodes).max() > 1e-3  # the others kept their state
 
 
+@pytest.mark.slow
 def test_batch_same_answer_over_a_two_second_preset(rigs, device):
     """The issue's same-answer target: two different heads and a third playing other controls, 2 s of
     laugh (attack, hold, release) at 30 fps, each head within 1e-6 m of the same head alone, every 10th frame."""
@@ -147,12 +149,8 @@ def test_bad_inputs_are_input_errors(rigs):
 
 
 @pytest.fixture(scope="module")
-def build_dir(tmp_path_factory):
-    from facewarp.cli import main
-
-    d = tmp_path_factory.mktemp("build") / "b"
-    assert main(["build", "default", "--out", str(d)]) == 0
-    return d
+def build_dir(tmp_path_factory, default_build_dir):
+    return fresh_build(tmp_path_factory, default_build_dir)
 
 
 def test_batch_mujoco_jaws_match_the_single_head_driver(build_dir):

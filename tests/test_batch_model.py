@@ -67,6 +67,7 @@ def test_model_of_faces_layout(rigs):
     np.testing.assert_array_equal(rig.att_node[k0:k1], np.asarray(b.rig.att_node) + p)
 
 
+@pytest.mark.slow
 def test_model_batch_same_answer_without_contact(rigs):
     """Heads of different rest shapes in one Model: each close to its run alone. The CPU solver
     (L-BFGS over the whole Model) stops on a global test (the largest step over every head), so a

@@ -84,6 +84,7 @@ def test_schema_writer_fields(tmp_path):
         _common.load(bad)
 
 
+@pytest.mark.slow
 def test_runner_runs_a_case_into_the_schema(tmp_path):
     r = _runner("--results", str(tmp_path), "anatomy_levels", "--levels", "0")
     assert r.returncode == 0, r.stdout + r.stderr

@@ -10,13 +10,12 @@ import pytest
 
 import facewarp
 from facewarp.cli import main
+from conftest import fresh_build
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    out = tmp_path_factory.mktemp("build")
-    assert main(["--json", "build", "default", "--out", str(out)]) == 0
-    return out
+def built(tmp_path_factory, default_build_dir):
+    return fresh_build(tmp_path_factory, default_build_dir)
 
 
 def test_build_outputs(built):
@@ -33,6 +32,7 @@ def test_build_outputs(built):
     assert {"zygomatic_major_L", "zygomatic_major_R", "orbicularis_oris", "orbicularis_oculi_L"} <= names
 
 
+@pytest.mark.slow
 def test_simulate_outputs(built, tmp_path, capsys):
     out = tmp_path / "sim"
     code = main(["--json", "simulate", str(built), "--expression", "smile", "--seconds", "0.2", "--fps", "20",

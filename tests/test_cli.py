@@ -41,6 +41,7 @@ def facewarp_process(*argv, **env_extra):
     return subprocess.run([sys.executable, "-m", "facewarp", *argv], capture_output=True, text=True, env=env)
 
 
+@pytest.mark.slow
 def test_template_export(tmp_path, capsys):
     out = tmp_path / "t"
     code, _, err = run(capsys, "--json", "template", "export", "--out", str(out), "--level", "0", "--usd")
@@ -144,6 +145,7 @@ def test_device_cuda_without_gpu(capsys):
     one_line_error(code, out, err, "--device cuda", "no CUDA device")
 
 
+@pytest.mark.slow
 def test_json_stdout_is_one_document_and_warp_is_quiet(tmp_path):
     """With --json stdout holds exactly one JSON document; Warp's messages (banner, the CUDA
     driver note on machines without a GPU) appear only with --verbose, and then on stderr."""

@@ -96,6 +96,7 @@ class _Springs:
         pass
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["lbfgs", "newton-pcg"])
 def test_kernels_evaluate_one_sided_springs_like_the_reference(method):
     import warp as wp
@@ -267,6 +268,7 @@ def default_rig():
     return an, face_rig_from_anatomy(an)
 
 
+@pytest.mark.slow
 def test_lips_pushed_into_the_teeth_stay_outside(default_rig):
     """The inner sheet of the lips and cheeks near the teeth, pushed toward the nearest dental
     arch by 6 N a node, crosses into it without contact (6 nodes, 0.27 mm deep on the default
@@ -408,6 +410,7 @@ def test_the_default_head_keeps_both_lids_of_each_eye_to_their_side(default_rig)
     assert rest["lid_lid"] == 0 and rest["lid_lid_depth_m"] == 0.0
 
 
+@pytest.mark.slow
 def test_a_gliding_lid_node_is_held_on_its_sphere_by_the_verlet_forces():
     """The inner lid sheet over the eyeball glides on it: a gliding node lifted off its sphere
     (its rest distance from the centre) is pulled back with the glide stiffness, one pushed in
@@ -453,6 +456,7 @@ def test_a_gliding_lid_node_is_held_on_its_sphere_by_the_verlet_forces():
     assert np.abs(dF[mid[2]]).max() == 0.0  # contact only: lifting off is free
 
 
+@pytest.mark.slow
 def test_the_lids_inner_sheet_over_the_eyeballs_glides_on_them(default_rig):
     """The default head's inner lid sheet over each eyeball has no planar sliding support (a plane
     tangent at rest pushed the closing lid medially and held it off the ball) but glides on the

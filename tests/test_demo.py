@@ -11,6 +11,9 @@ import facewarp
 import usd_export
 from facewarp.cli import main
 
+pytestmark = pytest.mark.slow  # minutes on the 2-core box: the slow tier
+
+
 
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):

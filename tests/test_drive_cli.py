@@ -10,15 +10,14 @@ import pytest
 
 import facewarp as fw
 from facewarp.cli import main
+from conftest import fresh_build
 
 NAMES = ["2.1", "8.3", "8.4", "8.1", "8.2", "5.1", "5.2", *fw.STABLE_POINTS]
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    out = tmp_path_factory.mktemp("build")
-    assert main(["--json", "build", "default", "--out", str(out)]) == 0
-    return out
+def built(tmp_path_factory, default_build_dir):
+    return fresh_build(tmp_path_factory, default_build_dir)
 
 
 @pytest.fixture(scope="module")
@@ -40,6 +39,7 @@ def take(built, tmp_path_factory):
     return d / "take.json", tr
 
 
+@pytest.mark.slow
 def test_drive_markers_end_to_end(built, take, tmp_path, capsys):
     path, truth = take
     out = tmp_path / "driven"

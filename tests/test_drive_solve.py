@@ -14,8 +14,8 @@ import facewarp as fw
 
 
 @pytest.fixture(scope="module")
-def rig():
-    return fw.build_face(fw.default_template(0))
+def rig(default_rig):
+    return default_rig
 
 
 @pytest.fixture(scope="module")
@@ -49,6 +49,7 @@ def _simulate(rig, A, J):
     return np.array(P), np.array(S)
 
 
+@pytest.mark.slow
 def test_sensitivity_matches_finite_differences(rig, fdps):
     # the solver's sensitivity of one step (a factorised Hessian, one back-substitution per control)
     # against full simulated steps from the same start with one control moved
@@ -85,6 +86,7 @@ def test_sensitivity_matches_finite_differences(rig, fdps):
         assert err < 0.15 and cos > 0.99, f"control {i}: relative error {err:.3f}, cosine {cos:.4f}"
 
 
+@pytest.mark.slow
 def test_round_trip_recovers_the_face(rig, fdps):
     rng = np.random.default_rng()  # a new case each run
     A, J = _smooth_controls(rng, 12, 27)

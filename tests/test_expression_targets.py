@@ -22,8 +22,8 @@ MM = 1e-3
 
 
 @pytest.fixture(scope="module")
-def rig():
-    return build_face(default_template(0))
+def rig(default_rig):
+    return default_rig
 
 
 @pytest.fixture(scope="module")
@@ -146,6 +146,7 @@ def test_blink_closes_the_lids(rig, peaks):
     assert np.linalg.norm(d["4.3"]) < 1 * MM  # the brows stay (0.4 mm)
 
 
+@pytest.mark.slow
 def test_pucker_narrows_and_purses(rig, peaks):
     d = _peak(rig, peaks, "pucker")
     # the orbicularis oris acts by itself: the mouth narrows (54 -> 45.3 mm), the corners come forward

@@ -16,8 +16,8 @@ SECONDS = 0.4
 
 
 @pytest.fixture(scope="module")
-def rig():
-    return build_face(default_template(0))
+def rig(default_rig):
+    return default_rig
 
 
 def motion(rig, timeline, seconds=SECONDS, **kw):
@@ -59,6 +59,7 @@ def test_old_face_rig_without_contact_asks_for_a_rebuild(rig, tmp_path):
     assert "\n" not in str(e.value)
 
 
+@pytest.mark.slow
 def test_rest_stays_at_rest(rig):
     d, frames = motion(rig, Timeline([]), 0.1)
     assert np.abs(frames.points - frames.points[0]).max() < 1e-6
@@ -89,6 +90,7 @@ def test_part_points_follow_jaw_and_head_pose(rig):
                                atol=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("solver, material", [("implicit", "physical"), ("implicit", "thesis"), ("verlet", "thesis")])
 def test_smile_raises_lip_corners_outward(rig, solver, material):
     seconds = SECONDS if solver == "implicit" else 0.2  # Verlet: ~2,200 substeps per frame (thesis)

@@ -58,6 +58,7 @@ def first(scans, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_broken_scan_does_not_sink_the_batch(first, scans):
     m = _manifest(first)
     assert set(m) == {"good1", "good2", "broken"}
@@ -415,6 +416,7 @@ def alone(first, scans, tmp_path_factory):
     return _sim_run(first, scans, tmp_path_factory)
 
 
+@pytest.mark.slow
 def test_grouped_simulate_writes_what_each_scan_gets_alone(grouped, alone):
     import numpy as np
 

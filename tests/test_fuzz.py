@@ -24,6 +24,7 @@ import pytest
 
 import facewarp as fw
 from facewarp.cli import main
+from conftest import fresh_build
 
 SEED = int(os.environ.get("FACEWARP_FUZZ_SEED", random.SystemRandom().randrange(2**31)))
 N = int(os.environ.get("FACEWARP_FUZZ_CASES", "6"))  # random mutations per file kind
@@ -151,6 +152,7 @@ def test_mesh_values_that_must_be_refused(small_mesh, tmp_path, capsys):
         _cli(capsys, ["mesh", "check", p], needle=name)
 
 
+@pytest.mark.slow
 def test_stl_of_the_demo_scan_adapts(tmp_path, capsys):
     """A binary STL with three copies of every vertex (trimesh's export of the demo scan) adapts."""
     import trimesh
@@ -192,10 +194,8 @@ def test_landmark_files(tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- heads and face rigs
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    out = tmp_path_factory.mktemp("fuzz") / "build"
-    assert main(["--json", "build", "default", "--out", str(out)]) == 0
-    return out
+def built(tmp_path_factory, default_build_dir):
+    return fresh_build(tmp_path_factory, default_build_dir)
 
 
 @pytest.fixture(scope="module")

@@ -16,6 +16,8 @@ from facewarp import (FDP_CATALOGUE, FDP_IDS, FRONTAL_REGIONS, ICT_FDP_VERTICES,
                       ICT_SKIN_VERTICES, REGIONS, InputError, build_anatomy, default_template, face_rig_from_anatomy,
                       import_ict, load_mesh, load_template_dir)
 
+pytestmark = pytest.mark.slow  # minutes on the 2-core box: the slow tier
+
 
 @pytest.fixture(scope="module")
 def ict(ict_dir):

@@ -52,6 +52,7 @@ def test_morph_blends_skin_and_parts(head_b, tmp_path, capsys):
         np.testing.assert_allclose(ratio, np.sqrt(1.04), rtol=1e-5, err_msg=name)
 
 
+@pytest.mark.slow
 def test_morph_builds_simulatable_heads(head_b, tmp_path, capsys):
     out, build = tmp_path / "m.usda", tmp_path / "heads"
     code, rep, err = run(["morph", "default", str(head_b), "--steps", "1", "--out", str(out), "--build", str(build)],

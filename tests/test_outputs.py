@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from facewarp.cli import main
+from conftest import fresh_build
 
 
 def _env():
@@ -26,10 +27,8 @@ def _leftovers(folder: Path) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    out = tmp_path_factory.mktemp("outputs") / "build"
-    assert main(["--json", "build", "default", "--out", str(out)]) == 0
-    return out
+def built(tmp_path_factory, default_build_dir):
+    return fresh_build(tmp_path_factory, default_build_dir)
 
 
 def _start(argv, cwd):

@@ -13,8 +13,8 @@ SECONDS = 0.1  # 4 frames at 30 fps
 
 
 @pytest.fixture(scope="module")
-def rig():
-    return fw.build_face(fw.default_template(0))
+def rig(default_rig):
+    return default_rig
 
 
 @pytest.fixture(scope="module")

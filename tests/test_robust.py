@@ -12,8 +12,8 @@ from facewarp.physics import VOLUME_FLOOR
 
 
 @pytest.fixture(scope="module")
-def rig():
-    return fw.build_face(fw.default_template(0))
+def rig(default_rig):
+    return default_rig
 
 
 def volume_ratios(rig, X):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import json
 import subprocess
 import sys
@@ -20,6 +21,7 @@ def run_scene(name: str, *args) -> str:
     return run.stdout
 
 
+@pytest.mark.slow
 def test_slab_muscle(tmp_path):
     out = tmp_path / "slab"
     run_scene("slab_muscle", "--seconds", 0.05, "--cells", 10, "--size", 64, "--out", out)

@@ -36,6 +36,7 @@ def test_outward_orientation(t0):
     assert 3e-3 < vol < 8e-3, vol  # m^3; an adult head and neck is about 4-5 litres
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("level", [1, 2, 3])
 def test_levels_are_4x_and_manifold(level):
     lo, hi = default_template(level - 1), default_template(level)
