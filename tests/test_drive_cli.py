@@ -142,6 +142,7 @@ def test_drive_bad_input(built, take, tmp_path, capsys, case):
 
 
 # ----------------------------------------------------------------------------- retargeting and edges
+@pytest.mark.slow
 def test_drive_retarget_a_larger_actor(built, take, tmp_path, capsys):
     """The same smile on an actor 12 % larger across and 5 % shorter, in cm, turned and standing in
     the room: retargeted, its displacements drive this head; the report gives the map and the
