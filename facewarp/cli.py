@@ -20,7 +20,7 @@ import os
 import sys
 
 from ._src.cli import build_parser
-from ._src.cli.common import EXIT_USAGE, MAX_TEMPLATE_LEVEL
+from ._src.cli.common import EXIT_USAGE, MAX_TEMPLATE_LEVEL, close_progress
 from ._src.core.errors import FacewarpError
 
 __all__ = ["EXIT_BROKEN_PIPE", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_USAGE", "MAX_TEMPLATE_LEVEL", "build_parser",
@@ -163,6 +163,8 @@ def _run(args) -> int:
             raise
         hint = "" if isinstance(e, ImportError) else "; --verbose shows the traceback, please report it"
         return _error(_unstaged(staging, f"{type(e).__name__}: {e}{hint}"), EXIT_INTERNAL)
+    finally:
+        close_progress()  # no progress line after the command, whatever ended it
     return 0
 
 

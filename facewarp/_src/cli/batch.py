@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from ..core.limits import MAX_ADAPT_LEVELS, MAX_FPS, MAX_SECONDS
-from .common import FacewarpError, FrameBar, Parser, emit, fps, number, out_dir, seconds, whole_in
+from .common import FacewarpError, FrameBar, Parser, emit, muscle_list, fps, number, out_dir, seconds, whole_in
 
 
 # ----------------------------------------------------------------------------- options
@@ -15,8 +15,8 @@ def add_parser(sub) -> None:
     bt = sub.add_parser("batch", help="many scans through adapt, build, simulate and rig, in local processes or on Ray")
     btsub = bt.add_subparsers(dest="batch_command", metavar="ACTION", parser_class=Parser)
     btsub.required = True
-    br = btsub.add_parser(
-        "run", help="run every scan through the chosen steps; a manifest makes re-runs skip finished work",
+    br = btsub.add_parser("run", example="facewarp batch run scans/a.ply scans/b.ply --units mm --out batch --workers 2",
+                          help="run every scan through the chosen steps; a manifest makes re-runs skip finished work",
         epilog="Writes DIR/manifest.json (per scan: inputs with their SHA-256, each step's status, error, outputs, "
                "seconds and worker; rewritten atomically as tasks finish), DIR/scans/NAME-KEY/{adapt,build,simulate,rig}/, "
                "DIR/report.json and DIR/report.csv. A scan is known by its content: a re-run (or a renamed copy) "
@@ -43,7 +43,7 @@ def add_parser(sub) -> None:
                     help="the rig step's files rig.FORMAT, one bake written in each (default usdc,glb)")
     br.add_argument("--rig-inbetweens", type=whole_in(0, 8), default=0, metavar="K",
                     help="the rig step's in-between shapes per muscle (as `facewarp rig --inbetweens`; 0..8, default 0)")
-    br.add_argument("--rig-muscles", default=None, metavar="A,B,...",
+    br.add_argument("--rig-muscles", type=muscle_list, default=None, metavar="A,B,...",
                     help="the rig step bakes only these muscles (as `facewarp rig --muscles`; default all)")
     br.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scans and their landmarks")
     br.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
@@ -64,13 +64,13 @@ def add_parser(sub) -> None:
                     help="retries of a step whose worker process died (killed, out of memory), 0..100, default 2")
     br.add_argument("--retry-failed", action="store_true", help="run the steps that failed in an earlier run again")
     br.set_defaults(func=run_batch_run)
-    bs = btsub.add_parser(
-        "simulate", help="many built heads played together in one FaceBatch (one step, one CUDA graph per frame for all)",
+    bs = btsub.add_parser("simulate", example="facewarp batch simulate build_a build_b --expression laugh --out crowd",
+                          help="many built heads played together in one FaceBatch (one step, one CUDA graph per frame for all)",
         epilog="Writes DIR/head_KK.usdc (one USD animation per head, in the order given) and DIR/report.json "
                "(per head: status, error, frames sub-stepped; frames/s and head-frames/s of the batch). A head that fails (NaN, inverted tet even when sub-stepped) is frozen at its "
                "last good frame and reported; the others go on. --per-head FILE.json: {\"heads\": [\"smile\", "
-               "{\"expression\": \"laugh\"}, ...]}, one entry per BUILD_DIR.")
-    bs.add_argument("builds", nargs="+", type=Path, metavar="BUILD_DIR", help="`facewarp build` output folders")
+               "{\"expression\": \"laugh\"}, ...]}, one entry per BUILD.")
+    bs.add_argument("builds", nargs="+", type=Path, metavar="BUILD", help="`facewarp build` output folders")
     bs.add_argument("--expression", default="smile", metavar="NAME|sequence|FILE.json",
                     help="what every head plays (as `facewarp simulate --expression`; default smile)")
     bs.add_argument("--per-head", type=Path, metavar="FILE.json", help="one expression per head (overrides --expression)")
@@ -126,7 +126,7 @@ def run_batch_run(args):
              else scans_from_paths(args.scans, units=args.units))
     rep = run_batch(scans, args.out, steps=args.steps, expression=args.expression, seconds=args.seconds,
                     levels=args.levels, rig_formats=args.rig_formats, rig_inbetweens=args.rig_inbetweens,
-                    rig_muscles=[m for m in args.rig_muscles.split(",") if m] if args.rig_muscles else None,
+                    rig_muscles=args.rig_muscles,
                     device=args.device, ray=args.ray, workers=args.workers,
                     gpus_per_task=args.gpus_per_task, simulate_batch=args.simulate_batch,
                     max_retries=args.max_retries, retry_failed=args.retry_failed,

@@ -10,7 +10,8 @@ from .common import Progress, emit, fps, whole_in
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    mo = sub.add_parser("morph", help="in-between heads of two heads of the same topology, as one USD",
+    mo = sub.add_parser("morph", example="facewarp morph head_a head_b --steps 8 --out morph.usdc",
+                        help="in-between heads of two heads of the same topology, as one USD",
                         epilog="A and B: template folders, adapt outputs or default[:LEVEL] made from one template. "
                                "The USD holds steps + 2 time samples (A, the in-betweens, B); a picture "
                                "FILE.png is written beside it.")

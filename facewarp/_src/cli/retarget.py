@@ -10,7 +10,8 @@ from .common import StageBar, emit, fps, out_dir, seconds
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    r = sub.add_parser("retarget", help="one activation sequence on several heads: a USD per head and a picture",
+    r = sub.add_parser("retarget", example="facewarp retarget sequence build_a build_b --out crowd",
+                       help="one activation sequence on several heads: a USD per head and a picture",
                        epilog="SEQUENCE: a sequence file (see `facewarp simulate --help`), a preset name or "
                               "'sequence'. HEAD: a `facewarp build` output, a template folder, an adapt output or "
                               "default[:LEVEL]. Every head gets the same physical parameters.")

@@ -567,7 +567,7 @@ def load_arkit(path, *, fps: float | None = None, start: float | None = None, en
     Returns:
         The track: weights (T, 52) in :data:`~facewarp.ARKIT_NAMES` order, on a uniform grid at the
         take's own rate (frames the recording dropped interpolated, and said in ``notes``);
-        head_rotation (T, 3) [rad] yaw, pitch, roll and eye_rotation (T, 2, 3) [rad] from Live
+        head_rotation (T, 3) [rad] yaw, pitch, roll and eye_rotation (T, 2, 2) [rad] yaw, pitch from Live
         Link's columns, None for MediaPipe.
 
     Raises:
@@ -815,7 +815,9 @@ def _livelink_csv(path: Path, text: str, fps: float | None) -> ArkitTrack:
         rate = 30.0 if fps is None else fps  # a single frame: its rate does not matter
     W = np.clip(_fill(W, index), 0.0, 1.0)
     H = None if H is None else _fill(H, index)
-    E = None if E is None else _fill(E, index).reshape(-1, 2, 3)
+    E = None if E is None else _fill(E, index).reshape(-1, 2, 3)[:, :, :2]  # yaw, pitch (the eyes do not roll)
+    if E is not None and not np.any(E):
+        E = None  # a writer that records no gaze (all zero): the eyeLook* weights say where the eyes look
     info = {"clamped": counts, **gaps, "frames_read": T}
     return ArkitTrack(rate, W, H, source=str(path), eye_rotation=E, notes=notes + _gap_note(gaps, rate), info=info)
 

@@ -39,15 +39,16 @@ shook weakly seen muscles (the lip corners', the brows') by 3 to 5 mm between fr
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..core.checks import check_array, check_bool, check_choice, check_int, check_number
 from ..core.errors import InputError
+from .result import DriveResult
 from .sensitivity import PointReadout, step_sensitivity
 
-__all__ = ["DriveResult", "Tracker", "drive"]
+__all__ = ["DriveResult", "Tracker"]
 
 MODES = ("offline", "realtime")
 """Tracker modes: ``offline`` (frames re-taken until the step matches its prediction) and
@@ -441,152 +442,3 @@ class Tracker:
         self.last_error = np.where(visible, err, np.nan)
         self._update_noise(np.where(visible[:, None], p - T, np.nan))
         return sim.activations, sim.jaw_angles
-
-
-# ---------------------------------------------------------------------------------------- drive
-@dataclass
-class DriveResult:
-    """What :func:`drive` solved for a track.
-
-    Attributes:
-        fps: Frames per second [1/s].
-        names: The K point names of the track.
-        muscle_names: The M muscle names, column order of ``activations``.
-        activations: (T, M) float32 in [0, 1], per frame.
-        jaw: (T, 2) float32 [rad], (opening, side) per frame.
-        error: (T, K) float64 [m], distance of each simulated point from its target (NaN where missing).
-        rms: (T,) float64 [m], RMS of ``error`` over the frame's present points (NaN: none present).
-        unreachable: Notes on what the face could not match (frames and points off by more than ``unreachable_limit``).
-        seconds: Wall time of the whole solve [s].
-        frames_per_second: Frames solved per wall-clock second.
-        mode: The tracker's mode.
-        stats: The tracker's :class:`TrackerStats` as a dict.
-        head_poses: (T, 4, 4) float64 rigid head poses removed from the targets, when the caller gives them; else None.
-        targets: (T, K, 3) float64 [m] the targets the error is measured against (head frame), when known.
-        retarget: The retargeting's map and notes (:class:`~facewarp._src.drive.retarget.RetargetMap` as a
-            dict) when the take was retargeted; else None.
-    """
-
-    fps: float
-    names: list
-    muscle_names: list
-    activations: np.ndarray
-    jaw: np.ndarray
-    error: np.ndarray
-    rms: np.ndarray
-    unreachable: list
-    seconds: float
-    frames_per_second: float
-    mode: str
-    stats: dict = field(default_factory=dict)
-    head_poses: np.ndarray | None = None
-    targets: np.ndarray | None = None
-    retarget: dict | None = None
-
-    @property
-    def frames(self) -> int:
-        """T, the number of frames."""
-        return int(self.activations.shape[0])
-
-
-def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offline", head_poses=None,
-          unreachable_limit: float = 2e-3, **options) -> DriveResult:
-    """Solve a performance's activations and jaw per frame and play them on ``sim`` (module doc).
-
-    The simulator is reset to rest, then each frame ``k`` of the track is one step of ``1 / fps``
-    (:meth:`Tracker.update`); the sinks see frame ``k`` at ``t = k / fps`` like :func:`~facewarp.play`'s
-    (a :class:`~facewarp.FrameRecorder` keeps the frames, a :class:`~facewarp.UsdAnimation` streams them).
-
-    Args:
-        sim: The :class:`~facewarp.FaceSimulator` (implicit solver), at the track's frame rate.
-        track: A :class:`~facewarp.MarkerTrack` (points in the head's frame, NaN where missing).
-        table: For an :class:`~facewarp.ArkitTrack`: the head's :class:`~facewarp.ArkitTable`
-            (:func:`~facewarp.arkit_table`); the track is then played through it
-            (:func:`.arkit.drive_arkit`: ``refine=True`` tracks each frame towards its blended
-            target FDPs, the other keywords as here; the head rotation drives the head pose).
-        sinks: :class:`~facewarp.Sink` objects or callables ``f(sim, k, t)``, called after each frame.
-        progress: Optional ``progress(k, frame_count)`` after each frame.
-        mode: ``"offline"`` or ``"realtime"`` (:class:`Tracker`).
-        head_poses: Optional (T, 4, 4) rigid poses removed from the targets, kept in the result.
-        unreachable_limit: A frame whose point is farther than this [m] from its target is noted (default 2 mm).
-        **options: Further keywords of :class:`Tracker` (``smoothness``, ``effort``, ``robust``, ...).
-
-    Returns:
-        The :class:`DriveResult`.
-
-    Raises:
-        InputError: a bad argument, a track at another frame rate than ``sim``, unknown point names.
-    """
-    from ..sim.play import PlayStats, _as_sink
-    from ..sim.simulator import FaceSimulator
-    from .tracks import ArkitTrack, MarkerTrack
-
-    if not isinstance(sim, FaceSimulator):
-        raise InputError(f"sim: expected a facewarp FaceSimulator, got {type(sim).__name__}")
-    if isinstance(track, ArkitTrack):
-        from .arkit import drive_arkit
-
-        if head_poses is not None:
-            raise InputError("head_poses: not for an ArkitTrack (its head_rotation drives the head pose)")
-        return drive_arkit(sim, track, table, sinks=sinks, progress=progress, mode=mode,
-                           unreachable_limit=unreachable_limit, **options)
-    if not isinstance(track, MarkerTrack):
-        raise InputError(f"track: expected a facewarp MarkerTrack, got {type(track).__name__}")
-    if table is not None:
-        raise InputError("table: only for an ArkitTrack")
-    if abs(track.fps - sim.fps) > 1e-6 * sim.fps:
-        raise InputError(f"track: {track.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
-                         f"make the FaceSimulator with fps={track.fps:g}")
-    if progress is not None and not callable(progress):
-        raise InputError(f"progress: expected a callable progress(k, frame_count), got {type(progress).__name__}")
-    unreachable_limit = check_number("unreachable_limit", unreachable_limit, low=0.0, low_open=True)
-    nf = track.frames
-    if head_poses is not None:
-        head_poses = check_array("head_poses", head_poses, shape=(nf, 4, 4))
-    sinks = [_as_sink(s) for s in sinks]
-    tracker = Tracker(sim, track.names, mode=mode, **options)
-    sim.reset()
-    tracker.reset_tracking()
-    for s in sinks:
-        s.start(sim, nf)
-    K, M = tracker.count, tracker.M
-    acts = np.zeros((nf, M), np.float32)
-    jaw = np.zeros((nf, 2), np.float32)
-    err = np.full((nf, K), np.nan)
-    t0 = time.perf_counter()
-    stepping = 0.0
-    for k in range(nf):
-        s0 = time.perf_counter()
-        acts[k], jaw[k] = tracker.update(track.positions[k])
-        stepping += time.perf_counter() - s0
-        err[k] = tracker.last_error
-        for s in sinks:
-            s.frame(sim, k, k / track.fps)
-        if progress:
-            progress(k, nf)
-    wall = time.perf_counter() - t0
-    stepping = max(stepping, 1e-9)
-    with np.errstate(invalid="ignore"):
-        present = np.isfinite(err)
-        rms = np.sqrt(np.where(present.any(1), np.nansum(err**2, 1) / np.maximum(present.sum(1), 1), np.nan))
-    notes = []
-    never = [n for n, seen in zip(track.names, present.any(0)) if not seen]
-    if never:
-        notes.append(f"never present: {', '.join(never)}")
-    bad = np.where(np.nan_to_num(err, nan=0.0) > unreachable_limit)
-    if len(bad[0]):
-        for i in np.unique(bad[1]):
-            fr_k = bad[0][bad[1] == i]
-            notes.append(f"point {track.names[i]}: {len(fr_k)} frame(s) off by more than "
-                         f"{unreachable_limit * 1e3:g} mm (worst {np.nanmax(err[:, i]) * 1e3:.2f} mm at frame "
-                         f"{int(np.nanargmax(err[:, i]))})")
-    stats = PlayStats(frames=nf, seconds=nf / track.fps, wall_s=wall, simulation_wall_s=stepping,
-                      frames_per_second=nf / stepping, steps_per_second=tracker.stats.steps * sim.substeps / stepping,
-                      realtime_factor=nf / track.fps / stepping, substeps=int(sim.substeps), dt_s=float(sim.dt),
-                      device=str(sim.device), jaw="tracker", frame_stats=sim.stats.as_dict(), mujoco_events=[])
-    for s in sinks:
-        s.finish(sim, stats)
-    return DriveResult(fps=track.fps, names=list(track.names), muscle_names=list(sim.muscle_names),
-                       activations=acts, jaw=jaw, error=err, rms=rms, unreachable=notes, seconds=stepping,
-                       frames_per_second=nf / stepping, mode=tracker.mode, stats=tracker.stats.as_dict(),
-                       head_poses=head_poses)

@@ -12,7 +12,8 @@ import numpy as np
 from ..core.checks import check_array, check_bool, check_number
 from ..core.errors import InputError
 from ..sim.play import Source, play
-from .inverse import DriveResult, Tracker
+from .inverse import Tracker
+from .result import DriveResult
 from .tracks import ArkitTrack, MarkerTrack
 
 __all__ = ["ArkitSource", "MarkerSource", "drive", "head_rest_points"]
@@ -60,32 +61,39 @@ class MarkerSource(Source):
 
 class ArkitSource(Source):
     """ARKit curves as a play source: each frame's weights become controls through the head's
-    table (:meth:`~facewarp.ArkitTable.controls`: blended in activation space, clamped), the
-    track's head rotation the head pose; with ``refine=True`` a :class:`~facewarp.Tracker` tracks
-    each frame towards its blended target FDPs instead (:meth:`~facewarp.ArkitTable.targets_for`).
+    table (:meth:`~facewarp.ArkitTable.controls`: blended in activation space, clamped), the eyes
+    turn by :func:`.arkit.track_gaze` (the track's recorded eye angles, else its eyeLook* weights),
+    the track's head rotation is the head pose; with ``refine=True`` a :class:`~facewarp.Tracker`
+    tracks each frame towards its blended target FDPs instead (:meth:`~facewarp.ArkitTable.targets_for`).
 
     After :func:`~facewarp.play`: ``activations``, ``jaw``, ``error`` (T, F) float64 [m] (each
-    table FDP's distance from its blended target, head frame), ``targets`` (T, F, 3) [m] and
-    ``poses`` (T, 4, 4) or None.
+    table FDP's distance from its blended target, head frame), ``targets`` (T, F, 3) [m],
+    ``poses`` (T, 4, 4) or None, ``gaze`` (T, 2, 2) [rad], ``warnings`` (shapes used but not mapped).
+
+    Raises:
+        InputError: a table of another head, a Tracker option without ``refine``, a track of which
+        nothing can move this face (every shape it uses unmapped, no head or eye rotation).
     """
 
     steps_first = True
 
     def __init__(self, sim, table, track: ArkitTrack, *, refine: bool = False, mode: str = "offline", **options):
-        from .arkit import ArkitTable, _head_fdps, head_rotation_matrix, rig_key
+        from .arkit import _head_fdps, arkit_warnings, check_table, head_rotation_matrix, track_gaze
 
-        if not isinstance(table, ArkitTable):
-            raise InputError("table: an ArkitTrack is driven through the head's ARKit table "
-                             f"(fw.arkit_table(sim, cache=BUILD)), got {type(table).__name__}")
-        if list(table.muscle_names) != list(sim.muscle_names) or table.key_rig != rig_key(sim):
-            raise InputError("table: built for another head (or solver) than this simulator's; "
-                             "build it with fw.arkit_table(sim, cache=BUILD)")
+        check_table(sim, table)
         refine = check_bool("refine", refine)
         if options and not refine:
             raise InputError(f"{sorted(options)[0]}: a Tracker option, only with refine=True")
+        self.warnings, moves = arkit_warnings(track, table)
+        if not moves:
+            used = [n for n, w in zip(table.names, np.asarray(track.weights).max(axis=0)) if w > 0]
+            what = (f"none of the {len(used)} ARKit shapes it uses ({', '.join(used[:4])}"
+                    f"{', ...' if len(used) > 4 else ''}) is mapped on this head" if used else "every ARKit weight is 0")
+            raise InputError(f"{track.source or 'track'}: the face cannot move: {what}, and the head and eyes do not turn")
         self.table, self.track, self.fps, self.frames = table, track, float(track.fps), int(track.frames)
         self.name = "arkit tracker" if refine else "arkit table"
         self.A, self.J = table.controls(track.weights)
+        self.gaze = track_gaze(track, table)
         self.targets = table.targets_for(track.weights)
         self.poses = None
         if track.head_rotation is not None:
@@ -107,6 +115,7 @@ class ArkitSource(Source):
 
         if self.poses is not None:
             sim.set_head_pose(self.poses[k, :3, :3], np.zeros(3))
+        sim.set_eye_gaze(self.gaze[k])
         if self.tracker is None:
             sim.set_activations(self.A[k])
             sim.set_jaw(float(self.J[k, 0]), float(self.J[k, 1]))
@@ -206,16 +215,16 @@ def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offli
         src = ArkitSource(sim, table, track, refine=refine, mode=mode, **options)
         stats = play(sim, src, sinks=sinks, progress=progress)
         rms = np.sqrt(np.mean(src.error**2, axis=1))
-        notes = list(track.notes)
-        notes += [f"{n}: out of reach ({table.reasons[n]}); weight up to {track.weights[:, i].max():.2f}"
-                  for i, n in enumerate(table.names) if n in table.reasons and track.weights[:, i].max() > 0]
+        notes = list(track.notes) + list(src.warnings)
+        if table.info.get("cache_note"):
+            notes.append(table.info["cache_note"])
         notes += _notes_off(list(table.fdp_ids), src.error, unreachable_limit)
         return DriveResult(fps=track.fps, names=list(table.fdp_ids), muscle_names=list(sim.muscle_names),
                            activations=src.activations, jaw=src.jaw, error=src.error, rms=rms, unreachable=notes,
                            seconds=stats.simulation_wall_s, frames_per_second=stats.frames_per_second,
                            mode="arkit-tracker" if refine else "arkit-table",
                            stats=src.tracker.stats.as_dict() if src.tracker is not None else {"frames": track.frames},
-                           head_poses=src.poses, targets=src.targets)
+                           head_poses=src.poses, warnings=list(src.warnings), gaze=src.gaze, targets=src.targets)
     if not isinstance(track, MarkerTrack):
         raise InputError(f"track: expected a facewarp MarkerTrack or ArkitTrack, got {type(track).__name__}")
     if table is not None:

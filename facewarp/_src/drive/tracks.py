@@ -130,8 +130,9 @@ class ArkitTrack:
         head_rotation: (T, 3) float64 [rad] yaw, pitch, roll of the head (ARKit's HeadYaw,
             HeadPitch, HeadRoll), or None when the source has no head channels.
         source: Where the track came from, for reports.
-        eye_rotation: (T, 2, 3) float64 [rad], yaw, pitch, roll of the left and right eyeball
-            (Live Link Face's LeftEyeYaw ... RightEyeRoll), or None when the source has none.
+        eye_rotation: (T, 2, 2) float64 [rad], yaw and pitch of the left and right eyeball (Live
+            Link Face's LeftEyeYaw, LeftEyePitch, RightEyeYaw, RightEyePitch), or None when the
+            source has none (or records none: all zero).
         notes: What the loader changed or filled in (weights clamped, frames interpolated, a
             category the source lacks), one line each.
         info: The same as numbers, for reports.
@@ -159,7 +160,7 @@ class ArkitTrack:
                                              shape=(len(w), 3)).astype(np.float64)
         if self.eye_rotation is not None:
             self.eye_rotation = check_array("eye_rotation", self.eye_rotation,
-                                            shape=(len(w), 2, 3)).astype(np.float64)
+                                            shape=(len(w), 2, 2)).astype(np.float64)
         self.notes = [str(n) for n in self.notes]
         self.info = dict(self.info)
 

@@ -179,17 +179,14 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
             ``"START:END"`` seconds; default the first frame).
         start, end: Drive the part of the take from ``start`` to ``end`` seconds.
         device: Warp device.
-        progress: ``f(k, n)`` per frame; off a terminal a line per few seconds of take goes to stderr too.
+        progress: ``f(k, n)`` per frame.
         table_progress: ``f(done, total, name)`` while the head's ARKit table is built (the first
             ARKit run on a build: minutes; later runs read ``arkit_table.npz`` from the build folder).
 
     Returns:
         The report (what ``report.json`` holds, less the per-frame arrays).
     """
-    import sys
-
     from ..drive.perform import drive, head_rest_points
-    from ..sim.play import progress_lines
 
     t0 = time.perf_counter()
     if isinstance(out, str) and not out.strip():
@@ -231,14 +228,8 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         from ..drive.arkit import arkit_table
 
         step = table_progress or (lambda done, total, name: None)
-        table = arkit_table(sim, cache=fr_dir, progress=step)
-    if not sys.stderr.isatty():  # a log, CI, | tee: a line per few seconds of take (a bar cannot draw there)
-        lines, given = progress_lines("drive", track.fps), progress
-
-        def progress(k, n):
-            if given is not None:
-                given(k, n)
-            lines(k, n)
+        used = [n for n, w in zip(track.names, np.asarray(track.weights).max(axis=0)) if w > 0]
+        table = arkit_table(sim, cache=fr_dir, progress=step, solve=used)  # the shapes the take uses, added to the cache
 
     keep = None if usd_out else FrameRecorder()
     usd_path = out if usd_out else out / USD_NAME
@@ -281,7 +272,10 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     if isinstance(track, ArkitTrack):
         rep["error_is"] = "distance of each head FDP from its blended ARKit target (the table's shapes, head frame)"
         rep["out_of_reach"] = table.out_of_reach()
-        rep["table"] = {"file": str(fr_dir / ARKIT_TABLE_FILE), "from_cache": bool(table.info.get("from_cache"))}
+        rep["warnings"] = list(result.warnings)
+        rep["reach"] = [r for r in table.reach() if r["name"] in track.names and np.max(track.curve(r["name"])) > 0]
+        rep["table"] = {"file": str(fr_dir / ARKIT_TABLE_FILE), "from_cache": bool(table.info.get("from_cache")),
+                        "cached": not table.info.get("cache_note"), "source": table.info.get("source")}
     report_full = dict(rep)
     report_full["error_per_frame_mm"] = [[None if not np.isfinite(v) else round(float(v) * 1e3, 4) for v in row]
                                          for row in err]

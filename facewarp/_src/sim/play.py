@@ -25,7 +25,7 @@ from ..expressions import Timeline
 from .frames import Frames
 from .readout import fdp_points
 
-__all__ = ["FrameRecorder", "PlayStats", "Sink", "Source", "TimelineSource", "check_seconds", "play", "progress_lines"]
+__all__ = ["FrameRecorder", "PlayStats", "Sink", "Source", "TimelineSource", "check_seconds", "play"]
 
 
 # ------------------------------------------------------------------------------------- sinks
@@ -228,32 +228,6 @@ class TimelineSource(Source):
         return list(getattr(getattr(self.jaw, "coupler", None), "events", ()))
 
 
-PROGRESS_EVERY_S = 5.0
-"""Seconds of take between two progress lines off a terminal (:func:`progress_lines`)."""
-
-
-def progress_lines(what: str, fps: float, *, every_s: float = PROGRESS_EVERY_S, stream=None):
-    """A ``progress(k, frame_count)`` that writes one line per ``every_s`` seconds of take (and at
-    the end) to ``stream`` (default stderr): for logs, CI and ``| tee``, where a bar cannot draw."""
-    import sys
-
-    out = stream if stream is not None else sys.stderr
-    step = max(1, int(round(every_s * fps)))
-    t0 = [None]
-
-    def progress(k: int, n: int) -> None:
-        now = time.perf_counter()
-        if k == 0 or t0[0] is None:
-            t0[0] = now  # from the end of the first frame: the rate of the frames after it
-        if (k + 1) % step and k + 1 != n:
-            return
-        rate = f", {k / (now - t0[0]):.1f} frames/s" if k > 0 and now > t0[0] else ""
-        out.write(f"{what}: frame {k + 1}/{n} ({(k + 1) / fps:.1f} of {n / fps:.1f} s of take){rate}\n")
-        out.flush()
-
-    return progress
-
-
 # -------------------------------------------------------------------------------------- play
 def check_seconds(seconds) -> float:
     """``seconds`` as a float if it is a finite number > 0, else :class:`InputError`."""
@@ -283,8 +257,7 @@ def play(sim, source, seconds: float | None = None, *, sinks=(), jaw=None, progr
         jaw: For a timeline: a jaw driver (``step(expression)`` sets the jaw and steps ``sim`` one
             frame; ``name``): default the kinematic jaw (:class:`~facewarp.coupling.KinematicJawDriver`);
             the MuJoCo jaw is :class:`~facewarp.coupling.MujocoJawDriver`.
-        progress: Optional ``progress(k, frame_count)`` after each frame (:func:`progress_lines`
-            writes a line per few seconds of take).
+        progress: Optional ``progress(k, frame_count)`` after each frame.
 
     Returns:
         The :class:`PlayStats` (also handed to every sink's ``finish``).
