@@ -765,7 +765,11 @@ def fleet(r: Results) -> str:
             + f"\n{f['scans']} scans ({f['broken_scans']} broken) through {', '.join(f['steps'])} "
             f"({f['smile_seconds']:g} s smile) on {doc['machine'].get('cores', '?')} cores, {doc['date'][:10]}: "
             f"Ray {f['ray_overhead_over_local']:.1%} over local processes ({f['ray_startup_s']:.1f} s of it "
-            f"starting Ray). Per task (median CPU seconds, largest worker memory): {steps}.\n")
+            f"starting Ray). Per task (median CPU seconds, largest worker memory): {steps}. Load average "
+            f"{min(f[k]['load_before'][0] for k in ('serial', 'local', 'ray')):.1f}-"
+            f"{max(f[k]['load_after'][0] for k in ('serial', 'local', 'ray')):.1f} (the tasks got "
+            + ", ".join(f"{f[k]['cpu_share_of_tasks']:.0%}" for k in ("serial", "local", "ray"))
+            + " of a core: wall times and speed-ups above a load of 2 measure the box's other jobs).\n")
 
 
 @table("soak")

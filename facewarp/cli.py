@@ -140,7 +140,7 @@ def _run(args) -> int:
                 with staged_outputs(targets) as staging:
                     for name, _, _ in targets:
                         setattr(args, name, staging.path(name))
-                    args.func(args)
+                    code = args.func(args)  # a command may say what happened (batch run: 1 some scans failed)
                     if interrupted_by() is not None:  # a library swallowed the KeyboardInterrupt
                         raise Interrupted(interrupted_by())
         text = args.stdout.getvalue()
@@ -165,7 +165,7 @@ def _run(args) -> int:
         return _error(_unstaged(staging, f"{type(e).__name__}: {e}{hint}"), EXIT_INTERNAL)
     finally:
         close_progress()  # no progress line after the command, whatever ended it
-    return 0
+    return code if isinstance(code, int) and not isinstance(code, bool) else 0
 
 
 def _unstaged(staging, text: str) -> str:

@@ -148,7 +148,7 @@ def test_play_refuses_no_frame_after_rest_and_bad_arguments(sim):
     tl = fw.timeline_for("smile")
     with pytest.raises(fw.InputError, match="no frame after the rest pose"):
         fw.play(sim, tl, 0.01)
-    with pytest.raises(fw.InputError, match="longer than a run"):
+    with pytest.raises(fw.InputError, match="seconds"):
         fw.play(sim, tl, 1e9)
     with pytest.raises(fw.InputError, match="sim"):
         fw.play("sim", tl, 1.0)

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from ..core.limits import MAX_ADAPT_LEVELS, MAX_FPS, MAX_SECONDS
-from .common import FacewarpError, FrameBar, Parser, emit, muscle_list, fps, number, out_dir, seconds, whole_in
+from .common import FacewarpError, FrameBar, Parser, emit, muscle_list, fps, number, out_dir, path, seconds, whole_in
 
 
 # ----------------------------------------------------------------------------- options
@@ -24,12 +24,17 @@ def add_parser(sub) -> None:
                "(simulate and rig read the build: --steps rig alone rigs the builds in DIR). A scan's landmarks are looked for beside it (NAME_landmarks.json, "
                "NAME.landmarks.json, NAME.json, NAME.pp, landmarks.json), else found on the scan. Ray: "
                "pip install 'facewarp[ray]'; --ray alone starts a local Ray, --ray auto or --ray ray://HOST:10001 "
-               "joins a cluster (`ray start --head`; the scans and DIR on a file system every node sees).")
+               "joins a cluster (`ray start --head`; the scans and DIR on a file system every node sees). Every option "
+               "is checked before the first scan's adapt. Exit code: 0 every scan done; 1 some scans failed or are "
+               "incomplete (the summary line says which, report.csv why); 2 nothing could start (a bad option, "
+               "scan or --out, or --out held by another run); 130 / 143 interrupted (SIGINT / SIGTERM: the "
+               "finished steps, the manifest and the reports kept).")
     br.add_argument("scans", nargs="*", type=Path, metavar="SCANS", help="scan meshes (OBJ, PLY, STL, OFF, GLB, GLTF)")
     br.add_argument("--manifest", type=Path, metavar="IN.json",
                     help='the scans as a file: {"scans": ["a.obj", {"scan": "b.ply", "landmarks": "b.json", '
                          '"units": "mm", "name": "b"}]} (paths relative to the file), or a batch\'s manifest.json')
-    br.add_argument("--out", required=True, type=Path, metavar="DIR", help="batch folder (continued if it has a manifest)")
+    br.add_argument("--out", required=True, type=path, metavar="DIR",
+                    help="batch folder (continued if it has a manifest; locked while the batch runs)")
     br.add_argument("--steps", type=steps, default=("adapt", "build", "simulate"), metavar="adapt,build,simulate,rig",
                     help="the steps to run, in this order per scan (default adapt,build,simulate); rig: the build's "
                          "blendshape rig as `facewarp rig` bakes it (UsdSkel, glTF) into NAME-KEY/rig/")
@@ -45,7 +50,9 @@ def add_parser(sub) -> None:
                     help="the rig step's in-between shapes per muscle (as `facewarp rig --inbetweens`; 0..8, default 0)")
     br.add_argument("--rig-muscles", type=muscle_list, default=None, metavar="A,B,...",
                     help="the rig step bakes only these muscles (as `facewarp rig --muscles`; default all)")
-    br.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scans and their landmarks")
+    br.add_argument("--units", choices=["mm", "cm", "m", "auto"], default=None,
+                    help="units of the scans and their landmarks, as `facewarp adapt --units`; default: m when a "
+                         "scan's extent is a plausible head in metres, else auto (the scale from the FDPs)")
     br.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                     help="run as Ray tasks: alone, on a local Ray started here; with auto, ray://HOST:10001 or "
                          "HOST:6379, on that cluster")
@@ -73,7 +80,7 @@ def add_parser(sub) -> None:
     bs.add_argument("builds", nargs="+", type=Path, metavar="BUILD", help="`facewarp build` output folders")
     bs.add_argument("--expression", default="smile", metavar="NAME|sequence|FILE.json",
                     help="what every head plays (as `facewarp simulate --expression`; default smile)")
-    bs.add_argument("--per-head", type=Path, metavar="FILE.json", help="one expression per head (overrides --expression)")
+    bs.add_argument("--per-head", type=path, metavar="FILE.json", help="one expression per head (overrides --expression)")
     bs.add_argument("--seconds", type=seconds, metavar="S", default=2.0,
                     help=f"simulated time [s], > 0 and <= {MAX_SECONDS:g} (default 2)")
     bs.add_argument("--fps", type=fps, metavar="F", default=30.0,
@@ -83,7 +90,7 @@ def add_parser(sub) -> None:
                          "head.xml hinge body two-way coupled, one CPU MuJoCo per head stepped in a loop)")
     bs.add_argument("--stage", metavar="FILE.usda|FILE.usdc",
                     help="also DIR/FILE: one stage with every head as /Crowd/head_KK (referencing its file), side by side")
-    bs.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    bs.add_argument("--out", required=True, type=path, metavar="DIR", help="output folder")
     bs.set_defaults(func=run_batch_simulate, outputs=out_dir)
 
 
@@ -135,7 +142,8 @@ def run_batch_run(args):
     width = max([len(r["name"]) for r in rep["rows"]] + [4])
     lines = [f"batch of {rep['scans']} scans in {args.out} on {rep['executor']}: {rep['done']} done, "
              f"{rep['failed']} failed, {rep['incomplete']} incomplete ({rep['tasks_run']} steps run, "
-             f"{rep['tasks_kept']} kept from earlier runs) in {rep['seconds']:.1f} s",
+             f"{rep['tasks_kept']} kept from earlier runs) in {rep['seconds']:.1f} s: {rep['outcome']} "
+             f"(exit {rep['exit_code']})",
              f"  {'scan':<{width}}  " + "  ".join(f"{c + ' [s]':>12}" for c in cols) + "  status"]
     shown = rep["rows"][:50]
     for r in shown:
@@ -156,6 +164,7 @@ def run_batch_run(args):
                      f"step together: {'; '.join(g['fallback_errors'])})")
     lines.append(f"  wrote {rep['manifest']}, {rep['report']}, {rep['report_csv']}")
     emit(args, rep, lines)
+    return rep["exit_code"]
 
 
 def run_batch_simulate(args):

@@ -22,7 +22,7 @@ from ..core.limits import MAX_FPS, MAX_SECONDS
 __all__ = ["DOCS_PAGE", "EXIT_USAGE", "FacewarpError", "FrameBar", "GLOBAL_TITLE", "HelpFormatter",
            "MAX_TEMPLATE_LEVEL", "Parser", "Progress", "StageBar", "add_global_options", "amount_up_to",
            "close_progress", "command_options", "device", "docs_link", "emit", "fps", "frame_stats_lines", "jsonable",
-           "level", "muscle_list", "number", "out_dir", "out_dir_or_usd", "out_file", "progress_lines",
+           "level", "muscle_list", "number", "out_dir", "out_dir_or_usd", "out_file", "path", "progress_lines",
            "progress_mode", "seconds", "whole_in"]
 
 EXIT_USAGE = 2
@@ -174,6 +174,14 @@ def amount_up_to(high: float):
 seconds = amount_up_to(MAX_SECONDS)
 fps = amount_up_to(MAX_FPS)
 level = number(int, lambda v: 0 <= v <= MAX_TEMPLATE_LEVEL, f"a level 0..{MAX_TEMPLATE_LEVEL}")
+
+
+def path(text: str) -> Path:
+    """An argparse ``type=`` for a file or folder path: an empty one (``--out ''``, which ``Path``
+    reads as the current folder) is a usage error."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return Path(text)
 
 
 def device(text: str) -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.limits import MAX_FPS, MAX_SECONDS
-from .common import StageBar, emit, fps, out_dir, seconds
+from .common import StageBar, emit, fps, out_dir, path, seconds
 
 
 # ----------------------------------------------------------------------------- options
@@ -17,7 +17,7 @@ def add_parser(sub) -> None:
                               "default[:LEVEL]. Every head gets the same physical parameters.")
     r.add_argument("expression", metavar="SEQUENCE", help="sequence .json, preset or 'sequence'")
     r.add_argument("heads", nargs="+", metavar="HEAD", help="heads to play it on")
-    r.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    r.add_argument("--out", required=True, type=path, metavar="DIR", help="output folder")
     r.add_argument("--seconds", type=seconds, metavar="S",
                    help=f"length [s], > 0 and <= {MAX_SECONDS:g} (default: the file's length + 0.5 s; 2 s for a "
                         "preset, 8 s for 'sequence')")

@@ -27,7 +27,9 @@ _SIM_KEYS = ("solver", "material", "dt", "substeps", "iterations", "tolerance", 
 def _rig_list(rigs, count) -> list:
     if isinstance(rigs, FaceRig):
         n = 1 if count is None else check_int("count", count, low=1, high=MAX_BATCH_HEADS)
-        return [rigs] * int(n)
+        rigs = [rigs] * int(n)
+        _check_batch_memory(rigs, "count")
+        return rigs
     if isinstance(rigs, (str, bytes)) or not hasattr(rigs, "__len__"):
         raise InputError(f"rigs: expected a FaceRig or a list of FaceRigs, got {describe(rigs)}")
     rigs = list(rigs)
@@ -43,13 +45,33 @@ def _rig_list(rigs, count) -> list:
         if int(count) != len(rigs):
             raise InputError(f"count: {count} heads asked for with {len(rigs)} rigs (give one rig to replicate, "
                              "or leave count out)")
+    _check_batch_memory(rigs, "rigs")
     return rigs
+
+
+def _check_batch_memory(rigs: list, what: str) -> None:
+    """Refuse a batch whose heads would not fit in this machine's memory, before any is made
+    (:func:`~facewarp._src.core.limits.estimate_batch_bytes`: a level-0 head about 18.8 MB more)."""
+    from collections import Counter
+
+    from ..core.limits import check_memory, estimate_batch_bytes
+
+    count = Counter(id(fr) for fr in rigs)
+    distinct = {id(fr): fr for fr in rigs}
+    need = sum(estimate_batch_bytes(len(fr.nodes), len(fr.tets), count[k]) for k, fr in distinct.items())
+    check_memory(need, f"{what}: {len(rigs)} heads")
 
 
 def _poses(name: str, R, t, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Rotations (n, 3, 3) and translations (n, 3) from one pose or one per head, checked."""
-    R = np.asarray(R, dtype=np.float64) if R is not None else np.eye(3)
-    t = np.asarray(t, dtype=np.float64) if t is not None else np.zeros(3)
+    try:
+        R = np.asarray(R, dtype=np.float64) if R is not None else np.eye(3)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: rotations must be numbers, shape (3, 3) or ({n}, 3, 3), got {describe(R)}") from None
+    try:
+        t = np.asarray(t, dtype=np.float64) if t is not None else np.zeros(3)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: translations must be numbers [m], shape (3,) or ({n}, 3), got {describe(t)}") from None
     if R.shape == (3, 3):
         R = np.broadcast_to(R, (n, 3, 3))
     if t.shape == (3,):

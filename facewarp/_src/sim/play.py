@@ -267,25 +267,19 @@ def play(sim, source, seconds: float | None = None, *, sinks=(), jaw=None, progr
         the rest, more solver steps than a run may take), ``jaw``, sink or ``progress``; a source at
         another frame rate than ``sim``.
     """
-    from ..core.limits import MAX_SECONDS, check_steps
-    from .simulator import FaceSimulator
-
-    if not isinstance(sim, FaceSimulator):
-        raise InputError(f"sim: expected a facewarp FaceSimulator, got {type(sim).__name__}")
+    check_play_arguments(sim, jaw, progress)
     if isinstance(source, Timeline):
         if seconds is None:
             raise InputError("seconds: a timeline is played for a given length; give seconds")
-        if jaw is not None and not callable(getattr(jaw, "step", None)):
-            raise InputError(f"jaw: expected a jaw driver with step(expression) (facewarp.coupling), "
-                             f"got {type(jaw).__name__}")
         source = TimelineSource(source, jaw)
     elif isinstance(source, Source):
         if jaw is not None:
             raise InputError("jaw: only with a timeline (a take's source sets the jaw itself)")
     else:
         raise InputError(f"timeline: expected a facewarp Timeline or a play source (Source), got {type(source).__name__}")
-    if progress is not None and not callable(progress):
-        raise InputError(f"progress: expected a callable progress(k, frame_count), got {type(progress).__name__}")
+    if isinstance(sinks, (str, bytes)) or not hasattr(sinks, "__iter__"):
+        raise InputError(f"sinks: expected a list of Sink objects or callables f(sim, k, t), got {type(sinks).__name__}")
+    sinks = [_as_sink(s) for s in sinks]
     if source.fps is not None and abs(source.fps - sim.fps) > 1e-6 * sim.fps:
         raise InputError(f"source: {source.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
                          f"make the FaceSimulator with fps={source.fps:g}")
@@ -296,16 +290,46 @@ def play(sim, source, seconds: float | None = None, *, sinks=(), jaw=None, progr
         seconds = (nf - 1) / sim.fps if nf > 1 else 1.0 / sim.fps
     else:
         seconds = check_seconds(seconds)
-        if seconds > MAX_SECONDS:
-            raise InputError(f"seconds: {seconds:g} s is longer than a run may be ({MAX_SECONDS:g} s)")
         nf = int(round(seconds * sim.fps)) + 1
         if nf < 2 and not source.steps_first:
             raise InputError(f"seconds: {seconds:g} s at {sim.fps:g} frames/s is no frame after the rest pose "
                              f"(at least {0.5 / sim.fps:.3g} s)")
         if source.frames is not None:
             nf = min(nf, int(source.frames))
-    check_steps(seconds, sim.fps, sim.substeps, what="seconds")
-    return _run(sim, source, seconds, nf, [_as_sink(s) for s in sinks], progress)
+    check_play_length(sim, seconds, sinks)
+    return _run(sim, source, seconds, nf, sinks, progress)
+
+
+def check_play_arguments(sim, jaw, progress) -> None:
+    """The types of :func:`play`'s ``sim``, ``jaw`` and ``progress``: :class:`InputError` naming the argument."""
+    from .simulator import FaceSimulator
+
+    if not isinstance(sim, FaceSimulator):
+        raise InputError(f"sim: expected a FaceSimulator, got {type(sim).__name__}")
+    if jaw is not None and not (callable(getattr(jaw, "step", None)) and not isinstance(jaw, (str, bytes))):
+        raise InputError(f"jaw: expected a jaw driver (facewarp.coupling.KinematicJawDriver or MujocoJawDriver) or "
+                         f"None, got {type(jaw).__name__} {jaw!r:.40}")
+    if jaw is not None and getattr(jaw, "sim", sim) is not sim:
+        raise InputError("jaw: the jaw driver drives another simulator than sim")
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(k, frame_count) or None, got {type(progress).__name__}")
+
+
+def check_play_length(sim, seconds: float, sinks=()) -> None:
+    """A run of ``seconds`` at ``sim.fps`` within :data:`~facewarp._src.core.limits.MAX_ADVANCE_FRAMES`
+    frames and this machine's time; a :class:`FrameRecorder` among ``sinks`` keeps every frame,
+    so its memory is checked too. The refusal states the estimates."""
+    from ..core.limits import MAX_ADVANCE_FRAMES, check_work, describe_seconds, estimate_frames_bytes, estimate_seconds
+
+    frames = seconds * sim.fps
+    V = len(sim.fr.head_vertices)
+    if not frames <= MAX_ADVANCE_FRAMES:
+        t = estimate_seconds(frames, str(sim.device), V)
+        raise InputError(f"seconds: {seconds:g} s at {sim.fps:g} fps is {frames:.3g} frames (about "
+                         f"{describe_seconds(t)} on {sim.device}), more than {MAX_ADVANCE_FRAMES:,} per run")
+    keep = sum(isinstance(s, FrameRecorder) for s in sinks)
+    check_work(f"seconds: {seconds:g} s at {sim.fps:g} fps", head_frames=frames, vertex_count=V,
+               device=str(sim.device), memory_bytes=keep * estimate_frames_bytes(frames + 1, V))
 
 
 def _play(sim, timeline: Timeline, seconds: float, sinks: list, jaw, progress) -> PlayStats:
