@@ -69,7 +69,7 @@ _NAMES = {
     # performance files in and out, rigid head motion out of a take
     "load_markers": "drive.formats", "load_arkit": "drive.formats",
     "arkit_table": "drive.arkit",
-    "Tracker": "drive.inverse", "drive": "drive.inverse",
+    "Tracker": "drive.inverse", "drive": "drive.perform",
     "LiveLink": "drive.livelink",
     # MuJoCo coupling, moving head
     "MujocoJaw": "coupling.mujoco", "head_mjcf": "coupling.mjcf",
@@ -111,7 +111,8 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.jobs.animation import UsdAnimation
     from ._src.anatomy.rig import build_face
     from ._src.physics.face_rig import FaceRig, load_face_rig, save_face_rig
-    from ._src.drive.inverse import Tracker, drive
+    from ._src.drive.inverse import Tracker
+    from ._src.drive.perform import drive
     from ._src.drive.livelink import LiveLink
     from ._src.drive.tracks import ARKIT_NAMES, MarkerTrack
     from ._src.drive.formats import load_arkit, load_markers

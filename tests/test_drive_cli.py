@@ -139,3 +139,63 @@ def test_drive_bad_input(built, take, tmp_path, capsys, case):
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert err.startswith("facewarp: error: "), err
     assert not out.exists() and not list(tmp_path.glob(".o*")), list(tmp_path.iterdir())
+
+
+# ----------------------------------------------------------------------------- retargeting and edges
+@pytest.mark.slow
+def test_drive_retarget_a_larger_actor(built, take, tmp_path, capsys):
+    """The same smile on an actor 12 % larger across and 5 % shorter, in cm, turned and standing in
+    the room: retargeted, its displacements drive this head; the report gives the map and the
+    error against the retargeted targets."""
+    _, truth = take
+    S = np.diag([1.12, 0.95, 1.0])
+    c, s = np.cos(0.4), np.sin(0.4)
+    R = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    P = truth.positions @ S.T @ R.T + np.array([0.2, 1.65, -0.4])
+    actor = fw.MarkerTrack(truth.fps, truth.names, P)
+    fw.takes.save_markers_json(actor, tmp_path / "actor.json", units="cm")
+    out = tmp_path / "retargeted"
+    code = main(["--json", "drive", str(built), "--markers", str(tmp_path / "actor.json"), "--retarget",
+                 "--out", str(out)])
+    o, err = capsys.readouterr()
+    assert code == 0, err
+    rep = json.loads(o)
+    assert rep["retarget"]["method"] == "fapu" and rep["error_is"].startswith("distance of each simulated point")
+    assert rep["error_mm"]["rms"] < 1.0, rep["error_mm"]
+    assert rep["head_motion"]["relative_to"] == "the actor's neutral"
+    full = json.loads((out / "report.json").read_text())
+    assert max(abs(a) for row in full["head_motion"]["yaw_pitch_roll_deg"] for a in row) < 0.5  # the actor stood still
+    A = np.loadtxt(out / "activations.csv", delimiter=",", skiprows=1)[:, 2:-2]
+    zyg = [i for i, n in enumerate(rep["muscles"]) if n.startswith("zygomatic_major")]
+    assert A[-1, zyg].max() > 0.1, A[-1]
+
+
+def test_drive_one_marker_take_draws_its_picture(built, tmp_path, capsys, monkeypatch):
+    """A legal one-marker take (the chin, three frames): solved, and drive.png framed on the face
+    (no picture of zero extent), with progress lines on stderr off a terminal."""
+    monkeypatch.setenv("FACEWARP_PROGRESS", "lines")
+    sim = fw.FaceSimulator(fw.load_face_rig(built))
+    chin = np.array([sim.fdp_points()[[str(i) for i in fw.load_face_rig(built).fdp_ids].index("2.1")]] * 3)
+    fw.takes.save_markers_json(fw.MarkerTrack(30.0, ["2.1"], chin[:, None]), tmp_path / "one.json")
+    code = main(["drive", str(built), "--markers", str(tmp_path / "one.json"), "--out", str(tmp_path / "o")])
+    o, err = capsys.readouterr()
+    assert code == 0, err
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert (tmp_path / "o" / "drive.png").is_file() and rep["frames"] == 3
+    assert "facewarp drive: " in err and "frame 3/3" in err, err  # progress lines off a terminal
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--out", ""], "--out: expected an output folder"),
+    (["--neutral", "2:1", "--out", "o"], "--neutral"),
+    (["--start", "-1", "--out", "o"], "--start"),
+    (["--start", "50", "--out", "o"], "start 50 s is beyond the take's"),
+    (["--neutral", "0:0.1", "--out", "o"], "neutral, method: they go with retarget"),
+])
+def test_drive_cli_cut_and_retarget_options_refused(built, take, tmp_path, capsys, monkeypatch, extra, words):
+    path, _ = take
+    monkeypatch.chdir(tmp_path)
+    code = main(["drive", str(built), "--markers", str(path), *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []

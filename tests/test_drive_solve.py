@@ -211,3 +211,10 @@ def test_drive_rejects_bad_inputs(rig):
         tr.update(np.full((1, 3), np.inf))
     with pytest.raises(fw.InputError, match="implicit"):
         fw.Tracker(fw.FaceSimulator(rig, solver="verlet"), ["2.1"])
+
+
+def test_tracker_refuses_kilometre_targets_without_lapack_noise(rig, capfd):
+    tracker = fw.Tracker(fw.FaceSimulator(rig), ["2.1", "8.3", "8.4", "4.1", "4.2"])
+    with pytest.raises(fw.InputError, match="targets: a point 1e\\+308 m from the head's origin"):
+        tracker.update(np.full((5, 3), 1e308))
+    assert capfd.readouterr().err == ""

@@ -142,3 +142,46 @@ def test_simulate_enters_no_module_more_than_twice(simulate_path):
     stages = [m.split(".")[0] if m.startswith("physics.") else m for m in simulate_path]
     stages = [m for k, m in enumerate(stages) if k == 0 or stages[k - 1] != m]
     assert stages.count("physics") <= 5, " -> ".join(stages)  # measured 5 after the split (core.warp asked inside finalize)
+
+
+def test_play_refuses_no_frame_after_rest_and_bad_arguments(sim):
+    tl = fw.timeline_for("smile")
+    with pytest.raises(fw.InputError, match="no frame after the rest pose"):
+        fw.play(sim, tl, 0.01)
+    with pytest.raises(fw.InputError, match="seconds"):
+        fw.play(sim, tl, 1e9)
+    with pytest.raises(fw.InputError, match="sim"):
+        fw.play("sim", tl, 1.0)
+    with pytest.raises(fw.InputError, match="jaw"):
+        fw.play(sim, tl, 1.0, jaw="mujoco")
+    with pytest.raises(fw.InputError, match="progress"):
+        fw.play(sim, tl, 1.0, progress=5)
+
+
+def test_play_takes_a_source(sim):
+    """A Source of one's own is played by the same loop: frame 0 stepped when it says so, the
+    sinks see every frame, and a source at another rate than the simulator is refused."""
+
+    class Pulse(fw.takes.Source):
+        steps_first = True
+        frames = 3
+        name = "pulse"
+
+        def __init__(self, fps):
+            self.fps = fps
+            self.seen = []
+
+        def apply(self, sim, k, t):
+            a = np.zeros(len(sim.muscle_names))
+            a[0] = 0.5
+            sim.set_activations(a)
+            sim.step()
+            self.seen.append(k)
+
+    src = Pulse(sim.fps)
+    times = []
+    stats = fw.play(sim, src, sinks=[lambda s, k, t: times.append(t)])
+    assert src.seen == [0, 1, 2] and stats.frames == 3 and stats.jaw == "pulse"
+    assert times == pytest.approx([0.0, 1 / sim.fps, 2 / sim.fps])
+    with pytest.raises(fw.InputError, match="frames/s"):
+        fw.play(sim, Pulse(sim.fps * 2))

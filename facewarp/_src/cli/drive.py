@@ -2,12 +2,41 @@
 
 from __future__ import annotations
 
+import argparse
+import math
 from pathlib import Path
 
 from .common import FrameBar, emit, fps, out_dir_or_usd, progress_lines
 
 
 # ----------------------------------------------------------------------------- options
+def _out_path(text: str) -> Path:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected an output folder or a .usda/.usdc/.usdz file, got ''")
+    return Path(text)
+
+
+def _seconds(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"expected seconds >= 0, got {text!r}")
+    return v
+
+
+def _span(text: str) -> tuple[float, float]:
+    parts = text.split(":")
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        vals = []
+    if len(vals) not in (1, 2) or not all(math.isfinite(v) and v >= 0 for v in vals) or vals[-1] < vals[0]:
+        raise argparse.ArgumentTypeError(f"expected START:END seconds (START <= END, or one time), got {text!r}")
+    return vals[0], vals[-1]
+
+
 def add_parser(sub) -> None:
     dr = sub.add_parser("drive", example="facewarp drive build --arkit take.csv --out take.usdc",
                         help="drive a `build` output from data: muscle activations and jaw solved per frame from markers, "
@@ -35,7 +64,19 @@ def add_parser(sub) -> None:
     dr.add_argument("--no-rigid", action="store_true",
                     help="keep the take as it is (already in the head's frame): no fit of forehead, nose bridge and "
                          "ear roots to remove head motion")
-    dr.add_argument("--out", required=True, type=Path, metavar="DIR|FILE.usd[a|c|z]",
+    dr.add_argument("--retarget", action="store_true",
+                    help="the marker take is of another face (an actor): its displacements from its neutral are "
+                         "carried to this head, the actor's head motion removed against its neutral")
+    dr.add_argument("--method", choices=["fapu", "affine"], default=None,
+                    help="with --retarget: the map, MPEG-4 FAP units (fapu, default) or an affine fit of the "
+                         "actor's neutral markers to the head's points per region (affine)")
+    dr.add_argument("--neutral", type=_span, metavar="START:END", default=None,
+                    help="with --retarget: the seconds of the take where the actor is at rest (their mean; "
+                         "default the first frame)")
+    dr.add_argument("--start", type=_seconds, metavar="S", default=None,
+                    help="drive the take from this second on (from its first frame)")
+    dr.add_argument("--end", type=_seconds, metavar="S", default=None, help="drive the take up to this second")
+    dr.add_argument("--out", required=True, type=_out_path, metavar="DIR|FILE.usd[a|c|z]",
                     help="output folder, or a USD file (the animation alone)")
     dr.add_argument("--rig", type=Path, metavar="RIGDIR", default=None,
                     help="a `facewarp rig --out RIGDIR` folder of this head: also write the take as that rig's "
@@ -54,7 +95,9 @@ def run(args):
     table_bar = FrameBar(not args.json, desc="ARKit table (once per build)", unit="shape", lines=writer)
     try:
         rep = drive_files(args.build, args.out, markers=args.markers, arkit=args.arkit, mediapipe=args.mediapipe,
-                          map=args.map, units=args.units, fps=args.fps, rigid=not args.no_rigid, device=args.device,
+                          map=args.map, units=args.units, fps=args.fps, rigid=not args.no_rigid,
+                          retarget=args.retarget, method=args.method, neutral=args.neutral, start=args.start,
+                          end=args.end, device=args.device,
                           progress=bar, table_progress=lambda done, total, name: table_bar(done, total),
                           **({"rig": args.rig} if getattr(args, "rig", None) is not None else {}))
     finally:
@@ -67,7 +110,8 @@ def run(args):
     e = rep.get("error_mm")
     if e and e.get("rms") is not None:
         worst = max(((v, k) for k, v in e["per_point_rms"].items() if v is not None), default=(None, None))
-        what = "simulated to target" if rep["kind"] == "markers" else "head FDPs to the blended ARKit targets"
+        what = ("simulated to the retargeted targets" if rep.get("retarget") else "simulated to target"
+                if rep["kind"] == "markers" else "head FDPs to the blended ARKit targets")
         lines.append(f"  distance {what}: RMS {e['rms']:.2f} mm, max {e['max']:.2f} mm"
                      + (f" (worst point {worst[1]}: RMS {worst[0]:.2f} mm)" if worst[1] is not None else ""))
     if rep.get("table"):
@@ -84,9 +128,14 @@ def run(args):
         lines.append(f"  ... {len(reach) - 8} more shapes' reach in report.json")
     warnings = rep.get("warnings", [])
     lines += [f"  warning: {w}" for w in warnings]
+    rt = rep.get("retarget")
+    if rt:
+        lines.append(f"  retargeted ({rt['method']}): the actor's neutral {rt['neutral_residual_mm']:.1f} mm RMS from "
+                     f"the head after a similarity of scale {rt['scale']:.3f}")
     hm = rep.get("head_motion")
     if hm:
         lines.append(f"  head motion removed by a fit of {len(hm['stable_points'])} stable points"
+                     + (" (relative to the actor's neutral)" if hm.get("relative_to") else "")
                      + (f" ({hm['frames_held']} frames held the pose before them)" if hm["frames_held"] else ""))
     rt = rep.get("rig_take")
     if rt:

@@ -57,11 +57,10 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..sim.readout import eye_gaze_rotation
-from .result import DriveResult
 from .tracks import ARKIT_NAMES
 
 __all__ = ["ARKIT_OUT_OF_REACH", "ARKIT_TABLE_FILE", "ArkitTable", "EYE_GAZE_MAX", "EYE_LOOK_DEG", "JAW_PROBE",
-           "JAW_SIDE_PROBE", "arkit_table", "drive_arkit", "eye_gaze_rotation", "head_rotation_matrix",
+           "JAW_SIDE_PROBE", "arkit_table", "eye_gaze_rotation", "head_rotation_matrix",
            "load_arkit_table"]
 
 ARKIT_TABLE_FILE = "arkit_table.npz"
@@ -716,108 +715,3 @@ def arkit_warnings(track, table: ArkitTable) -> tuple[list, bool]:
     eyes = getattr(track, "eye_rotation", None)
     looks = eyes is not None and bool(np.abs(eyes).max() > 0)
     return warnings, bool((used & mapped).any() or turns or looks)
-
-
-def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, tracker=None,
-                unreachable_limit: float = 2e-3):
-    """Play an :class:`~facewarp.takes.ArkitTrack` on ``sim`` through its head's :class:`ArkitTable`
-    (what :func:`~facewarp.drive` does for an ArkitTrack).
-
-    Each frame's weights become controls by :meth:`ArkitTable.controls` (blend in activation
-    space, clamp); with a ``tracker`` (a :class:`~facewarp.Tracker` on the table's FDP ids, which
-    :func:`~facewarp.drive` makes for ``refine=True``) the frame is instead tracked towards its
-    blended target FDPs (:meth:`ArkitTable.targets_for`), starting from the previous frame. The
-    eyeballs turn by :func:`track_gaze` (:meth:`~facewarp.FaceSimulator.set_eye_gaze`). The track's
-    head rotation, when it has one, drives :meth:`~facewarp.FaceSimulator.set_head_pose`
-    (:func:`head_rotation_matrix`, no translation). The per-frame error is each head FDP's distance
-    from its blended target (head frame).
-
-    Returns:
-        A :class:`~facewarp.takes.DriveResult` (``names``: the table's FDP ids; ``head_poses``: (T, 4, 4)
-        when the track has head rotation; ``warnings``: the shapes used but not mapped; ``gaze``).
-
-    Raises:
-        InputError: a table of another head, a track at another rate, or a track of which nothing
-            can move this face (every shape it uses unmapped, no head or eye rotation).
-    """
-    from ..core.checks import check_number
-    from ..sim.play import PlayStats, _as_sink
-
-    check_table(sim, table)
-    if abs(track.fps - sim.fps) > 1e-6 * sim.fps:
-        raise InputError(f"track: {track.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
-                         f"make the FaceSimulator with fps={track.fps:g}")
-    if progress is not None and not callable(progress):
-        raise InputError(f"progress: expected a callable progress(k, frame_count), got {type(progress).__name__}")
-    unreachable_limit = check_number("unreachable_limit", unreachable_limit, low=0.0, low_open=True)
-    warnings, moves = arkit_warnings(track, table)
-    if not moves:
-        used = [n for n, w in zip(table.names, np.asarray(track.weights).max(axis=0)) if w > 0]
-        listed = ", ".join(used[:4]) + (", ..." if len(used) > 4 else "")
-        what = (f"none of the {len(used)} ARKit shapes it uses ({listed})"
-                " is mapped on this head" if used else "every ARKit weight is 0")
-        raise InputError(f"{track.source or 'track'}: the face cannot move: {what}, and the head and eyes do not turn")
-    nf = track.frames
-    A, J = table.controls(track.weights)
-    G = track_gaze(track, table)
-    targets = table.targets_for(track.weights)
-    poses = None
-    if track.head_rotation is not None:
-        poses = np.tile(np.eye(4), (nf, 1, 1))
-        for k, (y, p, r) in enumerate(track.head_rotation):
-            poses[k, :3, :3] = head_rotation_matrix(y, p, r)
-    sinks = [_as_sink(s) for s in sinks]
-    _, idx = _head_fdps(sim.fr)
-    sim.reset()
-    if tracker is not None:
-        tracker.reset_tracking()
-    for s in sinks:
-        s.start(sim, nf)
-    M = len(sim.muscle_names)
-    acts = np.zeros((nf, M), np.float32)
-    jaw = np.zeros((nf, 2), np.float32)
-    err = np.zeros((nf, len(table.fdp_ids)))
-    t0 = time.perf_counter()
-    stepping = 0.0
-    for k in range(nf):
-        s0 = time.perf_counter()
-        if poses is not None:
-            sim.set_head_pose(poses[k, :3, :3], np.zeros(3))
-        sim.set_eye_gaze(G[k])
-        if tracker is None:
-            sim.set_activations(A[k])
-            sim.set_jaw(float(J[k, 0]), float(J[k, 1]))
-            sim.step()
-            acts[k], jaw[k] = sim.activations, sim.jaw_angles
-        else:
-            acts[k], jaw[k] = tracker.update(targets[k])
-        stepping += time.perf_counter() - s0
-        err[k] = np.linalg.norm(_fdp_of(sim.fr, idx, sim.surface(frame="head")) - targets[k], axis=1)
-        for s in sinks:
-            s.frame(sim, k, k / track.fps)
-        if progress:
-            progress(k, nf)
-    wall = time.perf_counter() - t0
-    stepping = max(stepping, 1e-9)
-    rms = np.sqrt(np.mean(err**2, axis=1))
-    notes = list(warnings)
-    if table.info.get("cache_note"):
-        notes.append(table.info["cache_note"])
-    bad = np.where(err > unreachable_limit)
-    for i in np.unique(bad[1]):
-        fr_k = bad[0][bad[1] == i]
-        notes.append(f"point {table.fdp_ids[i]}: {len(fr_k)} frame(s) off by more than "
-                     f"{unreachable_limit * 1e3:g} mm (worst {err[:, i].max() * 1e3:.2f} mm at frame "
-                     f"{int(np.argmax(err[:, i]))})")
-    steps = tracker.stats.steps if tracker is not None else nf
-    stats = PlayStats(frames=nf, seconds=nf / track.fps, wall_s=wall, simulation_wall_s=stepping,
-                      frames_per_second=nf / stepping, steps_per_second=steps * sim.substeps / stepping,
-                      realtime_factor=nf / track.fps / stepping, substeps=int(sim.substeps), dt_s=float(sim.dt),
-                      device=str(sim.device), jaw="arkit table", frame_stats=sim.stats.as_dict(), mujoco_events=[])
-    for s in sinks:
-        s.finish(sim, stats)
-    return DriveResult(fps=track.fps, names=list(table.fdp_ids), muscle_names=list(sim.muscle_names),
-                       activations=acts, jaw=jaw, error=err, rms=rms, unreachable=notes, seconds=stepping,
-                       frames_per_second=nf / stepping, mode="arkit-tracker" if tracker is not None else "arkit-table",
-                       stats=tracker.stats.as_dict() if tracker is not None else {"frames": nf},
-                       head_poses=poses, warnings=warnings, gaze=G)

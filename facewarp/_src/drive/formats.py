@@ -32,22 +32,33 @@ ARKit formats (:func:`load_arkit`):
 
 - Live Link Face CSV (Epic's iPhone app): ``Timecode, BlendShapeCount, EyeBlinkLeft, ...,
   TongueOut, HeadYaw, HeadPitch, HeadRoll, LeftEyeYaw, ..., RightEyeRoll``; all 52 blendshape
-  columns (the ARKit names with a capital first letter, any order), weights in [0, 1]. The
-  timecode is ``HH:MM:SS:FF.fff`` (``;`` also accepted): the frame field ``FF`` with its
+  columns (ARKit's names, any order, matched without case: exports spell ``BlendshapeCount`` too).
+  The timecode is ``HH:MM:SS:FF.fff`` (``;`` also accepted): the frame field ``FF`` with its
   sub-frame fraction counts at the timecode rate, read as the smallest of 24, 25, 30, 48, 50, 60,
-  100, 120 that exceeds the largest frame number seen before a whole second turns over; the
-  take's fps is 1 / the median step of the times so made (``fps=`` when the take does not cross
-  a whole second). HeadYaw, HeadPitch and HeadRoll are radians; eye rotation columns are read
-  and ignored (gaze is beyond the muscle model).
-- MediaPipe Face Landmarker JSON: a list of frames as the Tasks API's results are dumped,
-  ``[{"timestamp_ms": 0, "face_blendshapes": [[{"category_name": "_neutral", "score": 0.0},
-  {"category_name": "browDownLeft", "score": 0.01}, ...]]}, ...]`` (or the same under
-  ``{"frames": [...]}``); the JavaScript spellings ``timestampMs``, ``faceBlendshapes``,
-  ``categoryName`` and a face given as ``{"categories": [...]}`` are accepted too. Per frame the
-  first face is used; it must have all 52 ARKit categories (``_neutral`` is ignored). A frame with
-  no face (an empty ``face_blendshapes``) holds the previous frame's weights (zero before the
-  first face). fps = 1000 / the median step of ``timestamp_ms`` (``fps=`` when the frames have
-  no timestamps).
+  100, 120 that exceeds the largest frame number seen before a whole second turns over
+  (``fps=`` when the take does not cross a whole second). HeadYaw, HeadPitch, HeadRoll and the
+  eye angles are radians.
+- MediaPipe Face Landmarker JSON: the Tasks API's results as dumped, ``[{"timestamp_ms": 0,
+  "face_blendshapes": [[{"category_name": "_neutral", "score": 0.0}, {"category_name":
+  "browDownLeft", "score": 0.01}, ...]]}, ...]`` (or under ``{"frames": [...]}``), and what other
+  exporters write: the JavaScript spellings (``timestampMs``, ``faceBlendshapes``,
+  ``categoryName``, a face as ``{"categories": [...]}``), ``{"people": [[{"name", "score"}]]}``
+  per frame, a flat list of categories per frame (``"blendshapes"``, or the frame itself: then
+  ``fps=``), scores as numbers or strings, ``timestamp_us``. The model's 52 categories are
+  ``_neutral`` (ignored) and 51 ARKit names without ``tongueOut`` (read as 0, said in the notes);
+  another missing name is an error. Per frame the first face is used; a frame with no face
+  holds the previous frame's weights (zero before the first face).
+
+Real takes (both formats and marker CSVs): the take's rate is the median step of its times, every
+step a whole number of it (a 30 fps take on a 60 fps timecode that drops frames steps by 2 to 8
+timecode frames); the frames skipped are interpolated at their real times, counted and said
+(:data:`MAX_GAP_S` at most), and the rate is the frames over the span, snapped to a whole or NTSC
+rate within the times' rounding (MediaPipe's whole milliseconds give 30 fps, not 30.303). A rate
+outside :data:`~facewarp._src.drive.tracks.MIN_TAKE_FPS`..``MAX_TAKE_FPS`` is an error, except
+MediaPipe ``timestamp_ms`` steps that are microseconds (:data:`VIDEO_FPS`). ARKit weights up to
+:data:`WEIGHT_SLACK` beyond [0, 1] are clamped and counted per shape (Live Link Face writes
+EyeLookIn up to about 1.05); farther is an error naming the row (frame) and column (category).
+``start=`` / ``end=`` keep a part of a take.
 """
 
 from __future__ import annotations
@@ -58,6 +69,7 @@ import json
 import math
 import os
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -67,7 +79,7 @@ from ..core.errors import InputError
 from ..core.fileio import atomic_write, write_json
 from ..geometry.landmarks import FDP_CATALOGUE
 from ..geometry.mesh import unit_scale
-from .tracks import ARKIT_NAMES, ArkitTrack, MarkerTrack
+from .tracks import ARKIT_NAMES, MAX_TAKE_FPS, MIN_TAKE_FPS, ArkitTrack, MarkerTrack
 
 __all__ = ["MARKER_SUFFIXES", "check_point_name", "load_arkit", "load_map", "load_markers", "markers_from_frames",
            "save_livelink_csv", "save_markers_json"]
@@ -209,7 +221,8 @@ def _apply_map(path: Path, labels: list, positions: np.ndarray, mapping: dict | 
 
 
 # ----------------------------------------------------------------------------- markers
-def load_markers(path, *, map=None, units: str | None = None, fps: float | None = None) -> MarkerTrack:  # noqa: A002
+def load_markers(path, *, map=None, units: str | None = None, fps: float | None = None,  # noqa: A002
+                 neutral=None, start: float | None = None, end: float | None = None) -> MarkerTrack:
     """Read a marker take (JSON, CSV or C3D; formats in this module's docstring) as a :class:`MarkerTrack`.
 
     Args:
@@ -220,14 +233,20 @@ def load_markers(path, *, map=None, units: str | None = None, fps: float | None 
             ``"m"``) and for JSON and C3D files that do not say (if the file says, it must agree).
         fps: Frames per second, for a CSV with a ``frame`` column (other files carry it; if given
             it must agree with them within 0.5 %).
+        neutral: The actor's face at rest, for retargeting: ``(START, END)`` seconds of the take
+            (its mean over those frames, each point over the frames it is present) or a time in
+            seconds (that frame); default None, the first frame. Read before ``start``/``end`` cut.
+        start, end: Keep the part of the take from ``start`` to ``end`` seconds (from its first frame).
 
     Returns:
-        The track, positions (T, K, 3) float64 [m], NaN where a marker is missing.
+        The track, positions (T, K, 3) float64 [m], NaN where a marker is missing; rows a CSV's
+        times skipped are interpolated (``notes``).
 
     Raises:
         InputError: one line naming the file and what is wrong (empty, truncated, malformed,
         unknown columns or labels, a marker with the wrong number of frames, NaN in JSON, a
-        partly missing point, uneven time steps, units that do not give a head-sized take).
+        partly missing point, times that go back or are not whole steps, a frame rate outside
+        1..1000 frames/s, units that do not give a head-sized take).
     """
     mapping = None
     if map is not None:
@@ -237,15 +256,17 @@ def load_markers(path, *, map=None, units: str | None = None, fps: float | None 
     if units is not None:
         unit_scale(units)
     if fps is not None:
-        fps = check_number("fps", fps, low=0.0, high=10_000.0, low_open=True)
+        fps = check_number("fps", fps, low=MIN_TAKE_FPS, high=MAX_TAKE_FPS)
+    span = _check_neutral(neutral)
+    start, end = _check_cut(start, end)
     path, text = _open_text(path, MARKER_SUFFIXES, "marker")
     suffix = path.suffix.lower()
     if suffix == ".json":
-        labels, P, file_fps, file_units = _markers_json(path, text)
+        labels, P, file_fps, file_units, gaps = _markers_json(path, text)
     elif suffix == ".csv":
-        labels, P, file_fps, file_units = _markers_csv(path, text)
+        labels, P, file_fps, file_units, gaps = _markers_csv(path, text)
     else:
-        labels, P, file_fps, file_units = _markers_c3d(path)
+        labels, P, file_fps, file_units, gaps = _markers_c3d(path)
     if file_units is not None and units is not None and file_units != units:
         raise InputError(f"{path}: the file says units {file_units!r}, but units {units!r} were given")
     u = file_units or units or "m"
@@ -255,12 +276,59 @@ def load_markers(path, *, map=None, units: str | None = None, fps: float | None 
     if file_fps is not None and fps is not None and abs(file_fps - fps) > 0.005 * fps:
         raise InputError(f"{path}: the file's frame rate is {file_fps:g}, but fps {fps:g} was given")
     rate = file_fps if file_fps is not None else fps
+    _check_rate(path, rate, "file's frame rate")
     names, P = _apply_map(path, labels, P, mapping)
     _check_span(path, P, u)
+    notes = _gap_note(gaps, rate) if gaps else []
+    info = dict(gaps or {}, frames_read=int(len(P) - (gaps or {}).get("frames_filled", 0)))
+    rest = None
+    if span is not None:
+        if span[0] == span[1]:  # one time: the nearest frame
+            a = int(round(span[0] * rate))
+            if a >= len(P):
+                raise InputError(f"{path}: neutral {span[0]:g} s is beyond the take's {(len(P) - 1) / rate:.4g} s")
+            b = a + 1
+        else:
+            a, b = _cut_range(path, len(P), rate, span[0], span[1])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a point never seen in the span: NaN
+            rest = np.nanmean(P[a:b], axis=0)
+        info["neutral_frames"] = [a, b - 1]
+        notes.append(f"neutral: frames {a}..{b - 1} ({a / rate:.3f}-{(b - 1) / rate:.3f} s)")
+    if start is not None or end is not None:
+        a, b = _cut_range(path, len(P), rate, start, end)
+        if rest is None:  # the actor's rest stays the take's first frame
+            rest = P[0].copy()
+        P = P[a:b]
+        info.update(start_s=a / rate, end_s=(b - 1) / rate, frames_in_take=int(len(P)))
+        notes.append(f"frames {a}..{b - 1} kept ({a / rate:.3f}-{(b - 1) / rate:.3f} s of the take)")
     try:
-        return MarkerTrack(rate, names, P, source=str(path))
+        return MarkerTrack(rate, names, P, source=str(path), neutral=rest, notes=notes, info=info)
     except InputError as e:
         raise InputError(f"{path}: {e}") from None
+
+
+def _check_neutral(neutral):
+    """``neutral=`` as ``(start, end)`` seconds (a single time: that frame), or None."""
+    if neutral is None:
+        return None
+    if isinstance(neutral, str):
+        parts = neutral.split(":")
+        try:
+            vals = [float(p) for p in parts]
+        except ValueError:
+            raise InputError(f"neutral: expected START:END seconds (or one time), got {neutral!r}") from None
+    elif isinstance(neutral, (tuple, list)):
+        vals = list(neutral)
+    else:
+        vals = [neutral]
+    if len(vals) not in (1, 2):
+        raise InputError(f"neutral: expected START:END seconds (or one time), got {neutral!r}")
+    a = check_number("neutral", vals[0], low=0.0)
+    b = check_number("neutral", vals[-1], low=0.0)
+    if b < a:
+        raise InputError(f"neutral: end {b:g} s is before start {a:g} s")
+    return a, b
 
 
 def _markers_json(path: Path, text: str):
@@ -303,7 +371,7 @@ def _markers_json(path: Path, text: str):
                 raise InputError(f"{path}: marker {label!r} frame {t}: expected [x, y, z] or null, "
                                  f"got {json.dumps(v)[:40]}")
             P[t, k] = v
-    return labels, P, rate, units
+    return labels, P, rate, units, None
 
 
 def _cells(path: Path, text: str) -> list[list[str]]:
@@ -330,25 +398,6 @@ def _float(path: Path, cell: str, row: int, column: str, *, missing: bool = Fals
     if not math.isfinite(v):
         raise InputError(f"{path}: row {row} column {column!r}: expected a finite number, got {cell!r}")
     return v
-
-
-def _even_steps(path: Path, t: np.ndarray, what: str) -> float | None:
-    """fps of increasing, evenly spaced times ``t`` [s]: frames over the whole span (which the
-    rounding of the printed times barely touches), a whole number when within 0.2 % of one; None
-    for a single frame."""
-    d = np.diff(t)
-    if len(d) == 0:
-        return None
-    if (d <= 0).any():
-        k = int(np.argmax(d <= 0))
-        raise InputError(f"{path}: {what} do not increase (row {k + 3})")
-    step = float(np.median(d))
-    bad = np.abs(d - step) > 0.1 * step
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise InputError(f"{path}: uneven {what}: step {d[k]:.4g} s at row {k + 3}, median {step:.4g} s")
-    rate = len(d) / float(t[-1] - t[0])
-    return float(round(rate)) if abs(rate - round(rate)) < 0.002 * rate else rate
 
 
 def _markers_csv(path: Path, text: str):
@@ -383,10 +432,26 @@ def _markers_csv(path: Path, text: str):
     if part.any():
         t, k = map(int, np.argwhere(part)[0])
         raise InputError(f"{path}: row {t + 2}: marker {labels[k]!r} has some of x, y, z missing (all or none)")
-    rate = _even_steps(path, first_col, "times") if first == "time" else None
-    if first == "frame":
-        _even_steps(path, first_col, "frame numbers")
-    return labels, P, rate, None
+    if first == "time":
+        rate, index, gaps = _grid(path, first_col, "times", resolution=_printed_resolution(rows[1:]))
+        if rate is not None:
+            _check_rate(path, rate, "times")
+    else:
+        rate = None
+        if (first_col != np.round(first_col)).any():
+            raise InputError(f"{path}: frame numbers must be whole numbers")
+        _, index, gaps = _grid(path, first_col, "frame numbers", unit="frames")
+    return labels, _fill(P, index), rate, None, gaps
+
+
+def _printed_resolution(rows) -> float:
+    """The resolution [s] of a time column as printed (``0.033`` -> 1e-3)."""
+    digits = 0
+    for r in rows[:50]:
+        c = r[0].strip()
+        if "." in c and "e" not in c.lower():
+            digits = max(digits, len(c.split(".")[1]))
+    return 0.5 * 10.0 ** (-digits)
 
 
 def _markers_c3d(path: Path):
@@ -406,6 +471,7 @@ def _markers_c3d(path: Path):
             units = None
             if grp is not None and grp.get("UNITS") is not None:
                 units = grp.get("UNITS").string_value.strip().lower() or None
+            expected = int(reader.last_frame) - int(reader.first_frame) + 1
             frames = []
             for _, points, _ in reader.read_frames():
                 p = np.array(points[:, :3], dtype=np.float64)
@@ -417,6 +483,9 @@ def _markers_c3d(path: Path):
         raise InputError(f"{path}: not a readable C3D file ({type(e).__name__}: {e})") from None
     if not frames:
         raise InputError(f"{path}: the C3D file has no frames")
+    if len(frames) != expected:
+        raise InputError(f"{path}: the C3D header says {expected} frames, the file holds {len(frames)} "
+                         "(a truncated file?)")
     if not labels or len(labels) != frames[0].shape[0]:
         raise InputError(f"{path}: the C3D file has {frames[0].shape[0]} points but {len(labels)} labels")
     if len(set(labels)) != len(labels):
@@ -425,7 +494,7 @@ def _markers_c3d(path: Path):
         raise InputError(f"{path}: POINT:UNITS is {units!r}, expected mm, cm or m")
     if not math.isfinite(rate) or rate <= 0:
         raise InputError(f"{path}: the C3D point rate is {rate!r}")
-    return labels, np.stack(frames), rate, units
+    return labels, np.stack(frames), rate, units, None
 
 
 def save_markers_json(track: MarkerTrack, path, *, units: str = "mm") -> Path:
@@ -484,7 +553,7 @@ def markers_from_frames(frames, names, *, fps: float | None = None) -> MarkerTra
 
 
 # ----------------------------------------------------------------------------- ARKit
-def load_arkit(path, *, fps: float | None = None) -> ArkitTrack:
+def load_arkit(path, *, fps: float | None = None, start: float | None = None, end: float | None = None) -> ArkitTrack:
     """Read ARKit blendshape curves: a Live Link Face CSV or a MediaPipe Face Landmarker JSON
     (formats in this module's docstring) as an :class:`ArkitTrack`.
 
@@ -492,25 +561,181 @@ def load_arkit(path, *, fps: float | None = None) -> ArkitTrack:
         path: ``.csv`` (Live Link Face) or ``.json`` (MediaPipe).
         fps: Frames per second, needed only when the file cannot tell (a Live Link take that does
             not cross a whole second, MediaPipe frames without timestamps).
+        start, end: Keep the part of the take from ``start`` to ``end`` seconds (from its first
+            frame; default the whole take).
 
     Returns:
-        The track: weights (T, 52) in :data:`~facewarp.ARKIT_NAMES` order; head_rotation (T, 3)
-        [rad] yaw, pitch, roll from Live Link's head columns, None for MediaPipe.
+        The track: weights (T, 52) in :data:`~facewarp.ARKIT_NAMES` order, on a uniform grid at the
+        take's own rate (frames the recording dropped interpolated, and said in ``notes``);
+        head_rotation (T, 3) [rad] yaw, pitch, roll and eye_rotation (T, 2, 2) [rad] yaw, pitch from Live
+        Link's columns, None for MediaPipe.
 
     Raises:
         InputError: one line naming the file and what is wrong (empty, truncated, malformed,
-        missing or unknown columns or categories, weights outside [0, 1], bad timecodes).
+        missing or unknown columns or categories, a weight beyond [-0.1, 1.1] with its row and
+        column, times that go back or cannot be a take's frame rate).
     """
     if fps is not None:
-        fps = check_number("fps", fps, low=0.0, high=10_000.0, low_open=True)
+        fps = check_number("fps", fps, low=MIN_TAKE_FPS, high=MAX_TAKE_FPS)
+    start, end = _check_cut(start, end)
     path, text = _open_text(path, ARKIT_SUFFIXES, "ARKit")
     if path.suffix.lower() == ".csv":
-        return _livelink_csv(path, text, fps)
-    return _mediapipe_json(path, text, fps)
+        track = _livelink_csv(path, text, fps)
+    else:
+        track = _mediapipe_json(path, text, fps)
+    return _cut_arkit(path, track, start, end)
 
 
-def _timecodes(path: Path, cells: list[str], fps: float | None) -> float:
-    """The take's fps from its Live Link timecodes (see the module docstring)."""
+# ---------------------------------------------------------------- times of real takes
+def _check_cut(start, end) -> tuple[float | None, float | None]:
+    start = check_number("start", start, low=0.0, allow_none=True)
+    end = check_number("end", end, low=0.0, low_open=True, allow_none=True)
+    if start is not None and end is not None and end <= start:
+        raise InputError(f"end: {end:g} s is not after start {start:g} s")
+    return start, end
+
+
+def _cut_range(path: Path, frames: int, fps: float, start, end) -> tuple[int, int]:
+    """Frames ``[a, b)`` of a take of ``frames`` at ``fps`` from ``start`` to ``end`` seconds."""
+    length = (frames - 1) / fps
+    a = 0 if start is None else int(math.ceil(start * fps - 1e-6))
+    b = frames if end is None else min(frames, int(math.floor(end * fps + 1e-6)) + 1)
+    if start is not None and a >= frames:
+        raise InputError(f"{path}: start {start:g} s is beyond the take's {length:.4g} s")
+    if b - a < 1:
+        raise InputError(f"{path}: no frame between start {start or 0:g} s and end {end or length:g} s")
+    return a, b
+
+
+def _cut_arkit(path: Path, track: ArkitTrack, start, end) -> ArkitTrack:
+    if start is None and end is None:
+        return track
+    a, b = _cut_range(path, track.frames, track.fps, start, end)
+    notes = list(track.notes) + [f"frames {a}..{b - 1} of {track.frames} kept ({a / track.fps:.3f}-"
+                                 f"{(b - 1) / track.fps:.3f} s of the take)"]
+    info = dict(track.info, start_s=a / track.fps, end_s=(b - 1) / track.fps, frames_in_take=track.frames)
+    return ArkitTrack(track.fps, track.weights[a:b],
+                      None if track.head_rotation is None else track.head_rotation[a:b], source=track.source,
+                      eye_rotation=None if track.eye_rotation is None else track.eye_rotation[a:b], notes=notes,
+                      info=info)
+
+
+MAX_GAP_S = 2.0
+"""Longest stretch [s] of a take without a frame that is filled in (interpolated); longer is an error."""
+
+_NAMED_RATES = (24000 / 1001, 30000 / 1001, 60000 / 1001)
+"""Video rates that are not whole numbers (23.976, 29.97, 59.94 frames/s)."""
+
+
+def _snap_rate(rate: float, tolerance: float) -> float:
+    """``rate`` as a whole number or an NTSC rate when within ``tolerance`` [1/s] of one."""
+    for r in (float(round(rate)), *_NAMED_RATES):
+        if r > 0 and abs(rate - r) <= tolerance:
+            return r
+    return rate
+
+
+def _grid(path: Path, t: np.ndarray, what: str, *, resolution: float = 0.0, row0: int = 2,
+          unit: str = "s") -> tuple[float | None, np.ndarray, dict]:
+    """The take's frame rate and each sample's frame on it, from sample times ``t`` [s] that may
+    skip frames (a 30 fps take on a 60 fps timecode drops frames: steps of 2, 4, 6 ... timecode
+    frames).
+
+    The rate's step is the median step; every step must be a whole number of it (within a
+    quarter: jitter of rounded timestamps), and the rate is the frames so counted over the span
+    (the times' rounding, ``resolution`` [s], barely touches it), snapped to a whole number or an
+    NTSC rate when within the rounding's reach or 0.2 %.
+
+    Returns:
+        ``(rate, index, info)``: rate [1/s] (None for one sample); index (n,) int64, each sample's
+        frame; info: ``frames_filled`` (frames the take skipped), ``gaps``, ``longest_gap_frames``.
+    """
+    n = len(t)
+    if n < 2:
+        return None, np.zeros(n, np.int64), {"frames_filled": 0, "gaps": 0, "longest_gap_frames": 0}
+    d = np.diff(t)
+    if (d <= 0).any():
+        k = int(np.argmax(d <= 0))
+        raise InputError(f"{path}: {what} do not increase (row {k + row0 + 1}: {t[k + 1]:.6g} {unit} after "
+                         f"{t[k]:.6g})")
+    step = float(np.median(d))
+    m = d / step
+    k = np.rint(m)
+    off = np.abs(m - k) > 0.25
+    if off.any():
+        i = int(np.argmax(off))
+        raise InputError(f"{path}: uneven {what}: step {d[i]:.4g} {unit} at row {i + row0 + 1} is not a whole number "
+                         f"of the median step {step:.4g} {unit}")
+    k = k.astype(np.int64)
+    if unit == "s" and (d > MAX_GAP_S).any():
+        i = int(np.argmax(d > MAX_GAP_S))
+        raise InputError(f"{path}: uneven {what}: a gap of {d[i]:.4g} s at row {i + row0 + 1}, more than "
+                         f"{MAX_GAP_S:g} s without a frame (two takes joined?)")
+    count = int(k.sum())
+    span = float(t[-1] - t[0])
+    rate = count / span
+    rate = _snap_rate(rate, max(0.002 * rate, 1.5 * rate * resolution / span))
+    index = np.concatenate([[0], np.cumsum(k)])
+    info = {"frames_filled": int(count - (n - 1)), "gaps": int((k > 1).sum()), "longest_gap_frames": int(k.max() - 1)}
+    return rate, index, info
+
+
+def _check_rate(path: Path, rate: float, what: str) -> float:
+    if not MIN_TAKE_FPS <= rate <= MAX_TAKE_FPS:
+        raise InputError(f"{path}: the {what} give {rate:.6g} frames/s, outside a take's {MIN_TAKE_FPS:g}.."
+                         f"{MAX_TAKE_FPS:g} (are the timestamps' units right?)")
+    return rate
+
+
+def _fill(values: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """Samples ``values`` (n, ...) at frames ``index`` (n,) on the full grid 0..index[-1], linear
+    between samples (a NaN sample stays missing: frames between it and its neighbours are NaN)."""
+    if index[-1] == len(index) - 1:
+        return values
+    shape = values.shape[1:]
+    V = values.reshape(len(values), -1)
+    grid = np.arange(index[-1] + 1)
+    out = np.empty((len(grid), V.shape[1]))
+    seg = np.clip(np.searchsorted(index, grid, side="right") - 1, 0, len(index) - 2)
+    w = (grid - index[seg]) / (index[seg + 1] - index[seg])
+    out[:] = V[seg] * (1.0 - w[:, None]) + V[seg + 1] * w[:, None]
+    exact = np.isin(grid, index)
+    out[exact] = V[np.searchsorted(index, grid[exact])]
+    return out.reshape(len(grid), *shape)
+
+
+def _gap_note(info: dict, rate: float) -> list:
+    if not info.get("frames_filled"):
+        return []
+    return [f"{info['frames_filled']} frame(s) the take skipped ({info['gaps']} gap(s), the longest "
+            f"{info['longest_gap_frames'] / rate:.3f} s) interpolated at {rate:g} frames/s"]
+
+
+WEIGHT_SLACK = 0.1
+"""ARKit weights up to this beyond [0, 1] are clamped (Live Link Face writes EyeLookIn up to about
+1.05) and counted; farther is an error."""
+
+
+def _clamp(path: Path, W: np.ndarray, where) -> tuple[np.ndarray, dict, list]:
+    """Weights W (T, 52) clamped to [0, 1]; beyond :data:`WEIGHT_SLACK` an error naming
+    ``where(t, i)``; the count of clamped values per shape."""
+    bad = (W < -WEIGHT_SLACK) | (W > 1.0 + WEIGHT_SLACK)
+    if bad.any():
+        t, i = map(int, np.argwhere(bad)[0])
+        raise InputError(f"{path}: {where(t, i)}: weight {W[t, i]:g} is outside [0, 1] by more than "
+                         f"{WEIGHT_SLACK:g}")
+    over = (W > 1.0) | (W < 0.0)
+    counts = {ARKIT_NAMES[i]: int(c) for i, c in enumerate(over.sum(axis=0)) if c}
+    notes = []
+    if counts:
+        top = max(counts, key=counts.get)
+        notes.append(f"{int(over.sum())} weight(s) beyond [0, 1] clamped (largest {W.max():.3f}; "
+                     f"most in {top}: {counts[top]})")
+    return np.clip(W, 0.0, 1.0), counts, notes
+
+
+def _timecodes(path: Path, cells: list[str], fps: float | None) -> tuple[float | None, np.ndarray, dict]:
+    """The take's fps and each row's frame from its Live Link timecodes (module docstring)."""
     whole = np.empty(len(cells))
     frame = np.empty(len(cells))
     for n, c in enumerate(cells):
@@ -527,17 +752,19 @@ def _timecodes(path: Path, cells: list[str], fps: float | None) -> float:
         if fps is None and len(cells) > 1:
             raise InputError(f"{path}: the take does not cross a whole second, so its frame rate cannot be read "
                              "from the timecodes; give fps")
-        return fps
+        _, index, info = _grid(path, frame, "timecodes", unit="frames")  # fps given: the steps still count
+        return fps, index, info
     top = max(int(frame[i]) for i in turns) + 1
     rate = next((r for r in TIMECODE_RATES if r >= top), None)
     if rate is None or frame.max() >= rate:
         raise InputError(f"{path}: timecode frame numbers up to {int(frame.max())} fit no timecode rate "
                          f"({', '.join(map(str, TIMECODE_RATES))})")
     t = whole + frame / rate
-    found = _even_steps(path, t, "timecodes")
+    found, index, info = _grid(path, t, "timecodes", resolution=0.5e-3 / rate)
+    _check_rate(path, found, "timecodes")
     if fps is not None and abs(found - fps) > 0.005 * fps:
         raise InputError(f"{path}: the timecodes give {found:g} fps, but fps {fps:g} was given")
-    return found
+    return found, index, info
 
 
 def _livelink_csv(path: Path, text: str, fps: float | None) -> ArkitTrack:
@@ -545,41 +772,54 @@ def _livelink_csv(path: Path, text: str, fps: float | None) -> ArkitTrack:
     head = [h.strip() for h in rows[0]]
     if not head or head[0].lower() != "timecode":
         raise InputError(f"{path}: not a Live Link Face CSV: the first column must be 'Timecode', got {head[0]!r}")
-    known = {_cap(n): i for i, n in enumerate(ARKIT_NAMES)}
+    known = {n.lower(): i for i, n in enumerate(ARKIT_NAMES)}
+    extra = {n.lower(): n for n in (*LIVELINK_HEAD, *LIVELINK_EYES, "BlendShapeCount")}
     where = {}
     for j, h in enumerate(head[1:], start=1):
-        if h in where:
-            raise InputError(f"{path}: column {h!r} appears twice")
-        if h not in known and h not in LIVELINK_HEAD and h not in LIVELINK_EYES and h != "BlendShapeCount":
+        key = h.lower()
+        if key in where:
+            raise InputError(f"{path}: column {h!r} appears twice (column names are read without case)")
+        if key not in known and key not in extra:
             raise InputError(f"{path}: unknown column {h!r} (expected Live Link Face's Timecode, BlendShapeCount, "
                              "the 52 ARKit names such as EyeBlinkLeft, HeadYaw/Pitch/Roll, eye angles)")
-        where[h] = j
-    missing = [n for n in known if n not in where]
+        where[key] = j
+    missing = [_cap(ARKIT_NAMES[i]) for n, i in known.items() if n not in where]
     if missing:
         raise InputError(f"{path}: no column {missing[0]!r} ({len(missing)} of the 52 ARKit blendshapes missing)")
-    heads = [h for h in LIVELINK_HEAD if h in where]
+    heads = [h for h in LIVELINK_HEAD if h.lower() in where]
     if heads and len(heads) != 3:
         raise InputError(f"{path}: head rotation needs HeadYaw, HeadPitch and HeadRoll, got only {', '.join(heads)}")
+    eyes = [h for h in LIVELINK_EYES if h.lower() in where]
+    if eyes and len(eyes) != 6:
+        raise InputError(f"{path}: eye rotation needs all six of {', '.join(LIVELINK_EYES)}, got {len(eyes)}")
     T = len(rows) - 1
     W = np.empty((T, 52))
     H = np.empty((T, 3)) if heads else None
+    E = np.empty((T, 6)) if eyes else None
+    cols = [(where[n], i, _cap(ARKIT_NAMES[i])) for n, i in known.items()]
     for t, r in enumerate(rows[1:]):
-        for name, i in known.items():
-            W[t, i] = _float(path, r[where[name]], t + 2, name)
+        for j, i, name in cols:
+            W[t, i] = _float(path, r[j], t + 2, name)
         if H is not None:
-            H[t] = [_float(path, r[where[h]], t + 2, h) for h in LIVELINK_HEAD]
-    bad = (W < -1e-3) | (W > 1 + 1e-3)
-    if bad.any():
-        t, i = map(int, np.argwhere(bad)[0])
-        raise InputError(f"{path}: row {t + 2} column {_cap(ARKIT_NAMES[i])!r}: weight {W[t, i]:g} is outside [0, 1]")
-    if H is not None and (np.abs(H) > math.pi).any():
-        t, i = map(int, np.argwhere(np.abs(H) > math.pi)[0])
-        raise InputError(f"{path}: row {t + 2} column {LIVELINK_HEAD[i]!r}: {H[t, i]:g} rad is beyond +-pi "
-                         "(head angles are radians)")
-    rate = _timecodes(path, [r[0] for r in rows[1:]], fps)
+            H[t] = [_float(path, r[where[h.lower()]], t + 2, h) for h in LIVELINK_HEAD]
+        if E is not None:
+            E[t] = [_float(path, r[where[h.lower()]], t + 2, h) for h in LIVELINK_EYES]
+    W, counts, notes = _clamp(path, W, lambda t, i: f"row {t + 2} column {head[where[ARKIT_NAMES[i].lower()]]!r}")
+    for A, names in ((H, LIVELINK_HEAD), (E, LIVELINK_EYES)):
+        if A is not None and (np.abs(A) > math.pi).any():
+            t, i = map(int, np.argwhere(np.abs(A) > math.pi)[0])
+            raise InputError(f"{path}: row {t + 2} column {names[i]!r}: {A[t, i]:g} rad is beyond +-pi "
+                             "(head and eye angles are radians)")
+    rate, index, gaps = _timecodes(path, [r[0] for r in rows[1:]], fps)
     if rate is None:
         rate = 30.0 if fps is None else fps  # a single frame: its rate does not matter
-    return ArkitTrack(rate, W, H, source=str(path))
+    W = np.clip(_fill(W, index), 0.0, 1.0)
+    H = None if H is None else _fill(H, index)
+    E = None if E is None else _fill(E, index).reshape(-1, 2, 3)[:, :, :2]  # yaw, pitch (the eyes do not roll)
+    if E is not None and not np.any(E):
+        E = None  # a writer that records no gaze (all zero): the eyeLook* weights say where the eyes look
+    info = {"clamped": counts, **gaps, "frames_read": T}
+    return ArkitTrack(rate, W, H, source=str(path), eye_rotation=E, notes=notes + _gap_note(gaps, rate), info=info)
 
 
 def _get(d: dict, *keys):
@@ -589,73 +829,150 @@ def _get(d: dict, *keys):
     return None
 
 
-def _mediapipe_json(path: Path, text: str, fps: float | None) -> ArkitTrack:
-    data = _json(path, text)
+_FACE_KEYS = ("face_blendshapes", "faceBlendshapes", "blendshapes", "blendShapes", "people", "faces")
+_NAME_KEYS = ("category_name", "categoryName", "name", "display_name", "displayName")
+_MS_KEYS = ("timestamp_ms", "timestampMs", "time_ms")
+_US_KEYS = ("timestamp_us", "timestampUs", "time_us")
+VIDEO_FPS = (10.0, 240.0)
+"""Frame rates [1/s] of video a face tracker runs on: ``timestamp_ms`` steps that give under 1 fps
+in milliseconds but a rate in this range in microseconds are read as microseconds."""
+
+MEDIAPIPE_MISSING_OK = ("tongueOut",)
+"""ARKit shapes a MediaPipe take may lack: the Face Landmarker's 52 categories are ``_neutral``
+and 51 ARKit names, without ``tongueOut`` (read as 0, and said in the track's notes)."""
+
+
+def _is_category(c) -> bool:
+    return isinstance(c, dict) and any(k in c for k in _NAME_KEYS) and ("score" in c or "value" in c)
+
+
+def _mediapipe_frames(path: Path, data) -> list:
+    """The file's frames as dicts ``{"faces": [...], "ms": .., "us": ..}`` in any of the layouts exporters write."""
     if isinstance(data, dict) and "frames" in data:
         data = data["frames"]
+    elif isinstance(data, dict) and (any(k in data for k in _FACE_KEYS) or _is_category(data)):
+        data = [data]  # one frame
     if not isinstance(data, list) or not data:
         raise InputError(f"{path}: expected a list of frames [{{\"timestamp_ms\": .., \"face_blendshapes\": "
                          f"[[{{\"category_name\": .., \"score\": ..}}, ...]]}}, ...], got {describe(data)}")
-    index = {n: i for i, n in enumerate(ARKIT_NAMES)}
-    W = np.zeros((len(data), 52))
-    stamps = []
-    empty = 0
+    if all(_is_category(c) for c in data):
+        data = [data]  # a flat list of categories: one frame
+    out = []
     for t, fr in enumerate(data):
+        if isinstance(fr, list):  # a frame given as its categories (or as its faces)
+            out.append({"faces": [fr] if not fr or _is_category(fr[0]) else fr, "ms": None, "us": None})
+            continue
         if not isinstance(fr, dict):
-            raise InputError(f"{path}: frame {t}: expected an object, got {describe(fr)}")
-        faces = _get(fr, "face_blendshapes", "faceBlendshapes")
+            raise InputError(f"{path}: frame {t}: expected an object or a list of categories, got {describe(fr)}")
+        faces = _get(fr, *_FACE_KEYS)
+        if faces is None and _is_category(fr):
+            raise InputError(f"{path}: frame {t}: a lone category; expected a list of categories per frame")
         if not isinstance(faces, list):
-            raise InputError(f"{path}: frame {t}: no 'face_blendshapes' list")
-        ts = _get(fr, "timestamp_ms", "timestampMs")
-        if ts is not None:
-            if isinstance(ts, bool) or not isinstance(ts, (int, float)) or not math.isfinite(ts):
-                raise InputError(f"{path}: frame {t}: timestamp_ms must be a number, got {describe(ts)}")
-            stamps.append(float(ts))
-        if not faces:
+            raise InputError(f"{path}: frame {t}: no 'face_blendshapes' list (or 'blendshapes', 'people')")
+        if faces and (_is_category(faces[0])):
+            faces = [faces]  # one face, its categories flat
+        out.append({"faces": faces, "ms": _get(fr, *_MS_KEYS), "us": _get(fr, *_US_KEYS)})
+    return out
+
+
+def _score(path: Path, t: int, name: str, score) -> float:
+    if isinstance(score, str):
+        try:
+            score = float(score.strip())
+        except ValueError:
+            raise InputError(f"{path}: frame {t}: category {name!r} score must be a number, got {score!r}") from None
+    if isinstance(score, bool) or not isinstance(score, (int, float)) or not math.isfinite(score):
+        raise InputError(f"{path}: frame {t}: category {name!r} score must be a number, got {describe(score)}")
+    return float(score)
+
+
+def _stamp(path: Path, t: int, value, key: str) -> float:
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InputError(f"{path}: frame {t}: {key} must be a number, got {describe(value)}")
+    return float(value)
+
+
+def _mediapipe_json(path: Path, text: str, fps: float | None) -> ArkitTrack:
+    frames = _mediapipe_frames(path, _json(path, text))
+    index = {n.lower(): i for i, n in enumerate(ARKIT_NAMES)}
+    T = len(frames)
+    W = np.zeros((T, 52))
+    ms, us = [], []
+    empty = 0
+    lacking: set = set()
+    for t, fr in enumerate(frames):
+        if fr["ms"] is not None:
+            ms.append(_stamp(path, t, fr["ms"], "timestamp_ms"))
+        if fr["us"] is not None:
+            us.append(_stamp(path, t, fr["us"], "timestamp_us"))
+        if not fr["faces"]:
             W[t] = W[t - 1] if t else 0.0
             empty += 1
             continue
-        cats = faces[0]
+        cats = fr["faces"][0]
         if isinstance(cats, dict):
             cats = cats.get("categories")
         if not isinstance(cats, list):
-            raise InputError(f"{path}: frame {t}: a face must be a list of categories, got {describe(faces[0])}")
+            raise InputError(f"{path}: frame {t}: a face must be a list of categories, got {describe(fr['faces'][0])}")
         seen = set()
         for c in cats:
-            name = _get(c, "category_name", "categoryName") if isinstance(c, dict) else None
-            score = c.get("score") if isinstance(c, dict) else None
+            name = _get(c, *_NAME_KEYS) if isinstance(c, dict) else None
             if not isinstance(name, str):
                 raise InputError(f"{path}: frame {t}: a category without 'category_name': {json.dumps(c)[:60]}")
-            if name == "_neutral":
+            if name.strip().lower() == "_neutral":
                 continue
-            if name not in index:
+            i = index.get(name.strip().lower())
+            if i is None:
                 raise InputError(f"{path}: frame {t}: unknown category {name!r} (expected the 52 ARKit names)")
-            if isinstance(score, bool) or not isinstance(score, (int, float)) or not math.isfinite(score):
-                raise InputError(f"{path}: frame {t}: category {name!r} score must be a number, got {describe(score)}")
-            if not -1e-3 <= score <= 1 + 1e-3:
-                raise InputError(f"{path}: frame {t}: category {name!r} score {score:g} is outside [0, 1]")
-            W[t, index[name]] = score
-            seen.add(name)
-        if len(seen) != 52:
-            miss = [n for n in ARKIT_NAMES if n not in seen]
-            raise InputError(f"{path}: frame {t}: no category {miss[0]!r} ({len(miss)} of the 52 missing)")
-    if empty == len(data):
+            if i in seen:
+                raise InputError(f"{path}: frame {t}: category {name!r} appears twice")
+            W[t, i] = _score(path, t, name, _get(c, "score", "value"))
+            seen.add(i)
+        miss = [ARKIT_NAMES[i] for i in range(52) if i not in seen]
+        hard = [n for n in miss if n not in MEDIAPIPE_MISSING_OK]
+        if hard:
+            raise InputError(f"{path}: frame {t}: no category {hard[0]!r} ({len(miss)} of the 52 ARKit names missing)")
+        lacking.update(miss)
+    if empty == T:
         raise InputError(f"{path}: no frame has a face")
-    if stamps and len(stamps) != len(data):
-        raise InputError(f"{path}: some frames have timestamp_ms and some do not")
-    rate = fps
+    W, counts, notes = _clamp(path, W, lambda t, i: f"frame {t} category {ARKIT_NAMES[i]!r}")
+    if lacking:
+        notes.append(f"no {', '.join(sorted(lacking))} in the take (MediaPipe's Face Landmarker has none): read as 0")
+    if empty:
+        notes.append(f"{empty} frame(s) without a face hold the weights before them")
+    if ms and us:
+        raise InputError(f"{path}: frames have both timestamp_ms and timestamp_us")
+    stamps = ms or us
+    if stamps and len(stamps) != T:
+        raise InputError(f"{path}: some frames have a timestamp and some do not")
+    rate, idx, gaps = fps, np.arange(T), {"frames_filled": 0, "gaps": 0, "longest_gap_frames": 0}
+    info = {"clamped": counts, "missing": sorted(lacking), "frames_without_face": empty, "frames_read": T}
     if len(stamps) > 1:
-        d = np.diff(stamps)
-        if (d <= 0).any():
-            raise InputError(f"{path}: timestamp_ms do not increase (frame {int(np.argmax(d <= 0)) + 1})")
-        rate = 1000.0 / float(np.median(d))
+        x = np.asarray(stamps)
+        unit = 1e-6 if us else 1e-3
+        step = float(np.median(np.diff(x))) * unit
+        if ms and step > 0 and 1.0 / step < MIN_TAKE_FPS and VIDEO_FPS[0] <= 1.0 / (step * 1e-3) <= VIDEO_FPS[1]:
+            unit = 1e-6  # microseconds under a millisecond key (MediaPipe's C++ and graph timestamps)
+            notes.append(f"timestamp_ms read as microseconds: in milliseconds the take would be {1.0 / step:.3g} "
+                         "frames/s")
+            info["timestamps_in_microseconds"] = True
+        rate, idx, gaps = _grid(path, x * unit, "timestamps", resolution=unit, row0=0,
+                                unit="s")
+        _check_rate(path, rate, "timestamps")
         if fps is not None and abs(rate - fps) > 0.005 * fps:
             raise InputError(f"{path}: the timestamps give {rate:g} fps, but fps {fps:g} was given")
     elif rate is None:
-        if len(data) > 1:
+        if T > 1:
             raise InputError(f"{path}: the frames have no timestamp_ms; give fps")
         rate = 30.0
-    return ArkitTrack(rate, W, None, source=str(path))
+    W = np.clip(_fill(W, idx), 0.0, 1.0)
+    info.update(gaps)
+    return ArkitTrack(rate, W, None, source=str(path), notes=notes + _gap_note(gaps, rate), info=info)
 
 
 def save_livelink_csv(track: ArkitTrack, path) -> Path:

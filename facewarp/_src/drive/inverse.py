@@ -48,7 +48,7 @@ from ..core.errors import InputError
 from .result import DriveResult
 from .sensitivity import PointReadout, step_sensitivity
 
-__all__ = ["DriveResult", "Tracker", "drive"]
+__all__ = ["DriveResult", "Tracker"]
 
 MODES = ("offline", "realtime")
 """Tracker modes: ``offline`` (frames re-taken until the step matches its prediction) and
@@ -394,6 +394,10 @@ class Tracker:
         T = check_array("targets", targets, shape=(self.count, 3), finite=False)
         if np.isinf(T).any():
             raise InputError("targets: infinite values (use NaN for a missing point)")
+        with np.errstate(over="ignore", invalid="ignore"):  # 1e308: an infinite distance, refused below
+            far = np.nan_to_num(np.abs(T), nan=0.0).max(initial=0.0)
+        if far > 1000.0:  # as MarkerTrack's MAX_POSITION_M: no face is a kilometre from the origin
+            raise InputError(f"targets: a point {far:.3g} m from the head's origin (metres expected, head frame)")
         visible = np.isfinite(T).all(axis=1)
         T = np.where(visible[:, None], T, 0.0)
         sim, snap = self.sim, self._snap
@@ -438,114 +442,3 @@ class Tracker:
         self.last_error = np.where(visible, err, np.nan)
         self._update_noise(np.where(visible[:, None], p - T, np.nan))
         return sim.activations, sim.jaw_angles
-
-
-# ---------------------------------------------------------------------------------------- drive
-def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offline", head_poses=None,
-          unreachable_limit: float = 2e-3, **options) -> DriveResult:
-    """Solve a performance's activations and jaw per frame and play them on ``sim`` (module doc).
-
-    The simulator is reset to rest, then each frame ``k`` of the track is one step of ``1 / fps``
-    (:meth:`Tracker.update`); the sinks see frame ``k`` at ``t = k / fps`` like :func:`~facewarp.play`'s
-    (a :class:`~facewarp.FrameRecorder` keeps the frames, a :class:`~facewarp.UsdAnimation` streams them).
-
-    Args:
-        sim: The :class:`~facewarp.FaceSimulator` (implicit solver), at the track's frame rate.
-        track: A :class:`~facewarp.MarkerTrack` (points in the head's frame, NaN where missing).
-        table: For an :class:`~facewarp.takes.ArkitTrack`: the head's :class:`~facewarp.takes.ArkitTable`
-            (:func:`~facewarp.arkit_table`); the track is then played through it
-            (:func:`.arkit.drive_arkit`: ``refine=True`` tracks each frame towards its blended
-            target FDPs, the other keywords as here; the head rotation drives the head pose).
-        sinks: :class:`~facewarp.takes.Sink` objects or callables ``f(sim, k, t)``, called after each frame.
-        progress: Optional ``progress(k, frame_count)`` after each frame.
-        mode: ``"offline"`` or ``"realtime"`` (:class:`Tracker`).
-        head_poses: Optional (T, 4, 4) rigid poses removed from the targets, kept in the result.
-        unreachable_limit: A frame whose point is farther than this [m] from its target is noted (default 2 mm).
-        **options: Further keywords of :class:`Tracker` (``smoothness``, ``effort``, ``robust``, ...).
-
-    Returns:
-        The :class:`DriveResult`.
-
-    Raises:
-        InputError: a bad argument, a track at another frame rate than ``sim``, unknown point names.
-    """
-    from ..sim.play import PlayStats, _as_sink
-    from ..sim.simulator import FaceSimulator
-    from .tracks import ArkitTrack, MarkerTrack
-
-    if not isinstance(sim, FaceSimulator):
-        raise InputError(f"sim: expected a facewarp FaceSimulator, got {type(sim).__name__}")
-    if isinstance(track, ArkitTrack):
-        from .arkit import check_table, drive_arkit
-
-        if head_poses is not None:
-            raise InputError("head_poses: not for an ArkitTrack (its head_rotation drives the head pose)")
-        refine = options.pop("refine", False)
-        if not isinstance(refine, (bool, np.bool_)):
-            raise InputError(f"refine: expected True or False, got {refine!r}")
-        if options and not refine:
-            raise InputError(f"{sorted(options)[0]}: a Tracker option, only with refine=True")
-        check_table(sim, table)
-        tracker = Tracker(sim, table.fdp_ids, mode=mode, **options) if refine else None
-        return drive_arkit(sim, track, table, sinks=sinks, progress=progress, tracker=tracker,
-                           unreachable_limit=unreachable_limit)
-    if not isinstance(track, MarkerTrack):
-        raise InputError(f"track: expected a facewarp MarkerTrack, got {type(track).__name__}")
-    if table is not None:
-        raise InputError("table: only for an ArkitTrack")
-    if abs(track.fps - sim.fps) > 1e-6 * sim.fps:
-        raise InputError(f"track: {track.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
-                         f"make the FaceSimulator with fps={track.fps:g}")
-    if progress is not None and not callable(progress):
-        raise InputError(f"progress: expected a callable progress(k, frame_count), got {type(progress).__name__}")
-    unreachable_limit = check_number("unreachable_limit", unreachable_limit, low=0.0, low_open=True)
-    nf = track.frames
-    if head_poses is not None:
-        head_poses = check_array("head_poses", head_poses, shape=(nf, 4, 4))
-    sinks = [_as_sink(s) for s in sinks]
-    tracker = Tracker(sim, track.names, mode=mode, **options)
-    sim.reset()
-    tracker.reset_tracking()
-    for s in sinks:
-        s.start(sim, nf)
-    K, M = tracker.count, tracker.M
-    acts = np.zeros((nf, M), np.float32)
-    jaw = np.zeros((nf, 2), np.float32)
-    err = np.full((nf, K), np.nan)
-    t0 = time.perf_counter()
-    stepping = 0.0
-    for k in range(nf):
-        s0 = time.perf_counter()
-        acts[k], jaw[k] = tracker.update(track.positions[k])
-        stepping += time.perf_counter() - s0
-        err[k] = tracker.last_error
-        for s in sinks:
-            s.frame(sim, k, k / track.fps)
-        if progress:
-            progress(k, nf)
-    wall = time.perf_counter() - t0
-    stepping = max(stepping, 1e-9)
-    with np.errstate(invalid="ignore"):
-        present = np.isfinite(err)
-        rms = np.sqrt(np.where(present.any(1), np.nansum(err**2, 1) / np.maximum(present.sum(1), 1), np.nan))
-    notes = []
-    never = [n for n, seen in zip(track.names, present.any(0)) if not seen]
-    if never:
-        notes.append(f"never present: {', '.join(never)}")
-    bad = np.where(np.nan_to_num(err, nan=0.0) > unreachable_limit)
-    if len(bad[0]):
-        for i in np.unique(bad[1]):
-            fr_k = bad[0][bad[1] == i]
-            notes.append(f"point {track.names[i]}: {len(fr_k)} frame(s) off by more than "
-                         f"{unreachable_limit * 1e3:g} mm (worst {np.nanmax(err[:, i]) * 1e3:.2f} mm at frame "
-                         f"{int(np.nanargmax(err[:, i]))})")
-    stats = PlayStats(frames=nf, seconds=nf / track.fps, wall_s=wall, simulation_wall_s=stepping,
-                      frames_per_second=nf / stepping, steps_per_second=tracker.stats.steps * sim.substeps / stepping,
-                      realtime_factor=nf / track.fps / stepping, substeps=int(sim.substeps), dt_s=float(sim.dt),
-                      device=str(sim.device), jaw="tracker", frame_stats=sim.stats.as_dict(), mujoco_events=[])
-    for s in sinks:
-        s.finish(sim, stats)
-    return DriveResult(fps=track.fps, names=list(track.names), muscle_names=list(sim.muscle_names),
-                       activations=acts, jaw=jaw, error=err, rms=rms, unreachable=notes, seconds=stepping,
-                       frames_per_second=nf / stepping, mode=tracker.mode, stats=tracker.stats.as_dict(),
-                       head_poses=head_poses)

@@ -32,6 +32,9 @@ class DriveResult:
         warnings: What the take asked for that the face cannot show (ARKit shapes not mapped on this head).
         gaze: (T, 2, 2) float64 [rad], the eyes' (yaw, pitch) per frame (left, right) for an ARKit
             track; else None.
+        targets: (T, K, 3) float64 [m] the targets the error is measured against (head frame), when known.
+        retarget: The retargeting's map, notes and the actor's head motion (a dict) when the take was
+            retargeted (``retarget=True``); else None.
     """
 
     fps: float
@@ -49,6 +52,8 @@ class DriveResult:
     head_poses: np.ndarray | None = None
     warnings: list = field(default_factory=list)
     gaze: np.ndarray | None = None
+    targets: np.ndarray | None = None
+    retarget: dict | None = None
 
     @property
     def frames(self) -> int:

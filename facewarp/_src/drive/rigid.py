@@ -40,6 +40,81 @@ plane's worth: the second singular value of the centred points), else the frame'
 trusted and the previous frame's pose is kept."""
 
 
+COLLINEAR_RATIO = 0.05
+"""The take's stable points of a frame are taken as on a line when their second spread (singular
+value) is below this fraction of the first (or below :data:`MIN_SPREAD_M`)."""
+
+MIN_SCALE, MAX_SCALE = 0.25, 4.0
+"""Bounds of a frame's fitted scale (the take's face over the head's): beyond them the stable
+points collapsed or flew apart (a frame of them is not a head)."""
+
+MIRROR_RATIO = 3.0
+"""A take is mirrored when the best rotation fits its stable points more than this many times
+worse than the best reflection (and by more than 2 mm RMS)."""
+
+
+def _spread_like(X: np.ndarray, Q: np.ndarray) -> bool:
+    """The take's points X spread over a plane as the head's Q do (not collinear, not collapsed)."""
+    sx, sq = point_spread(X), point_spread(Q)
+    return bool(sx[1] >= max(COLLINEAR_RATIO * sx[0], MIN_SCALE * sq[1], 1e-9))
+
+
+def _orthogonal_residual(Q: np.ndarray, X: np.ndarray, scale: bool, reflect: bool) -> float:
+    """RMS [m] of the best similarity (or rigid) map Q -> X with a proper rotation or with a reflection."""
+    qc, xc = Q - Q.mean(0), X - X.mean(0)
+    U, S, Vt = np.linalg.svd(xc.T @ qc)
+    D = np.ones(3)
+    D[2] = -1.0 if (np.linalg.det(U @ Vt) > 0) == reflect else 1.0
+    Rm = U @ np.diag(D) @ Vt
+    s = float((S * D).sum() / max((qc**2).sum(), 1e-300)) if scale else 1.0
+    s = max(s, 1e-12)
+    return float(np.sqrt(np.mean(np.sum((s * qc @ Rm.T - xc) ** 2, axis=1))))
+
+
+def _check_stable_geometry(where: str, names: list, Q: np.ndarray, P: np.ndarray, scale: bool) -> None:
+    """Refuse a take whose stable points cannot give its head motion, with a line saying which and
+    why: collinear or collapsed in every frame where three are present, or mirrored (left and right
+    swapped, a left-handed capture)."""
+    frames = [np.isfinite(P[f]).all(axis=1) for f in range(len(P))]
+    usable = [f for f, ok in enumerate(frames) if ok.sum() >= 3]
+    if not usable:
+        return  # the fit's own message: no frame has three stable points present
+    good, why = [], None
+    for f in usable:
+        ok = frames[f]
+        X = P[f][ok]
+        sx, sq = point_spread(X), point_spread(Q[ok])
+        if sx[1] >= max(COLLINEAR_RATIO * sx[0], MIN_SCALE * sq[1], 1e-9):
+            good.append(f)
+        elif why is None:
+            pts = ", ".join(n for n, o in zip(names, ok) if o)
+            if sx[0] < MIN_SCALE * sq[0]:
+                why = (f"the stable points {pts} collapsed: they span {sx[0] * 1e3:.3g} mm in the take, "
+                       f"{sq[0] * 1e3:.3g} mm on the head (frame {f})")
+            else:
+                why = (f"the stable points {pts} lie on a line in the take ({sx[1] * 1e3:.3g} mm across it, "
+                       f"{sx[0] * 1e3:.3g} mm along; frame {f}): a line does not fix a rotation")
+    if not good:
+        raise InputError(f"{where}: cannot remove head motion: {why}")
+    mirrored = 0
+    tested = 0
+    for f in good[:: max(1, len(good) // 20)]:
+        ok = frames[f]
+        if ok.sum() < 4 or point_spread(Q[ok])[2] < MIN_SPREAD_M:
+            continue  # three (or coplanar) points: a reflection is a rotation
+        tested += 1
+        rot = _orthogonal_residual(Q[ok], P[f][ok], scale, reflect=False)
+        ref = _orthogonal_residual(Q[ok], P[f][ok], scale, reflect=True)
+        if rot > 2e-3 and rot > MIRROR_RATIO * ref:
+            mirrored += 1
+            last = (f, rot, ref, ", ".join(n for n, o in zip(names, ok) if o))
+    if tested and mirrored > tested // 2:
+        f, rot, ref, pts = last
+        raise InputError(f"{where}: cannot remove head motion: the stable points {pts} are mirrored in the take "
+                         f"(a reflection fits them to the head with {ref * 1e3:.3g} mm RMS, a rotation only with "
+                         f"{rot * 1e3:.3g} mm; frame {f}): left and right swapped, or a left-handed capture")
+
+
 @dataclass
 class HeadMotion:
     """The head's pose in each frame of a take: ``data = scale * rotation @ rest + translation``.
@@ -119,6 +194,13 @@ def remove_head_motion(track: MarkerTrack, rest, *, points=None, scale: bool = T
         raise InputError(f"{track.source or 'track'}: removing head motion needs three or more of the stable points "
                          f"{', '.join(points)} in the take, it has {len(cols)}")
     Q = np.array([np.asarray(rest[track.names[c]], dtype=np.float64).reshape(3) for c in cols])
+    keep_cols = np.isfinite(Q).all(axis=1)
+    cols, Q = [c for c, k in zip(cols, keep_cols) if k], Q[keep_cols]
+    where = track.source or "track"
+    if len(cols) < 3:
+        raise InputError(f"{where}: removing head motion needs three or more of the stable points "
+                         f"{', '.join(points)} in the take and at rest, it has {len(cols)}")
+    _check_stable_geometry(where, [track.names[c] for c in cols], Q, track.positions[:, cols], scale)
     P = track.positions
     T = track.frames
     R = np.tile(np.eye(3), (T, 1, 1))
@@ -130,7 +212,7 @@ def remove_head_motion(track: MarkerTrack, rest, *, points=None, scale: bool = T
     for f in range(T):
         X = P[f, cols]
         ok = np.isfinite(X).all(axis=1)
-        if ok.sum() < 3 or point_spread(Q[ok])[1] < MIN_SPREAD_M:
+        if ok.sum() < 3 or point_spread(Q[ok])[1] < MIN_SPREAD_M or not _spread_like(X[ok], Q[ok]):
             continue
         keep = np.nonzero(ok)[0]
         S = fit_similarity(Q[keep], X[keep], with_scale=scale)
@@ -141,6 +223,8 @@ def remove_head_motion(track: MarkerTrack, rest, *, points=None, scale: bool = T
                 break
             keep = keep[~out]
             S = fit_similarity(Q[keep], X[keep], with_scale=scale)
+        if not MIN_SCALE <= S.scale <= MAX_SCALE:
+            continue  # a collapsed or exploded frame: held (the take-wide check named the cause)
         R[f], t[f], s[f] = S.rotation, S.translation, S.scale
         res[f] = float(np.sqrt(np.mean(np.sum((S.apply(Q[keep]) - X[keep]) ** 2, axis=1))))
         used[f] = len(keep)

@@ -13,7 +13,7 @@ import numpy as np
 from ..core.checks import check_array, check_number
 from ..core.errors import InputError
 
-__all__ = ["ARKIT_NAMES", "ArkitTrack", "MarkerTrack"]
+__all__ = ["ARKIT_NAMES", "MAX_TAKE_FPS", "MIN_TAKE_FPS", "ArkitTrack", "MarkerTrack"]
 
 MAX_POSITION_M = 1000.0
 """Farthest a marker may be from the take's origin [m]: beyond any capture volume (a point there
@@ -34,8 +34,20 @@ ARKIT_NAMES = (
 the order of Live Link Face's CSV columns and MediaPipe's ``faceBlendshapes`` categories 1-52)."""
 
 
+MIN_TAKE_FPS = 1.0
+"""Slowest frame rate [1/s] of a take: below it the frames are stills, not a performance (a
+MediaPipe take whose timestamps in microseconds were read as milliseconds comes out at 0.03 fps)."""
+
+MAX_TAKE_FPS = 1000.0
+"""Fastest frame rate [1/s] of a take: the simulator's own bound (``MAX_FPS``)."""
+
+
 def _check_fps(fps) -> float:
-    return check_number("fps", fps, low=0.0, high=10_000.0, low_open=True)
+    fps = check_number("fps", fps)
+    if not MIN_TAKE_FPS <= fps <= MAX_TAKE_FPS:
+        raise InputError(f"fps: {fps:g} frames/s is outside a take's {MIN_TAKE_FPS:g}..{MAX_TAKE_FPS:g} "
+                         "(timestamps in other units than the file says?)")
+    return fps
 
 
 @dataclass
@@ -48,12 +60,20 @@ class MarkerTrack:
             build) or any label a map file turns into one.
         positions: (T, K, 3) float64 [m], NaN where a point is missing in a frame.
         source: Where the track came from (a path, or a short description), for reports.
+        neutral: (K, 3) float64 [m], the actor's face at rest (NaN where a point was never seen
+            there), or None: the first frame. Retargeting (:func:`~facewarp.drive` with
+            ``retarget=True``) carries the displacements from it to the head.
+        notes: What the loader changed or filled in (frames interpolated over gaps, a cut), one line each.
+        info: The same as numbers, for reports (e.g. ``{"frames_filled": 12, "start_s": 2.0}``).
     """
 
     fps: float
     names: list
     positions: np.ndarray
     source: str = ""
+    neutral: np.ndarray | None = None
+    notes: list = field(default_factory=list)
+    info: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self.fps = _check_fps(self.fps)
@@ -72,6 +92,17 @@ class MarkerTrack:
                              f"farther than any capture volume ({MAX_POSITION_M:g} m); are the units right?")
         if len(self.positions) == 0:
             raise InputError("positions: the track has no frames")
+        if self.neutral is not None:
+            self.neutral = check_array("neutral", self.neutral, shape=(len(self.names), 3),
+                                       finite=False).astype(np.float64)
+            if np.isinf(self.neutral).any():
+                raise InputError("neutral: infinite values (use NaN for a missing point)")
+        self.notes = [str(n) for n in self.notes]
+        self.info = dict(self.info)
+
+    def neutral_points(self) -> np.ndarray:
+        """(K, 3) float64 [m]: :attr:`neutral`, or the first frame when the track has none."""
+        return (self.neutral if self.neutral is not None else self.positions[0]).copy()
 
     @property
     def frames(self) -> int:
@@ -99,12 +130,21 @@ class ArkitTrack:
         head_rotation: (T, 3) float64 [rad] yaw, pitch, roll of the head (ARKit's HeadYaw,
             HeadPitch, HeadRoll), or None when the source has no head channels.
         source: Where the track came from, for reports.
+        eye_rotation: (T, 2, 2) float64 [rad], yaw and pitch of the left and right eyeball (Live
+            Link Face's LeftEyeYaw, LeftEyePitch, RightEyeYaw, RightEyePitch), or None when the
+            source has none (or records none: all zero).
+        notes: What the loader changed or filled in (weights clamped, frames interpolated, a
+            category the source lacks), one line each.
+        info: The same as numbers, for reports.
     """
 
     fps: float
     weights: np.ndarray
     head_rotation: np.ndarray | None = None
     source: str = ""
+    eye_rotation: np.ndarray | None = None
+    notes: list = field(default_factory=list)
+    info: dict = field(default_factory=dict)
     names: tuple = field(default=ARKIT_NAMES, init=False)
 
     def __post_init__(self):
@@ -118,6 +158,11 @@ class ArkitTrack:
         if self.head_rotation is not None:
             self.head_rotation = check_array("head_rotation", self.head_rotation,
                                              shape=(len(w), 3)).astype(np.float64)
+        if self.eye_rotation is not None:
+            self.eye_rotation = check_array("eye_rotation", self.eye_rotation,
+                                            shape=(len(w), 2, 2)).astype(np.float64)
+        self.notes = [str(n) for n in self.notes]
+        self.info = dict(self.info)
 
     @property
     def frames(self) -> int:

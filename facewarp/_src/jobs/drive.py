@@ -5,8 +5,12 @@ Steps: the take is read and checked first (:mod:`~facewarp._src.drive.formats`),
 rig; a marker take's points are checked against the head (FDP ids it has, vertices in range), its
 rigid head motion removed when it has three or more stable points
 (:func:`~facewarp.takes.remove_head_motion`), and :func:`~facewarp.drive` solves and plays it through
-the sinks (frames kept, the USD animation streamed). ARKit curves go through the head's ARKit
-table (built once and cached in the build folder).
+the sinks (frames kept, the USD animation streamed) in the one frame loop (:func:`~facewarp.play`).
+A take of another face (``retarget=True``) is carried to this head from its neutral
+(:mod:`..drive.retarget`: the actor's head motion removed against the neutral). ARKit curves go
+through the head's ARKit table (built once and cached in the build folder). What the loader
+changed or filled in (frames interpolated, weights clamped, a cut) is in the report's ``notes``
+and ``take``.
 
 Outputs (a folder): ``activations.csv`` (per frame the time, every muscle's activation and the jaw's
 opening and side angles), ``frames.npz`` (as ``simulate`` writes), ``animation.usdc``,
@@ -53,27 +57,33 @@ PICTURE_FRAMES = 3
 """Frames shown in ``drive.png``: the first, the one whose targets moved most, the last (the middle
 one when these coincide)."""
 
+FRAME_MIN_M = 0.02
+"""Smallest extent [m] of the points ``drive.png`` frames; fewer or closer points are framed with the face."""
+
 CROSS_M = 0.003
 """Half the size [m] of the cross that marks a simulated point in ``drive.png``."""
 
 
 def load_performance(*, markers=None, arkit=None, mediapipe=None, map=None, units=None,  # noqa: A002
-                     fps=None) -> MarkerTrack | ArkitTrack:
+                     fps=None, start=None, end=None, neutral=None) -> MarkerTrack | ArkitTrack:
     """The track of exactly one of ``markers`` (JSON, CSV or C3D), ``arkit`` (Live Link Face CSV)
-    or ``mediapipe`` (MediaPipe Face Landmarker JSON); ``map``, ``units`` go with markers."""
+    or ``mediapipe`` (MediaPipe Face Landmarker JSON); ``map``, ``units``, ``neutral`` go with
+    markers; ``start``/``end`` [s] cut any take."""
     given = [k for k, v in (("markers", markers), ("arkit", arkit), ("mediapipe", mediapipe)) if v is not None]
     if len(given) != 1:
         raise InputError("drive: give exactly one of markers, arkit or mediapipe"
                          + (f" (got {', '.join(given)})" if given else ""))
     if markers is not None:
-        return load_markers(markers, map=map, units=units, fps=fps)
+        return load_markers(markers, map=map, units=units, fps=fps, neutral=neutral, start=start, end=end)
     if map is not None or units is not None:
         raise InputError("map, units: they go with markers (ARKit curves have neither)")
+    if neutral is not None:
+        raise InputError("neutral: it goes with markers (a retargeted take's rest)")
     path = arkit if arkit is not None else mediapipe
     want = ".csv" if arkit is not None else ".json"
     if Path(path).suffix.lower() != want:
         raise InputError(f"{path}: expected a {'Live Link Face .csv' if arkit is not None else 'MediaPipe .json'} file")
-    return load_arkit(path, fps=fps)
+    return load_arkit(path, fps=fps, start=start, end=end)
 
 
 def _check_points(track: MarkerTrack, fr) -> None:
@@ -85,13 +95,6 @@ def _check_points(track: MarkerTrack, fr) -> None:
                 raise InputError(f"{track.source}: marker {name!r} is beyond the head's {n} vertices")
         elif name not in ids:
             raise InputError(f"{track.source}: the head has no FDP {name!r}")
-
-
-def _rest_points(sim, names) -> dict:
-    """The head's rest position [m] of each point name (FDP ids and ``v<index>``)."""
-    fdp = dict(zip((str(i) for i in sim.fr.fdp_ids), sim.fdp_points()))
-    skin = sim.surface()
-    return {n: (skin[int(n[1:])] if _VERTEX.match(n) else fdp[n]).astype(np.float64) for n in names}
 
 
 def _simulated_points(frames, names) -> np.ndarray:
@@ -111,15 +114,18 @@ def _write_activations_csv(path: Path, times, muscles, A, J) -> None:
         f.write(out.getvalue())
 
 
-def _picture(path: Path, frames, names, targets, device: str) -> None:
-    """Targets (red) and simulated points (blue) on the simulated head at a few frames."""
+def _picture(path: Path, frames, names, targets, device: str) -> bool:
+    """Targets (red) and simulated points (blue) on the simulated head at a few frames; False (no
+    picture) when no frame has a target to show."""
     sim_pts = _simulated_points(frames, names)
     T = len(targets)
     moved = np.nan_to_num(np.linalg.norm(targets - targets[:1], axis=2), nan=0.0).max(axis=1)
     picks = {0, int(np.argmax(moved)), T - 1}
     if len(picks) < PICTURE_FRAMES and T > 2:
         picks.add(T // 2)
-    picks = sorted(picks)
+    picks = sorted(k for k in picks if np.isfinite(targets[k]).all(axis=1).any())
+    if not picks:
+        return False
     blue = (0.1, 0.25, 0.85)
     tiles = []
     for k in picks:
@@ -128,13 +134,16 @@ def _picture(path: Path, frames, names, targets, device: str) -> None:
         for p in sim_pts[k] + (0.0, 0.0, CROSS_M):  # a cross at each simulated point, lifted off the skin
             for d in ((CROSS_M, 0.0, 0.0), (0.0, CROSS_M, 0.0)):
                 crosses.append((np.array([p - d, p + d]), blue))
+        frame_pts = np.concatenate([targets[k][ok], sim_pts[k]])
+        if np.linalg.norm(np.ptp(frame_pts, axis=0)) < FRAME_MIN_M:  # one point (or a few close): framed on the face
+            frame_pts = np.concatenate([frame_pts, frames.points[k]])
         tiles.append(render_mesh(frames.points[k], frames.faces, points=targets[k][ok], point_color=(0.85, 0.1, 0.1),
                                  extra_meshes=[(V[k], F, (0.85, 0.85, 0.8)) for V, F in frames.parts.values()],
                                  point_radius=4.0, polylines=crosses, line_width=2.5, width=360, height=400,
-                                 depth_tolerance=0.004, frame_points=np.concatenate([targets[k][ok], sim_pts[k]]),
-                                 device=device))
+                                 depth_tolerance=0.004, frame_points=frame_pts, device=device))
     save_png(path, np.concatenate(tiles, axis=1),
              title="frames " + ", ".join(str(k) for k in picks) + ": targets red dots, simulated blue crosses")
+    return True
 
 
 def _activation_picture(path: Path, times, muscles, A, J) -> None:
@@ -150,8 +159,8 @@ def _activation_picture(path: Path, times, muscles, A, J) -> None:
 
 
 def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=None, units=None,  # noqa: A002
-                fps=None, rigid: bool = True, device: str = "cpu", progress=None, table_progress=None,
-                rig=None) -> dict:
+                fps=None, rigid: bool = True, retarget: bool = False, method: str | None = None, neutral=None,
+                start=None, end=None, device: str = "cpu", progress=None, table_progress=None, rig=None) -> dict:
     """Drive the face of a ``build`` output from a performance file and write the results.
 
     Args:
@@ -164,6 +173,11 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
             ARKit files that cannot tell their rate.
         rigid: Remove the take's rigid head motion (needs three stable points; else the take is
             taken as already in the head's frame, and the report says so).
+        retarget: The marker take is of another face: its displacements from its neutral are
+            carried to this head (:func:`~facewarp.drive` ``retarget=True``); ``method`` the map
+            (``"fapu"``, the default, or ``"affine"``), ``neutral`` the neutral's span (``(START, END)`` or
+            ``"START:END"`` seconds; default the first frame).
+        start, end: Drive the part of the take from ``start`` to ``end`` seconds.
         device: Warp device.
         progress: ``f(k, n)`` per frame.
         table_progress: ``f(done, total, name)`` while the head's ARKit table is built (the first
@@ -176,8 +190,19 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     Returns:
         The report (what ``report.json`` holds, less the per-frame arrays).
     """
+    from ..drive.perform import drive, head_rest_points
+
     t0 = time.perf_counter()
-    track = load_performance(markers=markers, arkit=arkit, mediapipe=mediapipe, map=map, units=units, fps=fps)
+    if isinstance(out, str) and not out.strip():
+        raise InputError("out: empty (give an output folder or a .usda/.usdc/.usdz file)")
+    if not isinstance(retarget, bool):
+        raise InputError(f"retarget: expected True or False, got {retarget!r}")
+    if (neutral is not None or method is not None) and not retarget:
+        raise InputError("neutral, method: they go with retarget (a take of another face)")
+    track = load_performance(markers=markers, arkit=arkit, mediapipe=mediapipe, map=map, units=units, fps=fps,
+                             start=start, end=end, neutral=neutral)
+    if retarget and not isinstance(track, MarkerTrack):
+        raise InputError("retarget: only for a marker take (ARKit curves drive any head as they are)")
     usd_out = Path(out).suffix.lower() in USD_SUFFIXES
     out = check_usd_path(out) if usd_out else check_out_dir(out)
     if track.fps > MAX_FPS:
@@ -197,14 +222,16 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), track.frames, len(fr.head_vertices)),
                  f"{track.source}: {track.frames} frames of a head of {len(fr.nodes)} nodes")
     motion = None
-    notes = []
+    notes = list(track.notes)
     if isinstance(track, MarkerTrack):
         _check_points(track, fr)
     sim = FaceSimulator(fr, device=device, fps=track.fps)
-    if isinstance(track, MarkerTrack) and rigid:
+    if isinstance(track, MarkerTrack) and rigid and not retarget:
         stable = [p for p in STABLE_POINTS if p in track.names]
         if len(stable) >= 3:
-            track, motion = remove_head_motion(track, _rest_points(sim, track.names))
+            kept = track.notes
+            track, motion = remove_head_motion(track, head_rest_points(sim, track.names))
+            track.notes = kept
         else:
             notes.append(f"head motion not removed: the take has {len(stable)} of the stable points "
                          f"{', '.join(STABLE_POINTS)} (it is taken as in the head's frame)")
@@ -214,8 +241,7 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
 
         step = table_progress or (lambda done, total, name: None)
         used = [n for n, w in zip(track.names, np.asarray(track.weights).max(axis=0)) if w > 0]
-        table = arkit_table(sim, cache=fr_dir, progress=step, solve=used)  # the take's shapes, added to the cache
-    from ..drive.inverse import drive
+        table = arkit_table(sim, cache=fr_dir, progress=step, solve=used)  # the shapes the take uses, added to the cache
 
     keep = None if usd_out else FrameRecorder()
     usd_path = out if usd_out else out / USD_NAME
@@ -233,17 +259,20 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         poses = np.tile(np.eye(4), (motion.frames, 1, 1))
         poses[:, :3, :3] = motion.scale[:, None, None] * motion.rotation
         poses[:, :3, 3] = motion.translation
+    kw = {"head_poses": poses} if poses is not None else {}
+    if retarget:
+        kw.update(retarget=True, method=method or "fapu", rigid=rigid)
     with anim:
-        result = drive(sim, track, table=table, sinks=sinks, progress=progress,
-                       **({"head_poses": poses} if poses is not None else {}))
+        result = drive(sim, track, table=table, sinks=sinks, progress=progress, **kw)
     A = np.asarray(result.activations, dtype=np.float64)
     J = np.asarray(result.jaw, dtype=np.float64)
     times = np.arange(len(A)) / track.fps
     names = list(result.names)
     err = np.asarray(result.error, dtype=np.float64)
     ok = np.isfinite(err)
+    kind = "markers" if isinstance(track, MarkerTrack) else "arkit"
     rep = {
-        "build": str(build), "source": track.source, "kind": "markers" if isinstance(track, MarkerTrack) else "arkit",
+        "build": str(build), "source": track.source, "kind": kind,
         "frames": int(len(A)), "fps": track.fps, "device": str(sim.device), "mode": result.mode,
         "frames_per_second": float(result.frames_per_second), "muscles": list(sim.muscle_names),
         "points": names,
@@ -251,8 +280,12 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
                      "max": float(err[ok].max() * 1e3) if ok.any() else None,
                      "per_point_rms": {n: (float(np.sqrt(np.nanmean(err[:, k] ** 2)) * 1e3) if ok[:, k].any() else None)
                                        for k, n in enumerate(names)}},
-        "notes": notes + list(result.unreachable), "seconds": None, "files": [],
+        "notes": list(dict.fromkeys(notes + list(result.unreachable))), "seconds": None, "files": [],
+        "take": dict(track.info),
     }
+    if retarget:
+        rep["error_is"] = "distance of each simulated point from its retargeted target (head frame)"
+        rep["retarget"] = {k: v for k, v in result.retarget.items() if k != "head_motion"}
     if isinstance(track, ArkitTrack):
         rep["error_is"] = "distance of each head FDP from its blended ARKit target (the table's shapes, head frame)"
         rep["out_of_reach"] = table.out_of_reach()
@@ -266,6 +299,11 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     if motion is not None:
         rep["head_motion"] = {"stable_points": list(motion.points), "frames_held": int(motion.held.sum())}
         report_full["head_motion"] = motion.to_dict()
+    elif retarget and result.retarget.get("head_motion"):
+        hm = result.retarget["head_motion"]
+        rep["head_motion"] = {"stable_points": hm["stable_points"], "frames_held": hm["frames_held"],
+                              "relative_to": "the actor's neutral"}
+        report_full["head_motion"] = dict(hm, relative_to="the actor's neutral")
     elif result.head_poses is not None:  # ARKit's head rotation, played as the head pose
         R = np.asarray(result.head_poses)[:, :3, :3]
         report_full["head_motion"] = {"yaw_pitch_roll_deg": np.round(np.degrees(track.head_rotation), 3).tolist(),
@@ -277,21 +315,27 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         save_frames_npz(out / "frames.npz", frames)
         _write_activations_csv(out / "activations.csv", times, list(sim.muscle_names), A, J)
         _activation_picture(out / "activations.png", times, list(sim.muscle_names), A, J)
-        if isinstance(track, MarkerTrack):
+        if result.targets is not None and isinstance(track, MarkerTrack):
+            targets = np.asarray(result.targets)
+        elif isinstance(track, MarkerTrack):
             targets = track.positions
         else:  # the blended target FDPs, moved by the head pose as the simulated face was
             targets = table.targets_for(track.weights)
             if result.head_poses is not None:
                 H = np.asarray(result.head_poses)
                 targets = np.einsum("tij,tkj->tki", H[:, :3, :3], targets) + H[:, None, :3, 3]
-        _picture(out / "drive.png", frames, names, targets, device)
-        written = [out / "activations.csv", out / "frames.npz", usd_path, out / "report.json", out / "drive.png",
-                   out / "activations.png"]
+        written = [out / "activations.csv", out / "frames.npz", usd_path, out / "report.json"]
+        if _picture(out / "drive.png", frames, names, targets, device):
+            written.append(out / "drive.png")
+        else:
+            rep["notes"].append("drive.png not drawn: no frame has a target point")
+        written.append(out / "activations.png")
         if take is not None:
             written += [out / "take.glb", out / "take.usdc"]
             take.write(out / "take.glb", out / "take.usdc")
             rep["rig_take"] = report_full["rig_take"] = take.report()
         rep["files"] = report_full["files"] = [str(w) for w in written]
+        report_full["notes"] = rep["notes"]
     rep["seconds"] = report_full["seconds"] = round(time.perf_counter() - t0, 3)
     if not usd_out:
         write_json(out / "report.json", report_full)

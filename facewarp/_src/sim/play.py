@@ -25,7 +25,7 @@ from ..expressions import Timeline
 from .frames import Frames
 from .readout import fdp_points
 
-__all__ = ["FrameRecorder", "PlayStats", "Sink", "check_seconds", "play"]
+__all__ = ["FrameRecorder", "PlayStats", "Sink", "Source", "TimelineSource", "check_seconds", "play"]
 
 
 # ------------------------------------------------------------------------------------- sinks
@@ -152,6 +152,82 @@ class FrameRecorder(Sink):
                              solver=sim.solver_name, material=sim.material.name)
 
 
+# ------------------------------------------------------------------------------------ sources
+class Source:
+    """What a frame of :func:`play` does to the simulator: set its controls (activations, jaw,
+    head pose) and step it one frame. A :class:`~facewarp.Timeline` (through :class:`TimelineSource`),
+    a marker take (a :class:`~facewarp.Tracker` solving each frame), ARKit curves (through the
+    head's ARKit table) and a live stream are sources.
+
+    Attributes:
+        fps: The source's frame rate [1/s], or None when it plays at any (a timeline): the
+            simulator must run at it.
+        frames: Frames the source has (None: as many as ``seconds`` asks, a timeline or a stream).
+        steps_first: Frame 0 is stepped too (a take's frame 0 is a recorded frame); False: frame
+            0 is the rest (a timeline).
+        name: A short name for :class:`PlayStats` (``jaw``).
+    """
+
+    fps: float | None = None
+    frames: int | None = None
+    steps_first: bool = False
+    name: str = "source"
+
+    def start(self, sim, frame_count: int) -> None:
+        """Called once after the reset, before frame 0."""
+
+    def apply(self, sim, k: int, t: float) -> None:
+        """Set frame ``k``'s controls (time ``t`` [s]) and step ``sim`` one frame."""
+        raise NotImplementedError
+
+    def finish(self, sim) -> None:
+        """Called once after the last frame, before the sinks' ``finish``."""
+
+    @property
+    def steps(self) -> int | None:
+        """Solver frames stepped (re-takes included), when the source steps more than once a frame."""
+        return None
+
+    @property
+    def events(self) -> list:
+        """Warnings met on the way (MuJoCo's), for :class:`PlayStats`."""
+        return []
+
+
+class TimelineSource(Source):
+    """A :class:`~facewarp.Timeline` as a :class:`Source`: per frame the timeline's activations
+    (:meth:`~facewarp.FaceSimulator.set_activations`), then the jaw driver sets the jaw and steps.
+
+    Args:
+        timeline: The expressions over time (converted for the head once, :meth:`~facewarp.Timeline.for_head`).
+        jaw: A jaw driver (``step(expression)``; default the kinematic jaw).
+    """
+
+    def __init__(self, timeline: Timeline, jaw=None):
+        if not isinstance(timeline, Timeline):
+            raise InputError(f"timeline: expected a facewarp Timeline, got {type(timeline).__name__}")
+        self.timeline = timeline
+        self.jaw = jaw
+        self._converted = None
+
+    def start(self, sim, frame_count: int) -> None:
+        if self.jaw is None:
+            from ..coupling.drivers import KinematicJawDriver
+
+            self.jaw = KinematicJawDriver(sim)
+        self._converted = self.timeline.for_head(sim.fr)  # chin drops -> this head's jaw angles (once)
+        self.name = str(getattr(self.jaw, "name", type(self.jaw).__name__))
+
+    def apply(self, sim, k: int, t: float) -> None:
+        e = self._converted.sample(t)
+        sim.set_activations(e)
+        self.jaw.step(e)
+
+    @property
+    def events(self) -> list:
+        return list(getattr(getattr(self.jaw, "coupler", None), "events", ()))
+
+
 # -------------------------------------------------------------------------------------- play
 def check_seconds(seconds) -> float:
     """``seconds`` as a float if it is a finite number > 0, else :class:`InputError`."""
@@ -161,40 +237,67 @@ def check_seconds(seconds) -> float:
     return float(seconds)
 
 
-def play(sim, timeline: Timeline, seconds: float, *, sinks=(), jaw=None, progress=None) -> PlayStats:
-    """Play ``seconds`` of ``timeline`` on ``sim`` from rest, handing every frame to ``sinks``.
+def play(sim, source, seconds: float | None = None, *, sinks=(), jaw=None, progress=None) -> PlayStats:
+    """Play ``source`` on ``sim`` from rest for ``seconds``, handing every frame to ``sinks``: the
+    one frame loop of the package (``drive`` and the ARKit player are sources played here).
 
-    Frame ``k`` is at ``k / sim.fps`` s; frame 0 is the rest (:meth:`~facewarp.FaceSimulator.reset`:
-    no activation, jaw closed), then each frame sets the timeline's activations
-    (:meth:`~facewarp.FaceSimulator.set_activations`) and lets the jaw driver set the jaw and step
-    (the controls ramp across the step, :meth:`~facewarp.FaceSimulator.step`).
+    Frame ``k`` is at ``k / sim.fps`` s. For a :class:`~facewarp.Timeline`, frame 0 is the rest
+    (:meth:`~facewarp.FaceSimulator.reset`: no activation, jaw closed), then each frame sets the
+    timeline's activations and lets the jaw driver set the jaw and step (the controls ramp across
+    the step, :meth:`~facewarp.FaceSimulator.step`). A take's source (a marker take, ARKit curves)
+    steps its frame 0 too, and plays all its frames unless ``seconds`` asks for fewer.
 
     Args:
         sim: The :class:`~facewarp.FaceSimulator`.
-        timeline: The expressions over time; its chin drops become this head's jaw angles
-            (:meth:`~facewarp.Timeline.for_head`) unless it is already converted for it.
-        seconds: Length [s], > 0.
+        source: A :class:`~facewarp.Timeline` (its chin drops become this head's jaw angles,
+            :meth:`~facewarp.Timeline.for_head`) or a :class:`Source`.
+        seconds: Length [s], > 0 and at least one frame after the rest (required for a timeline;
+            for a take, default its length).
         sinks: :class:`Sink` objects or callables ``f(sim, k, t)``, called in order after each frame.
-        jaw: A jaw driver (``step(expression)`` sets the jaw and steps ``sim`` one frame; ``name``):
-            default the kinematic jaw (:class:`~facewarp.coupling.KinematicJawDriver`); the
-            MuJoCo jaw is :class:`~facewarp.coupling.MujocoJawDriver`.
+        jaw: For a timeline: a jaw driver (``step(expression)`` sets the jaw and steps ``sim`` one
+            frame; ``name``): default the kinematic jaw (:class:`~facewarp.coupling.KinematicJawDriver`);
+            the MuJoCo jaw is :class:`~facewarp.coupling.MujocoJawDriver`.
         progress: Optional ``progress(k, frame_count)`` after each frame.
 
     Returns:
         The :class:`PlayStats` (also handed to every sink's ``finish``).
 
     Raises:
-        InputError: ``seconds`` not a finite number > 0, ``timeline`` not a Timeline, a bad sink.
+        InputError: a bad ``sim``, ``source``, ``seconds`` (not a finite number > 0, no frame after
+        the rest, more solver steps than a run may take), ``jaw``, sink or ``progress``; a source at
+        another frame rate than ``sim``.
     """
     check_play_arguments(sim, jaw, progress)
-    seconds = check_seconds(seconds)
-    if not isinstance(timeline, Timeline):
-        raise InputError(f"timeline: expected a facewarp Timeline, got {type(timeline).__name__}")
+    if isinstance(source, Timeline):
+        if seconds is None:
+            raise InputError("seconds: a timeline is played for a given length; give seconds")
+        source = TimelineSource(source, jaw)
+    elif isinstance(source, Source):
+        if jaw is not None:
+            raise InputError("jaw: only with a timeline (a take's source sets the jaw itself)")
+    else:
+        raise InputError(f"timeline: expected a facewarp Timeline or a play source (Source), got {type(source).__name__}")
     if isinstance(sinks, (str, bytes)) or not hasattr(sinks, "__iter__"):
         raise InputError(f"sinks: expected a list of Sink objects or callables f(sim, k, t), got {type(sinks).__name__}")
     sinks = [_as_sink(s) for s in sinks]
+    if source.fps is not None and abs(source.fps - sim.fps) > 1e-6 * sim.fps:
+        raise InputError(f"source: {source.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
+                         f"make the FaceSimulator with fps={source.fps:g}")
+    if seconds is None:
+        if source.frames is None:
+            raise InputError("seconds: this source has no length of its own; give seconds")
+        nf = int(source.frames)
+        seconds = (nf - 1) / sim.fps if nf > 1 else 1.0 / sim.fps
+    else:
+        seconds = check_seconds(seconds)
+        nf = int(round(seconds * sim.fps)) + 1
+        if nf < 2 and not source.steps_first:
+            raise InputError(f"seconds: {seconds:g} s at {sim.fps:g} frames/s is no frame after the rest pose "
+                             f"(at least {0.5 / sim.fps:.3g} s)")
+        if source.frames is not None:
+            nf = min(nf, int(source.frames))
     check_play_length(sim, seconds, sinks)
-    return _play(sim, timeline, seconds, sinks, jaw, progress)
+    return _run(sim, source, seconds, nf, sinks, progress)
 
 
 def check_play_arguments(sim, jaw, progress) -> None:
@@ -230,35 +333,38 @@ def check_play_length(sim, seconds: float, sinks=()) -> None:
 
 
 def _play(sim, timeline: Timeline, seconds: float, sinks: list, jaw, progress) -> PlayStats:
-    """:func:`play` on checked inputs."""
-    if jaw is None:
-        from ..coupling.drivers import KinematicJawDriver
+    """A timeline played on checked inputs (the jobs' entry): :func:`play`'s loop."""
+    return _run(sim, TimelineSource(timeline, jaw), seconds, int(round(seconds * sim.fps)) + 1, sinks, progress)
 
-        jaw = KinematicJawDriver(sim)
-    timeline = timeline.for_head(sim.fr)  # chin drops -> this head's jaw angles (once per timeline)
+
+def _run(sim, source: Source, seconds: float, nf: int, sinks: list, progress) -> PlayStats:
+    """:func:`play` on checked inputs: ``nf`` frames."""
     sim.reset()
-    nf = int(round(seconds * sim.fps)) + 1
+    source.start(sim, nf)
     for s in sinks:
         s.start(sim, nf)
     t0 = time.perf_counter()
     stepping = 0.0
     for k in range(nf):
         t = k / sim.fps
-        if k > 0:
-            e = timeline.sample(t)
-            sim.set_activations(e)
+        if k > 0 or source.steps_first:
             s0 = time.perf_counter()
-            jaw.step(e)  # the stepping: what frames_per_second measures
+            source.apply(sim, k, t)  # the stepping: what frames_per_second measures
             stepping += time.perf_counter() - s0
         for s in sinks:
             s.frame(sim, k, t)
         if progress:
             progress(k, nf)
+    source.finish(sim)
     wall = time.perf_counter() - t0
     stepping = max(stepping, 1e-9)
-    stats = PlayStats.measured(sim, frames=nf, seconds=seconds, wall_s=wall, stepping_s=stepping,
-                               jaw=str(getattr(jaw, "name", type(jaw).__name__)),
-                               mujoco_events=getattr(getattr(jaw, "coupler", None), "events", ()))
+    stepped = nf if source.steps_first else nf - 1
+    steps = source.steps if source.steps is not None else stepped
+    stats = PlayStats(frames=nf, seconds=seconds, wall_s=wall, simulation_wall_s=stepping,
+                      frames_per_second=stepped / stepping, steps_per_second=steps * sim.substeps / stepping,
+                      realtime_factor=stepped / sim.fps / stepping, substeps=int(sim.substeps), dt_s=float(sim.dt),
+                      device=str(sim.device), jaw=source.name, frame_stats=sim.stats.as_dict(),
+                      mujoco_events=source.events)
     for s in sinks:
         s.finish(sim, stats)
     return stats
