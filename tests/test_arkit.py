@@ -113,6 +113,7 @@ def test_table_build_cache_and_controls(ict, sim, built):
     assert t3.reasons == t.reasons and t3.key == t.key
 
 
+@pytest.mark.slow
 def test_drive_arkit_track(sim, built):
     """fw.drive plays an ArkitTrack through the table: the controls are the table's blend, the
     head rotation drives the head pose, shapes out of reach are noted; refine=True tracks the

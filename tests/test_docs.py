@@ -52,6 +52,7 @@ def test_cli_reference_lists_every_command_and_option():
     assert "--landmarks" in text and "--device" in text
 
 
+@pytest.mark.slow
 def test_docs_build_with_warnings_as_errors(tmp_path):
     r = subprocess.run([sys.executable, "-m", "sphinx", "-W", "-q", "-b", "html", str(DOCS), str(tmp_path / "html")],
                        capture_output=True, text=True, env=_env(), cwd=ROOT, timeout=900)
@@ -64,6 +65,7 @@ def _blocks(page: Path) -> list[tuple[str, str]]:
     return re.findall(r"^```(python|bash)\n(.*?)^```", page.read_text(), flags=re.S | re.M)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("page", GUIDES, ids=[p.stem for p in GUIDES])
 def test_guide_code_blocks_run(page, tmp_path):
     blocks = _blocks(page)
