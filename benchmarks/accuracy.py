@@ -113,12 +113,12 @@ def stream_controls(sim, stream: str, *, quick: bool, seconds: float | None, see
         return {f"preset_{n}": timeline_controls(sim, fw.timeline_for(n, attack=0.3, hold=0.5, release=0.3,
                                                                       start=0.1), length) for n in names}
     if stream == "sequence":
-        return {"sequence": timeline_controls(sim, fw.thesis_sequence(), seconds or (2.0 if quick else 8.0))}
-    frames = int(round((seconds or (0.5 if quick else 1.0)) * sim.fps))
+        return {"sequence": timeline_controls(sim, fw.thesis_sequence(), seconds or (1.0 if quick else 8.0))}
+    frames = int(round((seconds or (0.3 if quick else 1.0)) * sim.fps))
     if stream == "switching":
         return {"switching": switching_controls(sim, frames, seed)}
     if stream == "drive":
-        return {"drive": drive_controls(sim, int(round((seconds or (1.0 if quick else 3.0)) * sim.fps)), seed)}
+        return {"drive": drive_controls(sim, int(round((seconds or (0.7 if quick else 3.0)) * sim.fps)), seed)}
     raise ValueError(stream)
 
 
