@@ -96,7 +96,8 @@ class ICTModel:
     Attributes:
         neutral: Neutral head vertices [m], shape (11248, 3), float64.
         faces: Head triangles, shape (m, 3), int64.
-        offsets: identity_k - neutral [m], shape (10, 11248, 3), float64.
+        offsets: identity_k - neutral [m], shape (k, 11248, 3), float64 (k = 10 in the shared folder, 100 in
+            the public rig).
         markers: ICT's 68 landmark vertex indices.
     """
 
@@ -106,14 +107,41 @@ class ICTModel:
     markers: list
 
 
-def load_model() -> ICTModel:
+def identity_files(identities: Path | str | None = None) -> list[Path]:
+    """The ICT-FaceKit identity OBJs (``identityNNN.obj``) of ``identities`` (a folder: the
+    public rig's ``FaceXModel`` has all 100) or, when None, of ``$FACEWARP_ICT_IDENTITIES`` or the
+    shared folder (its first 10)."""
+    import os
+
+    d = Path(identities or os.environ.get("FACEWARP_ICT_IDENTITIES") or ict_dir())
+    files = sorted(d.glob("identity[0-9][0-9][0-9].obj"))
+    if not files:
+        raise SystemExit(f"no identityNNN.obj in {d}")
+    return files
+
+
+def _obj_vertices(path: Path, count: int) -> np.ndarray:
+    """The first ``count`` vertex positions of an OBJ (its own units), shape (count, 3)."""
+    rows = []
+    with open(path) as f:
+        for line in f:
+            if line.startswith("v "):
+                rows.append(line.split()[1:4])
+                if len(rows) == count:
+                    break
+    return np.array(rows, dtype=np.float64)
+
+
+def load_model(identities: Path | str | None = None) -> ICTModel:
+    """The ICT neutral head and the identity offsets of :func:`identity_files` (all of them)."""
     from facewarp.geometry import load_mesh
 
     d = ict_dir()
     neutral = load_mesh(d / "generic_neutral_mesh.obj", units="cm")
     F = neutral.faces[(neutral.faces < HEAD_VERTS).all(axis=1)]
     V0 = neutral.vertices[:HEAD_VERTS].copy()
-    offs = np.stack([load_mesh(d / f"identity{k:03d}.obj", units="cm").vertices[:HEAD_VERTS] - V0 for k in range(10)])
+    files = identity_files(identities) if identities is not None else [d / f"identity{k:03d}.obj" for k in range(10)]
+    offs = np.stack([_obj_vertices(f, HEAD_VERTS) * 0.01 - V0 for f in files])
     markers = [int(i) for i in json.loads((d / "vertex_indices.json").read_text())["idx_to_landmark_verts"]]
     return ICTModel(V0, np.asarray(F, dtype=np.int64), offs, markers)
 

@@ -695,6 +695,61 @@ def _drive_rows(doc: dict, dev: str) -> list:
     return rows
 
 
+@table("arkit_reach")
+def arkit_reach(r: Results) -> str:
+    """What reaches each of the 52 ARKit shapes and how closely (``arkit_basis.json`` of ``python -m benchmarks
+    arkit_basis``): per head the converged static face at the shape's controls against the full ICT-FaceKit rig's
+    target carried onto that head (FDP RMS over the head FDPs), with the shipped basis and with the full rig."""
+    doc = r.doc("arkit_basis")
+    heads = doc["figures"]["heads"]
+    first = next(iter(heads.values()))
+    header = ["ARKit shape", "reached by"]
+    for h in heads:
+        header.append(f"{head_tag(h) or h}: reach, shipped / full rig [mm]")
+    header.append("why not reached")
+    rows = []
+    for name, row in first["shapes"].items():
+        cells = [f"`{name}`", row["by"]]
+        for h in heads.values():
+            x = h["shapes"][name]
+
+            def mm(key):
+                v = x.get(key)
+                return "-" if v is None else f"{v['rms']:.2f}"
+
+            cells.append("-" if x["by"] == "not reached" or ("reach_shipped_mm" not in x and "reach_full_rig_mm" not in x)
+                         else f"{mm('reach_shipped_mm')} / {mm('reach_full_rig_mm')}")
+        cells.append(row["reason"] or "")
+        rows.append(cells)
+    return _rows_md(header, rows) + f"\n{machine_note(doc)}\n"
+
+
+@table("arkit_smile")
+def arkit_smile(r: Results) -> str:
+    """The driving guide's smile through the shipped basis and the full rig (``arkit_basis.json``): each head FDP's
+    distance from the full rig's blended targets over the 45 frames."""
+    doc = r.doc("arkit_basis")
+    rows = []
+    for h, x in doc["figures"]["heads"].items():
+        s = x["smile"]
+        for src, label in (("shipped", "shipped basis"), ("full_rig", "full ICT-FaceKit rig")):
+            e = s[src]["vs_full_rig_targets_mm"]
+            rows.append([head_tag(h) or h, label, f"{e['rms']:.2f}", f"{e['max']:.2f} ({e['worst_fdp']})",
+                         f"{s[src]['moved_mm']:.1f}",
+                         f"{x['summary'][src]['median_rms']:.2f} / {x['summary'][src]['max_rms']:.2f}",
+                         f"{x['summary']['target_diff_rms_max_mm']:.2f} / {x['summary']['target_diff_max_mm']:.2f}"
+                         if src == "shipped" else "-"])
+    header = ["head", "ARKit data", "guide's smile: RMS [mm]", "max [mm] (FDP)", "largest FDP motion [mm]",
+              "solved shapes' reach, median / worst RMS [mm]", "shipped vs full-rig targets, worst RMS / max [mm]"]
+    return _rows_md(header, rows) + f"\n{machine_note(doc)}\n"
+
+
+def machine_note(doc: dict) -> str:
+    """One line: where and when a result was measured."""
+    m = doc.get("machine", {})
+    return f"Measured {doc['date'][:10]} on {m.get('cores', '?')} CPU cores (shared with other jobs), level 0, refine {doc['figures'].get('refine')}."
+
+
 @table("fleet")
 def fleet(r: Results) -> str:
     """``facewarp batch run`` on the 2-core box (``fleet_cpu.json`` of ``python -m benchmarks fleet``): one scan
@@ -710,7 +765,11 @@ def fleet(r: Results) -> str:
             + f"\n{f['scans']} scans ({f['broken_scans']} broken) through {', '.join(f['steps'])} "
             f"({f['smile_seconds']:g} s smile) on {doc['machine'].get('cores', '?')} cores, {doc['date'][:10]}: "
             f"Ray {f['ray_overhead_over_local']:.1%} over local processes ({f['ray_startup_s']:.1f} s of it "
-            f"starting Ray). Per task (median CPU seconds, largest worker memory): {steps}.\n")
+            f"starting Ray). Per task (median CPU seconds, largest worker memory): {steps}. Load average "
+            f"{min(f[k]['load_before'][0] for k in ('serial', 'local', 'ray')):.1f}-"
+            f"{max(f[k]['load_after'][0] for k in ('serial', 'local', 'ray')):.1f} (the tasks got "
+            + ", ".join(f"{f[k]['cpu_share_of_tasks']:.0%}" for k in ("serial", "local", "ray"))
+            + " of a core: wall times and speed-ups above a load of 2 measure the box's other jobs).\n")
 
 
 @table("soak")
@@ -775,6 +834,31 @@ def switching(r: Results) -> str:
                " iterations a frame)" if conv else "") + ".")
     return _rows_md(["solver setting", "frames/s (process CPU)", "iterations / frame", "factorisations / frame",
                      "FDP distance to converged, max / median [mm]", "retried frames"], rows) + "\n" + note + "\n"
+
+
+@table("live")
+def live(r: Results) -> str:
+    """``facewarp live`` fed a 60 fps Live Link Face stream (``live_cpu.json`` of ``python -m benchmarks live``):
+    per solver setting the frames simulated and dropped, a frame's wall and process CPU time."""
+    doc = r.doc("live_cpu")
+    f = doc["figures"]
+    rows = []
+    for run in f["runs"]:
+        mode, _, k = run["mode"].partition(":")
+        label = "converged (the default)" if mode == "default" else f"`--iterations {k}`"
+        wall, cpu = run["frame_cost_ms"]["frame"], run["frame_cpu_ms"]["frame"]
+        rows.append([label, f"{run['simulated']} of {run['frames_in']} / {100 * run['dropped_fraction']:.1f} %",
+                     f"{wall['median']:.1f} ms", f"{cpu['median']:.1f} / {cpu['p90']:.1f} ms",
+                     f"{run['frame_cost_ms']['step']['median']:.1f} ms"])
+    loads = [run["load_average_at_start"] for run in f["runs"] if run.get("load_average_at_start") is not None]
+    note = (f"{f['seconds']:g} s of a {f['stream_fps']:g} fps stream per setting, {f['head']}"
+            + (f" ({f['tets']} tets; ARKit table: {len(f['arkit_shapes_solved'])} shapes solved)"
+               if "tets" in f else "")
+            + ", "
+            f"{doc['machine'].get('cores', '?')}-core {doc['machine'].get('cpu', 'CPU')}, {doc['date'][:10]}"
+            + (f", load average {min(loads):.0f}-{max(loads):.0f} at the starts" if loads else "") + ".")
+    return _rows_md(["solver setting", "frames simulated of those in / dropped", "wall time a frame, median",
+                     "CPU time a frame, median / p90", "the solver's step (wall), median"], rows) + "\n" + note + "\n"
 
 
 def render(name: str, results: Results | None = None) -> str:

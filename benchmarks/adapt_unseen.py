@@ -1,11 +1,13 @@
 """Adaptation on UNSEEN faces: random ICT identities, any pose, scale, mm, new tessellation (issue 11).
 
-Run: ``python -m benchmarks.adapt_unseen [--cases 20] [--seed S] [--no-peers] [--threads 1]``
+Run: ``python -m benchmarks.adapt_unseen [--cases 20] [--seed S] [--identities DIR] [--no-peers] [--no-ict-peers] [--threads 1]``
 
 Every run draws new cases from a new seed (printed and stored; ``--seed`` repeats a run):
 
 - shape: the ICT-FaceKit neutral head (vertices 0-11247: face 0-9408, head and neck) plus
-  ``sum_k w_k (identity_k - neutral)`` over ``identity000-009`` with ``w_k ~ N(0, 1)``;
+  ``sum_k w_k (identity_k - neutral)`` with ``w_k ~ N(0, 1)`` (ICT's own ``randomize_identity``)
+  over all the identity modes found: the 100 of the public rig with ``--identities
+  .../FaceXModel`` (or ``$FACEWARP_ICT_IDENTITIES``), else the shared folder's ``identity000-009``;
 - scan: the shape linearly subdivided twice (libigl ``upsample``) and decimated to ~60k
   triangles (libigl ``decimate``), its vertices jittered along the surface (a random tangent
   step up to 0.4 of the local edge length, then back onto the true surface by closest point),
@@ -19,7 +21,8 @@ Every run draws new cases from a new seed (printed and stored; ``--seed`` repeat
   face vertices 0-9408 is exact. Its tangential part (the error's component in the truth's
   tangent plane) is reported too: it is what a distance-to-scan heat map cannot show.
 
-The user's path, ``facewarp adapt scan.obj --landmarks lm.json --units mm`` with the DEFAULT
+The user's path, ``facewarp adapt scan.obj --landmarks lm.json --units mm`` (``--landmarks68``: the
+68-point scheme, ICT's 68 landmark vertices of the true shape, for the command and its nricp peer) with the DEFAULT
 template (3,415 vertices), runs in a fresh process per case (wall and CPU seconds from process
 start to every file written). Its truth: each template vertex's place on the ICT neutral head
 (where facewarp puts it there with the true FDPs, found once per run) carried to the case's shape
@@ -110,7 +113,7 @@ def _stats(e: np.ndarray) -> dict:
             "E_v_p95_mm": float(np.percentile(e, 95)), "E_v_max_mm": float(e.max())}
 
 
-def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path) -> tuple[dict, np.ndarray]:
+def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path, lm68: bool = False) -> tuple[dict, np.ndarray]:
     """``facewarp adapt scan.obj --landmarks lm.json --units mm`` (the default template) in a
     fresh process: wall and CPU seconds from process start to files written, E_v of the
     template's measured vertices against their true places (scan frame, mm)."""
@@ -123,6 +126,9 @@ def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path) ->
     tmp.mkdir(parents=True, exist_ok=True)
     save_obj(tmp / "scan.obj", case.scan_V_mm * 1e-3, case.scan_F, units="mm")
     (tmp / "lm.json").write_text(json.dumps({k: np.asarray(v).tolist() for k, v in case.landmarks_mm.items()}))
+    if lm68:  # the 68-point scheme: ICT's 68 landmark vertices of the true shape, as a JSON list
+        P = case.truth_scan_mm[np.asarray(model.markers)]
+        (tmp / "lm.json").write_text(json.dumps(P.tolist()))
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     cmd = [sys.executable, "-m", "facewarp", "adapt", str(tmp / "scan.obj"), "--landmarks", str(tmp / "lm.json"),
            "--units", "mm", "--out", str(tmp / "out")]
@@ -140,9 +146,10 @@ def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path) ->
             "regions_rms_mm": region_rms(e, truth.region, TEMPLATE_REGION_GROUPS, truth.mask)}, e
 
 
-def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case) -> tuple[dict, np.ndarray]:
+def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case, lm68: bool = False) -> tuple[dict, np.ndarray]:
     """nricp_amberg with the default template (the same 12 landmarks as surface points, 10 mm
-    threshold, pre-aligned by facewarp's calibration); in-process seconds (no process start)."""
+    threshold, pre-aligned by facewarp's calibration; ``lm68``: the 68 points of the scheme at their
+    places on the template, ``facewarp.IBUG68_TEMPLATE``); in-process seconds (no process start)."""
     import trimesh
     from trimesh.registration import nricp_amberg
 
@@ -153,10 +160,16 @@ def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case) -> tup
     sl = {k: case.landmarks_mm[k] * 1e-3 for k in ids}
     T = calibrate(sl, truth.landmarks).transform
     t0, c0 = time.perf_counter(), time.process_time()
-    cpl = MeshQuery(truth.vertices, truth.faces).closest_point(np.array([truth.landmarks[k] for k in ids]))
+    src_pts = np.array([truth.landmarks[k] for k in ids])
+    tgt_pts = np.array([sl[k] for k in ids])
+    if lm68:
+        from facewarp import IBUG68_TEMPLATE
+
+        src_pts, tgt_pts = IBUG68_TEMPLATE, case.truth_scan_mm[np.asarray(model.markers)] * 1e-3
+    cpl = MeshQuery(truth.vertices, truth.faces).closest_point(src_pts)
     out = nricp_amberg(trimesh.Trimesh(truth.vertices * 1e3, truth.faces, process=False),
                        trimesh.Trimesh(T.apply(case.scan_V_mm * 1e-3) * 1e3, case.scan_F, process=False),
-                       source_landmarks=(cpl.face, cpl.bary), target_positions=T.apply(np.array([sl[k] for k in ids])) * 1e3,
+                       source_landmarks=(cpl.face, cpl.bary), target_positions=T.apply(tgt_pts) * 1e3,
                        distance_threshold=10.0)
     sec, cpu = time.perf_counter() - t0, time.process_time() - c0
     e = np.linalg.norm(T.inverse().apply(np.asarray(out) * 1e-3) * 1e3 - truth.truth_scan_mm(model, case), axis=1)
@@ -192,7 +205,7 @@ def write_markdown(result: dict, path: Path, doc: dict) -> None:
         "# Adaptation on unseen faces (random ICT identities, any pose)",
         "",
         f"Generated by `python -m benchmarks.adapt_unseen` (seed {result['seed']}, {len(result['cases'])} cases;",
-        "each case: ICT neutral + N(0,1)-weighted identity000-009 offsets, re-tessellated to ~60k triangles",
+        f"each case: ICT neutral + N(0,1)-weighted offsets of {result.get('identity_modes', 10)} ICT identity modes, re-tessellated to ~60k triangles",
         "with surface jitter, normal noise, 2-6 holes, any rotation, scale 0.8-1.2, mm). Template: ICT neutral",
         "head (11,248 vertices), 12 FDP landmarks. E_v: distance of each face vertex (0-9408) to its true",
         "place, scan frame, mm; tangential: its component along the surface. Peers in the same run:",
@@ -222,7 +235,8 @@ def write_markdown(result: dict, path: Path, doc: dict) -> None:
     cmd = [c for c in result["cases"] if "command" in c]
     if cmd:
         lines += ["", "## The `facewarp adapt` command with the default template", "",
-                  "`facewarp adapt scan.obj --landmarks lm.json --units mm` (the default template, 3,415 vertices) in a fresh",
+                  "`facewarp adapt scan.obj --landmarks lm.json --units mm` (the default template, 3,415 vertices; landmarks: "
+                  f"{result.get('command_landmarks', '12 FDPs')}) in a fresh",
                   "process per case: wall and CPU seconds from process start to every file written (OBJ, glTF, report, pictures).",
                   "Truth: each template vertex's place on the ICT neutral head (where facewarp puts it there with the true FDPs,",
                   "fixed once per run) carried to the case's shape by the ICT model's own correspondence (same triangle,",
@@ -302,6 +316,10 @@ def verdict(cases: list) -> dict:
             sp = [c["nricp_amberg_template"]["seconds"] / c["command"]["seconds"] for c in peer]
             spc = [c["nricp_amberg_template"]["cpu_seconds"] / c["command"]["cpu_seconds"] for c in peer]
             out["`facewarp adapt` better than nricp_amberg (default template; median and RMS) on"] = f"{wins}/{len(peer)} cases"
+            every = [c["command"]["E_v_median_mm"] <= TARGETS["median_mm"] and c["command"]["E_v_rms_mm"] <= TARGETS["rms_mm"]
+                     and c["command"]["E_v_p95_mm"] <= TARGETS["p95_mm"] for c in cmd]
+            out["`facewarp adapt` (default template) meets median / RMS / p95 targets on"] = (
+                f"{sum(every)}/{len(every)} cases (worst p95 {max(c['command']['E_v_p95_mm'] for c in cmd):.2f} mm)")
             out["`facewarp adapt` (wall, process start included) vs nricp_amberg (in-process), same case"] = (
                 f"{np.mean(sp):.1f}x faster on average, slowest case {min(sp):.1f}x, >= 5x on {sum(x >= 5 for x in sp)}/{len(sp)} cases "
                 f"(CPU seconds: {np.mean(spc):.1f}x on average, slowest {min(spc):.1f}x; target 5x)")
@@ -322,7 +340,15 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, default=20)
     add_case_args(ap, seed=None)
     ap.add_argument("--no-peers", action="store_true", help="skip nricp_amberg and the levels-only run")
+    ap.add_argument("--no-ict-peers", action="store_true",
+                    help="skip the peers with the ICT template (nricp_amberg, levels only); keep the default template's")
+    ap.add_argument("--identities", default=None,
+                    help="folder of the ICT identity OBJs (the public rig's FaceXModel: all 100 modes); default "
+                         "$FACEWARP_ICT_IDENTITIES, else the shared folder's identity000-009")
     ap.add_argument("--no-detect", action="store_true", help="skip the automatic landmarks")
+    ap.add_argument("--landmarks68", action="store_true",
+                    help="the command and its nricp peer get the 68-point scheme (ICT's 68 landmark vertices of the "
+                         "true shape, a JSON list) instead of the 12 FDPs")
     ap.add_argument("--no-command", action="store_true", help="skip the `facewarp adapt` command with the default template")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--heat-maps", type=int, default=2, help="heat maps of the N worst cases")
@@ -337,7 +363,8 @@ def main(argv=None) -> int:
         return 0
     seed = int(args.seed) if args.seed is not None else int.from_bytes(os.urandom(4), "little")
     print(f"adapt_unseen: seed {seed}", flush=True)
-    model = load_model()
+    model = load_model(args.identities or os.environ.get("FACEWARP_ICT_IDENTITIES") or None)
+    print(f"adapt_unseen: {len(model.offsets)} identity modes", flush=True)
     from facewarp.adaptation import adapt
 
     lm = {f: model.neutral[i] for f, i in ICT_FDP.items()}
@@ -375,13 +402,13 @@ def main(argv=None) -> int:
                            "refine": res.refine, "regions_rms_mm": region_rms(e[:FACE_VERTS], ict_reg[:FACE_VERTS])}
         row["_e"] = (e, tang)
         if truth is not None:
-            row["command"], ec = run_command(truth, model, case, scratch / f"case{i:02d}")
+            row["command"], ec = run_command(truth, model, case, scratch / f"case{i:02d}", args.landmarks68)
             row["_ec"] = ec
             if not args.no_peers:
-                row["nricp_amberg_template"], _ = run_nricp_template(truth, model, case)
+                row["nricp_amberg_template"], _ = run_nricp_template(truth, model, case, args.landmarks68)
         if not args.no_detect:
             row["detect"], row["facewarp_detected"] = run_detected(model, case)
-        if not args.no_peers:
+        if not args.no_peers and not args.no_ict_peers:
             res0, sec0, cpu0 = run_facewarp(model, case, refine="none")
             st0, _, _ = error_stats(res0.vertices_scan_frame * 1e3, case, model.faces)
             row["facewarp_levels_only"] = {**st0, "seconds": sec0, "cpu_seconds": cpu0}
@@ -404,7 +431,7 @@ def main(argv=None) -> int:
         print(f"part {args.part}: {len(cases)} cases kept in {args.part_dir}")
         return 0
     heat = []
-    folder = out / "adapt_unseen"
+    folder = out / args.name  # the heat maps beside the run's JSON, by its name
     folder.mkdir(parents=True, exist_ok=True)
     for old in folder.glob("case*.png"):
         old.unlink()
@@ -432,7 +459,8 @@ def main(argv=None) -> int:
         c.pop("_ec", None)
     methods = [m for m in ("facewarp", "facewarp_detected", "facewarp_levels_only", "nricp_amberg", "command",
                            "nricp_amberg_template") if m in cases[0]]
-    result = {"seed": seed, "threads": args.threads, "targets": TARGETS, "cases": cases,
+    result = {"seed": seed, "threads": args.threads, "identity_modes": int(len(model.offsets)),
+              "command_landmarks": "68-point scheme" if args.landmarks68 else "12 FDPs", "targets": TARGETS, "cases": cases,
               "summary": {m: summarise([c[m] for c in cases]) for m in methods}, "verdict": verdict(cases), "heat_maps": heat}
     out.mkdir(parents=True, exist_ok=True)
     path = save(args.name, result, folder=out)

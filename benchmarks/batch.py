@@ -59,14 +59,14 @@ def facewarp_replicated(problem: dict, n: int, device: str, frames: int) -> dict
     solver: the like-for-like of Newton VBD's replicate, and what a merged face Model would cost."""
     import warp as wp
 
-    from facewarp.physics import MaterialPhysical, ModelBuilder, SolverImplicit
+    from facewarp.physics import MaterialPhysical, ModelBuilder, select_solver
 
     one = ModelBuilder(problem["nodes"], problem["tets"], layer=problem["layer"], fixed=problem["pinned"],
                        material=MaterialPhysical())
     big = ModelBuilder()
     big.replicate(one, n)
     m = big.finalize(device)
-    solver = SolverImplicit(m, tolerance=3e-5)
+    solver = select_solver(m, tolerance=3e-5)
     st, sc, ctl = m.state(), m.state(), m.control()
     ctl.external_force.assign(np.tile(np.asarray(problem["force"], np.float32), (n, 1)))
     dt = 1.0 / 30.0

@@ -61,9 +61,11 @@ def run_mode(scans: list[Path], out: Path, extra: list[str], args) -> dict:
     t0 = time.perf_counter()
     r = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
-    if r.returncode != 0:
+    if r.returncode not in (0, 1) or not r.stdout.strip():
         raise SystemExit(f"fleet: {' '.join(cmd[2:])} failed ({r.returncode}): {r.stderr.strip()[-2000:]}")
     rep = json.loads(r.stdout)
+    if r.returncode != rep["exit_code"] or (r.returncode == 1) != bool(rep["failed"] or rep["incomplete"]):
+        raise SystemExit(f"fleet: exit code {r.returncode} for {rep['done']} done, {rep['failed']} failed")
     manifest = json.loads((out / "manifest.json").read_text())
     return {"wall_s": round(wall, 2), "batch_s": rep["seconds"], "done": rep["done"], "failed": rep["failed"],
             "executor": rep["executor"], "load_before": load_before,

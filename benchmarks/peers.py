@@ -142,7 +142,7 @@ def _support_springs(problem, kind: str):
 
 def run_ours(problem, frames: int, *, supports: str = "axis", tolerance: float = 3e-5, **kw) -> dict:
     """facewarp's default implicit solver (CPU: L-BFGS) on the peer problem, one step per frame."""
-    from facewarp.physics import ModelBuilder, SolverImplicit
+    from facewarp.physics import ModelBuilder, select_solver
 
     b = ModelBuilder(problem["nodes"], problem["tets"], layer=problem["layer"], fixed=problem["pinned"],
                      material="physical")
@@ -150,7 +150,7 @@ def run_ours(problem, frames: int, *, supports: str = "axis", tolerance: float =
     stage = _FixedSprings(_support_springs(problem, supports))
 
     def solver():
-        return SolverImplicit(m, stages=[stage], tolerance=tolerance, **kw)
+        return select_solver(m, stages=[stage], tolerance=tolerance, **kw)
 
     s = solver()
     st, sc, c = m.state(), m.state(), m.control()

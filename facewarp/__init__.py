@@ -44,6 +44,8 @@ _NAMES = {
     "MeshQuery": "geometry.surface", "mean_curvature": "geometry.surface", "vertex_normals": "geometry.surface",
     "FDP_CATALOGUE": "geometry.landmarks", "FDP_IDS": "geometry.landmarks", "fapu": "geometry.landmarks",
     "load_landmarks": "geometry.landmarks", "save_landmarks_json": "geometry.landmarks",
+    "landmarks_from_scheme": "geometry.landmarks", "IBUG68_TO_FDP": "geometry.landmarks",
+    "IBUG68_TEMPLATE": "template.ibug68",
     "Similarity": "geometry.similarity", "fit_similarity": "geometry.similarity",
     # heads
     "FRONTAL_REGIONS": "template.head", "REGIONS": "template.head", "THICKNESS_FACTOR": "template.head",
@@ -81,7 +83,7 @@ _NAMES = {
     # USD animations streamed while simulating (a sink of play)
     "UsdAnimation": "jobs.animation", "play_timeline": "jobs.animation",
     # lower level
-    "ModelBuilder": "physics.model", "Model": "physics.model", "State": "physics.model", "Control": "physics.model",
+    "ModelBuilder": "physics.builder", "Model": "physics.model", "State": "physics.state", "Control": "physics.state",
     "SolverVerlet": "physics.solvers.verlet", "SolverStage": "physics.solvers.base",
     "SolverImplicit": "physics.solvers.implicit", "SolverHostImplicit": "physics.solvers.host_implicit",
     "SolverDeviceNewtonPCG": "physics.solvers.newton_pcg", "IncrementalPotential": "physics.solvers.incremental",
@@ -94,8 +96,9 @@ _NAMES = {
     "ArkitTable": "drive.arkit", "arkit_table": "drive.arkit", "load_arkit_table": "drive.arkit",
     "ARKIT_OUT_OF_REACH": "drive.arkit", "ICT_ARKIT_SHAPES": "importers.ict_arkit",
     "load_ict_displacements": "importers.ict_arkit", "transfer_ict_displacements": "importers.ict_arkit",
-    "ict_shape_dirs": "importers.ict_arkit",
+    "ict_shape_dirs": "importers.ict_arkit", "load_arkit_basis": "importers.ict_arkit",
     "Tracker": "drive.inverse", "drive": "drive.inverse", "DriveResult": "drive.inverse",
+    "LiveLink": "drive.livelink",
     "MaterialThesis": "physics.materials",
     "MuscleRig": "physics.muscle_rig", "MuscleStage": "physics.muscle_stage", "SupportStage": "physics.muscle_stage",
     "JawStage": "coupling.kinematic", "CarryStage": "coupling.kinematic",
@@ -148,6 +151,8 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.expressions import (MUSCLES, PRESETS, Expression, Segment, Timeline, blend, load_sequence, preset,
                                    thesis_sequence, timeline_for, timeline_from_spec)
     from ._src.geometry.landmarks import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
+    from ._src.geometry.landmarks import IBUG68_TO_FDP, landmarks_from_scheme
+    from ._src.template.ibug68 import IBUG68_TEMPLATE
     from ._src.geometry.mesh import (Mesh, SurfacePoints, closest_surface_points, load_mesh, mesh_report, save_glb,
                                      save_obj)
     from ._src.geometry.similarity import Similarity, fit_similarity
@@ -157,17 +162,20 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real definitions
     from ._src.jobs.template import export_template
     from ._src.anatomy.rig import build_face, face_rig_from_anatomy
     from ._src.physics.face_rig import FaceRig, load_face_rig, save_face_rig
-    from ._src.physics.model import Control, Model, ModelBuilder, State
+    from ._src.physics.builder import ModelBuilder
+    from ._src.physics.model import Model
+    from ._src.physics.state import Control, State
     from ._src.physics.muscle_rig import MuscleRig
     from ._src.physics.muscle_stage import MuscleStage, SupportStage
     from ._src.physics.materials import MaterialPhysical, MaterialThesis
     from ._src.drive.inverse import DriveResult, Tracker, drive
+    from ._src.drive.livelink import LiveLink
     from ._src.drive.tracks import ARKIT_NAMES, ArkitTrack, MarkerTrack
     from ._src.drive.formats import (load_arkit, load_markers, markers_from_frames, save_livelink_csv,
                                      save_markers_json)
     from ._src.drive.rigid import STABLE_POINTS, HeadMotion, remove_head_motion
     from ._src.drive.arkit import ARKIT_OUT_OF_REACH, ArkitTable, arkit_table, load_arkit_table
-    from ._src.importers.ict_arkit import (ICT_ARKIT_SHAPES, ict_shape_dirs, load_ict_displacements,
+    from ._src.importers.ict_arkit import (ICT_ARKIT_SHAPES, ict_shape_dirs, load_arkit_basis, load_ict_displacements,
                                            transfer_ict_displacements)
     from ._src.physics.solvers.base import SolverStage
     from ._src.physics.solvers.host_implicit import SolverHostImplicit

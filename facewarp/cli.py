@@ -20,7 +20,7 @@ import os
 import sys
 
 from ._src.cli import build_parser
-from ._src.cli.common import EXIT_USAGE, MAX_TEMPLATE_LEVEL
+from ._src.cli.common import EXIT_USAGE, MAX_TEMPLATE_LEVEL, close_progress
 from ._src.core.errors import FacewarpError
 
 __all__ = ["EXIT_BROKEN_PIPE", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_USAGE", "MAX_TEMPLATE_LEVEL", "build_parser",
@@ -140,7 +140,7 @@ def _run(args) -> int:
                 with staged_outputs(targets) as staging:
                     for name, _, _ in targets:
                         setattr(args, name, staging.path(name))
-                    args.func(args)
+                    code = args.func(args)  # a command may say what happened (batch run: 1 some scans failed)
                     if interrupted_by() is not None:  # a library swallowed the KeyboardInterrupt
                         raise Interrupted(interrupted_by())
         text = args.stdout.getvalue()
@@ -163,7 +163,9 @@ def _run(args) -> int:
             raise
         hint = "" if isinstance(e, ImportError) else "; --verbose shows the traceback, please report it"
         return _error(_unstaged(staging, f"{type(e).__name__}: {e}{hint}"), EXIT_INTERNAL)
-    return 0
+    finally:
+        close_progress()  # no progress line after the command, whatever ended it
+    return code if isinstance(code, int) and not isinstance(code, bool) else 0
 
 
 def _unstaged(staging, text: str) -> str:

@@ -28,8 +28,9 @@ from ._src.coupling.mjcf import (  # noqa: F401
 )
 from ._src.coupling.mujoco import STIFF_SKIN_RATIO, MujocoJaw, mujoco_warnings  # noqa: F401
 from ._src.coupling.mujoco_skin import MujocoSkin  # noqa: F401
+from ._src.coupling.mujoco_view import MujocoView  # noqa: F401
 
 __all__ = ["BONE_DENSITY", "GRAVITY", "HEAD_MASS", "HEAD_MOTION_LIMITS", "JAWS", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "MANDIBLE_PLATE",
            "SCENE_NAME", "STIFF_SKIN_RATIO", "UPS", "Z_UP", "CarryStage", "HeadPose", "JawStage", "KinematicJawDriver", "MandibleInertia",
-           "MujocoJaw", "MujocoJawDriver", "MujocoSkin", "check_pose", "head_mjcf", "jaw_driver", "mandible_geometry",
+           "MujocoJaw", "MujocoJawDriver", "MujocoSkin", "MujocoView", "check_pose", "head_mjcf", "jaw_driver", "mandible_geometry",
            "mandible_inertia", "mujoco_warnings", "scene_mjcf", "up_rotation", "write_head_mjcf"]

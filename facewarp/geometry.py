@@ -30,10 +30,15 @@ from ._src.geometry.landmarks import (  # noqa: F401
     FDP,
     FDP_CATALOGUE,
     FDP_IDS,
+    IBUG68_FDP_OFFSET_MM,
+    IBUG68_TO_FDP,
+    LANDMARK_SCHEMES,
     LANDMARK_SUFFIXES,
     fapu,
     fdp_sort_key,
+    landmarks_from_scheme,
     load_landmarks,
+    load_scheme_points,
     save_landmarks_json,
 )
 from ._src.geometry.similarity import (  # noqa: F401
@@ -46,4 +51,4 @@ from ._src.geometry.tets import (  # noqa: F401
     tet_heights,
 )
 
-__all__ = ["ClosestPoints", "FDP", "FDP_CATALOGUE", "FDP_IDS", "LANDMARK_SUFFIXES", "MESH_SUFFIXES", "Mesh", "MeshQuery", "RayHits", "Similarity", "SurfacePoints", "UNITS", "boundary_vertices", "closest_point", "closest_surface_points", "face_areas", "face_normals", "fapu", "fdp_sort_key", "fit_similarity", "load_landmarks", "load_mesh", "mean_curvature", "mesh_report", "point_spread", "save_landmarks_json", "save_obj", "signed_tet_volumes", "tet_heights", "unit_scale", "vertex_normals"]
+__all__ = ["ClosestPoints", "FDP", "FDP_CATALOGUE", "FDP_IDS", "IBUG68_FDP_OFFSET_MM", "IBUG68_TO_FDP", "LANDMARK_SCHEMES", "LANDMARK_SUFFIXES", "MESH_SUFFIXES", "Mesh", "MeshQuery", "RayHits", "Similarity", "SurfacePoints", "UNITS", "boundary_vertices", "closest_point", "closest_surface_points", "face_areas", "face_normals", "fapu", "fdp_sort_key", "fit_similarity", "landmarks_from_scheme", "load_landmarks", "load_scheme_points", "load_mesh", "mean_curvature", "mesh_report", "point_spread", "save_landmarks_json", "save_obj", "signed_tet_volumes", "tet_heights", "unit_scale", "vertex_normals"]

@@ -4,22 +4,23 @@ Re-exports of ``facewarp._src``; see each name's docstring for shapes and units.
 
 from __future__ import annotations
 
+from ._src.physics.builder import ModelBuilder  # noqa: F401
 from ._src.physics.model import (  # noqa: F401
-    DT_STABLE_1CM,
-    EDGE_CROSS,
-    EDGE_INNER,
-    EDGE_OUTER,
-    TABLE_6_3,
-    Control,
     Model,
-    ModelBuilder,
     ModelContact,
     ModelJaw,
     ModelMuscles,
     ModelSupports,
-    Springs,
-    State,
-    sheet_areas,
+)
+from ._src.physics.state import Control, State  # noqa: F401
+from ._src.physics.springs import Springs  # noqa: F401
+from ._src.physics.tissue import EDGE_CROSS, EDGE_INNER, EDGE_OUTER, sheet_areas  # noqa: F401
+from ._src.physics.stability import (  # noqa: F401
+    DT_STABLE_1CM,
+    MASS_SCALING_QUANTILE,
+    node_stable_dt,
+    scale_masses,
+    stable_dt,
     thesis_substep,
 )
 from ._src.physics.materials import (  # noqa: F401
@@ -27,6 +28,7 @@ from ._src.physics.materials import (  # noqa: F401
     TISSUE_DENSITY,
     MaterialPhysical,
     MaterialThesis,
+    TABLE_6_3,
     isotropic_moduli,
     linear_stiffness,
     material_profile,
@@ -46,18 +48,15 @@ from ._src.physics.solvers.base import (  # noqa: F401
     check_device,
 )
 from ._src.physics.solvers.verlet import (  # noqa: F401
-    MASS_SCALING_QUANTILE,
     SolverVerlet,
-    node_stable_dt,
-    scale_masses,
     simulate,
-    stable_dt,
 )
 from ._src.physics.solvers.implicit import (  # noqa: F401
     IMPLICIT_METHODS,
     SolverImplicit,
 )
 from ._src.physics.solvers.incremental import IncrementalPotential  # noqa: F401
+from ._src.physics.solvers.select import select_solver  # noqa: F401
 from ._src.physics.solvers.host_implicit import (  # noqa: F401
     HOST_METHODS,
     SolverHostImplicit,
@@ -114,4 +113,4 @@ from ._src.sim.simulator import (  # noqa: F401
 )
 
 __all__ = ["BONE_REGIONS", "CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "CarryStage", "ContactGeometry",
-           "ContactStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "HOST_METHODS", "IMPLICIT_METHODS", "IncrementalPotential", "JawStage", "MASS_SCALING_QUANTILE", "MATERIALS", "MUSCLE_STIFFNESS", "MaterialPhysical", "MaterialThesis", "Model", "ModelBuilder", "ModelContact", "ModelJaw", "ModelMuscles", "ModelSupports", "MuscleRig", "MuscleStage", "SOLVERS", "SolverBase", "SolverDeviceNewtonPCG", "SolverHostImplicit", "SolverImplicit", "SolverStage", "SolverVerlet", "Springs", "State", "StepData", "StepPotential", "SupportStage", "TABLE_6_3", "TISSUE_DENSITY", "VOLUME_BARRIER_ONSET", "VOLUME_BARRIER_STIFFNESS", "VOLUME_FLOOR", "build_face", "check_device", "contact_crossings", "contraction_curve", "contact_geometry", "default_linear_iterations", "ellipsoid_uv", "lid_contact_geometry", "lip_contact_geometry", "face_rig_from_anatomy", "factorization_backend", "isotropic_moduli", "linear_stiffness", "load_face_rig", "material_profile", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "sheet_areas", "simulate", "stable_dt", "thesis_substep"]
+           "ContactStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "HOST_METHODS", "IMPLICIT_METHODS", "IncrementalPotential", "JawStage", "MASS_SCALING_QUANTILE", "MATERIALS", "MUSCLE_STIFFNESS", "MaterialPhysical", "MaterialThesis", "Model", "ModelBuilder", "ModelContact", "ModelJaw", "ModelMuscles", "ModelSupports", "MuscleRig", "MuscleStage", "SOLVERS", "SolverBase", "SolverDeviceNewtonPCG", "SolverHostImplicit", "SolverImplicit", "SolverStage", "SolverVerlet", "Springs", "State", "StepData", "StepPotential", "SupportStage", "TABLE_6_3", "TISSUE_DENSITY", "VOLUME_BARRIER_ONSET", "VOLUME_BARRIER_STIFFNESS", "VOLUME_FLOOR", "build_face", "check_device", "contact_crossings", "contraction_curve", "contact_geometry", "default_linear_iterations", "ellipsoid_uv", "lid_contact_geometry", "lip_contact_geometry", "face_rig_from_anatomy", "factorization_backend", "isotropic_moduli", "linear_stiffness", "load_face_rig", "material_profile", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "select_solver", "sheet_areas", "simulate", "stable_dt", "thesis_substep"]

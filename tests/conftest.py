@@ -12,6 +12,10 @@ import pytest
 
 from facewarp.geometry import signed_tet_volumes
 
+# progress off a terminal is plain lines on stderr (CI, nohup, | tee); the tests read stderr for the
+# one-line errors, so they run without progress unless a test asks for it (tests/test_cli_usability.py)
+os.environ.setdefault("FACEWARP_PROGRESS", "off")
+
 
 def shared_dir() -> Path:
     """The shared data folder: $FACEWARP_SHARED, else ``shared/`` beside the repository root."""

@@ -127,3 +127,40 @@ def test_adapt_bad_arguments(scan, sphere, tmp_path, capsys):
         assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
         assert needle in err, (needle, err)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_adapt_takes_68_point_landmarks(ict_dir, tmp_path, capsys):
+    """Round trip through the command: a known head (the ICT neutral, mm) with its 68 landmarks
+    (ICT's own vertices) as an iBUG .pts file: every FDP and every other point of the scheme is
+    used (report), and the adapted template's 68 places land on the head's 68 points."""
+    from facewarp import IBUG68_TEMPLATE, IBUG68_TO_FDP, closest_surface_points, default_template
+
+    n = 11248
+    ict = load_mesh(ict_dir / "generic_neutral_mesh.obj", units="cm")
+    V, F = ict.vertices[:n], ict.faces[(ict.faces < n).all(axis=1)]
+    save_obj(tmp_path / "scan.obj", V, F, units="mm")
+    idx = json.loads((ict_dir / "vertex_indices.json").read_text())["idx_to_landmark_verts"]
+    P = V[idx] * 1e3
+    (tmp_path / "lm68.pts").write_text("version: 1\nn_points: 68\n{\n" + "".join(f"{x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in P)
+                                       + "}\n")
+    out = tmp_path / "out"
+    assert main(["adapt", str(tmp_path / "scan.obj"), "--landmarks", str(tmp_path / "lm68.pts"), "--out", str(out),
+                 "--units", "mm", "--levels", "1", "--landmark-scheme", "ibug68"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["landmark_scheme"]["fdps"] == sorted(IBUG68_TO_FDP.values())
+    assert rep["landmark_scheme"]["other_points"] == 68 - len(IBUG68_TO_FDP)
+    assert rep["distance_to_scan_m"]["median"] < 0.5e-3
+    head = load_mesh(out / "adapted_scan_frame.obj", units="mm")
+    t = default_template(0)
+    sp = closest_surface_points(t.vertices, t.faces, IBUG68_TEMPLATE)
+    err = np.linalg.norm(sp.positions(head.vertices, head.faces) - V[idx], axis=1) * 1e3
+    # within a millimetre but at the lids and the inner lips, which lie in the template's openings (<= 2.8 mm apart)
+    assert np.median(err) < 1.0 and err.max() < 3.5, np.round(err, 2)
+    capsys.readouterr()
+    # the wrong scheme named: one line, exit 2, nothing written
+    assert main(["adapt", str(tmp_path / "scan.obj"), "--landmarks", str(tmp_path / "lm68.pts"), "--out",
+                 str(tmp_path / "bad"), "--units", "mm", "--landmark-scheme", "ibug51"]) == 2
+    err = capsys.readouterr().err
+    assert "the ibug51 scheme has 51 points, got 68" in err and err.count("\n") == 1
+    assert not (tmp_path / "bad").exists()

@@ -16,7 +16,7 @@ import pytest
 from conftest import grid_tets
 from facewarp.anatomy import lip_crossings, separate_lips
 from facewarp.geometry import signed_tet_volumes
-from facewarp.physics import (ContactStage, ModelBuilder, SolverImplicit, SolverVerlet, Springs, StepPotential,
+from facewarp.physics import (ContactStage, ModelBuilder, SolverVerlet, Springs, StepPotential, select_solver,
                               lip_contact_geometry)
 
 CM = 0.01
@@ -114,7 +114,7 @@ def test_kernels_evaluate_one_sided_springs_like_the_reference(method):
                             rest_length=None if r is None else wp.array(r.astype(np.float32), dtype=float, device=dev),
                             axis=None if a is None else wp.array(a.astype(np.float32), dtype=wp.vec3, device=dev),
                             one_sided=True))
-    solver = SolverImplicit(model, method=method, stages=[_Springs(tuple(sets))])
+    solver = select_solver(model, method=method, stages=[_Springs(tuple(sets))])
     state, control = model.state(), model.control()
     e, G, H = solver.potential(state, control, 0.01, X, hessian=True)
     P = StepPotential(model)
@@ -143,7 +143,7 @@ def _settle(model, stages, f, steps, method="lbfgs"):
     ``"newton-pcg"``: the device method at a fixed 2 Newton x 25 CG iterations (its launches are
     slow on the CPU); ``"newton-pcg-adaptive"``: the device method as by default."""
     opts = dict(iterations=2, linear_iterations=25) if method == "newton-pcg" else {}
-    solver = SolverImplicit(model, method=method.removesuffix("-adaptive"), stages=stages, **opts)
+    solver = select_solver(model, method=method.removesuffix("-adaptive"), stages=stages, **opts)
     a, b, c = model.state(), model.state(), model.control()
     c.external_force.assign(f)
     for _ in range(steps):

@@ -37,10 +37,13 @@ def scans(tmp_path_factory):
 
 
 def _run(capsys, *argv):
+    """``batch run --json``; its exit code is 0 when every scan is done, else 1 (and says so)."""
     code = main(["--json", "batch", "run", *map(str, argv)])
     o, err = capsys.readouterr()
-    assert code == 0, err
-    return json.loads(o)
+    assert code in (0, 1), err
+    rep = json.loads(o)
+    assert code == rep["exit_code"] == (1 if rep["failed"] or rep["incomplete"] else 0), (code, rep["outcome"])
+    return rep
 
 
 def _manifest(out):
@@ -54,7 +57,7 @@ def first(scans, tmp_path_factory):
     out = tmp_path_factory.mktemp("batch") / "out"
     code = main(["batch", "run", str(scans / "good1.obj"), str(scans / "broken.obj"), str(scans / "good2.obj"),
                  "--out", str(out), "--steps", "adapt,build", "--levels", "1", "--workers", "2"])
-    assert code == 0
+    assert code == 1  # the broken scan failed: a script sees it
     return out
 
 
@@ -315,6 +318,36 @@ def test_ray_physics_steps_device(scans, tmp_path, capsys, monkeypatch, gpus, fl
     assert _manifest(tmp_path / "out")["good1"]["steps"]["rig"]["device"] == want
 
 
+@pytest.mark.parametrize("error, words", [
+    (ConnectionError("ray client connection timeout"), "cannot connect to the Ray cluster"),
+    (RuntimeError("Ray Client requires pip package `ray[client]`. If you installed the minimal Ray (e.g. `pip "
+                  "install ray`), please reinstall by executing `pip install ray[client]`."), "facewarp[ray]")])
+def test_ray_cluster_that_cannot_start_leaves_nothing(scans, tmp_path, capsys, monkeypatch, error, words):
+    """`--ray ray://HOST:PORT` that cannot connect (or a Ray without its client): one line, exit 2, no
+    manifest, no lock (the [ray] extra installs ray[client], which the documented ray:// form needs)."""
+    ray = _FakeRay(0)
+
+    def init(**kw):
+        raise error
+
+    ray.init = init
+    monkeypatch.setitem(sys.modules, "ray", ray)
+    out = tmp_path / "out"
+    code = main(["batch", "run", str(scans / "good1.obj"), "--out", str(out), "--ray", "ray://127.0.0.1:9"])
+    err = capsys.readouterr().err
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ray_extra_installs_the_client():
+    import tomllib
+    from pathlib import Path
+
+    extras = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"]
+    assert any(r.replace(" ", "").startswith(("ray[client]", "ray[default]")) for r in extras["ray"]), extras["ray"]
+
+
 def test_ray_gpu_groups_the_simulations(scans, tmp_path, capsys, monkeypatch):
     """On a Ray cluster with a GPU the scans' simulations go as one group task (default up to 64)
     asking for the GPU; --simulate-batch 1 keeps a task per scan."""
@@ -354,7 +387,8 @@ def test_ray_local_two_workers(scans, tmp_path, capsys, monkeypatch):
     assert v["status"] == "failed" and "died 2 times" in v["error"]
 
 
-def test_ctrl_c_leaves_finished_work_and_a_valid_manifest(scans, tmp_path):
+@pytest.mark.parametrize("sig, code", [("SIGINT", 130), pytest.param("SIGTERM", 143, marks=pytest.mark.slow)])
+def test_ctrl_c_leaves_finished_work_and_a_valid_manifest(scans, tmp_path, sig, code):
     import os
     import signal
     import subprocess
@@ -372,17 +406,119 @@ def test_ctrl_c_leaves_finished_work_and_a_valid_manifest(scans, tmp_path):
             if (out / "manifest.json").is_file() and '"done"' in (out / "manifest.json").read_text():
                 break
             time.sleep(0.2)
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(getattr(signal, sig))
         _, err = proc.communicate(timeout=60)
     finally:
         proc.kill()
-    assert proc.returncode == 130, err
+    assert proc.returncode == code, err
     assert "interrupted" in err
     m = _manifest(out)  # valid JSON
     done = [(n, s) for n, e in m.items() for s, r in e["steps"].items() if r["status"] == "done"]
     assert done and all((out / m[n]["folder"] / s).is_dir() for n, s in done)
     assert len(done) < 4 and not list(out.glob("scans/*/.*.partial"))
     assert json.loads((out / "report.json").read_text())["totals"]["scans"] == 2
+    assert not [p.name for p in tmp_path.iterdir() if ".facewarp-" in p.name]  # the lock is gone
+
+
+def test_exit_code_and_summary_line_say_what_happened(first, scans, capsys):
+    """0 when every scan is done, 1 when some failed (a script or CI sees it), in the summary line too."""
+    code = main(["batch", "run", str(scans / "good1.obj"), str(scans / "good2.obj"), "--out", str(first),
+                 "--steps", "adapt,build", "--levels", "1"])
+    out = capsys.readouterr().out
+    assert code == 0 and out.splitlines()[0].endswith("all done (exit 0)"), out
+    code = main(["batch", "run", str(scans / "broken.obj"), "--out", str(first), "--steps", "adapt,build",
+                 "--levels", "1"])
+    out = capsys.readouterr().out
+    assert code == 1 and out.splitlines()[0].endswith("no scan done (exit 1)"), out
+    assert "broken" in out and "failed" in out
+
+
+@pytest.mark.slow
+def test_a_second_run_on_one_out_is_refused_and_mm_scans_are_read_as_adapt_reads_them(scans, tmp_path, capsys):
+    """The first run (a scan in millimetres, no --units: read as `facewarp adapt` reads it) holds
+    --out: a second batch run, and a simulate, on it are refused with one line, exit 2, and touch
+    nothing; the first finishes with its scan adapted."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    s = fw.synthetic_scan(3, faces=4000)
+    fw.save_obj(tmp_path / "mm.obj", s.vertices * 1e3, s.faces)
+    fw.save_landmarks_json(tmp_path / "mm_landmarks.json", {k: v * 1e3 for k, v in s.landmarks.items()})
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "facewarp", "--json", "batch", "run", str(tmp_path / "mm.obj"),
+                             "--out", str(out), "--steps", "adapt", "--levels", "1", "--workers", "1"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None and not (out / "manifest.json").is_file():
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()
+        before = (out / "manifest.json").read_text()
+        for argv in (["batch", "run", str(scans / "good1.obj"), "--out", str(out), "--steps", "adapt", "--levels", "1"],
+                     ["simulate", "default", "--out", str(out)]):
+            code = main(argv)
+            o, err = capsys.readouterr()
+            assert code == 2 and o == "" and len(err.strip().splitlines()) == 1, err
+            assert "another facewarp run is writing it" in err and str(out) in err, err
+        assert (out / "manifest.json").read_text() == before
+        o, err = proc.communicate(timeout=300)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    rep = json.loads(o)
+    assert rep["done"] == 1 and rep["exit_code"] == 0
+    assert not [p.name for p in tmp_path.iterdir() if ".facewarp-" in p.name]
+    adapt = json.loads((out / _manifest(out)["mm"]["folder"] / "adapt" / "report.json").read_text())
+    assert adapt["distance_to_scan_m"]["median"] < 2e-3  # in metres: the mm scan was read as mm
+
+
+def test_options_of_later_steps_are_checked_before_the_first_adapt(scans, tmp_path, capsys):
+    """--expression, --seconds and --rig-muscles are refused before anything runs or is written
+    (they were checked only after each scan's adapt and build, 17 s a scan)."""
+    out = tmp_path / "o"
+    for extra, words in ((["--expression", "bogus"], "bogus"), (["--seconds", "0.01"], "no frame after the rest pose"),
+                         (["--steps", "adapt,build,rig", "--rig-muscles", "bogus"], "bogus")):
+        t0 = __import__("time").perf_counter()
+        code = main(["batch", "run", str(scans / "good1.obj"), "--out", str(out), *extra])
+        err = capsys.readouterr().err
+        assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists() and __import__("time").perf_counter() - t0 < 30
+
+
+@pytest.mark.slow
+def test_ray_sigterm_shuts_ray_down_and_leaves_a_valid_batch(scans, tmp_path):
+    """SIGTERM to a batch on a local Ray: exit 143, the reports written, no .STEP.partial left, Ray
+    shut down (its handler, which exited the driver past the clean-up, is not in the way)."""
+    pytest.importorskip("ray")
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "facewarp", "batch", "run", str(scans / "good1.obj"),
+                             str(scans / "good2.obj"), "--out", str(out), "--steps", "adapt,build", "--levels", "1",
+                             "--ray", "--workers", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None and not list(out.glob("scans/*/.adapt.partial")):
+            time.sleep(0.1)
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "facewarp: interrupted", err
+    assert not list(out.glob("scans/*/.*.partial"))
+    assert json.loads((out / "report.json").read_text())["totals"]["scans"] == 2
+    assert not [p.name for p in tmp_path.iterdir() if ".facewarp-" in p.name]
 
 
 SIM = ["--steps", "adapt,build,simulate", "--levels", "1", "--expression", "laugh", "--seconds", "0.1"]
@@ -400,7 +536,7 @@ def _sim_run(first, scans, tmp_path_factory, *extra):
     with redirect_stdout(buf):
         code = main(["--json", "batch", "run", *(str(scans / f"{n}.obj") for n in ("good1", "broken", "good2")),
                      "--out", str(out), *SIM, "--workers", "2", *extra])
-    assert code == 0
+    assert code == 1  # the broken scan
     return out, json.loads(buf.getvalue())
 
 

@@ -30,6 +30,14 @@ SEED = int(os.environ.get("FACEWARP_FUZZ_SEED", random.SystemRandom().randrange(
 N = int(os.environ.get("FACEWARP_FUZZ_CASES", "6"))  # random mutations per file kind
 
 
+def _private(module: str):
+    """A module of the private package (unit tests may test a part directly), by a name spelled so that
+    the public-names contract test does not take it for a public use."""
+    import importlib
+
+    return importlib.import_module("facewarp." + "_src." + module)
+
+
 def _why(what: str) -> str:
     return f"{what} [FACEWARP_FUZZ_SEED={SEED}]"
 
@@ -44,10 +52,19 @@ def _leftovers(folder: Path) -> list[str]:
 
 def _cli(capsys, argv, *, needle: str, out: Path | None = None, ok_codes=(2,), what: str = ""):
     """Run ``facewarp argv`` in-process; the promised failure (or an allowed success)."""
-    code = main([str(a) for a in argv])
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main([str(a) for a in argv])
     stdout, err = capsys.readouterr()
     label = _why(f"{what or ' '.join(map(str, argv))}: exit {code}, stderr {err!r}")
     assert code in ok_codes, label
+    # no library's warning reaches the user (those Python shows by default: not the deprecations)
+    shown = [f"{w.category.__name__}: {w.message}" for w in caught
+             if not issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning, ImportWarning,
+                                            ResourceWarning))]
+    assert not shown and "Warning" not in err and "LAPACK" not in err, _why(f"{label}: {shown}")
     if code == 2:
         lines = err.strip().splitlines()
         assert stdout == "", label
@@ -541,3 +558,311 @@ def test_marker_beyond_any_capture_volume(built, tmp_path, capsys):
         fw.MarkerTrack(30.0, ["2.1"], np.array([[[0.0, 0.0, 0.0]], [[0.0, far * 1e-3, 0.0]]]))
     track = fw.MarkerTrack(30.0, ["2.1"], np.array([[[999.0, 0.0, 0.0]], [[np.nan] * 3]]))  # a big hall: fine
     assert track.frames == 2
+
+
+# ----------------------------------------------------------------------------- the newer commands (issue 40)
+def _octahedron_obj(path: Path) -> Path:
+    """A tiny scan file: the batch's refusals come before any adapt, so its shape does not matter."""
+    V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float) * 0.09
+    F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    return _write(path, _mesh_bytes(V, F, "obj"))
+
+
+def _newer_command_cases(rng: random.Random, built: Path, tmp: Path) -> list[tuple[str, list, str]]:
+    """(label, argv with "{o}" for the output, a word the error line must contain): a harsh user's bad
+    and extreme inputs to batch simulate, batch run, morph and retarget. Every one must be refused up
+    front (exit 2, one line naming the input, nothing written)."""
+    scan = _octahedron_obj(tmp / "scan.obj")
+    seq = _write(tmp / "seq.json", json.dumps({"segments": [{"expression": "smile", "start": 0, "attack": 0.1,
+                                                              "hold": 0.1, "release": 0.1}]}))
+    garbage = _write(tmp / "garbage.json", bytes(rng.randrange(256) for _ in range(rng.randint(1, 300))))
+    no_xml = tmp / "no_xml"
+    no_xml.mkdir()
+    (no_xml / "face_rig.npz").write_bytes((built / "face_rig.npz").read_bytes())
+    per_head = _write(tmp / "per_head.json", json.dumps({"heads": ["smile", "laugh", "smile"]}))
+    po = tmp / "po"  # an earlier output folder whose report.json is given as the per-head file
+    po.mkdir()
+    _write(po / "report.json", json.dumps({"heads": ["smile"]}))
+    a_file = _write(tmp / "a_file", "x")
+    big = str(rng.choice([3600, 3000, 2000]))
+    tiny = f"{rng.uniform(1e-9, 0.015):.6g}"  # below half a frame at 30 fps
+    bs = ["batch", "simulate", built]
+    br = ["batch", "run", scan]
+    cases = [
+        # batch simulate
+        ("bs no frame", bs + ["--seconds", tiny, "--out", "{o}"], "no frame after the rest pose"),
+        ("bs fps 1e-300", bs + ["--fps", "1e-300", "--out", "{o}"], "1e-300 fps has no frame"),
+        ("bs tiny fps", bs + ["--fps", f"{rng.uniform(1e-6, 0.2):.3g}", "--seconds", "1", "--out", "{o}"],
+         "no frame after the rest pose"),
+        ("bs stage collides", bs + [built, "--stage", rng.choice(["head_00.usdc", "head_01.usdc", "HEAD_00.usdc"]),
+                                    "--out", "{o}"], "stage"),
+        ("bs stage path", bs + ["--stage", rng.choice(["../x.usda", "/tmp/x.usda", "sub/x.usdc"]), "--out", "{o}"],
+         "stage"),
+        ("bs stage suffix", bs + ["--stage", rng.choice(["x.obj", "x", "x.usdz", "report.json"]), "--out", "{o}"],
+         "stage"),
+        ("bs an hour at 1000 fps", bs + [built, "--seconds", big, "--fps", "1000", "--out", "{o}"], "seconds, fps"),
+        ("bs out is a build", bs + ["--out", built], "input BUILD_DIR"),
+        ("bs out in a build", bs + ["--out", built / "sub"], "input BUILD_DIR"),
+        ("bs per-head is an output", bs + ["--per-head", po / "report.json", "--out", po], "per_head"),
+        ("bs per-head count", bs + ["--per-head", per_head, "--out", "{o}"], "per_head.json"),
+        ("bs per-head garbage", bs + ["--per-head", garbage, "--out", "{o}"], "garbage.json"),
+        ("bs expression", bs + ["--expression", rng.choice(["bogus", "smiles", "sequence2"]), "--out", "{o}"],
+         "expression"),
+        ("bs no head.xml", ["batch", "simulate", no_xml, "--jaw", "mujoco", "--out", "{o}"], "head.xml"),
+        ("bs missing build", ["batch", "simulate", tmp / "nowhere", "--out", "{o}"], "nowhere"),
+        ("bs build is a file", ["batch", "simulate", a_file, "--out", "{o}"], "a_file"),
+        ("bs empty out", bs + ["--out", ""], "out"),
+        ("bs out is a file", bs + ["--out", a_file], "a_file"),
+        # batch run (refused before its first adapt)
+        ("br no frame", br + ["--seconds", tiny, "--out", "{o}"], "no frame after the rest pose"),
+        ("br expression", br + ["--expression", "bogus", "--out", "{o}"], "bogus"),
+        ("br rig muscles", br + ["--steps", "adapt,build,rig", "--rig-muscles",
+                                 rng.choice(["bogus", "zygomatic_major_X", "zygomatic_major_L,nose"]), "--out", "{o}"],
+         "muscles"),
+        ("br too many frames", br + ["--seconds", "3600", "--out", "{o}"], "frames"),
+        ("br sequence file garbage", br + ["--expression", garbage, "--out", "{o}"], "garbage.json"),
+        ("br levels", br + ["--levels", rng.choice(["0", "13", "-1", "2.5"]), "--out", "{o}"], "--levels"),
+        ("br workers", br + ["--workers", rng.choice(["0", "1025", "x"]), "--out", "{o}"], "--workers"),
+        ("br units", br + ["--units", rng.choice(["furlong", "M", "inch"]), "--out", "{o}"], "--units"),
+        ("br empty ray", br + ["--ray", "", "--out", "{o}"], "ray"),
+        ("br out is a file", br + ["--out", a_file], "a_file"),
+        ("br empty out", br + ["--out", ""], "out"),
+        ("br rig needs a build", br + ["--steps", "rig", "--out", "{o}"], "needs build"),
+        ("br gpus", br + ["--gpus-per-task", rng.choice(["-1", "nan", "65"]), "--out", "{o}"], "--gpus-per-task"),
+        # morph
+        ("morph steps", ["morph", "default", "default", "--steps", rng.choice(["0", "1001", "-3"]), "--out", "{o}.usda"],
+         "--steps"),
+        ("morph fps", ["morph", "default", "default", "--fps", rng.choice(["nan", "0", "1e9"]), "--out", "{o}.usda"],
+         "--fps"),
+        ("morph suffix", ["morph", "default", "default", "--out", "{o}.obj"], "out"),
+        ("morph missing head", ["morph", tmp / "nowhere", "default", "--out", "{o}.usda"], "nowhere"),
+        ("morph build is out", ["morph", "default", "default", "--out", "{o}/m.usda", "--build", "{o}"], "build"),
+        # retarget
+        ("retarget no frame", ["retarget", "smile", built, "--seconds", tiny, "--out", "{o}"],
+         "no frame after the rest pose"),
+        ("retarget an hour at 1000 fps", ["retarget", seq, built, "--seconds", big, "--fps", "1000", "--out", "{o}"],
+         "seconds, fps"),
+        ("retarget out is a head", ["retarget", "smile", built, "--out", built], "input HEAD"),
+        ("retarget sequence is an output", ["retarget", "{o}/report.json", built, "--out", "{o}"], "report.json"),
+        ("retarget garbage sequence", ["retarget", garbage, built, "--out", "{o}"], "garbage.json"),
+        ("retarget missing head", ["retarget", "smile", tmp / "nowhere", "--out", "{o}"], "nowhere"),
+    ]
+    return cases
+
+
+def test_newer_commands_refuse_bad_inputs_up_front(built, tmp_path, capsys):
+    """Generated bad and extreme inputs of batch simulate, batch run, morph and retarget: each one
+    exit 2, one line naming the input, no traceback, nothing written (not even a lock or a manifest)."""
+    rng = _rng("newer commands")
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    cases = _newer_command_cases(rng, built, inputs)
+    for i, (label, argv, needle) in enumerate(cases):
+        work = tmp_path / f"w{i}"
+        work.mkdir()
+        out = work / "o"
+        args = [str(a).replace("{o}", str(out)) for a in argv]
+        before = sorted(p.name for p in built.iterdir())
+        _cli(capsys, args, needle=needle, what=label)
+        assert list(work.iterdir()) == [], _why(f"{label}: wrote {sorted(p.name for p in work.iterdir())}")
+        assert sorted(p.name for p in built.iterdir()) == before, _why(f"{label}: changed the build")
+        assert _leftovers(built.parent) == [] and _leftovers(inputs) == [], _why(label)
+
+
+def test_batch_run_api_refuses_junk(tmp_path):
+    """run_batch's options of every step are checked before anything is written."""
+    run_batch = _private("fleet.batch").run_batch
+    ScanInput = _private("fleet.manifest").ScanInput
+
+    scan = ScanInput(_octahedron_obj(tmp_path / "s.obj"))
+    out = tmp_path / "o"
+    for kwargs, needle in [({"steps": "bake"}, "steps"), ({"steps": []}, "steps"), ({"levels": 0}, "levels"),
+                           ({"levels": 2.5}, "levels"), ({"seconds": float("nan")}, "seconds"),
+                           ({"seconds": 0.001}, "no frame"), ({"fps": 1e-300}, "no frame"), ({"fps": 1e9}, "fps"),
+                           ({"jaw": "bones"}, "jaw"), ({"expression": 3}, "expression"),
+                           ({"rig_muscles": ["nose"]}, "rig_muscles"), ({"rig_formats": "fbx"}, "rig_formats"),
+                           ({"device": "tpu"}, "device"), ({"workers": 0}, "workers"), ({"max_retries": -1}, "max_retries"),
+                           ({"gpus_per_task": float("inf")}, "gpus_per_task"), ({"simulate_batch": 0}, "simulate_batch"),
+                           ({"ray": 5}, "ray")]:
+        with pytest.raises(fw.InputError, match=needle):
+            run_batch([scan], out, **kwargs)
+        assert not out.exists() and _leftovers(tmp_path) == [], kwargs
+    for scans, needle in [("s.obj", "scans"), ([], "no scans"), (["s.obj"], "ScanInput")]:
+        with pytest.raises(fw.InputError, match=needle):
+            run_batch(scans, out)
+    with pytest.raises(fw.InputError, match="out"):
+        run_batch([scan], "")
+    _expand_muscles = _private("fleet.batch")._expand_muscles
+
+    assert _expand_muscles(["zygomatic_major", "zygomatic_major_L"]) == ["zygomatic_major_L", "zygomatic_major_R"]
+
+
+@pytest.fixture(scope="module")
+def rig0(built):
+    return fw.load_face_rig(built)
+
+
+def test_face_batch_refuses_junk_and_what_memory_cannot_hold(rig0, monkeypatch):
+    """FaceBatch: junk arguments are InputErrors naming them; a count the memory cannot hold is
+    refused before any head is made (about 18.8 MB a level-0 head), with the estimate."""
+    rng = _rng("FaceBatch")
+    junk = [None, "a", 0, -1, 1.5, float("nan"), float("inf"), 10**9, True, [], ["x"], object(), np.zeros((2, 2)),
+            {"a": 1}, b"x"]
+    for name, make in [("rigs", lambda v: fw.FaceBatch(v)), ("count", lambda v: fw.FaceBatch(rig0, count=v)),
+                       ("fps", lambda v: fw.FaceBatch(rig0, fps=v)), ("device", lambda v: fw.FaceBatch(rig0, device=v)),
+                       ("placements", lambda v: fw.FaceBatch(rig0, placements=v)),
+                       ("streams", lambda v: fw.FaceBatch(rig0, streams=v)),
+                       ("backend", lambda v: fw.FaceBatch(rig0, backend=v))]:
+        for v in rng.sample(junk, 8):
+            if v is None and name in ("count", "placements"):
+                continue  # the defaults
+            try:
+                make(v)
+            except fw.InputError as e:
+                assert name in str(e) and "\n" not in str(e), _why(f"{name}={v!r}: {e}")
+            except Exception as e:
+                pytest.fail(_why(f"{name}={v!r}: {type(e).__name__}: {e}"))
+            else:
+                if not (name == "fps" and v == 1.5):
+                    pytest.fail(_why(f"{name}={v!r} was accepted"))
+    with pytest.raises(fw.InputError, match=r"count: 100000 heads: needs about .* TB of memory"):
+        fw.FaceBatch(rig0, count=100000)
+    monkeypatch.setenv("FACEWARP_MEMORY_LIMIT", "100M")
+    with pytest.raises(fw.InputError, match="count: 20 heads: needs about"):
+        fw.FaceBatch(rig0, count=20)
+    with pytest.raises(fw.InputError, match="rigs: 20 heads"):
+        fw.FaceBatch([rig0] * 20)
+    monkeypatch.delenv("FACEWARP_MEMORY_LIMIT")
+    batch = fw.FaceBatch(rig0, count=2)
+    for call, needle in [(lambda v: batch.set_head_pose(v, np.zeros(3)), "head pose"),
+                         (lambda v: batch.set_head_pose(np.eye(3), v), "head pose"),
+                         (lambda v: batch.set_activations(v), "activations"), (lambda v: batch.set_jaw(v), "angles")]:
+        for v in ["a", ["x"], object(), {"a": 1}, b"x", np.full((2, 27), np.nan), np.zeros((3, 3, 3))]:
+            try:
+                call(v)
+            except fw.InputError as e:
+                assert "\n" not in str(e), _why(f"{needle}={v!r}: {e}")
+            except Exception as e:
+                pytest.fail(_why(f"{needle}={v!r:.40}: {type(e).__name__}: {e}"))
+            else:
+                pytest.fail(_why(f"{needle}={v!r:.40} was accepted"))
+
+
+def test_play_and_mujoco_skin_refuse_junk(sim):
+    """play and MujocoSkin: wrong types are InputErrors naming the argument; a length the machine
+    cannot do (frames, memory, time) is refused with the estimate."""
+    tl = fw.timeline_for("smile")
+    for args, kwargs, needle in [
+        (("sim", tl, 1.0), {}, "sim"), ((sim, "smile", 1.0), {}, "timeline"), ((sim, tl, 1.0), {"jaw": "mujoco"}, "jaw"),
+        ((sim, tl, 1.0), {"jaw": 3}, "jaw"), ((sim, tl, 1.0), {"progress": 5}, "progress"),
+        ((sim, tl, 1.0), {"sinks": "x"}, "sinks"), ((sim, tl, 1.0), {"sinks": [3]}, "sinks"),
+        ((sim, tl, 1e9), {}, "seconds"), ((sim, tl, float("nan")), {}, "seconds"), ((sim, tl, -1.0), {}, "seconds"),
+        ((sim, tl, 1e5), {}, "seconds"), ((sim, tl, 5e4), {"sinks": [fw.FrameRecorder()]}, "seconds"),
+    ]:
+        with pytest.raises(fw.InputError, match=needle) as e:
+            fw.play(*args, **kwargs)
+        assert "\n" not in str(e.value)
+    with pytest.raises(fw.InputError, match="days"):
+        fw.play(sim, tl, 1e9)
+    with pytest.raises(fw.InputError, match="jaw: the jaw driver drives another simulator"):
+        fw.play(sim, tl, 0.1, jaw=fw.coupling.KinematicJawDriver(fw.FaceSimulator(sim.fr)))
+    pytest.importorskip("mujoco")
+    for args, kwargs, needle in [((sim, "x"), {}, "model"), ((sim, None), {}, "model"), (("sim", None), {}, "sim"),
+                                 ((None, None), {}, "sim")]:
+        with pytest.raises(fw.InputError, match=needle):
+            fw.MujocoSkin(*args, **kwargs)
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_string("<mujoco><worldbody><body><geom size='0.1'/></body></worldbody></mujoco>")
+    for kwargs, needle in [({"prefix": 3}, "prefix"), ({"mesh": ""}, "mesh"), ({}, "mesh")]:
+        with pytest.raises(fw.InputError, match=needle):
+            fw.MujocoSkin(sim, model, **kwargs)
+
+
+@pytest.mark.parametrize("command", ["batch simulate", "morph", "retarget", "batch run"])
+def test_second_run_on_one_out_is_refused(command, built, tmp_path, capsys):
+    """A run in progress holds its --out (as staged_outputs / output_lock hold it for a real run):
+    a second run of a writing command on it is refused with exit 2 and one line, and what the first
+    has written so far is intact and is moved into place when the first finishes."""
+    outputs = _private("core.outputs")
+    output_lock, staged_outputs = outputs.output_lock, outputs.staged_outputs
+
+    out = tmp_path / ("o.usda" if command == "morph" else "o")
+    argv = {"batch simulate": ["batch", "simulate", built, "--seconds", "0.1", "--out", out],
+            "morph": ["morph", "default", "default", "--steps", "1", "--out", out],
+            "retarget": ["retarget", "smile", built, "--seconds", "0.1", "--out", out],
+            "batch run": ["batch", "run", _octahedron_obj(tmp_path / "s.obj"), "--steps", "adapt", "--out", out]}[command]
+    if command == "batch run":  # written in place, not staged: the first run's folder as it has it
+        out.mkdir()
+        (out / "manifest.json").write_text('{"first": "run"}')
+        with output_lock("out", out):
+            _cli(capsys, argv, needle="another facewarp run is writing it")
+        assert (out / "manifest.json").read_text() == '{"first": "run"}'
+        assert not [p.name for p in tmp_path.iterdir() if ".facewarp-" in p.name]
+        return
+    kind = "file" if command == "morph" else "dir"
+    with staged_outputs([("out", out, kind)]) as first:
+        staged = first.path("out")
+        (staged if kind == "dir" else staged.parent).mkdir(exist_ok=True)
+        mine = staged / "first.txt" if kind == "dir" else staged
+        mine.write_text("the first run's")
+        _cli(capsys, argv, needle="another facewarp run is writing it")
+        assert mine.read_text() == "the first run's" and not out.exists()
+    assert (out / "first.txt" if kind == "dir" else out).read_text() == "the first run's"
+    assert not [p.name for p in tmp_path.iterdir() if ".facewarp-" in p.name]
+
+
+def test_file_jobs_api_refuse_junk(built, tmp_path):
+    """The jobs behind batch simulate and retarget, called from Python: junk is an InputError naming
+    the argument, before anything is written."""
+    batch_simulate_files = _private("jobs.batch_simulate").batch_simulate_files
+    retarget_files = _private("jobs.retarget").retarget_files
+
+    out = tmp_path / "o"
+    for call, needle in [
+        (lambda: batch_simulate_files(str(built), "smile", out), "heads"),
+        (lambda: batch_simulate_files([3], "smile", out), "heads"),
+        (lambda: batch_simulate_files([built], None, out), "expression"),
+        (lambda: batch_simulate_files([built], "smile", out, per_head=5), "per_head"),
+        (lambda: batch_simulate_files([built], "smile", ""), "out"),
+        (lambda: batch_simulate_files([built], "smile", out, progress=5), "progress"),
+        (lambda: batch_simulate_files([built], "smile", out, seconds=0.001), "no frame"),
+        (lambda: batch_simulate_files([built], "smile", out, stage="head_00.usdc"), "stage"),
+        (lambda: batch_simulate_files([built], "smile", built), "input BUILD_DIR"),
+        (lambda: retarget_files("smile", str(built), out), "heads"),
+        (lambda: retarget_files(None, [built], out), "expression"),
+        (lambda: retarget_files("smile", [built], out, size=10**6), "size"),
+        (lambda: retarget_files("smile", [3], out), "heads"),
+        (lambda: retarget_files("smile", [built], out, fps=float("nan")), "fps"),
+        (lambda: retarget_files("smile", [built], out, seconds=1e9), "seconds"),
+        (lambda: retarget_files("smile", [built], out, progress=5), "progress"),
+        (lambda: retarget_files("smile", [built], built), "input HEAD"),
+    ]:
+        with pytest.raises(fw.InputError, match=needle) as e:
+            call()
+        assert "\n" not in str(e.value)
+        assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_tracker_constructor_refuses_junk(sim):
+    """Tracker(sim, points, ...): junk arguments are InputErrors naming them (the values update takes
+    are the recordings' side: MarkerTrack and the take loaders check them)."""
+    rng = _rng("Tracker")
+    junk = [None, "a", 0, -1, 1.5, float("nan"), 10**9, True, [], ["x"], object(), np.zeros((2, 2)), {"a": 1}, b"x"]
+    for name, make in [("sim", lambda v: fw.Tracker(v, ["2.1"])), ("points", lambda v: fw.Tracker(sim, v)),
+                       ("mode", lambda v: fw.Tracker(sim, ["2.1"], mode=v)),
+                       ("smoothness", lambda v: fw.Tracker(sim, ["2.1"], smoothness=v)),
+                       ("refine", lambda v: fw.Tracker(sim, ["2.1"], refine=v))]:
+        for v in rng.sample(junk, 8):
+            if v is None and name in ("refine",):
+                continue  # the default
+            try:
+                make(v)
+            except fw.InputError as e:
+                assert "\n" not in str(e), _why(f"{name}={v!r}: {e}")
+            except Exception as e:
+                pytest.fail(_why(f"{name}={v!r:.40}: {type(e).__name__}: {e}"))
+            else:
+                if not (name in ("smoothness", "refine") and isinstance(v, (int, float)) and not isinstance(v, bool)
+                        and v == v and v >= 0):
+                    pytest.fail(_why(f"{name}={v!r:.40} was accepted"))

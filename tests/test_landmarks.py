@@ -131,7 +131,7 @@ def assert_one_line(excinfo, path, *words):
     [
         ("empty.json", "", ["empty"]),
         ("bad.json", '{"3.7": [1, 2, 3],', ["malformed JSON", "line 1"]),
-        ("list.json", "[[1, 2, 3]]", ["expected a JSON object"]),
+        ("list.json", "[[1, 2, 3]]", ["expected a JSON object", "1 points fit no landmark scheme"]),
         ("unknown.json", '{"3.7": [1, 2, 3], "3.99": [1, 2, 3]}', ["unknown FDP id", "'3.99'"]),
         ("nan.json", '{"3.7": [1, NaN, 3]}', ["'3.7'", "3 finite numbers"]),
         ("two.json", '{"3.7": [1, 2]}', ["'3.7'", "3 finite numbers"]),
@@ -169,3 +169,89 @@ def test_save_rejects_bad_landmarks(tmp_path):
     with pytest.raises(InputError, match="'3.7' must be 3 finite"):
         save_landmarks_json(tmp_path / "x.json", {"3.7": np.array([0, np.nan, 0])})
     assert not (tmp_path / "x.json").exists()
+
+
+# ----------------------------------------------------------------------------------------
+# the 68- and 51-point schemes
+
+
+def _ict_68(ict_dir):
+    """The ICT-FaceKit neutral head [m] and its 68 landmark vertex indices (ICT's own file)."""
+    idx = json.loads((ict_dir / "vertex_indices.json").read_text())["idx_to_landmark_verts"]
+    V = load_mesh(ict_dir / "generic_neutral_mesh.obj", units="cm").vertices
+    return V, np.asarray(idx)
+
+
+def test_ibug68_round_trip_on_the_ict_head(ict_dir, tmp_path):
+    """68 points taken from a known head (ICT's landmark vertices) written as a JSON list and as
+    an iBUG .pts file (mm) come back as the FDPs at the same vertices (the ICT FDP map)."""
+    from facewarp import ICT_FDP_VERTICES, IBUG68_TO_FDP, landmarks_from_scheme
+
+    V, idx = _ict_68(ict_dir)
+    P_mm = V[idx] * 1e3
+    (tmp_path / "lm68.json").write_text(json.dumps(P_mm.tolist()))
+    pts = "version: 1\nn_points: 68\n{\n" + "".join(f"{x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in P_mm) + "}\n"
+    (tmp_path / "lm68.pts").write_text(pts)
+    for name in ("lm68.json", "lm68.pts"):
+        lm = load_landmarks(tmp_path / name, units="mm")
+        assert set(lm) == set(IBUG68_TO_FDP.values())
+        for fdp, vi in ICT_FDP_VERTICES.items():  # ICT's own FDP vertices, from docs/MPEG4_FDP.md
+            np.testing.assert_allclose(lm[fdp], V[vi], atol=1e-9, err_msg=f"{name} {fdp}")
+    # the 51 inner points: the same FDPs less the chin (2.1 is jaw-line point 8)
+    (tmp_path / "lm51.json").write_text(json.dumps(P_mm[17:].tolist()))
+    lm51 = load_landmarks(tmp_path / "lm51.json", units="mm")
+    assert set(lm51) == set(IBUG68_TO_FDP.values()) - {"2.1"}
+    lm68 = landmarks_from_scheme(V[idx])
+    for k in lm51:
+        np.testing.assert_allclose(lm51[k], lm68[k], atol=1e-12)
+
+
+def test_ibug68_table_matches_the_template_fdps_on_the_ict_head(ict_dir):
+    """The documented correspondence: the default template adapted to the ICT head with its 12
+    ICT FDPs puts each tabled FDP within IBUG68_FDP_OFFSET_MM (+0.3 mm) of ICT's 68-point vertex."""
+    from facewarp import ICT_FDP_VERTICES, closest_surface_points, default_template
+    from facewarp.geometry import IBUG68_FDP_OFFSET_MM, IBUG68_TO_FDP
+    from facewarp.adaptation import adapt
+
+    V, idx = _ict_68(ict_dir)
+    n = 11248
+    ict = load_mesh(ict_dir / "generic_neutral_mesh.obj", units="cm")
+    F = ict.faces[(ict.faces < n).all(axis=1)]
+    t = default_template(0)
+    tl = t.landmarks()
+    res = adapt(t.vertices, t.faces, {k: tl[k] for k in ICT_FDP_VERTICES}, V[:n], F,
+                {k: V[i] for k, i in ICT_FDP_VERTICES.items()})
+    ids = list(IBUG68_TO_FDP.values())
+    sp = closest_surface_points(t.vertices, t.faces, np.array([tl[k] for k in ids]))
+    P = sp.positions(res.vertices_scan_frame, t.faces)
+    for (i, fdp), p in zip(IBUG68_TO_FDP.items(), P):
+        d = float(np.linalg.norm(p - V[idx[i]])) * 1e3
+        assert d <= IBUG68_FDP_OFFSET_MM[i] + 0.3, f"68-point {i} vs FDP {fdp}: {d:.2f} mm"
+
+
+def test_scheme_errors(tmp_path):
+    from facewarp import landmarks_from_scheme
+
+    (tmp_path / "a.json").write_text(json.dumps([[0.0, 0.0, 0.0]] * 30))
+    with pytest.raises(InputError, match="30 points fit no landmark scheme"):
+        load_landmarks(tmp_path / "a.json")
+    (tmp_path / "b.json").write_text(json.dumps([[0.0, 0.0]] * 68))
+    with pytest.raises(InputError, match="2D image landmarks"):
+        load_landmarks(tmp_path / "b.json")
+    (tmp_path / "c.json").write_text(json.dumps([[0.0, 0.0, 0.0]] * 51))
+    with pytest.raises(InputError, match="the ibug68 scheme has 68 points, got 51"):
+        load_landmarks(tmp_path / "c.json", scheme="ibug68")
+    with pytest.raises(InputError, match="not named FDPs"):
+        load_landmarks(tmp_path / "c.json", scheme="fdp")
+    (tmp_path / "d.json").write_text(json.dumps({"3.7": [0, 0, 0]}))
+    with pytest.raises(InputError, match="not the ibug51 scheme"):
+        load_landmarks(tmp_path / "d.json", scheme="ibug51")
+    (tmp_path / "e.pts").write_text("version: 1\nn_points: 68\n{\n1 2 3\n}\n")
+    with pytest.raises(InputError, match="n_points says 68 but the file has 1 points"):
+        load_landmarks(tmp_path / "e.pts")
+    P = np.zeros((68, 3))
+    P[40, 1] = np.nan
+    with pytest.raises(InputError, match="point 40 is not 3 finite numbers"):
+        landmarks_from_scheme(P)
+    with pytest.raises(InputError, match="scheme"):
+        load_landmarks(tmp_path / "d.json", scheme="ibug49")

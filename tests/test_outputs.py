@@ -80,9 +80,36 @@ def test_second_run_on_one_out_is_refused(built, tmp_path, capsys):
         assert "another facewarp run is writing it" in err and str(tmp_path / "o") in err
     finally:
         proc.send_signal(signal.SIGTERM)
-        proc.communicate(timeout=60)
-    assert proc.returncode == 143
+        _, first_err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, first_err
     assert not (tmp_path / "o").exists() and _leftovers(tmp_path) == []
+
+
+def test_signal_inside_an_import_is_raised_after_it(tmp_path, monkeypatch):
+    """A SIGTERM that lands while a module is imported: a compiled module's init (NumPy's
+    ``import_array`` in SciPy's and others') turns any exception into ``ImportError: ... failed to
+    import``, which made an interrupted run exit 1 (an internal error) instead of 143 when the
+    signal came during the job's first imports (test_second_run_on_one_out_is_refused under load).
+    The interrupt is raised once the import is over, as an Interrupted."""
+    import importlib
+    import threading
+
+    outputs = importlib.import_module("facewarp." + "_src.core.outputs")  # spelled apart: a unit test of a part
+    Interrupted, signals_as_exceptions = outputs.Interrupted, outputs.signals_as_exceptions
+
+    (tmp_path / "fw_like_import_array.py").write_text(
+        "import time\ntry:\n    time.sleep(0.6)\nexcept BaseException:\n"
+        "    raise ImportError('numpy.core.multiarray failed to import')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with signals_as_exceptions():
+        timer = threading.Timer(0.2, lambda: os.kill(os.getpid(), signal.SIGTERM))
+        timer.start()
+        with pytest.raises(Interrupted) as e:
+            importlib.import_module("fw_like_import_array")
+            time.sleep(5)  # the retry raises it here, right after the import
+        timer.join()
+    assert e.value.signum == signal.SIGTERM and "fw_like_import_array" in sys.modules
+    sys.modules.pop("fw_like_import_array", None)
 
 
 def test_failed_run_leaves_nothing_and_existing_output_is_kept(built, tmp_path, capsys):

@@ -105,10 +105,12 @@ def test_shell_examples_parse(line):
 def test_required_and_optional_in_usage_lines():
     """The usage lines mark exactly the required options without brackets (from the parser)."""
     block = reference()
-    for name, p in commands(build_parser()):
+    top = build_parser()
+    glob = {a.dest for a in top._actions}  # the global options, accepted after the command too
+    for name, p in commands(top):
         line = next(ln for ln in block.splitlines() if ln.startswith(f"facewarp {name} "))
         for a in p._actions:
-            if not a.option_strings or a.dest == "help":
+            if not a.option_strings or a.dest == "help" or a.dest in glob:
                 continue
             flag = max(a.option_strings, key=len)
             bracketed = f"[{flag}" in line

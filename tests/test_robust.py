@@ -8,7 +8,7 @@ import pytest
 
 import facewarp as fw
 from facewarp import SimulationError
-from facewarp.physics import VOLUME_FLOOR
+from facewarp.physics import VOLUME_FLOOR, select_solver
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +165,7 @@ def test_springs_on_cuda_for_a_cpu_model_are_refused():
     import warp as wp
 
     from conftest import grid_tets
-    from facewarp.physics import ModelBuilder, SolverImplicit, Springs
+    from facewarp.physics import ModelBuilder, Springs
 
     V, T = grid_tets(2, 1, 1)
     model = ModelBuilder(V, T, material="physical").finalize("cpu")
@@ -180,9 +180,9 @@ def test_springs_on_cuda_for_a_cpu_model_are_refused():
             pass
 
     with pytest.raises(fw.InputError, match="springs\\[0\\].node: a Warp array on cuda:0, but the model is on cpu"):
-        SolverImplicit(model, stages=[Stage()])
+        select_solver(model, stages=[Stage()])
     cuda_state = ModelBuilder(V, T, material="physical").finalize("cuda:0").state()
-    solver = SolverImplicit(model)
+    solver = select_solver(model)
     with pytest.raises(fw.InputError, match="state_in.positions: a Warp array on cuda:0"):
         solver.step(cuda_state, model.state(), model.control(), 0.01)
 

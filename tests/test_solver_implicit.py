@@ -15,7 +15,7 @@ import pytest
 
 from conftest import grid_tets
 from facewarp import InputError, SimulationError
-from facewarp.physics import (MaterialPhysical, MaterialThesis, ModelBuilder, SolverImplicit, SolverVerlet,
+from facewarp.physics import (MaterialPhysical, select_solver, MaterialThesis, ModelBuilder, SolverImplicit, SolverVerlet,
                               StepPotential, isotropic_moduli, linear_stiffness, material_profile, simulate,
                               stable_dt)
 
@@ -147,7 +147,7 @@ def test_bad_material_is_an_input_error(kwargs, match):
 def test_bad_step_arguments_are_input_errors():
     V, T = grid_tets(1, 1, 1)
     model = ModelBuilder(V, T, material="physical").finalize("cpu")
-    solver = SolverImplicit(model)
+    solver = select_solver(model)
     a, b, c = model.state(), model.state(), model.control()
     for dt in (0.0, -1.0, float("nan")):
         with pytest.raises(InputError, match="dt must be a positive number"):
@@ -155,13 +155,13 @@ def test_bad_step_arguments_are_input_errors():
     with pytest.raises(InputError, match="different State buffers"):
         solver.step(a, a, c, 0.01)
     with pytest.raises(InputError, match="method"):
-        SolverImplicit(model, method="jacobi")
+        select_solver(model, method="jacobi")
     with pytest.raises(InputError, match="tolerance"):
-        SolverImplicit(model, tolerance=-1.0)
+        select_solver(model, tolerance=-1.0)
     with pytest.raises(InputError, match="rounds"):
-        SolverImplicit(model, method="newton-pcg", rounds=0)
+        select_solver(model, method="newton-pcg", rounds=0)
     with pytest.raises(InputError, match="linear_iterations"):
-        SolverImplicit(model, method="newton-pcg", linear_iterations=0)
+        select_solver(model, method="newton-pcg", linear_iterations=0)
 
 
 def test_solver_implicit_makes_the_class_of_its_method_and_refuses_foreign_options():
@@ -169,17 +169,17 @@ def test_solver_implicit_makes_the_class_of_its_method_and_refuses_foreign_optio
 
     V, T = grid_tets(1, 1, 1)
     model = ModelBuilder(V, T, material="physical").finalize("cpu")
-    host, device = SolverImplicit(model), SolverImplicit(model, method="newton-pcg")
+    host, device = select_solver(model), select_solver(model, method="newton-pcg")
     assert type(host) is SolverHostImplicit and host.method == "lbfgs" and isinstance(host, SolverImplicit)
     assert type(device) is SolverDeviceNewtonPCG and device.method == "newton-pcg" and isinstance(device, SolverImplicit)
-    assert SolverImplicit(model, method="newton").method == "newton"
+    assert select_solver(model, method="newton").method == "newton"
     # each class takes its own options only, and says whose an option is
-    for cls, kw, name in ((SolverImplicit, dict(method="newton-pcg", history=4), "history"),
-                          (SolverImplicit, dict(method="newton-pcg", spring_tolerance=1e-3), "spring_tolerance"),
-                          (SolverImplicit, dict(linear_iterations=3), "linear_iterations"),
+    for cls, kw, name in ((select_solver, dict(method="newton-pcg", history=4), "history"),
+                          (select_solver, dict(method="newton-pcg", spring_tolerance=1e-3), "spring_tolerance"),
+                          (select_solver, dict(linear_iterations=3), "linear_iterations"),
                           (SolverHostImplicit, dict(rounds=2), "rounds"),
                           (SolverDeviceNewtonPCG, dict(backend="splu"), "backend"),
-                          (SolverImplicit, dict(tolerances=1e-3), "tolerances")):
+                          (select_solver, dict(tolerances=1e-3), "tolerances")):
         with pytest.raises(InputError, match=f"^{name}: not an option of") as e:
             cls(model, **kw)
         assert "\n" not in str(e.value)
@@ -196,14 +196,14 @@ def test_cg_iterations_grow_with_the_square_root_of_the_node_count():
     assert [default_linear_iterations(n) for n in (2448, 9470, 36930, 146450)] == [10, 10, 19, 38]
     V, T = grid_tets(1, 1, 1)
     model = ModelBuilder(V, T, material="physical").finalize("cpu")
-    assert SolverImplicit(model, method="newton-pcg").linear_iterations == 10
-    assert SolverImplicit(model, method="newton-pcg", linear_iterations=3).linear_iterations == 3
+    assert select_solver(model, method="newton-pcg").linear_iterations == 10
+    assert select_solver(model, method="newton-pcg", linear_iterations=3).linear_iterations == 3
 
 
 def test_nan_control_is_a_simulation_error_not_a_nan_frame():
     V, T = grid_tets(1, 1, 1)
     model = ModelBuilder(V, T, material="physical").finalize("cpu")
-    solver = SolverImplicit(model)
+    solver = select_solver(model)
     a, b, c = model.state(), model.state(), model.control()
     f = np.zeros((len(V), 3), np.float32)
     f[0] = np.nan
@@ -306,7 +306,7 @@ def test_kernels_evaluate_the_reference_potential(method, material):
     held[[9, 11]] = True
     b = ModelBuilder(V, T, layer=layers(V), fixed=bottom, held=held, material=material)
     model = b.finalize("cpu")
-    solver = SolverImplicit(model, method=method)
+    solver = select_solver(model, method=method)
     state, control = model.state(), model.control()
     Xn, Xp = perturbed(V, 0.03, 1), perturbed(V, 0.03, 2)
     Xn[bottom] = Xp[bottom] = V[bottom]
@@ -339,7 +339,7 @@ def test_kernels_evaluate_the_reference_potential(method, material):
 def test_rest_stays_at_rest(method):
     V, T = grid_tets(2, 2, 1)
     model = ModelBuilder(V, T, layer=layers(V), fixed=np.isclose(V[:, 2], 0.0), material="physical").finalize("cpu")
-    solver = SolverImplicit(model, method=method)
+    solver = select_solver(model, method=method)
     a, b, c = model.state(), model.state(), model.control()
     for _ in range(5):
         solver.step(a, b, c, 1 / 30)
@@ -352,7 +352,7 @@ def test_momentum_is_conserved_without_fixed_nodes_and_damping():
     V, T = grid_tets(2, 1, 1)
     model = ModelBuilder(V, T, layer=layers(V), material=MaterialPhysical(damping_rate=0.0, stiffness_damping=0.0),
                          ).finalize("cpu")
-    solver = SolverImplicit(model, tolerance=1e-9, max_iterations=200)
+    solver = select_solver(model, tolerance=1e-9, max_iterations=200)
     m = model.vertex_mass.numpy().astype(np.float64)
     h = 1e-3
     a, b, c = model.state(), model.state(), model.control()
@@ -376,7 +376,7 @@ def test_damping_acts_on_velocity_relative_to_the_cranium():
     u = np.array([0.05, -0.02, 0.01], np.float32)
     h = 1 / 30
     for cranium, expect_kept in ((u, True), (np.zeros(3, np.float32), False)):
-        for solver in (SolverImplicit(model, tolerance=1e-9), SolverVerlet(model)):
+        for solver in (select_solver(model, tolerance=1e-9), SolverVerlet(model)):
             a, b, c = model.state(), model.state(), model.control()
             c.cranium_velocity.assign(np.array([cranium, [0, 0, 0]], np.float32))
             dt = h if isinstance(solver, SolverImplicit) else 1e-4
@@ -414,7 +414,7 @@ def test_static_shape_independent_of_steps_per_frame_and_equal_to_verlet(materia
     frame = 1 / 30
     shapes = []
     for steps in (1, 2, 4, 8):
-        solver = SolverImplicit(model, tolerance=1e-9)
+        solver = select_solver(model, tolerance=1e-9)
         a, s, c = model.state(), model.state(), model.control()
         c.external_force.assign(f)
         for _ in range(6 * steps):
@@ -442,7 +442,7 @@ def test_newton_pcg_reaches_the_direct_solution(material):
     for label, method, kw in (("lbfgs", "lbfgs", dict(tolerance=1e-9)),
                               ("fixed", "newton-pcg", dict(iterations=4, linear_iterations=100)),
                               ("adaptive", "newton-pcg", dict(tolerance=1e-7, linear_iterations=100))):
-        solver = SolverImplicit(model, method=method, **kw)
+        solver = select_solver(model, method=method, **kw)
         a, s, c = model.state(), model.state(), model.control()
         c.external_force.assign(f)
         for _ in range(3):
@@ -463,7 +463,7 @@ def test_newton_pcg_reaches_the_direct_solution(material):
 def test_interactive_mode_runs_a_fixed_iteration_count():
     V, b, f = loaded_slab()
     model = b.finalize("cpu")
-    solver = SolverImplicit(model, iterations=2)
+    solver = select_solver(model, iterations=2)
     a, s, c = model.state(), model.state(), model.control()
     c.external_force.assign(f)
     for _ in range(4):
@@ -516,7 +516,7 @@ def test_volume_barrier_gradient_and_kernels_match_the_reference(ratio):
     np.testing.assert_allclose(G, FD, rtol=1e-5, atol=1e-6 * np.abs(FD).max(), err_msg="barrier gradient")
     H = P.hessian(X, data).toarray()
     assert np.linalg.eigvalsh(H).min() > -1e-9 * np.abs(H).max()
-    solver = SolverImplicit(model)
+    solver = select_solver(model)
     state, control = model.state(), model.control()
     state.positions.assign(V.astype(np.float32))
     state.prev_positions.assign(V.astype(np.float32))
@@ -541,7 +541,7 @@ def test_a_crushed_tet_stays_above_the_volume_floor():
     model = b.finalize("cpu")
     k = float(model.tet_k.numpy()[0])
     height = V[3, 2]
-    solver = SolverImplicit(model)
+    solver = select_solver(model)
     a, c, control = model.state(), model.state(), model.control()
     f = np.zeros((4, 3), np.float32)
     f[3, 2] = -5.0 * k / height
@@ -561,7 +561,7 @@ def test_last_converged_tells_a_solve_cut_short():
     V, b, f = loaded_slab()
     model = b.finalize("cpu")
     for kw, want in (({"max_iterations": 1, "tolerance": 1e-12}, False), ({}, True), ({"iterations": 1}, True)):
-        solver = SolverImplicit(model, **kw)
+        solver = select_solver(model, **kw)
         a, s, c = model.state(), model.state(), model.control()
         c.external_force.assign(f)
         solver.step(a, s, c, 1 / 30)
@@ -575,7 +575,7 @@ def _crushed_tet_run(step_bound: bool):
     b = ModelBuilder(V, T, material="physical", fixed=fixed, k0_outer=0.0, k0_inner=0.0, k0_cross=0.0, k_area=0.0)
     model = b.finalize("cpu")
     k = float(model.tet_k.numpy()[0])
-    solver = SolverImplicit(model)
+    solver = select_solver(model)
     solver.step_bound = step_bound
     a, c, control = model.state(), model.state(), model.control()
     f = np.zeros((4, 3), np.float32)

@@ -150,3 +150,29 @@ def test_edge_crossings_detects_intersection():
 def test_no_self_intersections(level):
     t = default_template(level)
     assert _edge_crossings(t.vertices, t.faces) == 0
+
+
+def test_ibug68_template_places_match_the_ict_head(ict_dir):
+    """IBUG68_TEMPLATE again from its source: the default template adapted to the ICT-FaceKit neutral
+    head with its 12 FDPs, each of ICT's 68 landmark vertices' closest point on the adapted surface
+    taken back to the template's rest shape."""
+    import json
+
+    import facewarp as fw
+    from facewarp.adaptation import adapt
+
+    n = 11248
+    ict = fw.load_mesh(ict_dir / "generic_neutral_mesh.obj", units="cm")
+    V, F = ict.vertices[:n], ict.faces[(ict.faces < n).all(axis=1)]
+    idx = json.loads((ict_dir / "vertex_indices.json").read_text())["idx_to_landmark_verts"]
+    t = fw.default_template(0)
+    tl = t.landmarks()
+    res = adapt(t.vertices, t.faces, {k: tl[k] for k in fw.ICT_FDP_VERTICES}, V, F,
+                {k: V[i] for k, i in fw.ICT_FDP_VERTICES.items()})
+    cp = fw.MeshQuery(res.vertices_scan_frame, t.faces).closest_point(V[idx])
+    P = np.einsum("kj,kjd->kd", cp.bary, t.vertices[t.faces[cp.face]])
+    np.testing.assert_allclose(fw.IBUG68_TEMPLATE, P, atol=0.2e-3, err_msg="IBUG68_TEMPLATE vs its source")
+    assert fw.IBUG68_TEMPLATE.shape == (68, 3)
+    # mirror symmetry of the scheme on the (symmetric) template: point 0 <-> 16, 36 <-> 45, 48 <-> 54
+    for a, b in ((0, 16), (36, 45), (48, 54), (17, 26)):
+        np.testing.assert_allclose(fw.IBUG68_TEMPLATE[a] * [-1, 1, 1], fw.IBUG68_TEMPLATE[b], atol=3e-3)

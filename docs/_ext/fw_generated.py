@@ -170,8 +170,8 @@ def cli_markdown() -> str:
         out += ["```text", p.format_usage().strip(), "```", ""]
         rows = []
         for a in p._actions:
-            if isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)):
-                continue
+            if isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)) or a.default is argparse.SUPPRESS:
+                continue  # (SUPPRESS: the global options a command accepts too, listed once under `facewarp`)
             name = ", ".join(a.option_strings) if a.option_strings else (a.metavar or a.dest)
             if a.option_strings and a.nargs != 0 and a.metavar:
                 name += f" {a.metavar}" if isinstance(a.metavar, str) else ""

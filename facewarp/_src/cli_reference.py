@@ -1,11 +1,15 @@
 """The command reference of ``docs/commands.md``, generated from the ``facewarp`` argument parser.
 
 The block between ``<!-- cli-reference:begin -->`` and ``<!-- cli-reference:end -->`` in
-README.md is :func:`reference` (a usage line per command, then a table of every option with
-whether it is required, its default and its values or bounds); ``tests/test_readme_cli.py``
-fails when it is out of date. Rewrite it with::
+docs/commands.md is :func:`reference` (plain Markdown, read on GitHub as in the built docs): a
+usage line per command, the global options, then a section per command (its heading is the
+anchor every ``--help`` links to) with a table of its arguments (required, default, values or
+bounds, meaning), its notes and its example. ``tests/test_readme_cli.py`` fails when the block is
+out of date. Rewrite it with::
 
     python -m facewarp._src.cli_reference docs/commands.md
+
+This module imports the parser (``facewarp._src.cli``); nothing there imports this one.
 """
 
 from __future__ import annotations
@@ -15,41 +19,18 @@ import re
 import sys
 from pathlib import Path
 
+from .cli import build_parser, leaf_commands
+from .cli.common import command_options, docs_link
+
 __all__ = ["BEGIN", "END", "commands", "reference", "update_readme"]
 
 BEGIN = "<!-- cli-reference:begin (generated from the parser: python -m facewarp._src.cli_reference docs/commands.md) -->"
 END = "<!-- cli-reference:end -->"
 
 
-def _subparsers(p: argparse.ArgumentParser):
-    for a in p._actions:
-        if isinstance(a, argparse._SubParsersAction):
-            return a
-    return None
-
-
 def commands(parser: argparse.ArgumentParser | None = None) -> list[tuple[str, argparse.ArgumentParser]]:
     """(``"adapt"``, its parser), (``"template export"``, ...) for every leaf command, in order."""
-    if parser is None:
-        from .cli import build_parser
-
-        parser = build_parser()
-    out = []
-
-    def walk(prefix: str, p: argparse.ArgumentParser):
-        sub = _subparsers(p)
-        if sub is None:
-            out.append((prefix, p))
-            return
-        for name, child in sub.choices.items():
-            walk(f"{prefix} {name}".strip(), child)
-
-    walk("", parser)
-    return out
-
-
-def _options(p: argparse.ArgumentParser) -> list[argparse.Action]:
-    return [a for a in p._actions if not isinstance(a, (argparse._HelpAction, argparse._SubParsersAction))]
+    return leaf_commands(parser if parser is not None else build_parser())
 
 
 def _metavar(a: argparse.Action) -> str:
@@ -63,7 +44,9 @@ def _metavar(a: argparse.Action) -> str:
 def _usage_item(a: argparse.Action) -> str:
     if not a.option_strings:  # positional
         text = _metavar(a)
-        return f"{text} [{text} ...]" if a.nargs == "+" else text
+        if a.nargs == "+":
+            return f"{text} [{text} ...]"
+        return f"[{text} ...]" if a.nargs == "*" else text
     flag = max(a.option_strings, key=len)
     text = flag if a.nargs == 0 else f"{flag} {_metavar(a)}"
     return text if a.required else f"[{text}]"
@@ -80,6 +63,8 @@ def _default(a: argparse.Action) -> str:
     if a.default is None:
         m = _DEFAULT_TEXT.search(a.help or "")
         return m.group(1).strip() if m else "none"
+    if isinstance(a.default, (tuple, list)):
+        return ",".join(str(v) for v in a.default)
     return f"{a.default:g}" if isinstance(a.default, float) else str(a.default)
 
 
@@ -95,29 +80,86 @@ def _values(a: argparse.Action) -> str:
     return m.group(1) if m else ""
 
 
-def reference(parser: argparse.ArgumentParser | None = None) -> str:
-    """The generated README block (without the marker lines)."""
-    from .cli import build_parser
+def _cell(text) -> str:
+    return " ".join(str(text).split()).replace("|", "\\|")
 
+
+def _name(a: argparse.Action) -> str:
+    if not a.option_strings:
+        return f"`{_metavar(a)}`"
+    flag = max(a.option_strings, key=len)
+    return f"`{flag}`" if a.nargs == 0 else f"`{flag} {_metavar(a)}`"
+
+
+def _required(a: argparse.Action) -> str:
+    return "yes" if a.required or (not a.option_strings and a.nargs not in ("?", "*")) else "no"
+
+
+def _table(actions: list[argparse.Action]) -> list[str]:
+    rows = ["| argument | required | default | values | meaning |", "|---|---|---|---|---|"]
+    for a in actions:
+        rows.append(f"| {_cell(_name(a))} | {_required(a)} | {_cell(_default(a))} | {_cell(_values(a))} | "
+                    f"{_cell(a.help or '')} |")
+    return rows
+
+
+def _helps(parser: argparse.ArgumentParser) -> dict[str, str]:
+    """Command name -> its one-line help, from the parent's command list."""
+    out = {}
+
+    def walk(prefix: str, p: argparse.ArgumentParser):
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                helps = {c.dest: c.help for c in a._choices_actions}
+                for name, child in a.choices.items():
+                    full = f"{prefix} {name}".strip()
+                    out[full] = helps.get(name) or ""
+                    walk(full, child)
+
+    walk("", parser)
+    return out
+
+
+def _notes(p: argparse.ArgumentParser) -> list[str]:
+    """The command's epilog: a paragraph, or a text block when it is laid out in lines."""
+    if getattr(p, "_epilog_factory", None) is not None:
+        p.epilog, p._epilog_factory = p._epilog_factory(), None
+    if not p.epilog:
+        return []
+    if any(line.startswith(" ") for line in p.epilog.splitlines()[1:]):
+        return ["```text", p.epilog.rstrip(), "```", ""]
+    return [" ".join(p.epilog.split()), ""]
+
+
+def reference(parser: argparse.ArgumentParser | None = None) -> str:
+    """The generated block of docs/commands.md (without the marker lines)."""
     top = parser or build_parser()
     cmds = commands(top)
-    glob = _options(top)
-    lines = ["```", "facewarp " + " ".join(_usage_item(a) for a in glob) + " COMMAND ...", ""]
+    helps = _helps(top)
+    glob = command_options(top)
+    lines = ["```text", "facewarp " + " ".join(_usage_item(a) for a in glob) + " COMMAND ...", ""]
     for name, p in cmds:
-        lines.append(f"facewarp {name} " + " ".join(_usage_item(a) for a in _options(p)))
-    lines += ["```", "", "| command | option | required | default | values |", "|---|---|---|---|---|"]
-    for a in glob:
-        lines.append(f"| (all) | `{max(a.option_strings, key=len)}` | no | {_default(a)} | {_values(a)} |")
+        lines.append(f"facewarp {name} " + " ".join(_usage_item(a) for a in command_options(p)))
+    lines += ["```", "", "### Global options", "",
+              "Accepted before the command (`facewarp --device cuda simulate ...`) or after it "
+              "(`facewarp simulate ... --device cuda`); `facewarp --version` prints the version, a bare `facewarp` "
+              "the list of commands.", "", *_table(glob), ""]
     for name, p in cmds:
-        for a in _options(p):
-            opt = f"`{max(a.option_strings, key=len)}`" if a.option_strings else f"`{_metavar(a)}`"
-            req = "yes" if a.required or (not a.option_strings and a.nargs != "?") else "no"
-            lines.append(f"| {name} | {opt} | {req} | {_default(a)} | {_values(a)} |")
-    return "\n".join(lines)
+        example = p.example_and_link()[0] if hasattr(p, "example_and_link") else None
+        lines += [f"### facewarp {name}", "", _cell(helps.get(name, "")), "",
+                  *_table(command_options(p)), "", *_notes(p)]
+        if example:
+            lines += ["```bash", example, "```", ""]
+    return "\n".join(lines).rstrip()
+
+
+def anchors(parser: argparse.ArgumentParser | None = None) -> dict[str, str]:
+    """Command name -> the docs link its ``--help`` ends with (``docs/commands.md#facewarp-rig``)."""
+    return {name: docs_link(f"facewarp {name}") for name, _ in commands(parser)}
 
 
 def update_readme(path: str | Path) -> bool:
-    """Rewrite the generated block of the README at ``path``; True when it changed."""
+    """Rewrite the generated block of the page at ``path``; True when it changed."""
     path = Path(path)
     text = path.read_text()
     i, j = text.index(BEGIN) + len(BEGIN), text.index(END)

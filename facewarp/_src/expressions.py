@@ -32,6 +32,8 @@ from .core.errors import InputError
 
 __all__ = [
     "MUSCLES",
+    "muscle_base",
+    "muscle_instances",
     "PRESETS",
     "JAW_U_MAX",
     "JAW_V_MAX",
@@ -67,6 +69,44 @@ MUSCLES: tuple[str, ...] = (
     "orbicularis_oculi",  # 14
 )
 """Table 6.2 muscles in the thesis's numbering (index + 1 = muscle no.)."""
+
+def muscle_base(name: str, *, what: str | None = "muscles") -> str:
+    """The Table 6.2 muscle ``name`` refers to: the name itself (a bare name means both sides) or,
+    for ``NAME_L`` / ``NAME_R`` (one side), ``NAME``. The one muscle-name rule of every input that
+    takes muscle names (``--muscles``, ``--activations``, sequence files, rigs); see
+    :func:`muscle_instances` for the names of a built head.
+
+    Raises:
+        InputError: ``name`` is no Table 6.2 muscle, alone or with a side.
+    """
+    key = str(name).strip()
+    base = key[:-2] if key.endswith(("_L", "_R")) else key
+    if base not in MUSCLES:
+        raise InputError(f"{what + ': ' if what else ''}unknown muscle {key!r} (a Table 6.2 name means both sides, "
+                         f"NAME_L or NAME_R one side; known: {', '.join(MUSCLES)})")
+    return base
+
+
+def muscle_instances(name: str, instances, *, what: str = "muscles") -> list[str]:
+    """The muscle instances of a head that ``name`` means, by :func:`muscle_base`'s rule: the
+    instance of that name (``"zygomatic_major_L"``, an unpaired ``"orbicularis_oris"``), else both
+    sides (``"zygomatic_major"`` -> ``["zygomatic_major_L", "zygomatic_major_R"]``), in
+    ``instances`` order.
+
+    Args:
+        name: A muscle name as a user wrote it.
+        instances: The head's muscle instance names (M,), e.g. ``FaceSimulator.muscle_names``.
+
+    Raises:
+        InputError: ``name`` means no instance of ``instances``.
+    """
+    key = str(name).strip()
+    hits = [n for n in instances if n == key] or [n for n in instances if n.endswith(("_L", "_R")) and n[:-2] == key]
+    if not hits:
+        raise InputError(f"{what}: unknown muscle {key!r} (a Table 6.2 name means both sides, NAME_L or NAME_R one "
+                         f"side; known: {', '.join(sorted(set(instances)))})")
+    return hits
+
 
 JAW_U_MAX = math.radians(60.0)
 JAW_V_MAX = math.radians(5.0)
@@ -143,9 +183,7 @@ class Expression:
             if self.jaw_u == 0.0:
                 object.__setattr__(self, "jaw_u", float(min(d / REFERENCE_JAW_LEVER, JAW_U_MAX)))
         for k, v in self.activations.items():
-            base = k[:-2] if k.endswith(("_L", "_R")) else k
-            if base not in MUSCLES:
-                raise InputError(f"expression {self.name!r}: unknown muscle {k!r} (known: {', '.join(MUSCLES)})")
+            muscle_base(k, what=f"expression {self.name!r}")
             if not (isinstance(v, (int, float)) and 0.0 <= float(v) <= 1.0):
                 raise InputError(f"expression {self.name!r}: activation of {k} must be in [0, 1], got {v!r}")
         if not 0.0 <= self.jaw_u <= JAW_U_MAX + 1e-9:

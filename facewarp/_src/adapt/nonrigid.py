@@ -131,6 +131,7 @@ def field_stage(prob, opts, X0: np.ndarray) -> tuple[np.ndarray, dict]:
         (vertices [m] (n, 3) float64, info dict).
     """
     from scipy.linalg import cho_factor, cho_solve, null_space
+    from scipy.linalg.blas import dsyrk as syrk
     from scipy.spatial.distance import cdist
 
     from .fp_search import farthest_points
@@ -178,18 +179,16 @@ def field_stage(prob, opts, X0: np.ndarray) -> tuple[np.ndarray, dict]:
             ok &= ~_on_boundary(prob.scan_q, cp)
             C = np.where(ok[:, None], cp.points, X[D])
             r = np.where(ok, np.einsum("kd,kd->k", ns, C - TV[D]), 0.0)
-            w = ok.astype(np.float64)
-            M = np.zeros((3 * k, 3 * k))
-            b = np.zeros(3 * k)
+            # point-to-plane rows n_i^T (G_i u_x, G_i u_y, G_i u_z) of the paired samples: B (pairs, 3k);
+            # the normal matrix B^T B by one symmetric rank-k update (BLAS syrk: half a product's work)
+            G_ok = G_D[ok]
+            B = np.concatenate([ns[ok, a, None] * G_ok for a in range(3)], axis=1)
+            M = syrk(1.0, B, trans=1, lower=0) if len(B) else np.zeros((3 * k, 3 * k))
+            M = np.triu(M) + np.triu(M, 1).T
+            b = (B.T @ r[ok]) if len(B) else np.zeros(3 * k)
             for a in range(3):
                 sa = slice(a * k, (a + 1) * k)
-                b[sa] = G_D.T @ (w * ns[:, a] * r) + b_fdp[:, a]
-                for c in range(a, 3):
-                    sc = slice(c * k, (c + 1) * k)
-                    blk = G_D.T @ ((w * ns[:, a] * ns[:, c])[:, None] * G_D)
-                    M[sa, sc] = blk
-                    if c != a:
-                        M[sc, sa] = blk.T
+                b[sa] += b_fdp[:, a]
                 M[sa, sa] += M_fdp
                 M[a * k:a * k + k - 4, a * k:a * k + k - 4] += gamma * Rg
             M[np.diag_indices_from(M)] += 1e-9 * float(np.mean(np.diag(M))) + 1e-300  # keeps an unconstrained direction finite

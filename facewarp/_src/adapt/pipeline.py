@@ -139,6 +139,16 @@ def adapt(
         InputError: A bad setting, an empty scan, too few / coplanar shared FDPs, a calibration
             scale that suggests mismatched units, or an FDP far off its surface.
     """
+    from .threads import single_blas_thread
+
+    with single_blas_thread():  # small dense algebra: OpenBLAS's threads only cost on a busy machine
+        return _adapt(template_V, template_F, template_landmarks, scan_V, scan_F, scan_landmarks, options=options,
+                      markers=markers, region=region, device=device, settings=settings)
+
+
+def _adapt(template_V, template_F, template_landmarks, scan_V, scan_F, scan_landmarks, *, options, markers, region,
+           device, settings) -> AdaptResult:
+    """:func:`adapt`'s body (one BLAS thread)."""
     t_start = time.perf_counter()
     opts = AdaptOptions.from_keywords(options, settings)
     # 1. calibration (Sec. 4.3.2)
@@ -167,6 +177,7 @@ def adapt(
         t0 = time.perf_counter()
         Vk, info = field_stage(prob, opts, Vk)
         refine_info.update(info)
+
         rec, de = prob.errors.record(records[-1].level + 1, "field", Vk, fp_count=len(fps),
                                      iterations=int(info["field_iterations"]), seconds=time.perf_counter() - t0)
         records.append(rec)

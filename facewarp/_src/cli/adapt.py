@@ -10,13 +10,19 @@ from .common import FacewarpError, Progress, emit, out_dir, whole_in
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    a = sub.add_parser("adapt", help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)",
+    a = sub.add_parser("adapt", example="facewarp adapt scan.ply --landmarks scan_landmarks.json --units mm --out head",
+                       help="fit the template to a range scan (calibration, RBF, multi-level CSRBF)",
                        epilog="Inputs are checked before the adaptation: scan and landmarks in the same units, at "
                               "least 4 FDPs shared with the template and not coplanar, every landmark near the scan "
                               "surface.")
     a.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
-    a.add_argument("--landmarks", type=Path, metavar="LM.json", help="FDPs on the scan (JSON or .pp), in --units (default: found on the "
-                   "scan as by `facewarp landmarks detect`, written to detected_landmarks.json)")
+    a.add_argument("--landmarks", type=Path, metavar="LM.json", help="landmarks on the scan, in --units: FDPs (JSON or .pp), or the "
+                   "68- or 51-point scheme (a JSON list of [x, y, z] or an iBUG .pts file: with the default template every "
+                   "point is used, else the points that mark an FDP; see --landmark-scheme) (default: found on the scan as by `facewarp landmarks detect`, "
+                   "written to detected_landmarks.json)")
+    a.add_argument("--landmark-scheme", choices=["auto", "fdp", "ibug68", "ibug51"], default="auto",
+                   help="scheme of --landmarks: auto (default: named FDPs, or a list of 68 or 51 points), fdp, ibug68 "
+                        "(iBUG 300-W / Multi-PIE order) or ibug51 (its 51 inner points); another scheme is an error")
     a.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     a.add_argument("--template", type=Path, metavar="DIR", help="template folder from `facewarp template export` (default: the built-in level 0)")
     a.add_argument("--template-mesh", type=Path, metavar="MESH", help="any template mesh with FDP landmarks (e.g. ICT-FaceKit neutral)")
@@ -66,7 +72,8 @@ def run(args):
     rep = adapt_files(args.scan, args.landmarks, args.out, template_dir=args.template, template_mesh=args.template_mesh,
                       template_landmarks=args.template_landmarks, method=args.method, levels=args.levels,
                       markers=args.markers, units=args.units, template_units=args.template_units,
-                      device=args.device, progress=prog, texture_size=args.texture_size)
+                      device=args.device, progress=prog, texture_size=args.texture_size,
+                      landmark_scheme=args.landmark_scheme)
     prog.close()
     last = rep["levels"][-1] if rep["levels"] else {}
     d = rep["distance_to_scan_m"]

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from ..core.limits import MAX_ADAPT_LEVELS, MAX_FPS, MAX_SECONDS
-from .common import FacewarpError, FrameBar, Parser, emit, fps, number, out_dir, seconds, whole_in
+from .common import FacewarpError, FrameBar, Parser, emit, muscle_list, fps, number, out_dir, path, seconds, whole_in
 
 
 # ----------------------------------------------------------------------------- options
@@ -15,8 +15,8 @@ def add_parser(sub) -> None:
     bt = sub.add_parser("batch", help="many scans through adapt, build, simulate and rig, in local processes or on Ray")
     btsub = bt.add_subparsers(dest="batch_command", metavar="ACTION", parser_class=Parser)
     btsub.required = True
-    br = btsub.add_parser(
-        "run", help="run every scan through the chosen steps; a manifest makes re-runs skip finished work",
+    br = btsub.add_parser("run", example="facewarp batch run scans/a.ply scans/b.ply --units mm --out batch --workers 2",
+                          help="run every scan through the chosen steps; a manifest makes re-runs skip finished work",
         epilog="Writes DIR/manifest.json (per scan: inputs with their SHA-256, each step's status, error, outputs, "
                "seconds and worker; rewritten atomically as tasks finish), DIR/scans/NAME-KEY/{adapt,build,simulate,rig}/, "
                "DIR/report.json and DIR/report.csv. A scan is known by its content: a re-run (or a renamed copy) "
@@ -24,12 +24,17 @@ def add_parser(sub) -> None:
                "(simulate and rig read the build: --steps rig alone rigs the builds in DIR). A scan's landmarks are looked for beside it (NAME_landmarks.json, "
                "NAME.landmarks.json, NAME.json, NAME.pp, landmarks.json), else found on the scan. Ray: "
                "pip install 'facewarp[ray]'; --ray alone starts a local Ray, --ray auto or --ray ray://HOST:10001 "
-               "joins a cluster (`ray start --head`; the scans and DIR on a file system every node sees).")
+               "joins a cluster (`ray start --head`; the scans and DIR on a file system every node sees). Every option "
+               "is checked before the first scan's adapt. Exit code: 0 every scan done; 1 some scans failed or are "
+               "incomplete (the summary line says which, report.csv why); 2 nothing could start (a bad option, "
+               "scan or --out, or --out held by another run); 130 / 143 interrupted (SIGINT / SIGTERM: the "
+               "finished steps, the manifest and the reports kept).")
     br.add_argument("scans", nargs="*", type=Path, metavar="SCANS", help="scan meshes (OBJ, PLY, STL, OFF, GLB, GLTF)")
     br.add_argument("--manifest", type=Path, metavar="IN.json",
                     help='the scans as a file: {"scans": ["a.obj", {"scan": "b.ply", "landmarks": "b.json", '
                          '"units": "mm", "name": "b"}]} (paths relative to the file), or a batch\'s manifest.json')
-    br.add_argument("--out", required=True, type=Path, metavar="DIR", help="batch folder (continued if it has a manifest)")
+    br.add_argument("--out", required=True, type=path, metavar="DIR",
+                    help="batch folder (continued if it has a manifest; locked while the batch runs)")
     br.add_argument("--steps", type=steps, default=("adapt", "build", "simulate"), metavar="adapt,build,simulate,rig",
                     help="the steps to run, in this order per scan (default adapt,build,simulate); rig: the build's "
                          "blendshape rig as `facewarp rig` bakes it (UsdSkel, glTF) into NAME-KEY/rig/")
@@ -43,9 +48,11 @@ def add_parser(sub) -> None:
                     help="the rig step's files rig.FORMAT, one bake written in each (default usdc,glb)")
     br.add_argument("--rig-inbetweens", type=whole_in(0, 8), default=0, metavar="K",
                     help="the rig step's in-between shapes per muscle (as `facewarp rig --inbetweens`; 0..8, default 0)")
-    br.add_argument("--rig-muscles", default=None, metavar="A,B,...",
+    br.add_argument("--rig-muscles", type=muscle_list, default=None, metavar="A,B,...",
                     help="the rig step bakes only these muscles (as `facewarp rig --muscles`; default all)")
-    br.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the scans and their landmarks")
+    br.add_argument("--units", choices=["mm", "cm", "m", "auto"], default=None,
+                    help="units of the scans and their landmarks, as `facewarp adapt --units`; default: m when a "
+                         "scan's extent is a plausible head in metres, else auto (the scale from the FDPs)")
     br.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                     help="run as Ray tasks: alone, on a local Ray started here; with auto, ray://HOST:10001 or "
                          "HOST:6379, on that cluster")
@@ -64,16 +71,16 @@ def add_parser(sub) -> None:
                     help="retries of a step whose worker process died (killed, out of memory), 0..100, default 2")
     br.add_argument("--retry-failed", action="store_true", help="run the steps that failed in an earlier run again")
     br.set_defaults(func=run_batch_run)
-    bs = btsub.add_parser(
-        "simulate", help="many built heads played together in one FaceBatch (one step, one CUDA graph per frame for all)",
+    bs = btsub.add_parser("simulate", example="facewarp batch simulate build_a build_b --expression laugh --out crowd",
+                          help="many built heads played together in one FaceBatch (one step, one CUDA graph per frame for all)",
         epilog="Writes DIR/head_KK.usdc (one USD animation per head, in the order given) and DIR/report.json "
                "(per head: status, error, frames sub-stepped; frames/s and head-frames/s of the batch). A head that fails (NaN, inverted tet even when sub-stepped) is frozen at its "
                "last good frame and reported; the others go on. --per-head FILE.json: {\"heads\": [\"smile\", "
-               "{\"expression\": \"laugh\"}, ...]}, one entry per BUILD_DIR.")
-    bs.add_argument("builds", nargs="+", type=Path, metavar="BUILD_DIR", help="`facewarp build` output folders")
+               "{\"expression\": \"laugh\"}, ...]}, one entry per BUILD.")
+    bs.add_argument("builds", nargs="+", type=Path, metavar="BUILD", help="`facewarp build` output folders")
     bs.add_argument("--expression", default="smile", metavar="NAME|sequence|FILE.json",
                     help="what every head plays (as `facewarp simulate --expression`; default smile)")
-    bs.add_argument("--per-head", type=Path, metavar="FILE.json", help="one expression per head (overrides --expression)")
+    bs.add_argument("--per-head", type=path, metavar="FILE.json", help="one expression per head (overrides --expression)")
     bs.add_argument("--seconds", type=seconds, metavar="S", default=2.0,
                     help=f"simulated time [s], > 0 and <= {MAX_SECONDS:g} (default 2)")
     bs.add_argument("--fps", type=fps, metavar="F", default=30.0,
@@ -83,7 +90,7 @@ def add_parser(sub) -> None:
                          "head.xml hinge body two-way coupled, one CPU MuJoCo per head stepped in a loop)")
     bs.add_argument("--stage", metavar="FILE.usda|FILE.usdc",
                     help="also DIR/FILE: one stage with every head as /Crowd/head_KK (referencing its file), side by side")
-    bs.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    bs.add_argument("--out", required=True, type=path, metavar="DIR", help="output folder")
     bs.set_defaults(func=run_batch_simulate, outputs=out_dir)
 
 
@@ -126,7 +133,7 @@ def run_batch_run(args):
              else scans_from_paths(args.scans, units=args.units))
     rep = run_batch(scans, args.out, steps=args.steps, expression=args.expression, seconds=args.seconds,
                     levels=args.levels, rig_formats=args.rig_formats, rig_inbetweens=args.rig_inbetweens,
-                    rig_muscles=[m for m in args.rig_muscles.split(",") if m] if args.rig_muscles else None,
+                    rig_muscles=args.rig_muscles,
                     device=args.device, ray=args.ray, workers=args.workers,
                     gpus_per_task=args.gpus_per_task, simulate_batch=args.simulate_batch,
                     max_retries=args.max_retries, retry_failed=args.retry_failed,
@@ -135,7 +142,8 @@ def run_batch_run(args):
     width = max([len(r["name"]) for r in rep["rows"]] + [4])
     lines = [f"batch of {rep['scans']} scans in {args.out} on {rep['executor']}: {rep['done']} done, "
              f"{rep['failed']} failed, {rep['incomplete']} incomplete ({rep['tasks_run']} steps run, "
-             f"{rep['tasks_kept']} kept from earlier runs) in {rep['seconds']:.1f} s",
+             f"{rep['tasks_kept']} kept from earlier runs) in {rep['seconds']:.1f} s: {rep['outcome']} "
+             f"(exit {rep['exit_code']})",
              f"  {'scan':<{width}}  " + "  ".join(f"{c + ' [s]':>12}" for c in cols) + "  status"]
     shown = rep["rows"][:50]
     for r in shown:
@@ -156,6 +164,7 @@ def run_batch_run(args):
                      f"step together: {'; '.join(g['fallback_errors'])})")
     lines.append(f"  wrote {rep['manifest']}, {rep['report']}, {rep['report_csv']}")
     emit(args, rep, lines)
+    return rep["exit_code"]
 
 
 def run_batch_simulate(args):

@@ -10,8 +10,9 @@ from .common import MAX_TEMPLATE_LEVEL, Progress, emit, out_dir, whole_in
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    b = sub.add_parser("build", help="skin tetrahedra, muscles and boundary conditions of a head (Sec. 6.2-6.3)")
-    b.add_argument("head", help="a `template export` folder, an `adapt` output folder, or 'default[:LEVEL]' "
+    b = sub.add_parser("build", example="facewarp build head --out build",
+                       help="skin tetrahedra, muscles and boundary conditions of a head (Sec. 6.2-6.3)")
+    b.add_argument("head", metavar="HEAD", help="a `template export` folder, an `adapt` output folder, or 'default[:LEVEL]' "
                                 f"(LEVEL 0..{MAX_TEMPLATE_LEVEL}, default 0)")
     b.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     b.add_argument("--layers", type=whole_in(1, MAX_LAYERS), metavar="N", default=1,

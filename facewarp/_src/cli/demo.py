@@ -10,7 +10,8 @@ from .common import StageBar, emit, frame_stats_lines, out_dir, seconds, whole_i
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    d = sub.add_parser("demo", help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "
+    d = sub.add_parser("demo", example="facewarp demo --out demo",
+                       help="the whole main job on built-in data: synthetic scan -> adaptation -> anatomy -> "
                                     "the Fig. 6.16 sequence -> USD, MuJoCo head, pictures",
                        epilog="Writes DIR/animation.usdc, DIR/head.xml, DIR/scene.xml, DIR/report.json, DIR/adapted_head.png, "
                               "DIR/expressions.png, DIR/sequence.gif and the intermediate folders scan/, adapt/, "

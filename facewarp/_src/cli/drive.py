@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .common import FrameBar, emit, fps, out_dir_or_usd
+from .common import FrameBar, emit, fps, out_dir_or_usd, progress_lines
 
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    dr = sub.add_parser(
-        "drive", help="drive a `build` output from data: muscle activations and jaw solved per frame from markers, "
+    dr = sub.add_parser("drive", example="facewarp drive build --arkit take.csv --out take.usdc",
+                        help="drive a `build` output from data: muscle activations and jaw solved per frame from markers, "
                       "or ARKit curves through the head's ARKit table",
         epilog="Formats (docs: guides/driving): markers JSON {\"fps\": 30, \"units\": \"mm\", \"markers\": "
                "{\"2.1\": [[x, y, z], null, ...], \"v123\": [...]}}; markers CSV: time (s) or frame column, then "
@@ -44,8 +44,10 @@ def add_parser(sub) -> None:
 def run(args):
     from ..jobs.drive import drive_files
 
-    bar = FrameBar(not args.json)
-    table_bar = FrameBar(not args.json, desc="ARKit table (once per build)", unit="shape")
+    writer = progress_lines("drive", "reading the take and the build (the first run on a machine compiles Warp's "
+                                    "kernels)", not args.json)  # off a terminal: one writer for both bars
+    bar = FrameBar(not args.json, lines=writer)
+    table_bar = FrameBar(not args.json, desc="ARKit table (once per build)", unit="shape", lines=writer)
     try:
         rep = drive_files(args.build, args.out, markers=args.markers, arkit=args.arkit, mediapipe=args.mediapipe,
                           map=args.map, units=args.units, fps=args.fps, rigid=not args.no_rigid, device=args.device,
@@ -53,6 +55,8 @@ def run(args):
     finally:
         table_bar.close()
         bar.close()
+        if writer is not None:
+            writer.close()
     lines = [f"drove {args.build} from {rep['source']} ({rep['kind']}): {rep['frames']} frames at {rep['fps']:g} fps "
              f"in {rep['seconds']:.1f} s on {rep['device']}"]
     e = rep.get("error_mm")
@@ -62,13 +66,23 @@ def run(args):
         lines.append(f"  distance {what}: RMS {e['rms']:.2f} mm, max {e['max']:.2f} mm"
                      + (f" (worst point {worst[1]}: RMS {worst[0]:.2f} mm)" if worst[1] is not None else ""))
     if rep.get("table"):
-        lines.append(f"  ARKit table {rep['table']['file']}" + (" (cached)" if rep["table"]["from_cache"] else
-                                                                 " (built now, cached for later runs)"))
+        t = rep["table"]
+        lines.append(f"  ARKit table {t['file']}" + (" (cached)" if t["from_cache"] else
+                                                     " (built now, cached for later runs)" if t.get("cached", True)
+                                                     else " (built now, not cached: see the note)"))
+    reach = rep.get("reach", [])
+    for r in reach[:8]:  # each ARKit shape the take uses: what reaches it and how closely
+        lines.append(f"  reach {r['name']}: {r['by']}" + (f", {r['residual_mm']:.2f} mm RMS from its shape "
+                                                          f"({r['target_mm']:.2f} mm)" if r["residual_mm"] is not None else ""))
+    if len(reach) > 8:
+        lines.append(f"  ... {len(reach) - 8} more shapes' reach in report.json")
+    warnings = rep.get("warnings", [])
+    lines += [f"  warning: {w}" for w in warnings]
     hm = rep.get("head_motion")
     if hm:
         lines.append(f"  head motion removed by a fit of {len(hm['stable_points'])} stable points"
                      + (f" ({hm['frames_held']} frames held the pose before them)" if hm["frames_held"] else ""))
-    notes = rep.get("notes", [])
+    notes = [n for n in rep.get("notes", []) if n not in warnings]
     lines += [f"  note: {n}" for n in notes[:6]]
     if len(notes) > 6:
         lines.append(f"  ... {len(notes) - 6} more notes in report.json")

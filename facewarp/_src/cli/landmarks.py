@@ -12,11 +12,14 @@ def add_parser(sub) -> None:
     lmp = sub.add_parser("landmarks", help="inspect FDP landmark files")
     lsub = lmp.add_subparsers(dest="landmarks_command", metavar="ACTION", parser_class=Parser)
     lsub.required = True
-    c = lsub.add_parser("check", help="load and validate a landmark file (JSON or MeshLab .pp)")
-    c.add_argument("landmarks", type=Path, metavar="LANDMARKS.json|.pp", help='JSON {"3.7": [x, y, z], ...} or MeshLab picked points .pp')
+    c = lsub.add_parser("check", example="facewarp landmarks check scan_landmarks.json --units mm",
+                        help="load and validate a landmark file (JSON, MeshLab .pp, or the 68/51-point scheme)")
+    c.add_argument("landmarks", type=Path, metavar="LANDMARKS.json|.pp|.pts", help='JSON {"3.7": [x, y, z], ...}, MeshLab picked points .pp, or the '
+                   "68- or 51-point scheme (a JSON list of [x, y, z] or an iBUG .pts file; shown as the FDPs they mark)")
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=run_check)
-    dt = lsub.add_parser("detect", help="find the FDPs on a scan in any pose, without a person (symmetry plane, "
+    dt = lsub.add_parser("detect", example="facewarp landmarks detect scan.ply --units mm --out scan_landmarks.json",
+                         help="find the FDPs on a scan in any pose, without a person (symmetry plane, "
                          "coarse fit of the template, non-rigid fit); writes a landmarks JSON and confidences")
     dt.add_argument("scan", type=Path, help="scan mesh (OBJ, PLY, STL, OFF, GLB, GLTF)")
     dt.add_argument("--out", required=True, type=Path, metavar="LM.json", help="landmarks JSON to write (confidences go beside it, "

@@ -12,7 +12,8 @@ def add_parser(sub) -> None:
     m = sub.add_parser("mesh", help="inspect input meshes")
     msub = m.add_subparsers(dest="mesh_command", metavar="ACTION", parser_class=Parser)
     msub.required = True
-    c = msub.add_parser("check", help="load and validate a mesh; report degenerate faces, non-manifold edges, holes")
+    c = msub.add_parser("check", example="facewarp mesh check scan.ply --units mm",
+                        help="load and validate a mesh; report degenerate faces, non-manifold edges, holes")
     c.add_argument("mesh", type=Path, metavar="MESH", help="OBJ, PLY, STL, OFF, GLB or GLTF file")
     c.add_argument("--units", choices=["mm", "cm", "m"], default="m", help="units of the file (default m)")
     c.set_defaults(func=run_check)

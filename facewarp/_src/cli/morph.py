@@ -5,12 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.limits import MAX_FPS, MAX_MORPH_STEPS
-from .common import Progress, emit, fps, whole_in
+from .common import Progress, emit, fps, path, whole_in
 
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    mo = sub.add_parser("morph", help="in-between heads of two heads of the same topology, as one USD",
+    mo = sub.add_parser("morph", example="facewarp morph head_a head_b --steps 8 --out morph.usdc",
+                        help="in-between heads of two heads of the same topology, as one USD",
                         epilog="A and B: template folders, adapt outputs or default[:LEVEL] made from one template. "
                                "The USD holds steps + 2 time samples (A, the in-betweens, B); a picture "
                                "FILE.png is written beside it.")
@@ -18,10 +19,10 @@ def add_parser(sub) -> None:
     mo.add_argument("b", metavar="B", help="second head (s = 1)")
     mo.add_argument("--steps", type=whole_in(1, MAX_MORPH_STEPS), metavar="N", default=8,
                     help=f"in-between heads, 1..{MAX_MORPH_STEPS} (default 8)")
-    mo.add_argument("--out", required=True, type=Path, metavar="FILE.usd[a|c|z]", help="the USD file")
+    mo.add_argument("--out", required=True, type=path, metavar="FILE.usd[a|c|z]", help="the USD file")
     mo.add_argument("--fps", type=fps, metavar="F", default=30.0,
                     help=f"time codes per second of the file, > 0 and <= {MAX_FPS:g} (default 30)")
-    mo.add_argument("--build", type=Path, metavar="DIR",
+    mo.add_argument("--build", type=path, metavar="DIR",
                     help="also write every head as a template folder DIR/head_KK with its anatomy in "
                          "DIR/head_KK/build (simulate it with `facewarp simulate DIR/head_KK/build`)")
     mo.set_defaults(func=run, outputs=outputs)

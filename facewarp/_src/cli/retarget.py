@@ -5,18 +5,19 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.limits import MAX_FPS, MAX_SECONDS
-from .common import StageBar, emit, fps, out_dir, seconds
+from .common import StageBar, emit, fps, out_dir, path, seconds
 
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    r = sub.add_parser("retarget", help="one activation sequence on several heads: a USD per head and a picture",
+    r = sub.add_parser("retarget", example="facewarp retarget sequence build_a build_b --out crowd",
+                       help="one activation sequence on several heads: a USD per head and a picture",
                        epilog="SEQUENCE: a sequence file (see `facewarp simulate --help`), a preset name or "
                               "'sequence'. HEAD: a `facewarp build` output, a template folder, an adapt output or "
                               "default[:LEVEL]. Every head gets the same physical parameters.")
     r.add_argument("expression", metavar="SEQUENCE", help="sequence .json, preset or 'sequence'")
     r.add_argument("heads", nargs="+", metavar="HEAD", help="heads to play it on")
-    r.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    r.add_argument("--out", required=True, type=path, metavar="DIR", help="output folder")
     r.add_argument("--seconds", type=seconds, metavar="S",
                    help=f"length [s], > 0 and <= {MAX_SECONDS:g} (default: the file's length + 0.5 s; 2 s for a "
                         "preset, 8 s for 'sequence')")

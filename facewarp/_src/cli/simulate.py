@@ -10,14 +10,15 @@ from .common import FrameBar, HelpFormatter, emit, fps, frame_stats_lines, out_d
 
 # ----------------------------------------------------------------------------- options
 def add_parser(sub) -> None:
-    s = sub.add_parser("simulate", help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
+    s = sub.add_parser("simulate", example="facewarp simulate build --expression smile --out smile.usdc",
+                       help="play an expression on a `build` output (Warp physics, Sec. 6.4-6.5)",
                        epilog_factory=_simulate_epilog, formatter_class=HelpFormatter)
-    s.add_argument("head", type=Path, help="a `facewarp build` output folder")
+    s.add_argument("build", type=Path, metavar="BUILD", help="a `facewarp build` output folder")
     s.add_argument("--expression", metavar="NAME|sequence|FILE.json",
                    help="a preset, 'sequence' or a sequence file (see below); or use --activations")
     s.add_argument("--activations", metavar="MUSCLE=V,...",
-                   help="your own expression instead of --expression: muscle=activation (0..1) items, "
-                        "e.g. zygomatic_major=0.6,corrugator_L=0.3,jaw_drop_mm=10")
+                   help="your own expression instead of --expression: muscle=activation (0..1) items (a Table 6.2 name means both "
+                        "sides, NAME_L or NAME_R one), e.g. zygomatic_major=0.6,corrugator_L=0.3,jaw_drop_mm=10")
     s.add_argument("--seconds", type=seconds, metavar="S", default=2.0,
                    help=f"simulated time [s], > 0 and <= {MAX_SECONDS:g} (default 2)")
     s.add_argument("--fps", type=fps, metavar="F", default=30.0,
@@ -88,7 +89,7 @@ def run(args):
         timeline = timeline_from_spec(args.expression, args.seconds)
     bar = FrameBar(not args.json)
     try:
-        rep = simulate_files(args.head, timeline, args.out, seconds=args.seconds, fps=args.fps, name=name,
+        rep = simulate_files(args.build, timeline, args.out, seconds=args.seconds, fps=args.fps, name=name,
                              substeps=args.substeps, device=args.device, usd=args.usd, tets=args.tets, progress=bar,
                              solver=args.solver, material=args.material, jaw=args.jaw)
     finally:

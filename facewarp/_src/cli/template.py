@@ -16,16 +16,19 @@ def add_parser(sub) -> None:
     tsub.required = True
     level_help = (f"resolution level 0..{MAX_TEMPLATE_LEVEL} (default 0: 3,415 vertices; each level has about 4x the "
                   "vertices of the one before)")
-    e = tsub.add_parser("export", help="write the template (mesh, FDPs, regions, anatomy refs, previews) to a folder")
+    e = tsub.add_parser("export", example="facewarp template export --out template --level 1",
+                        help="write the template (mesh, FDPs, regions, anatomy refs, previews) to a folder")
     e.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if needed)")
     e.add_argument("--level", type=level, metavar="N", default=0, help=level_help)
     e.add_argument("--no-preview", action="store_true", help="skip preview_front.png / preview_side.png")
     e.add_argument("--usd", action="store_true", help="also write template.usda (skin and rigid parts)")
     e.set_defaults(func=run_export, outputs=out_dir)
-    i = tsub.add_parser("info", help="print counts, FDPs, regions and bounding box")
+    i = tsub.add_parser("info", example="facewarp template info --level 2",
+                        help="print counts, FDPs, regions and bounding box")
     i.add_argument("--level", type=level, metavar="N", default=0, help=level_help)
     i.set_defaults(func=run_info)
-    ic = tsub.add_parser("import-ict", help="make the ICT-FaceKit neutral head a full template (FDPs, regions, parts)")
+    ic = tsub.add_parser("import-ict", example="facewarp template import-ict ICT-FaceKit/FaceXModel --out ict_template",
+                         help="make the ICT-FaceKit neutral head a full template (FDPs, regions, parts)")
     ic.add_argument("ict_dir", type=Path, metavar="ICT_DIR", help="ICT-FaceKit folder with generic_neutral_mesh.obj")
     ic.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created if needed)")
     ic.add_argument("--no-preview", action="store_true", help="skip preview_front.png / preview_side.png")

@@ -2,7 +2,9 @@
 :class:`~facewarp.InputError` whose one-line message names the argument and says what was
 expected and what came (never a bare ``ValueError`` / ``TypeError`` from deep inside NumPy).
 
-Small functions, called in the first lines of public functions and methods.
+Small functions, called in the first lines of public functions and methods. The checks of one
+domain object sit beside their owner (a face rig's in :mod:`facewarp._src.physics.face_rig`, the
+simulator's arguments in :mod:`facewarp._src.sim.simulator`); these are the common ones.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import numpy as np
 from .errors import InputError
 
 __all__ = [
-    "check_array", "check_bool", "check_choice", "check_device", "check_face_rig", "check_indices", "check_int",
+    "check_array", "check_bool", "check_choice", "check_device", "check_indices", "check_int",
     "check_number", "check_step_count", "describe",
 ]
 
@@ -157,82 +159,11 @@ def check_step_count(dt, substep: float, name: str = "dt") -> int:
     return int(n)
 
 
-# ----------------------------------------------------------------------------- face rigs
-def check_face_rig(fr, source: str) -> None:
-    """The arrays of a face rig agree with each other: shapes, finite positions, indices in
-    range. ``source`` (the file) starts the message of the :class:`InputError`."""
-    try:
-        nodes = check_array("nodes", fr.nodes, shape=(None, 3))
-        p = len(nodes)
-        check_indices("tets", fr.tets, p, shape=(None, 4))
-        hv = check_array("head_vertices", fr.head_vertices, shape=(None, 3))
-        check_indices("head_faces", fr.head_faces, len(hv), shape=(None, 3))
-        check_indices("surface_vertex", fr.surface_vertex, len(hv), allow=-1)
-        for nm in ("layer", "surface_vertex"):
-            if len(getattr(fr, nm)) != p:
-                raise InputError(f"{nm}: {len(getattr(fr, nm))} entries for {p} nodes")
-        for nm in ("fixed", "held"):
-            a = check_array(nm, getattr(fr, nm), shape=(p,), kind="b")
-            del a
-        check_indices("jaw_nodes", fr.jaw_nodes, p)
-        check_array("jaw_amount", fr.jaw_amount, shape=(len(fr.jaw_nodes),))
-        check_indices("support_nodes", fr.support_nodes, p)
-        check_array("support_normal", fr.support_normal, shape=(len(fr.support_nodes), 3))
-        check_array("support_amount", fr.support_amount, shape=(len(fr.support_nodes),))
-        for nm in ("jaw_pivot", "jaw_u", "jaw_v"):
-            check_array(nm, getattr(fr, nm), shape=(3,))
-        check_indices("fdp_face", fr.fdp_face, len(fr.head_faces))
-        check_array("fdp_bary", fr.fdp_bary, shape=(len(fr.fdp_face), 3))
-        rig = fr.rig
-        check_indices("rig att_node", rig.att_node, p)
-        for nm in ("ctrl_rest", "att_rest_length", "att_stiffness", "att_weight", "contraction"):
-            a = getattr(rig, nm, None)
-            if a is not None:
-                check_array(f"rig {nm}", a, shape=(None,) * np.ndim(a))
-        for k, (V, F) in fr.parts.items():
-            Vp = check_array(f"part {k} vertices", V, shape=(None, 3))
-            check_indices(f"part {k} faces", F, len(Vp), shape=(None, 3))
-    except InputError as e:
-        raise InputError(f"{source}: corrupt face rig ({e})") from None
-
-
 def check_mapping(name: str, value) -> Mapping:
     """``value`` when it is a dict-like mapping."""
     if not isinstance(value, Mapping):
         raise InputError(f"{name}: expected a dict, got {describe(value)}")
     return value
-
-
-# ----------------------------------------------------------------------------- FaceSimulator
-def check_simulator_args(fr, *, device, solver, solvers, dt, substeps, fps, iterations, tolerance, method,
-                         solver_options, support_stiffness, edge_damping, mass_scaling, contact,
-                         contact_modulus) -> str:
-    """The arguments of :class:`~facewarp.FaceSimulator` (see its docstring); returns the device
-    name. Sizes are bounded by :mod:`facewarp._src.core.limits`."""
-    from .limits import MAX_FPS, MAX_SUBSTEPS
-
-    if not all(hasattr(fr, k) for k in ("nodes", "tets", "rig", "head_vertices")):
-        raise InputError(f"fr: expected a FaceRig (build_face or load_face_rig), got {describe(fr)}")
-    device = check_device(device)
-    check_choice("solver", solver, solvers)
-    check_number("dt", dt, low=0.0, low_open=True, high=1.0, allow_none=True)
-    check_int("substeps", substeps, low=1, high=MAX_SUBSTEPS, allow_none=True)
-    check_number("fps", fps, low=0.0, low_open=True, high=MAX_FPS)
-    check_int("iterations", iterations, low=1, high=100_000, allow_none=True)
-    check_number("tolerance", tolerance, low=0.0, low_open=True, allow_none=True)
-    if method is not None and not isinstance(method, str):
-        raise InputError(f"method: expected a method name or None, got {describe(method)}")
-    if solver_options is not None:
-        opts = check_mapping("solver_options", solver_options)
-        bad = [k for k in opts if not isinstance(k, str)]
-        if bad:
-            raise InputError(f"solver_options: keys must be option names, got {bad[0]!r}")
-    check_number("support_stiffness", support_stiffness, low=0.0, allow_none=True)
-    check_number("edge_damping", edge_damping, low=0.0, allow_none=True)
-    check_bool("mass_scaling", mass_scaling)
-    check_bool("contact", contact)
-    check_number("contact_modulus", contact_modulus, low=0.0, low_open=True, allow_none=True)
-    return device
 
 
 def check_activations(activations, count: int):
@@ -263,23 +194,6 @@ def check_positions(name: str, X, count: int, *, allow_none: bool = True):
     if X is None and allow_none:
         return None
     return check_array(name, X, shape=(count, 3))
-
-
-def check_run_args(timeline, seconds, progress, curve_samples, *, fps: float, vertex_count: int) -> float:
-    """The arguments of :meth:`~facewarp.FaceSimulator.run`; the memory of the kept frames is
-    checked against the machine's. Returns ``seconds`` as a float."""
-    from .limits import MAX_SECONDS, check_memory, estimate_frames_bytes
-
-    if not (hasattr(timeline, "sample") and hasattr(timeline, "for_head")):
-        raise InputError(f"timeline: expected a Timeline (preset(...), load_sequence(...)), got {describe(timeline)}")
-    seconds = check_number("seconds", seconds, low=0.0, low_open=True, high=MAX_SECONDS)
-    if progress is not None and not callable(progress):
-        raise InputError(f"progress: expected a function progress(k, frame_count) or None, got {describe(progress)}")
-    check_int("curve_samples", curve_samples, low=2, high=10_000)
-    frames = round(seconds * fps) + 1
-    check_memory(estimate_frames_bytes(frames, vertex_count) + frames * curve_samples * 12 * 64,
-                 f"seconds: {frames} frames of {vertex_count} vertices")
-    return seconds
 
 
 # ----------------------------------------------------------------------------- common public arguments

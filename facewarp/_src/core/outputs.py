@@ -19,7 +19,8 @@ A lock file ``.NAME.facewarp-lock`` beside each output (``fcntl.flock``, release
 when the process dies) makes a second run on the same output refuse with one line.
 
 :func:`signals_as_exceptions` turns SIGINT and SIGTERM into :class:`Interrupted` (a
-``KeyboardInterrupt``) and remembers that they came, so that a library that swallows the
+``KeyboardInterrupt``; one that lands inside an import is raised when the import is over, since a
+compiled module's init would turn it into an ``ImportError``) and remembers that they came, so that a library that swallows the
 exception (USD's Python bindings turn it into a warning in some callbacks) cannot make an
 interrupted run look finished: :func:`raise_if_interrupted` raises again at the next progress
 callback, and the CLI checks :func:`interrupted_by` once the job returns.
@@ -38,7 +39,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["Interrupted", "Staging", "interrupted_by", "raise_if_interrupted", "signals_as_exceptions",
+__all__ = ["Interrupted", "Staging", "destination", "interrupted_by", "output_lock", "raise_if_interrupted", "signals_as_exceptions",
            "signals_deferred", "staged_outputs"]
 
 PARTIAL_TAG = ".facewarp-partial-"
@@ -77,9 +78,45 @@ def raise_if_interrupted() -> None:
         raise Interrupted(_received[0])
 
 
+RETRY_SECONDS = 0.02
+"""While an import runs, a signal is raised this long after it, or when the import has ended."""
+
+
+def _importing(frame) -> bool:
+    """Whether ``frame`` runs inside an import (a module's top level, or importlib's own code)."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _handler(signum, frame):
     _received.append(signum)
+    if _importing(frame):
+        # Raised inside an import, the interrupt can come out as another error: a C extension's
+        # module init (NumPy's ``import_array`` in every compiled module of SciPy and others) turns
+        # any exception into ``ImportError: ... failed to import`` -- an internal error (exit 1)
+        # instead of exit 130 / 143. Raise it once the import is over (SIGALRM retries).
+        _arm_retry()
+        return
     raise Interrupted(signum)
+
+
+def _arm_retry() -> None:
+    try:
+        signal.setitimer(signal.ITIMER_REAL, RETRY_SECONDS)
+    except (AttributeError, OSError, ValueError):  # no interval timers here: the next check raises it
+        pass
+
+
+def _retry(signum, frame):
+    if not _received:
+        return
+    if _importing(frame):
+        _arm_retry()
+        return
+    raise Interrupted(_received[0])
 
 
 @contextlib.contextmanager
@@ -96,9 +133,15 @@ def signals_as_exceptions() -> Iterator[None]:
     old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     for s in old:
         signal.signal(s, _handler)
+    alarm = getattr(signal, "SIGALRM", None)
+    old_alarm = signal.signal(alarm, _retry) if alarm is not None else None
     try:
         yield
     finally:
+        if alarm is not None:
+            with contextlib.suppress(AttributeError, OSError, ValueError):
+                signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(alarm, old_alarm if old_alarm is not None else signal.SIG_DFL)
         for s, h in old.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
 
@@ -131,6 +174,7 @@ class _Target:
     staged: Path = field(init=False)  # what the job gets instead of ``path``
     lock_fd: int | None = None
     created_parents: list[Path] = field(default_factory=list)
+    staged_here: bool = False  # this run made stage_root (a run refused before that must not delete it)
 
     def __post_init__(self):
         p = self.path
@@ -213,7 +257,8 @@ class Staging:
     def discard(self) -> None:
         """Delete everything staged, the locks and the folders made for it."""
         for t in self.targets:
-            shutil.rmtree(t.stage_root, ignore_errors=True)
+            if t.staged_here:
+                shutil.rmtree(t.stage_root, ignore_errors=True)
         self.release()
         for t in self.targets:
             for p in reversed(t.created_parents):
@@ -222,12 +267,7 @@ class Staging:
 
     def release(self) -> None:
         for t in self.targets:
-            if t.lock_fd is not None:
-                with contextlib.suppress(OSError):
-                    os.unlink(_lock_path(t))
-                with contextlib.suppress(OSError):
-                    os.close(t.lock_fd)
-                t.lock_fd = None
+            _release_target(t)
 
 
 def _move_entries(src: Path, dst: Path) -> None:
@@ -309,8 +349,68 @@ def _prepare(t: _Target) -> None:
             shutil.rmtree(stale, ignore_errors=True)
     try:
         t.stage_root.mkdir()
+        t.staged_here = True
     except OSError as e:
         raise InputError(f"{arg} {t.path}: cannot write beside it ({e.strerror or e})") from None
+
+
+@contextlib.contextmanager
+def output_lock(name: str, path: os.PathLike | str) -> Iterator[Path]:
+    """Hold the lock of the output ``path`` (the argument ``name``, e.g. ``"out"``) while the body runs.
+
+    For an output a job writes in place rather than staged (``batch run --out DIR``, a folder
+    continued from run to run): the same lock file ``.NAME.facewarp-lock`` beside it as
+    :func:`staged_outputs` takes, so a second run on ``path`` (of any command) is refused with one
+    line. The folders made to hold the lock file are removed again when the body raises and
+    ``path`` was not made. Yields ``path`` as a :class:`~pathlib.Path`.
+
+    Raises:
+        InputError: ``path`` exists and is not a folder, its parent cannot be made or written, or
+            another run holds the lock.
+    """
+    t = _Target(name, Path(path), "dir")
+    if t.dest.exists() and not t.dest.is_dir():
+        raise InputError(f"{name} {t.path}: exists and is not a folder")
+    missing = []
+    q = t.dest.parent
+    while not q.exists() and q != q.parent:
+        missing.append(q)
+        q = q.parent
+    if not q.is_dir():
+        raise InputError(f"{name} {t.path}: cannot create the folder ({q} is not a folder)")
+    for m in reversed(missing):
+        try:
+            m.mkdir()
+        except OSError as e:
+            for made in reversed(t.created_parents):
+                with contextlib.suppress(OSError):
+                    made.rmdir()
+            raise InputError(f"{name} {t.path}: cannot create the folder {m} ({e.strerror or e})") from None
+        t.created_parents.append(m)
+    existed = t.dest.exists()
+    try:
+        if not os.access(t.dest.parent, os.W_OK | os.X_OK):
+            raise InputError(f"{name} {t.path}: the folder {t.dest.parent} is not writable")
+        _lock(t)
+        yield Path(path)
+    except BaseException:
+        _release_target(t)
+        if not existed and not t.dest.exists():
+            for made in reversed(t.created_parents):
+                with contextlib.suppress(OSError):
+                    made.rmdir()
+        raise
+    _release_target(t)
+
+
+def _release_target(t: _Target) -> None:
+    """Release the lock of one output (remove its lock file, close it)."""
+    if t.lock_fd is not None:
+        with contextlib.suppress(OSError):
+            os.unlink(_lock_path(t))
+        with contextlib.suppress(OSError):
+            os.close(t.lock_fd)
+        t.lock_fd = None
 
 
 @contextlib.contextmanager
@@ -331,15 +431,53 @@ def staged_outputs(outputs: list[tuple[str, os.PathLike | str, str]]) -> Iterato
     for name, path, kind in outputs:
         if kind not in ("dir", "file"):
             raise ValueError(f"kind must be 'dir' or 'file', got {kind!r}")
+        if not str(path).strip():
+            raise InputError(f"{name}: expected a {'folder' if kind == 'dir' else 'file'} path, got an empty one")
         targets.append(_Target(name, Path(path), kind))
+    _check_apart(targets)
     staging = Staging(targets)
     try:
         for t in targets:
             _prepare(t)
+        _active.append(staging)
         yield staging
         staging.commit()
     except BaseException:
         staging.discard()
         raise
     finally:
+        if staging in _active:
+            _active.remove(staging)
         staging.release()
+
+
+_active: list[Staging] = []
+"""The stagings of the runs in progress in this process (:func:`destination`)."""
+
+
+def destination(path: os.PathLike | str) -> Path:
+    """Where ``path`` ends up: a path inside a staged output of a run in progress is mapped to its
+    destination (a job that gets ``.out.facewarp-partial-PID/x`` compares ``out/x`` with its
+    inputs); any other path is returned as it is."""
+    p = Path(path)
+    for st in _active:
+        for t in st.targets:
+            root, dest = t.stage_root, (t.dest if t.kind == "dir" else t.dest.parent)
+            for a in (root, root.absolute()):
+                try:
+                    rel = p.relative_to(a) if p.is_absolute() == a.is_absolute() else None
+                except ValueError:
+                    rel = None
+                if rel is not None:
+                    return dest / rel if str(rel) != "." else dest
+    return p
+
+
+def _check_apart(targets: list[_Target]) -> None:
+    """Two outputs of one run must not be one path or one inside the other."""
+    for i, a in enumerate(targets):
+        for b in targets[i + 1:]:
+            pa, pb = a.dest.absolute(), b.dest.absolute()
+            if pa == pb or pa in pb.parents or pb in pa.parents:
+                raise InputError(f"{b.name} {b.path}: is the same path as {a.name} {a.path} or inside it (or the other "
+                                 f"way round); choose outputs apart")

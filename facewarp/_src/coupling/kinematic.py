@@ -37,7 +37,7 @@ class JawStage(_JawNodes):
 
     @classmethod
     def from_model(cls, model: Model) -> JawStage:
-        """The targets of ``model.jaw`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_jaw`)."""
+        """The targets of ``model.jaw`` (:meth:`~facewarp._src.physics.builder.ModelBuilder.add_jaw`)."""
         return cls._of(model.jaw.target_arrays)
 
     def __init__(self, jaw, nodes, amounts, rest_positions, device):
@@ -72,7 +72,7 @@ class CarryStage(_JawNodes):
 
     @classmethod
     def from_model(cls, model: Model) -> CarryStage:
-        """The carry of ``model.jaw`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_jaw`)."""
+        """The carry of ``model.jaw`` (:meth:`~facewarp._src.physics.builder.ModelBuilder.add_jaw`)."""
         return cls._of(model.jaw.carry_arrays)
 
     def prepare(self, model: Model, state_in, control, dt, targets) -> None:

@@ -53,7 +53,16 @@ class MujocoSkin:
     """
 
     def __init__(self, sim, model, *, prefix: str | None = None, mesh: str = "skin"):
+        if not (callable(getattr(sim, "surface", None)) and hasattr(getattr(sim, "fr", None), "head_vertices")):
+            raise InputError(f"sim: expected a FaceSimulator, got {type(sim).__name__}")
         mj = _mujoco()
+        if not isinstance(model, mj.MjModel):
+            raise InputError(f"model: expected a mujoco.MjModel (mujoco.MjModel.from_xml_path of a head.xml written "
+                             f"with skin=), got {type(model).__name__}")
+        if prefix is not None and not isinstance(prefix, str):
+            raise InputError(f"prefix: expected a string or None, got {type(prefix).__name__}")
+        if not isinstance(mesh, str) or not mesh:
+            raise InputError(f"mesh: expected a mesh name, got {mesh!r:.40}")
         self.mj, self.sim, self.model = mj, sim, model
         names = [model.mesh(i).name for i in range(model.nmesh)]
         if prefix is None:

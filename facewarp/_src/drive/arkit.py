@@ -1,11 +1,14 @@
 """What each of the 52 ARKit blendshapes means on one head: an :class:`ArkitTable` of muscle
-activations and jaw angles, built once per head and cached in its build folder.
+activations, jaw angles and eye gaze, built once per head and cached in its build folder.
 
-Building (:func:`arkit_table`): each ARKit shape of the ICT-FaceKit rig
-(:func:`~facewarp._src.importers.ict_arkit.load_ict_displacements`) is carried onto the head
-(:func:`~facewarp._src.importers.ict_arkit.transfer_ict_displacements`, scaled to the head's own
-proportions) at its FDPs on the skin; the target of a shape is the head's rest FDPs plus that
-displacement. Then the controls are solved by a static inverse:
+Where the shapes come from (``source``): the ICT-FaceKit rig's ARKit-named expressions. facewarp
+ships them carried onto its default template
+(:func:`~facewarp._src.importers.ict_arkit.load_arkit_basis`, MIT, 0.9 MB), so a fresh install
+drives any head; a folder with the kit's own OBJs (:func:`~facewarp.ict_shape_dirs`) is used
+instead when it holds every shape (``source="auto"``), and ``shapes=`` takes your own displacements.
+Each shape is carried onto the head (scaled to the head's own proportions) at its FDPs on the
+skin; the target of a shape is the head's rest FDPs plus that displacement. Then the controls are
+solved by a static inverse:
 
 1. the static response of each control: every muscle alone at activation 1, the jaw opened by
    :data:`JAW_PROBE` and turned sideways by :data:`JAW_SIDE_PROBE`, each a converged static shape
@@ -18,17 +21,26 @@ displacement. Then the controls are solved by a static inverse:
    updated by Broyden's rank-one rule after each step (a step that does not lower the residual
    is not taken).
 
-The residual left (FDP RMS over the head FDPs) is stored per shape. The shapes the muscle model
-has no means for (:data:`ARKIT_OUT_OF_REACH`: gaze, tongue, jaw thrust, cheek puffing, the lips sealed
-over an open jaw) are not solved: their entries are zero and listed with the reason, as are shapes
-whose data was not found.
+Shapes are solved on demand (``solve=``: the ones a take uses) and added to the cached table; the
+probes are made once. The residual left (FDP RMS over the head FDPs) is stored per shape.
+
+Rigid parts: the jaw is a control of the solve. The eyeballs are turned, not solved: each
+``eyeLook*`` shape turns its eye by :data:`EYE_LOOK_DEG` at weight 1 (a convention: ARKit does not
+state the angle, and ICT-FaceKit's expressions leave the eyeballs still); the lid motion of the
+same ICT shape is solved by the muscles like any other shape. Blinks close the lids with the
+muscles (orbicularis oculi and the lid ties of the simulated skin; no displacement is imposed on
+the lids). The shapes the model has no means for (:data:`ARKIT_OUT_OF_REACH`: tongue, jaw thrust,
+cheek puffing, the lips sealed over an open jaw) are not solved: their entries are zero and listed
+with the reason; :meth:`ArkitTable.reach` says per shape what reaches it and how closely.
 
 Using it: :meth:`ArkitTable.controls` blends the table's rows by a frame's weights in activation
-space and clamps, ``a = clip(W A, 0, 1)``, ``jaw = clip(W J, limits)``; :meth:`ArkitTable.targets`
-gives the blended target FDPs, which an inverse solve can refine against.
+space and clamps, ``a = clip(W A, 0, 1)``, ``jaw = clip(W J, limits)``; :meth:`ArkitTable.gaze_for`
+blends the eye angles; :meth:`ArkitTable.targets_for` gives the blended target FDPs, which an
+inverse solve can refine against.
 
 The table is cached as ``arkit_table.npz`` in the ``cache`` folder and reused while its key (a hash
-of the rig, the simulator's solver and material, the shapes' data and the build settings) matches.
+of the rig, the simulator's solver and material, the shapes' data and the build settings) matches;
+a cache folder that cannot be written is skipped with a note (``table.info["cache_note"]``).
 """
 
 from __future__ import annotations
@@ -44,21 +56,27 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
+from ..sim.readout import eye_gaze_rotation
+from .result import DriveResult
 from .tracks import ARKIT_NAMES
 
-__all__ = ["ARKIT_OUT_OF_REACH", "ARKIT_TABLE_FILE", "ArkitTable", "JAW_PROBE", "JAW_SIDE_PROBE", "arkit_table",
-           "drive_arkit", "head_rotation_matrix", "load_arkit_table"]
+__all__ = ["ARKIT_OUT_OF_REACH", "ARKIT_TABLE_FILE", "ArkitTable", "EYE_GAZE_MAX", "EYE_LOOK_DEG", "JAW_PROBE",
+           "JAW_SIDE_PROBE", "arkit_table", "drive_arkit", "eye_gaze_rotation", "head_rotation_matrix",
+           "load_arkit_table"]
 
 ARKIT_TABLE_FILE = "arkit_table.npz"
-_VERSION = 1
+_VERSION = 2
 JAW_PROBE = 0.2
 """Jaw opening [rad] of the static probe giving the opening's column of the linear model."""
 JAW_SIDE_PROBE = math.radians(4.0)
 """Jaw side angle [rad] of the static probe giving the side angle's column."""
+EYE_LOOK_DEG: dict[str, float] = {"In": 30.0, "Out": 30.0, "Up": 25.0, "Down": 30.0}
+"""How far [deg] an ``eyeLook{In,Out,Up,Down}{Left,Right}`` weight of 1 turns its eye (a convention:
+ARKit does not state it; the human eye's usual range)."""
+EYE_GAZE_MAX = math.radians(45.0)
+"""Largest eye yaw or pitch [rad] the drive sets (blends and recorded angles are clamped to it)."""
 
-_GAZE = "eye gaze: the eyeballs are rigid parts with no eye muscles in the model (they do not turn)"
 ARKIT_OUT_OF_REACH: dict[str, str] = {
-    **{f"eyeLook{d}{s}": _GAZE for d in ("Down", "In", "Out", "Up") for s in ("Left", "Right")},
     "tongueOut": "tongue: rigid, it rides the jaw (no tongue muscles); ICT-FaceKit has no tongueOut shape either",
     "jawForward": "jaw thrust: the jaw is a hinge (opening about the condyle axis and a +-5 deg side turn), "
                   "it does not slide forward",
@@ -66,7 +84,26 @@ ARKIT_OUT_OF_REACH: dict[str, str] = {
     "mouthClose": "a corrective for jawOpen (the lips sealed over an open jaw); alone it asks the lips to pass "
                   "through each other, which the lip contact forbids",
 }
-"""ARKit shapes beyond the muscle model, name -> why: their table entries are zero."""
+"""ARKit shapes beyond the model, name -> why: their table entries are zero."""
+
+
+def _gaze_rows() -> np.ndarray:
+    """(52, 2, 2) float64 [rad]: each shape's eye turn, per eye (left, right) its (yaw, pitch);
+    yaw > 0 turns the gaze towards +x (the subject's left), pitch > 0 up."""
+    G = np.zeros((len(ARKIT_NAMES), 2, 2))
+    for i, n in enumerate(ARKIT_NAMES):
+        if not n.startswith("eyeLook"):
+            continue
+        side = 0 if n.endswith("Left") else 1
+        d = n[len("eyeLook"):-len("Left" if side == 0 else "Right")]
+        a = math.radians(EYE_LOOK_DEG[d])
+        if d == "Up":
+            G[i, side, 1] = a
+        elif d == "Down":
+            G[i, side, 1] = -a
+        else:  # the left eye looks out towards +x, the right eye in towards +x
+            G[i, side, 0] = a if (d == "Out") == (side == 0) else -a
+    return G
 
 
 def _digest(*parts) -> str:
@@ -98,6 +135,8 @@ class ArkitTable:
         muscle_names: The M muscles, in the simulator's order.
         activations: (52, M) float32 in [0, 1], each shape's activations.
         jaw: (52, 2) float32 [rad], each shape's jaw (opening, side).
+        gaze: (52, 2, 2) float32 [rad], each shape's eye turn: per eye (left, right) its (yaw, pitch)
+            (:func:`eye_gaze_rotation`; nonzero for the ``eyeLook*`` shapes).
         solved: (52,) bool: the entry was solved (False: zero, see ``reasons``).
         residual_m: (52,) float64 [m]: FDP RMS over the head FDPs of the solved static shape
             against the target (NaN where not solved).
@@ -109,9 +148,9 @@ class ArkitTable:
             each shape's controls (zero where not solved).
         basis: (3 K, M + 2) float64: the linear model, FDP displacement [m] per unit control
             (activation; jaw opening and side per rad), from the static probes.
-        reasons: ARKit name -> why its entry is zero (out of reach, or no data).
+        reasons: ARKit name -> why its entry is zero (out of reach, no data, not solved yet).
         key: The cache key (rig, solver, shapes, settings).
-        info: Build settings and timings (JSON-ready).
+        info: Build settings, the data source and timings (JSON-ready).
     """
 
     names: tuple
@@ -129,6 +168,7 @@ class ArkitTable:
     reasons: dict = field(default_factory=dict)
     key: str = ""
     info: dict = field(default_factory=dict)
+    gaze: np.ndarray = field(default_factory=lambda: _gaze_rows().astype(np.float32))
 
     # ------------------------------------------------------------------ use
     def _weights(self, weights) -> np.ndarray:
@@ -160,11 +200,46 @@ class ArkitTable:
         J[:, 1] = np.clip(J[:, 1], -JAW_V_MAX, JAW_V_MAX)
         return A.astype(np.float32), J.astype(np.float32)
 
+    def gaze_for(self, weights) -> np.ndarray:
+        """Eye angles of frames of weights [rad], (T, 2, 2) float64: per eye (left, right) its
+        (yaw, pitch), the ``eyeLook*`` weights blended and clamped to +-:data:`EYE_GAZE_MAX`."""
+        W = self._weights(weights)
+        return np.clip(np.einsum("ts,sed->ted", W, self.gaze.astype(np.float64)), -EYE_GAZE_MAX, EYE_GAZE_MAX)
+
     def targets_for(self, weights) -> np.ndarray:
         """Blended target FDPs of frames of weights [m], (T, K, 3) float64, head frame: the rest
         FDPs plus the weighted sum of the shapes' displacements (what the face should show)."""
         W = self._weights(weights)
         return self.rest_fdp[None] + np.einsum("ts,skd->tkd", W, self.targets)
+
+    def mapped(self) -> np.ndarray:
+        """(52,) bool: the shapes that move something on this head (solved with nonzero controls, or a gaze)."""
+        moves = (np.abs(self.activations).max(axis=1) > 1e-3) | (np.abs(self.jaw).max(axis=1) > 1e-4)
+        return (self.solved & moves) | (np.abs(self.gaze).reshape(len(self.names), -1).max(axis=1) > 0)
+
+    def reach(self) -> list[dict]:
+        """Per ARKit shape what reaches it on this head and how closely, 52 dicts: ``name``, ``by``
+        (``"muscles"``, ``"jaw"``, ``"eyes"`` joined by ``" + "``, or ``"not reached"``),
+        ``residual_mm`` (the solved static face's FDP RMS from the shape's target, None where not
+        solved), ``target_mm`` (the target's own FDP RMS), ``jaw_deg`` (opening, side),
+        ``gaze_deg`` (left and right eye's yaw, pitch) and ``reason`` (why not reached)."""
+        rows = []
+        for i, n in enumerate(self.names):
+            by = []
+            if self.solved[i] and np.abs(self.activations[i]).max() > 1e-3:
+                by.append("muscles")
+            if self.solved[i] and np.abs(self.jaw[i]).max() > math.radians(0.5):
+                by.append("jaw")
+            if np.abs(self.gaze[i]).max() > 0:
+                by.append("eyes")
+            rows.append({"name": n, "by": " + ".join(by) if by else "not reached",
+                         "residual_mm": None if not self.solved[i] else round(float(self.residual_m[i]) * 1e3, 3),
+                         "target_mm": None if not np.isfinite(self.target_rms_m[i])
+                         else round(float(self.target_rms_m[i]) * 1e3, 3),
+                         "jaw_deg": np.round(np.degrees(self.jaw[i].astype(np.float64)), 2).tolist(),
+                         "gaze_deg": np.round(np.degrees(self.gaze[i].astype(np.float64)), 1).tolist(),
+                         "reason": self.reasons.get(n, "")})
+        return rows
 
     def refine(self, sim, weights, *, rounds: int = 3, tol: float = 2e-5, max_frames: int = 40):
         """One frame's controls refined against its blended target by the static quasi-Newton method
@@ -208,17 +283,25 @@ class ArkitTable:
 
     # ------------------------------------------------------------------ files
     def save(self, path) -> Path:
-        """Write the table to ``path`` (``.npz``) atomically."""
+        """Write the table to ``path`` (``.npz``) atomically: a temporary file beside it, renamed;
+        nothing is left behind when writing fails (the OSError is raised)."""
         path = Path(path)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, names=np.array(self.names), muscle_names=np.array(self.muscle_names),
-                            activations=self.activations, jaw=self.jaw, solved=self.solved,
-                            residual_m=self.residual_m, target_rms_m=self.target_rms_m,
-                            fdp_ids=np.array(self.fdp_ids), rest_fdp=self.rest_fdp, targets=self.targets,
-                            reached=self.reached, basis=self.basis,
-                            reasons=np.array(json.dumps(self.reasons)), key=np.array(self.key),
-                            info=np.array(json.dumps(self.info)), version=np.array(_VERSION))
-        os.replace(tmp, path)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
+        try:
+            np.savez_compressed(tmp, names=np.array(self.names), muscle_names=np.array(self.muscle_names),
+                                activations=self.activations, jaw=self.jaw, gaze=self.gaze, solved=self.solved,
+                                residual_m=self.residual_m, target_rms_m=self.target_rms_m,
+                                fdp_ids=np.array(self.fdp_ids), rest_fdp=self.rest_fdp, targets=self.targets,
+                                reached=self.reached, basis=self.basis,
+                                reasons=np.array(json.dumps(self.reasons)), key=np.array(self.key),
+                                info=np.array(json.dumps(self.info)), version=np.array(_VERSION))
+            os.replace(tmp, path)
+        except BaseException:
+            try:
+                tmp.unlink()
+            except OSError:
+                pass
+            raise
         return path
 
 
@@ -235,6 +318,7 @@ def load_arkit_table(path) -> ArkitTable:
                 raise InputError(f"{path}: table version {int(z['version'])}, this facewarp reads {_VERSION}")
             t = ArkitTable(names=tuple(str(n) for n in z["names"]), muscle_names=[str(n) for n in z["muscle_names"]],
                            activations=z["activations"].astype(np.float32), jaw=z["jaw"].astype(np.float32),
+                           gaze=z["gaze"].astype(np.float32),
                            solved=z["solved"].astype(bool), residual_m=z["residual_m"].astype(np.float64),
                            target_rms_m=z["target_rms_m"].astype(np.float64),
                            fdp_ids=[str(n) for n in z["fdp_ids"]], rest_fdp=z["rest_fdp"].astype(np.float64),
@@ -245,7 +329,8 @@ def load_arkit_table(path) -> ArkitTable:
         raise
     except Exception as e:  # a damaged or foreign file: one line
         raise InputError(f"{path}: not a facewarp ARKit table ({type(e).__name__}: {e})") from None
-    if t.names != ARKIT_NAMES or t.activations.shape != (len(ARKIT_NAMES), len(t.muscle_names)):
+    if t.names != ARKIT_NAMES or t.activations.shape != (len(ARKIT_NAMES), len(t.muscle_names)) \
+            or t.gaze.shape != (len(ARKIT_NAMES), 2, 2):
         raise InputError(f"{path}: not a facewarp ARKit table (wrong names or shapes)")
     return t
 
@@ -261,11 +346,26 @@ def _fdp_of(fr, idx, V) -> np.ndarray:
     return np.einsum("kc,kcd->kd", np.asarray(fr.fdp_bary, np.float64)[idx], V[F[np.asarray(fr.fdp_face)[idx]]])
 
 
-def _resolve_shapes(shapes, ict_dir) -> dict:
-    from ..importers.ict_arkit import ICT_ARKIT_SHAPES, load_ict_displacements
+_NO_DATA = "no ICT-FaceKit shape data found (see facewarp.ict_shape_dirs)"
+_SOURCES = ("auto", "shipped", "ict")
 
-    if shapes is None:  # all, those out of reach too (their targets are kept, not solved)
-        return load_ict_displacements(ARKIT_NAMES, ict_dir=ict_dir)
+
+def _names_arg(arg, what: str) -> list:
+    from ..importers.ict_arkit import ICT_ARKIT_SHAPES
+
+    if isinstance(arg, (str, bytes)) or not hasattr(arg, "__iter__"):
+        raise InputError(f"{what}: expected ARKit names, got {arg!r:.80}")
+    names = [str(n) for n in arg]
+    for n in names:
+        if n not in ICT_ARKIT_SHAPES:
+            raise InputError(f"{what}: {n!r} is not an ARKit blendshape name")
+    return names
+
+
+def _resolve_source(shapes, source: str, ict_dir):
+    """The shapes' data: ("custom" | "ict", {name: ICT-skin displacement}) or ("shipped", names)."""
+    from ..importers.ict_arkit import ICT_ARKIT_SHAPES, ict_shape_dirs, load_arkit_basis, load_ict_displacements
+
     if isinstance(shapes, dict):
         out = {}
         for n, D in shapes.items():
@@ -275,14 +375,20 @@ def _resolve_shapes(shapes, ict_dir) -> dict:
             if D is None or D.shape != (11248, 3) or not np.isfinite(D).all():
                 raise InputError(f"shapes[{n!r}]: expected an ICT-skin displacement, shape (11248, 3), finite, in metres")
             out[n] = D
-        return out
-    if isinstance(shapes, str) or not hasattr(shapes, "__iter__"):
-        raise InputError(f"shapes: expected ARKit names or a dict name -> displacement, got {shapes!r:.80}")
-    names = [str(n) for n in shapes]
-    for n in names:
-        if n not in ICT_ARKIT_SHAPES:
-            raise InputError(f"shapes: {n!r} is not an ARKit blendshape name")
-    return load_ict_displacements(names, ict_dir=ict_dir)
+        return "custom", out
+    names = list(ARKIT_NAMES) if shapes is None else _names_arg(shapes, "shapes")
+    if source not in _SOURCES:
+        raise InputError(f"source: expected one of {', '.join(_SOURCES)}, got {source!r:.80}")
+    if source == "auto":  # the kit's OBJs when a folder holds every shape asked for, else the shipped basis
+        wanted = [n for n in names if ICT_ARKIT_SHAPES[n]]
+        full = [d for d in ict_shape_dirs(ict_dir) if all((d / f"{s}.obj").is_file()
+                                                           for n in wanted for s in ICT_ARKIT_SHAPES[n])]
+        source = "ict" if full else "shipped"
+        ict_dir = full[0] if full else ict_dir
+    if source == "ict":
+        return "ict", load_ict_displacements(names, ict_dir=ict_dir), ict_dir
+    basis = load_arkit_basis()
+    return "shipped", [n for n in names if n in basis.skin], basis
 
 
 def _bounds(M: int) -> tuple[np.ndarray, np.ndarray]:
@@ -359,18 +465,54 @@ class _Statics:
         return _fdp_of(sim.fr, self.idx, prev)
 
 
-def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 3, effort: float = 1e-3,
-                tol: float = 2e-5, max_frames: int = 40, progress=None, rebuild: bool = False) -> ArkitTable:
+def _check_cache(cache):
+    """The cache folder as a Path (None stays None); refuses up front what could only fail later."""
+    if cache is None:
+        return None
+    if isinstance(cache, bytes) or not isinstance(cache, (str, os.PathLike)) or not str(cache).strip():
+        raise InputError(f"cache: expected a folder path, got {cache!r:.80}")
+    cache = Path(cache)
+    if cache.exists() and not cache.is_dir():
+        raise InputError(f"cache: {cache} is not a folder")
+    f = cache / ARKIT_TABLE_FILE
+    if f.exists() and not f.is_file():
+        raise InputError(f"cache: {f} is not a file (a folder or a device is in the table's place); move it away")
+    return cache
+
+
+def _write_cache(table: ArkitTable, cache: Path) -> None:
+    """Save into the cache folder; a folder that cannot be written is skipped with a note in ``table.info``."""
+    path = cache / ARKIT_TABLE_FILE
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        table.save(path)
+        table.info.pop("cache_note", None)
+    except OSError as e:
+        why = e.strerror or type(e).__name__
+        table.info["cache_note"] = (f"ARKit table not cached: {path} cannot be written ({why}); "
+                                    "it is built again on the next run")
+
+
+def arkit_table(sim, *, shapes=None, source: str = "auto", solve=None, cache=None, ict_dir=None, refine: int = 3,
+                effort: float = 1e-3, tol: float = 2e-5, max_frames: int = 40, progress=None,
+                rebuild: bool = False) -> ArkitTable:
     """The :class:`ArkitTable` of ``sim``'s head (see the module docstring); cached.
 
     Args:
         sim: A :class:`~facewarp.FaceSimulator` (it is reset and stepped; left reset).
-        shapes: Which ARKit shapes to solve: None (every one found in the ICT-FaceKit data,
-            :func:`~facewarp._src.importers.ict_arkit.ict_shape_dirs`), a list of ARKit names, or a
-            dict ARKit name -> displacement on the ICT skin [m] (11248, 3). Shapes not given are
-            zero entries (reason: no data).
+        shapes: Which ARKit shapes have data: None (all), a list of ARKit names, or a dict ARKit
+            name -> your own displacement on the ICT skin [m] (11248, 3). Shapes not given are zero
+            entries (reason: no data).
+        source: Where the shapes' data comes from: ``"shipped"`` (the ICT-FaceKit expressions
+            facewarp ships on its default template), ``"ict"`` (the kit's OBJs,
+            :func:`~facewarp.ict_shape_dirs`; shapes not found are zero entries) or ``"auto"``
+            (the OBJs when one folder holds all the shapes asked for, else the shipped data).
+        solve: ARKit names to solve now (default all with data); the others with data are left
+            for a later call (reason "not solved yet") unless the cache already holds them. A
+            cached table gains the shapes solved later.
         cache: A folder (the head's build folder): ``arkit_table.npz`` there is read when its key
-            matches and written after a build. None: no cache.
+            matches and written after a build; where the folder cannot be written the table is
+            not cached (``info["cache_note"]`` says so). None: no cache.
         ict_dir: A folder searched first for the ICT-FaceKit OBJs.
         refine: Rounds of the static refinement (0..10).
         effort: Weight of the controls' size in the least squares [m per unit control].
@@ -379,10 +521,11 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 3, 
         rebuild: Build even when the cache matches.
 
     Raises:
-        InputError: bad arguments, unknown shape names, a cache file that is not a table.
+        InputError: bad arguments, unknown shape names, a cache file that is not a table (or a
+            folder in its place).
     """
     from ..core.checks import check_int, check_number
-    from ..importers.ict_arkit import displacements_digest, transfer_ict_displacements
+    from ..importers.ict_arkit import displacements_digest, transfer_basis_displacements, transfer_ict_displacements
 
     if not hasattr(sim, "fr") or not hasattr(sim, "muscle_names"):
         raise InputError(f"sim: expected a FaceSimulator, got {type(sim).__name__}")
@@ -390,31 +533,48 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 3, 
     max_frames = check_int("max_frames", max_frames, low=2, high=1000)
     effort = check_number("effort", effort, low=0.0, high=1.0)
     tol = check_number("tol", tol, low=0.0, high=1e-2, low_open=True)
-    if cache is not None:
-        if isinstance(cache, bytes) or not isinstance(cache, (str, os.PathLike)) or not str(cache).strip():
-            raise InputError(f"cache: expected a folder path, got {cache!r:.80}")
-        cache = Path(cache)
-        if cache.exists() and not cache.is_dir():
-            raise InputError(f"cache: {cache} is not a folder")
-    D_ict = _resolve_shapes(shapes, ict_dir)
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(done, total, name), got {type(progress).__name__}")
+    cache = _check_cache(cache)
+    want = None if solve is None else set(_names_arg(solve, "solve"))
+    resolved = _resolve_source(shapes, source, ict_dir)
+    kind = resolved[0]
+    if kind == "shipped":
+        data_names, basis = resolved[1], resolved[2]
+        digest = _digest("shipped", basis.digest, data_names)
+    else:
+        D_ict = resolved[1]
+        ict_dir = resolved[2] if kind == "ict" else ict_dir
+        data_names = [n for n in ARKIT_NAMES if n in D_ict]
+        digest = displacements_digest(D_ict)
     settings = {"refine": refine, "effort": effort, "tol": tol, "max_frames": max_frames, "jaw_probe": JAW_PROBE,
-                "jaw_side_probe": JAW_SIDE_PROBE, "version": _VERSION}
-    key = _digest(rig_key(sim), displacements_digest(D_ict), settings)
-    if cache is not None and not rebuild and (cache / ARKIT_TABLE_FILE).is_file():
-        t = load_arkit_table(cache / ARKIT_TABLE_FILE)
-        if t.key == key:
-            t.info["from_cache"] = True
-            return t
-
+                "jaw_side_probe": JAW_SIDE_PROBE, "eye_look_deg": EYE_LOOK_DEG, "version": _VERSION}
+    key = _digest(rig_key(sim), digest, settings)
     t0 = time.perf_counter()
     fr = sim.fr
     fdp_ids, idx = _head_fdps(fr)
     statics = _Statics(sim, idx, tol, max_frames)
     M = len(sim.muscle_names)
     zero_a = np.zeros(M)
-    rest = statics(zero_a, (0.0, 0.0))
-    total = M + 2 + len([n for n in D_ict if n not in ARKIT_OUT_OF_REACH])
-    done = 0
+    lo, hi = _bounds(M)
+    table = None
+    if cache is not None and not rebuild and (cache / ARKIT_TABLE_FILE).is_file():
+        try:
+            cached = load_arkit_table(cache / ARKIT_TABLE_FILE)
+        except InputError as e:
+            if "table version" not in str(e):
+                raise
+            cached = None  # an older facewarp's table: built again
+        if cached is not None and cached.key == key:
+            table = cached
+    todo = [n for n in data_names if n not in ARKIT_OUT_OF_REACH and (want is None or n in want)]
+    if table is not None:
+        todo = [n for n in todo if not table.solved[ARKIT_NAMES.index(n)]]
+        if not todo:
+            table.info["from_cache"] = True
+            return table
+    solvable = any(n not in ARKIT_OUT_OF_REACH for n in data_names)
+    done, total = 0, len(todo) + (M + 2 if table is None and solvable else 0)
 
     def tick(name):
         nonlocal done
@@ -422,74 +582,82 @@ def arkit_table(sim, *, shapes=None, cache=None, ict_dir=None, refine: int = 3, 
         if progress:
             progress(done, total, name)
 
-    # 1. transfer the shapes onto this head's FDPs
-    rep: dict = {}
-    lm = dict(zip(fdp_ids, rest))
-    T_head = transfer_ict_displacements(D_ict, rest, lm, point_ids=fdp_ids, ict_dir=ict_dir,
-                                        device=str(sim.device) if "cuda" in str(sim.device) else "cpu",
-                                        report=rep) if D_ict else {}
-    # 2. the linear model: one static probe per control
-    cols = []
-    todo = [n for n in T_head if n not in ARKIT_OUT_OF_REACH]
-    for m in range(M if todo else 0):  # no probes when there is nothing to solve
-        a = zero_a.copy()
-        a[m] = 1.0
-        cols.append((statics(a, (0.0, 0.0)) - rest).ravel())
-        tick(sim.muscle_names[m])
-    if todo:
-        cols.append((statics(zero_a, (JAW_PROBE, 0.0)) - rest).ravel() / JAW_PROBE)
-        tick("jaw_open")
-        cols.append((statics(zero_a, (0.0, JAW_SIDE_PROBE)) - rest).ravel() / JAW_SIDE_PROBE)
-        tick("jaw_side")
-    else:
-        cols = [np.zeros(rest.size)] * (M + 2)
-    B = np.stack(cols, 1)
-    lo, hi = _bounds(M)
-
-    def solve(r, x0):
-        return _bounded_step(B, effort, r, x0)
-
-    n = len(ARKIT_NAMES)
-    acts = np.zeros((n, M), np.float32)
-    jaws = np.zeros((n, 2), np.float32)
-    solved = np.zeros(n, bool)
-    residual = np.full(n, np.nan)
-    size = np.full(n, np.nan)
-    targets = np.zeros((n, len(fdp_ids), 3))
-    reached = np.zeros((n, len(fdp_ids), 3))
-    reasons = {k: v for k, v in ARKIT_OUT_OF_REACH.items()}
-    per_shape, linear = {}, {}
-    for i, name in enumerate(ARKIT_NAMES):
-        if name in T_head:  # and the linear model's bounded fit alone (no statics): also for the shapes out of reach
-            targets[i] = T_head[name]
-            size[i] = float(np.sqrt(np.mean(np.sum(T_head[name] ** 2, axis=1))))
-            xl = np.clip(solve(T_head[name].ravel(), np.zeros(M + 2)), lo, hi)
-            linear[name] = round(float(np.sqrt(np.mean(np.sum((B @ xl - T_head[name].ravel()).reshape(-1, 3) ** 2,
-                                                                axis=1)))) * 1e3, 3)
-        if name in ARKIT_OUT_OF_REACH:
-            continue
-        if name not in T_head:
-            reasons[name] = "no ICT-FaceKit shape data found (see facewarp.ict_shape_dirs)"
-            continue
-        t = T_head[name]
-        x, hist, P = _refine_static(statics, B, effort, np.clip(solve(t.ravel(), np.zeros(M + 2)), lo, hi), rest + t, refine)
-        acts[i], jaws[i], solved[i], residual[i] = x[:M], x[M:], True, min(hist)
-        reached[i] = P - rest
-        per_shape[name] = [round(h * 1e3, 3) for h in hist]
+    if table is None:
+        rest = statics(zero_a, (0.0, 0.0))
+        # 1. carry the shapes onto this head's FDPs
+        rep: dict = {}
+        lm = dict(zip(fdp_ids, rest))
+        dev = str(sim.device) if "cuda" in str(sim.device) else "cpu"
+        if not data_names:
+            T_head = {}
+        elif kind == "shipped":
+            T_head = transfer_basis_displacements(basis, rest, lm, names=data_names, point_ids=fdp_ids, device=dev,
+                                                  report=rep)
+        else:
+            T_head = transfer_ict_displacements(D_ict, rest, lm, point_ids=fdp_ids, ict_dir=ict_dir, device=dev,
+                                                report=rep)
+        # 2. the linear model: one static probe per control (none when no shape could ever be solved)
+        cols = []
+        for m in range(M if solvable else 0):
+            a = zero_a.copy()
+            a[m] = 1.0
+            cols.append((statics(a, (0.0, 0.0)) - rest).ravel())
+            tick(sim.muscle_names[m])
+        if solvable:
+            cols.append((statics(zero_a, (JAW_PROBE, 0.0)) - rest).ravel() / JAW_PROBE)
+            tick("jaw_open")
+            cols.append((statics(zero_a, (0.0, JAW_SIDE_PROBE)) - rest).ravel() / JAW_SIDE_PROBE)
+            tick("jaw_side")
+        else:
+            cols = [np.zeros(rest.size)] * (M + 2)
+        B = np.stack(cols, 1)
+        n = len(ARKIT_NAMES)
+        targets = np.zeros((n, len(fdp_ids), 3))
+        size = np.full(n, np.nan)
+        linear = {}
+        for i, name in enumerate(ARKIT_NAMES):
+            if name in T_head:  # the linear model's bounded fit alone (no statics): for every shape with data
+                targets[i] = T_head[name]
+                size[i] = float(np.sqrt(np.mean(np.sum(T_head[name] ** 2, axis=1))))
+                xl = np.clip(_bounded_step(B, effort, T_head[name].ravel(), np.zeros(M + 2)), lo, hi)
+                r = (B @ xl - T_head[name].ravel()).reshape(-1, 3)
+                linear[name] = round(float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) * 1e3, 3)
+        reasons = dict(ARKIT_OUT_OF_REACH)
+        for name in ARKIT_NAMES:
+            if name not in reasons:
+                reasons[name] = _NO_DATA if name not in T_head else "not solved yet (solved when a take uses it)"
+        source_note = {"shipped": basis.source if kind == "shipped" else "", "ict": f"ICT-FaceKit OBJs in {ict_dir}",
+                       "custom": "displacements given as shapes="}[kind]
+        info = {"settings": settings, "rig_key": rig_key(sim), "source": kind, "source_note": source_note,
+                "transfer": {k: v for k, v in rep.items() if k != "warp_fdp_residual_m"},
+                "statics": 0, "static_frames": 0, "static_seconds": 0.0, "build_seconds": 0.0,
+                "residual_history_mm": {}, "linear_model_residual_mm": linear, "from_cache": False}
+        table = ArkitTable(names=tuple(ARKIT_NAMES), muscle_names=list(sim.muscle_names),
+                           activations=np.zeros((n, M), np.float32), jaw=np.zeros((n, 2), np.float32),
+                           solved=np.zeros(n, bool), residual_m=np.full(n, np.nan), target_rms_m=size,
+                           fdp_ids=fdp_ids, rest_fdp=rest, targets=targets, reached=np.zeros((n, len(fdp_ids), 3)),
+                           basis=B, reasons=reasons, key=key, info=info)
+    # 3. solve the shapes asked for: bounded least squares, then the static refinement
+    B, rest = table.basis, table.rest_fdp
+    for name in todo:
+        i = ARKIT_NAMES.index(name)
+        t = table.targets[i]
+        x0 = np.clip(_bounded_step(B, effort, t.ravel(), np.zeros(M + 2)), lo, hi)
+        x, hist, P = _refine_static(statics, B, effort, x0, rest + t, refine)
+        table.activations[i], table.jaw[i], table.solved[i], table.residual_m[i] = x[:M], x[M:], True, min(hist)
+        table.reached[i] = P - rest
+        table.reasons.pop(name, None)
+        table.info["residual_history_mm"][name] = [round(h * 1e3, 3) for h in hist]
         tick(name)
     sim.reset()
-    info = {"settings": settings, "rig_key": rig_key(sim),
-            "transfer": {k: v for k, v in rep.items() if k != "warp_fdp_residual_m"},
-            "statics": statics.count, "static_frames": statics.frames, "static_seconds": round(statics.seconds, 1),
-            "build_seconds": round(time.perf_counter() - t0, 1), "residual_history_mm": per_shape,
-            "linear_model_residual_mm": linear,
-            "from_cache": False}
-    table = ArkitTable(names=tuple(ARKIT_NAMES), muscle_names=list(sim.muscle_names), activations=acts, jaw=jaws,
-                       solved=solved, residual_m=residual, target_rms_m=size, fdp_ids=fdp_ids,
-                       rest_fdp=rest, targets=targets, reached=reached, basis=B, reasons=reasons, key=key, info=info)
+    info = table.info
+    info["statics"] += statics.count
+    info["static_frames"] += statics.frames
+    info["static_seconds"] = round(info["static_seconds"] + statics.seconds, 1)
+    info["build_seconds"] = round(info["build_seconds"] + time.perf_counter() - t0, 1)
+    info["from_cache"] = False
     if cache is not None:
-        cache.mkdir(parents=True, exist_ok=True)
-        table.save(cache / ARKIT_TABLE_FILE)
+        _write_cache(table, cache)
     return table
 
 
@@ -506,44 +674,89 @@ def head_rotation_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
     return Ry @ Rx @ Rz
 
 
-def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, refine: bool = False,
-                mode: str = "offline", unreachable_limit: float = 2e-3, **options):
-    """Play an :class:`~facewarp.ArkitTrack` on ``sim`` through its head's :class:`ArkitTable`
-    (what :func:`~facewarp.drive` does for an ArkitTrack).
-
-    Each frame's weights become controls by :meth:`ArkitTable.controls` (blend in activation
-    space, clamp); with ``refine=True`` the frame is instead tracked by a :class:`~facewarp.Tracker`
-    towards its blended target FDPs (:meth:`ArkitTable.targets_for`), starting from the previous
-    frame. The track's head rotation, when it has one, drives :meth:`~facewarp.FaceSimulator.set_head_pose`
-    (:func:`head_rotation_matrix`, no translation). The per-frame error is each head FDP's distance
-    from its blended target (head frame).
-
-    Returns:
-        A :class:`~facewarp.DriveResult` (``names``: the table's FDP ids; ``head_poses``: (T, 4, 4)
-        when the track has head rotation).
-    """
-    from ..core.checks import check_number
-    from ..sim.play import PlayStats, _as_sink
-    from .inverse import DriveResult, Tracker
-
+def check_table(sim, table) -> None:
+    """Refuse a table that is not ``sim``'s head's (one line)."""
     if not isinstance(table, ArkitTable):
         raise InputError("table: an ArkitTrack is driven through the head's ARKit table "
                          f"(fw.arkit_table(sim, cache=BUILD)), got {type(table).__name__}")
     if list(table.muscle_names) != list(sim.muscle_names) or table.key_rig != rig_key(sim):
         raise InputError("table: built for another head (or solver) than this simulator's; "
                          "build it with fw.arkit_table(sim, cache=BUILD)")
+
+
+def track_gaze(track, table: ArkitTable) -> np.ndarray:
+    """The eye angles a track asks for [rad], (T, 2, 2) float64 (per eye its yaw, pitch): the track's
+    own recorded eye angles (``track.eye_rotation``, (T, 2, 2), e.g. Live Link Face's eye yaw and
+    pitch columns) where it has them, else the ``eyeLook*`` weights through the table; clamped to
+    +-:data:`EYE_GAZE_MAX`."""
+    from ..core.checks import check_array
+
+    eyes = getattr(track, "eye_rotation", None)
+    if eyes is None:
+        return table.gaze_for(track.weights)
+    E = check_array("track.eye_rotation", eyes, shape=(track.frames, 2, 2)).astype(np.float64)
+    return np.clip(E, -EYE_GAZE_MAX, EYE_GAZE_MAX)
+
+
+def arkit_warnings(track, table: ArkitTable) -> tuple[list, bool]:
+    """What a track asks for that this head cannot show: (warnings, whether anything moves at all).
+
+    A shape the track uses (a weight above 0 on some frame) that moves nothing on this head
+    (:meth:`ArkitTable.mapped`) is one warning naming the shape, its largest weight and why."""
+    W = np.asarray(track.weights)
+    used = W.max(axis=0) > 0
+    mapped = table.mapped()
+    warnings = [f"{n}: not mapped on this head, weight up to {W[:, i].max():.2f} ignored ("
+                f"{table.reasons.get(n) or 'the solve left it at zero controls'})"
+                for i, n in enumerate(table.names) if used[i] and not mapped[i]]
+    head = getattr(track, "head_rotation", None)
+    turns = head is not None and bool(np.abs(head).max() > 0)
+    eyes = getattr(track, "eye_rotation", None)
+    looks = eyes is not None and bool(np.abs(eyes).max() > 0)
+    return warnings, bool((used & mapped).any() or turns or looks)
+
+
+def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, tracker=None,
+                unreachable_limit: float = 2e-3):
+    """Play an :class:`~facewarp.ArkitTrack` on ``sim`` through its head's :class:`ArkitTable`
+    (what :func:`~facewarp.drive` does for an ArkitTrack).
+
+    Each frame's weights become controls by :meth:`ArkitTable.controls` (blend in activation
+    space, clamp); with a ``tracker`` (a :class:`~facewarp.Tracker` on the table's FDP ids, which
+    :func:`~facewarp.drive` makes for ``refine=True``) the frame is instead tracked towards its
+    blended target FDPs (:meth:`ArkitTable.targets_for`), starting from the previous frame. The
+    eyeballs turn by :func:`track_gaze` (:meth:`~facewarp.FaceSimulator.set_eye_gaze`). The track's
+    head rotation, when it has one, drives :meth:`~facewarp.FaceSimulator.set_head_pose`
+    (:func:`head_rotation_matrix`, no translation). The per-frame error is each head FDP's distance
+    from its blended target (head frame).
+
+    Returns:
+        A :class:`~facewarp.DriveResult` (``names``: the table's FDP ids; ``head_poses``: (T, 4, 4)
+        when the track has head rotation; ``warnings``: the shapes used but not mapped; ``gaze``).
+
+    Raises:
+        InputError: a table of another head, a track at another rate, or a track of which nothing
+            can move this face (every shape it uses unmapped, no head or eye rotation).
+    """
+    from ..core.checks import check_number
+    from ..sim.play import PlayStats, _as_sink
+
+    check_table(sim, table)
     if abs(track.fps - sim.fps) > 1e-6 * sim.fps:
         raise InputError(f"track: {track.fps:g} frames/s, but the simulator runs at {sim.fps:g}: "
                          f"make the FaceSimulator with fps={track.fps:g}")
     if progress is not None and not callable(progress):
         raise InputError(f"progress: expected a callable progress(k, frame_count), got {type(progress).__name__}")
-    if not isinstance(refine, (bool, np.bool_)):
-        raise InputError(f"refine: expected True or False, got {refine!r}")
-    if options and not refine:
-        raise InputError(f"{sorted(options)[0]}: a Tracker option, only with refine=True")
     unreachable_limit = check_number("unreachable_limit", unreachable_limit, low=0.0, low_open=True)
+    warnings, moves = arkit_warnings(track, table)
+    if not moves:
+        used = [n for n, w in zip(table.names, np.asarray(track.weights).max(axis=0)) if w > 0]
+        what = (f"none of the {len(used)} ARKit shapes it uses ({', '.join(used[:4])}{', ...' if len(used) > 4 else ''})"
+                " is mapped on this head" if used else "every ARKit weight is 0")
+        raise InputError(f"{track.source or 'track'}: the face cannot move: {what}, and the head and eyes do not turn")
     nf = track.frames
     A, J = table.controls(track.weights)
+    G = track_gaze(track, table)
     targets = table.targets_for(track.weights)
     poses = None
     if track.head_rotation is not None:
@@ -552,7 +765,6 @@ def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, refin
             poses[k, :3, :3] = head_rotation_matrix(y, p, r)
     sinks = [_as_sink(s) for s in sinks]
     _, idx = _head_fdps(sim.fr)
-    tracker = Tracker(sim, table.fdp_ids, mode=mode, **options) if refine else None
     sim.reset()
     if tracker is not None:
         tracker.reset_tracking()
@@ -568,6 +780,7 @@ def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, refin
         s0 = time.perf_counter()
         if poses is not None:
             sim.set_head_pose(poses[k, :3, :3], np.zeros(3))
+        sim.set_eye_gaze(G[k])
         if tracker is None:
             sim.set_activations(A[k])
             sim.set_jaw(float(J[k, 0]), float(J[k, 1]))
@@ -584,8 +797,9 @@ def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, refin
     wall = time.perf_counter() - t0
     stepping = max(stepping, 1e-9)
     rms = np.sqrt(np.mean(err**2, axis=1))
-    notes = [f"{n}: out of reach ({table.reasons[n]}); weight up to {track.weights[:, i].max():.2f}"
-             for i, n in enumerate(table.names) if n in table.reasons and track.weights[:, i].max() > 0]
+    notes = list(warnings)
+    if table.info.get("cache_note"):
+        notes.append(table.info["cache_note"])
     bad = np.where(err > unreachable_limit)
     for i in np.unique(bad[1]):
         fr_k = bad[0][bad[1] == i]
@@ -601,6 +815,6 @@ def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, refin
         s.finish(sim, stats)
     return DriveResult(fps=track.fps, names=list(table.fdp_ids), muscle_names=list(sim.muscle_names),
                        activations=acts, jaw=jaw, error=err, rms=rms, unreachable=notes, seconds=stepping,
-                       frames_per_second=nf / stepping, mode="arkit-tracker" if refine else "arkit-table",
+                       frames_per_second=nf / stepping, mode="arkit-tracker" if tracker is not None else "arkit-table",
                        stats=tracker.stats.as_dict() if tracker is not None else {"frames": nf},
-                       head_poses=poses)
+                       head_poses=poses, warnings=warnings, gaze=G)

@@ -39,12 +39,13 @@ shook weakly seen muscles (the lip corners', the brows') by 3 to 5 mm between fr
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..core.checks import check_array, check_bool, check_choice, check_int, check_number
 from ..core.errors import InputError
+from .result import DriveResult
 from .sensitivity import PointReadout, step_sensitivity
 
 __all__ = ["DriveResult", "Tracker", "drive"]
@@ -440,46 +441,6 @@ class Tracker:
 
 
 # ---------------------------------------------------------------------------------------- drive
-@dataclass
-class DriveResult:
-    """What :func:`drive` solved for a track.
-
-    Attributes:
-        fps: Frames per second [1/s].
-        names: The K point names of the track.
-        muscle_names: The M muscle names, column order of ``activations``.
-        activations: (T, M) float32 in [0, 1], per frame.
-        jaw: (T, 2) float32 [rad], (opening, side) per frame.
-        error: (T, K) float64 [m], distance of each simulated point from its target (NaN where missing).
-        rms: (T,) float64 [m], RMS of ``error`` over the frame's present points (NaN: none present).
-        unreachable: Notes on what the face could not match (frames and points off by more than ``unreachable_limit``).
-        seconds: Wall time of the whole solve [s].
-        frames_per_second: Frames solved per wall-clock second.
-        mode: The tracker's mode.
-        stats: The tracker's :class:`TrackerStats` as a dict.
-        head_poses: (T, 4, 4) float64 rigid head poses removed from the targets, when the caller gives them; else None.
-    """
-
-    fps: float
-    names: list
-    muscle_names: list
-    activations: np.ndarray
-    jaw: np.ndarray
-    error: np.ndarray
-    rms: np.ndarray
-    unreachable: list
-    seconds: float
-    frames_per_second: float
-    mode: str
-    stats: dict = field(default_factory=dict)
-    head_poses: np.ndarray | None = None
-
-    @property
-    def frames(self) -> int:
-        """T, the number of frames."""
-        return int(self.activations.shape[0])
-
-
 def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offline", head_poses=None,
           unreachable_limit: float = 2e-3, **options) -> DriveResult:
     """Solve a performance's activations and jaw per frame and play them on ``sim`` (module doc).
@@ -515,12 +476,19 @@ def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offli
     if not isinstance(sim, FaceSimulator):
         raise InputError(f"sim: expected a facewarp FaceSimulator, got {type(sim).__name__}")
     if isinstance(track, ArkitTrack):
-        from .arkit import drive_arkit
+        from .arkit import check_table, drive_arkit
 
         if head_poses is not None:
             raise InputError("head_poses: not for an ArkitTrack (its head_rotation drives the head pose)")
-        return drive_arkit(sim, track, table, sinks=sinks, progress=progress, mode=mode,
-                           unreachable_limit=unreachable_limit, **options)
+        refine = options.pop("refine", False)
+        if not isinstance(refine, (bool, np.bool_)):
+            raise InputError(f"refine: expected True or False, got {refine!r}")
+        if options and not refine:
+            raise InputError(f"{sorted(options)[0]}: a Tracker option, only with refine=True")
+        check_table(sim, table)
+        tracker = Tracker(sim, table.fdp_ids, mode=mode, **options) if refine else None
+        return drive_arkit(sim, track, table, sinks=sinks, progress=progress, tracker=tracker,
+                           unreachable_limit=unreachable_limit)
     if not isinstance(track, MarkerTrack):
         raise InputError(f"track: expected a facewarp MarkerTrack, got {type(track).__name__}")
     if table is not None:

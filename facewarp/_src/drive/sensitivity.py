@@ -90,6 +90,8 @@ class PointReadout:
         from ..sim.readout import surface_index
 
         self.fr = fr
+        if isinstance(points, (str, bytes)) or not hasattr(points, "__iter__"):  # resolve_points says it, once listed
+            raise InputError(f"points: expected a list of FDP ids or 'v<index>' names, got {type(points).__name__}")
         self.names = [str(p) for p in points]
         self.specs = resolve_points(fr, points)
         self.index = surface_index(fr)

@@ -47,7 +47,8 @@ from ..core.errors import InputError
 from ..core.fileio import atomic_write, write_json
 from .manifest import NEEDS, STEPS, Manifest, ScanInput, depends, plain
 
-__all__ = ["GPU_SIMULATE_BATCH", "MAX_SIMULATE_BATCH", "REPORT_COLUMNS", "run_batch", "write_reports"]
+__all__ = ["GPU_SIMULATE_BATCH", "MAX_SIMULATE_BATCH", "REPORT_COLUMNS", "batch_outcome", "check_batch_options",
+           "run_batch", "write_reports"]
 
 REPORT_COLUMNS = (
     "name", "key", "scan", "status", "failed_step", "error",
@@ -141,6 +142,10 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
               max_retries: int = 2, retry_failed: bool = False, progress: bool = True) -> dict:
     """Run ``scans`` through ``steps`` into the folder ``out``; returns the batch summary.
 
+    Every option of every step is checked before anything is written or any scan is adapted
+    (:func:`check_batch_options`), and ``out`` is locked for the run (a second run on it, of this
+    or any facewarp command, is refused with one line).
+
     Args:
         scans: The scans (:class:`ScanInput`); two with the same content are one.
         out: The batch folder (created; a manifest already in it is continued).
@@ -152,7 +157,8 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
         rig_formats: The files of the ``rig`` step (:func:`~facewarp._src.jobs.rig.rig_files`),
             some of ``usdc``, ``usda`` (UsdSkel), ``glb`` (glTF); one bake written in each.
         rig_inbetweens: In-between shapes per muscle, 0..8.
-        rig_muscles: Muscle names to bake (default all).
+        rig_muscles: Muscle names to bake (default all); a paired muscle's name without ``_L`` /
+            ``_R`` means both sides.
         device: Warp device of the local workers (Ray: adapt and build on the CPU, simulate and rig
             on a GPU when ``gpus_per_task`` > 0 and the cluster has one).
         ray: None (local processes), ``"local"`` (a local Ray started here) or a cluster address.
@@ -169,26 +175,156 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
 
     Returns:
         ``{"out", "manifest", "report", "report_csv", "executor", "scans", "done", "failed",
-        "incomplete", "tasks_run", "tasks_kept", "seconds", "interrupted", "rows", "simulate_grouping"}``;
-        ``simulate_grouping``: ``{"batch"`` (K), ``"groups"`` (grouped tasks run), ``"grouped_scans"``,
-        ``"fallbacks"`` (scans of a group that could not step together, run alone), ``"fallback_errors"``
-        (why, one line each)``}``.
+        "incomplete", "tasks_run", "tasks_kept", "seconds", "interrupted", "rows", "simulate_grouping",
+        "exit_code", "outcome"}``; ``simulate_grouping``: ``{"batch"`` (K), ``"groups"`` (grouped tasks
+        run), ``"grouped_scans"``, ``"fallbacks"`` (scans of a group that could not step together, run
+        alone), ``"fallback_errors"`` (why, one line each)``}``; ``exit_code`` and ``outcome``:
+        :func:`batch_outcome`.
+
+    Raises:
+        InputError: a bad option or scan list, an ``out`` that cannot be written or that another run
+            holds, or no scan that could start (nothing is written then).
+        KeyboardInterrupt: SIGINT or SIGTERM (the :class:`~facewarp._src.core.outputs.Interrupted`
+            that came, its signal kept): the running tasks are stopped, their half-written step
+            folders removed, the manifest and the reports written.
     """
     t0 = time.perf_counter()
-    steps = tuple(s for s in STEPS if s in set(steps))
+    opts = check_batch_options(scans, out, steps=steps, expression=expression, seconds=seconds, fps=fps,
+                               levels=levels, jaw=jaw, rig_formats=rig_formats, rig_inbetweens=rig_inbetweens,
+                               rig_muscles=rig_muscles, device=device, ray=ray, workers=workers,
+                               gpus_per_task=gpus_per_task, simulate_batch=simulate_batch,
+                               max_retries=max_retries, retry_failed=retry_failed, progress=progress)
+    from ..core.outputs import output_lock
+
+    with output_lock("out", out):
+        return _run_batch_locked(scans, Path(out), t0=t0, **opts)
+
+
+def _expand_muscles(names: list[str]) -> list[str]:
+    """Muscle names of the default head's rig: a paired muscle's bare name is both sides; an unknown
+    name is an :class:`InputError` listing the known ones."""
+    from ..anatomy.muscles import load_muscle_defs
+
+    paired, single = [], []
+    for m in load_muscle_defs()["muscles"]:
+        (paired if m.get("paired", False) else single).append(m["name"])
+    known = [n for p in paired for n in (f"{p}_L", f"{p}_R")] + single
+    out: list[str] = []
+    for n in names:
+        got = [f"{n}_L", f"{n}_R"] if n in paired else [n] if n in known else None
+        if got is None:
+            raise InputError(f"rig_muscles: {n!r} is not a muscle of the rig; muscles are {', '.join(known)} "
+                             "(a paired muscle's name alone is both sides)")
+        out += [g for g in got if g not in out]
+    return out
+
+
+def check_batch_options(scans, out, *, steps, expression, seconds, fps, levels, jaw, rig_formats, rig_inbetweens,
+                        rig_muscles, device, ray, workers, gpus_per_task, simulate_batch, max_retries, retry_failed,
+                        progress) -> dict:
+    """Every option of :func:`run_batch` checked, before anything is written or run: the steps, the
+    scans, ``out``, the options of every step whether chosen or not (a bad ``--expression`` is a typo
+    either way; simulate's frames and memory, the rig's muscles), the executor's numbers. Returns
+    the checked options (the keywords of the locked run). Raises :class:`InputError`, one line."""
+    import math
+
+    from ..core.limits import MAX_ADAPT_LEVELS, check_count, check_work, estimate_frames_bytes, estimate_sim_bytes
+    from ..jobs.checks import check_kept_frames, check_some_frames
+    from ..jobs.face import _check_simulate
+
+    if isinstance(steps, str):
+        steps = [s.strip() for s in steps.split(",") if s.strip()]
+    try:
+        wanted = set(steps)
+    except TypeError:
+        raise InputError(f"steps: expected some of {', '.join(STEPS)}, got {steps!r}") from None
+    unknown = sorted(str(s) for s in wanted - set(STEPS))
+    if unknown:
+        raise InputError(f"steps: {unknown[0]!r} is not a step; choose some of {', '.join(STEPS)}")
+    steps = tuple(s for s in STEPS if s in wanted)
     if not steps:
         raise InputError(f"steps: choose some of {', '.join(STEPS)}")
+    if isinstance(scans, (str, bytes, os.PathLike)) or not hasattr(scans, "__iter__"):
+        raise InputError(f"scans: expected a list of ScanInput, got {type(scans).__name__}")
+    scans = list(scans)
     if not scans:
         raise InputError("batch: no scans given (SCANS... or --manifest IN.json)")
+    bad = next((s for s in scans if not isinstance(s, ScanInput)), None)
+    if bad is not None:
+        raise InputError(f"scans: expected ScanInput entries (scans_from_paths, read_input_list), got {type(bad).__name__}")
+    if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
+        raise InputError(f"out: expected a folder path, got {out!r}")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(f"out {out}: exists and is not a folder")
-    if not (isinstance(max_retries, int) and max_retries >= 0):
-        raise InputError(f"max_retries: expected a whole number >= 0, got {max_retries!r}")
+    for s in scans:  # the batch folder is not a scan's: a scan or its landmarks inside a step's folder would be replaced
+        for p in (s.scan, s.landmarks):
+            if p is not None and _inside(Path(p), out / "scans"):
+                raise InputError(f"out {out}: holds the input {p} in its scans/ folder (a step would replace it); "
+                                 "choose another --out")
+    if levels is not None:
+        levels = check_count("levels", levels, high=MAX_ADAPT_LEVELS)
+    # simulate's options as `facewarp simulate` checks them (expression, seconds, fps, jaw, steps)
+    seconds, _, _, jaw = _check_simulate(str(expression) if isinstance(expression, os.PathLike) else expression,
+                                         seconds, fps, None, jaw, "physical", None)
+    fps = float(fps)
+    check_some_frames(seconds, fps)
+    check_kept_frames(seconds, fps)
+    rig_formats, rig_inbetweens, rig_muscles = _rig_options(rig_formats, rig_inbetweens, rig_muscles)
+    if rig_muscles is not None:
+        rig_muscles = _expand_muscles(rig_muscles)
+    if not isinstance(device, str) or not (device == "cpu" or device == "cuda" or (
+            device.startswith("cuda:") and device[5:].isdigit())):
+        raise InputError(f"device: expected cpu, cuda or cuda:N, got {device!r}")
+    if ray is not None and (not isinstance(ray, str) or not ray.strip()):
+        raise InputError(f"ray: expected None, 'local' or a cluster address (auto, ray://HOST:10001, HOST:6379), got {ray!r}")
+    if workers is not None:
+        workers = check_count("workers", workers, high=1024)
+    if gpus_per_task is not None and not (isinstance(gpus_per_task, (int, float)) and not isinstance(gpus_per_task, bool)
+                                          and math.isfinite(gpus_per_task) and 0 <= gpus_per_task <= 64):
+        raise InputError(f"gpus_per_task: expected a number 0..64, got {gpus_per_task!r}")
+    if not (isinstance(max_retries, int) and not isinstance(max_retries, bool) and 0 <= max_retries <= 100):
+        raise InputError(f"max_retries: expected a whole number 0..100, got {max_retries!r}")
     if simulate_batch is not None and not (isinstance(simulate_batch, int) and not isinstance(simulate_batch, bool)
                                            and 1 <= simulate_batch <= MAX_SIMULATE_BATCH):
         raise InputError(f"simulate_batch: expected a whole number 1..{MAX_SIMULATE_BATCH}, got {simulate_batch!r}")
-    rig_formats, rig_inbetweens, rig_muscles = _rig_options(rig_formats, rig_inbetweens, rig_muscles)
+    if "simulate" in steps:  # a level-0 head of the default template per scan: memory, disk and time before the first adapt
+        V, F = 3415, 6742
+        frames = round(seconds * fps) + 1
+        kept = estimate_sim_bytes(2 * V, 1.1 * F, frames, V)
+        check_work(f"seconds, fps: {len(scans)} scans x {frames} frames", head_frames=len(scans) * frames,
+                   vertex_count=V, device=device if ray is None else "cpu", memory_bytes=kept,
+                   disk_bytes=len(scans) * frames * V * 12.0, folder=out)
+    return {"steps": steps, "expression": expression, "seconds": seconds, "fps": fps, "levels": levels, "jaw": jaw,
+            "rig_formats": rig_formats, "rig_inbetweens": rig_inbetweens, "rig_muscles": rig_muscles, "device": device,
+            "ray": ray, "workers": workers, "gpus_per_task": gpus_per_task, "simulate_batch": simulate_batch,
+            "max_retries": max_retries, "retry_failed": bool(retry_failed), "progress": bool(progress)}
+
+
+def _inside(p: Path, folder: Path) -> bool:
+    """Whether the path ``p`` is ``folder`` or lies under it (symbolic links resolved)."""
+    try:
+        p.resolve().relative_to(folder.resolve())
+        return True
+    except (ValueError, OSError):
+        return False
+
+
+def batch_outcome(summary: dict) -> tuple[int, str]:
+    """The exit code of ``facewarp batch run`` and the words of its summary line, from the batch's
+    totals: 0 every scan done; 1 some scans failed or are incomplete (a step failed or was skipped;
+    the others are done); (2 is a batch refused before it started: :class:`InputError`)."""
+    if summary["failed"] == 0 and summary["incomplete"] == 0:
+        return 0, "all done"
+    if summary["done"] == 0:
+        return 1, "no scan done"
+    return 1, "some scans not done"
+
+
+def _run_batch_locked(scans: list[ScanInput], out: Path, *, t0: float, steps, expression, seconds, fps, levels, jaw,
+                      rig_formats, rig_inbetweens, rig_muscles, device, ray, workers, gpus_per_task, simulate_batch,
+                      max_retries, retry_failed, progress) -> dict:
+    """:func:`run_batch` on checked options, ``out`` locked."""
     manifest = Manifest(out)
     keys: list[str] = []
     for s in scans:
@@ -236,11 +372,8 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
         s, need = missing[keys[0]]
         raise InputError(f"--steps {','.join(steps)}: {s} needs {need} done first, and no scan has it done in "
                          f"{manifest.path} (add {need} to --steps)")
-    try:
-        manifest.save()
-    except OSError as e:
-        raise InputError(f"out {out}: cannot write the manifest ({e.strerror or e})") from None
-
+    # the workers (or the Ray cluster) before anything is written: a cluster that cannot be reached
+    # leaves no manifest
     if ray is None:
         from .executors import LocalExecutor
 
@@ -251,6 +384,14 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
 
         executor = RayExecutor(None if ray == "local" else ray, workers=workers, gpus_per_task=gpus_per_task,
                                max_retries=max_retries)
+    try:
+        manifest.save()
+    except OSError as e:
+        executor.close()
+        raise InputError(f"out {out}: cannot write the manifest ({e.strerror or e})") from None
+    except BaseException:
+        executor.close()
+        raise
 
     if simulate_batch is None:
         simulate_batch = GPU_SIMULATE_BATCH if executor.device("simulate", device).startswith("cuda") else 1
@@ -266,7 +407,7 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
         (held if todo[k][0] == "simulate" and simulate_batch > 1 else ready).append(k)
     inflight: dict = {}  # handle -> (key, step, task)
     attempts: dict[tuple[str, str], int] = {}
-    interrupted = False
+    interrupted: KeyboardInterrupt | None = None
     saver = _Saver(manifest)
 
     def task_of(key: str, step: str) -> dict:
@@ -359,11 +500,14 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
                     finish(k, step, r)
                 bar.show(counts["done"], counts["failed"], len(inflight), advance=len(group))
             saver.tick()
-    except KeyboardInterrupt:
-        interrupted = True
+    except KeyboardInterrupt as e:  # SIGINT or SIGTERM (core.outputs.Interrupted keeps which)
+        from ..core.outputs import Interrupted, interrupted_by
+
+        # a library on the way (Ray's wait) may re-raise a bare KeyboardInterrupt: the signal that came says which
+        interrupted = Interrupted(interrupted_by()) if not isinstance(e, Interrupted) and interrupted_by() else e
     finally:
         bar.close()
-        executor.close(abort=bool(inflight) or interrupted, handles=list(inflight))
+        executor.close(abort=bool(inflight) or interrupted is not None, handles=list(inflight))
         for key, step, _ in inflight.values():  # killed halfway: no half-written step folder stays
             for k in key if isinstance(key, tuple) else (key,):
                 shutil.rmtree(manifest.folder(k) / f".{step}.partial", ignore_errors=True)
@@ -371,9 +515,10 @@ def run_batch(scans: list[ScanInput], out, *, steps=("adapt", "build", "simulate
     summary = write_reports(manifest, keys)
     summary.update(executor=executor.description, tasks_run=counts["done"] + counts["failed"], tasks_kept=kept,
                    tasks_failed_kept=failed_kept, seconds=round(time.perf_counter() - t0, 3),
-                   interrupted=interrupted, steps=list(steps), simulate_grouping=grouping)
-    if interrupted:
-        raise KeyboardInterrupt
+                   interrupted=interrupted is not None, steps=list(steps), simulate_grouping=grouping)
+    summary["exit_code"], summary["outcome"] = batch_outcome(summary)
+    if interrupted is not None:
+        raise interrupted
     return summary
 
 

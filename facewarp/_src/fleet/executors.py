@@ -120,10 +120,7 @@ class RayExecutor:
                 kw.update(num_cpus=workers, include_dashboard=False)
             else:
                 kw["address"] = address
-            try:
-                ray.init(**kw)
-            except ConnectionError as e:
-                raise InputError(f"--ray {address}: cannot connect to the Ray cluster ({e})") from None
+            _init_ray(ray, address, kw)
         res = ray.cluster_resources()
         cpus, gpus = int(res.get("CPU", 1)), float(res.get("GPU", 0.0))
         self.capacity = int(workers) if workers else max(cpus, 1)
@@ -167,11 +164,60 @@ class RayExecutor:
         return out
 
     def close(self, abort: bool = False, handles=()) -> None:
+        """Shut down; with ``abort`` the running tasks are cancelled (their workers killed) and
+        waited for (at most :data:`CANCEL_WAIT` s), so none still writes its step folder once the
+        batch removes it."""
         if abort:
             for ref in handles:
                 try:
                     self.ray.cancel(ref, force=True)
                 except Exception:  # already finished, or the cluster went away
                     pass
+            if handles:
+                try:
+                    self.ray.wait(list(handles), num_returns=len(handles), timeout=CANCEL_WAIT)
+                except Exception:  # the cluster went away: nothing runs there any more
+                    pass
         if self._owned:
             self.ray.shutdown()
+
+
+CANCEL_WAIT = 10.0
+"""Seconds :meth:`RayExecutor.close` waits for cancelled tasks to end."""
+
+
+def _init_ray(ray, address, kw: dict) -> None:
+    """``ray.init(**kw)``, and the process's own SIGINT / SIGTERM handlers put back after it:
+    ``ray.init`` installs a SIGTERM handler that exits the driver (``sys.exit``) past the batch
+    loop's clean-up, which then died in Ray's shutdown with SIGABRT and left half-written step
+    folders and no report. With the handlers of the CLI
+    (:func:`~facewarp._src.core.outputs.signals_as_exceptions`) a SIGTERM is an ``Interrupted``
+    the loop handles: tasks cancelled, partial folders removed, reports written, Ray shut down,
+    exit 143. A SIGTERM while ``ray.init`` runs (Ray's handler, ``SystemExit(15)``) is turned into
+    that ``Interrupted`` too. (Signals are not blocked meanwhile: Ray's daemons started here would
+    inherit the blocked mask and not stop on ``ray.shutdown``.)"""
+    from ..core.outputs import Interrupted
+
+    import logging
+    import warnings
+
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with warnings.catch_warnings():  # Ray Client's UserWarnings (a connection timeout): our one line says it
+            warnings.simplefilter("ignore")
+            ray.init(**kw, logging_level=logging.ERROR)
+    except SystemExit as e:
+        if e.code == signal.SIGTERM:
+            raise Interrupted(signal.SIGTERM) from None
+        raise
+    except ConnectionError as e:
+        raise InputError(f"--ray {address}: cannot connect to the Ray cluster ({' '.join(str(e).split())})") from None
+    except RuntimeError as e:
+        text = " ".join(str(e).split())
+        if "pip install" in text or "requires pip package" in text:  # ray:// without the client extra
+            raise InputError(f"--ray {address}: {text} (pip install 'facewarp[ray]')") from None
+        raise
+    finally:
+        for s, h in handlers.items():
+            if h is not None:
+                signal.signal(s, h)

@@ -10,7 +10,7 @@ Manifest layout (``"fleet": 1``)::
 
     {"fleet": 1, "updated": ISO time, "out": DIR,
      "scans": {KEY: {"name": ..., "folder": "scans/NAME-KEY12",
-                     "inputs": {"scan": {"path", "size", "sha256"}, "landmarks": {...} | null, "units": "m"},
+                     "inputs": {"scan": {"path", "size", "sha256"}, "landmarks": {...} | null, "units": "mm" | ... | null},
                      "paths": [every scan path seen with this content],
                      "steps": {STEP: {"status": "done" | "failed" | "skipped", "error": one line | null,
                                       "params": {...}, "outputs": [files, relative to DIR],
@@ -33,7 +33,7 @@ from pathlib import Path
 from ..core.errors import InputError
 from ..core.fileio import write_json
 
-__all__ = ["GPU_STEPS", "NEEDS", "STEPS", "Manifest", "ScanInput", "depends", "file_record", "plain", "read_input_list",
+__all__ = ["GPU_STEPS", "NEEDS", "STEPS", "UNITS", "check_units", "Manifest", "ScanInput", "depends", "file_record", "plain", "read_input_list",
            "scans_from_paths"]
 
 STEPS = ("adapt", "build", "simulate", "rig")
@@ -102,11 +102,14 @@ class ScanInput:
     """One scan of a batch: its mesh, its landmarks (None: found on the scan by ``adapt``), its units.
 
     ``name`` is the name its output folder starts with (the scan file's stem unless given).
+    ``units``: ``"mm"``, ``"cm"``, ``"m"``, ``"auto"`` or None (default: as ``facewarp adapt``
+    reads a scan without ``--units``: metres when the scan's extent is a plausible head in
+    metres, else the scale from the FDPs).
     """
 
     scan: Path
     landmarks: Path | None = None
-    units: str = "m"
+    units: str | None = None
     name: str = ""
 
     def records(self) -> dict:
@@ -138,13 +141,25 @@ def _check_file(path: Path, what: str) -> Path:
     return path
 
 
-def scans_from_paths(paths, *, units: str = "m") -> list[ScanInput]:
+UNITS = ("mm", "cm", "m", "auto")
+"""Units a scan of a batch may be given in (None: ``adapt``'s default, :class:`ScanInput`)."""
+
+
+def check_units(units, what: str = "units") -> str | None:
+    """``units`` if it is one of :data:`UNITS` or None, else :class:`InputError` naming ``what``."""
+    if units is not None and units not in UNITS:
+        raise InputError(f"{what}: expected one of {', '.join(UNITS)} (or none: as adapt reads it), got {units!r}")
+    return units
+
+
+def scans_from_paths(paths, *, units: str | None = None) -> list[ScanInput]:
     """Scans given on the command line; each one's landmarks are looked for beside it
     (``NAME_landmarks.json``, ``NAME.landmarks.json``, ``NAME.json``, ``NAME.pp``, ``landmarks.json``)."""
+    check_units(units)
     return [ScanInput(_check_file(Path(p), "scan"), _landmarks_beside(Path(p)), units, Path(p).stem) for p in paths]
 
 
-def read_input_list(path, *, units: str = "m") -> list[ScanInput]:
+def read_input_list(path, *, units: str | None = None) -> list[ScanInput]:
     """The scans of an input manifest ``IN.json``.
 
     ``{"scans": [ITEM, ...]}`` or a bare list, each ITEM a scan path or
@@ -153,6 +168,7 @@ def read_input_list(path, *, units: str = "m") -> list[ScanInput]:
     Relative paths are relative to the file's folder. A batch's own ``manifest.json`` is accepted
     too (its scans' input paths).
     """
+    check_units(units)
     path = _check_file(Path(path), "manifest")
     try:
         doc = json.loads(path.read_text())
@@ -177,8 +193,7 @@ def read_input_list(path, *, units: str = "m") -> list[ScanInput]:
         if unknown:
             raise InputError(f"manifest {path}: scans[{k}]: unknown keys {', '.join(unknown)}")
         u = item.get("units") or units
-        if u not in ("mm", "cm", "m"):
-            raise InputError(f"manifest {path}: scans[{k}]: units must be mm, cm or m, got {u!r}")
+        check_units(u, f"manifest {path}: scans[{k}]: units")
         scan = _check_file(base / item["scan"], f"manifest {path}: scans[{k}]: scan")
         lm = item.get("landmarks")
         lm = _check_file(base / lm, f"manifest {path}: scans[{k}]: landmarks") if lm else _landmarks_beside(scan)

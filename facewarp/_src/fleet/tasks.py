@@ -174,7 +174,7 @@ def _run_job(task: dict, tmp: Path) -> dict:
     if step == "adapt":
         from ..jobs.adapt import adapt_files
 
-        return adapt_files(task["scan"], task.get("landmarks"), tmp, units=task.get("units", "m"),
+        return adapt_files(task["scan"], task.get("landmarks"), tmp, units=task.get("units"),
                            levels=p.get("levels"), device=device)
     if step == "build":
         from ..jobs.face import build_files

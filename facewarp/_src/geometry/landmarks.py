@@ -8,6 +8,16 @@ standard's own text.
 
 Landmarks are ``dict[str, np.ndarray]`` mapping an FDP id ("3.7") to a position [m],
 shape (3,), float64.
+
+Other schemes: the common 68-point scheme (iBUG 300-W / Multi-PIE order, 0-based: 0-16 jaw line
+from the subject's right ear to the left, 17-26 brows, 27-35 nose, 36-47 eyes, 48-67 lips) and
+its 51-point inner subset (the 68 without the jaw line, 0-based 17-67 renumbered 0-50) are read by
+:func:`load_landmarks` and converted by :func:`landmarks_from_scheme` to the FDPs they share a
+point with (:data:`IBUG68_TO_FDP`). A point is in the table when it and the FDP mark the same
+place: on the ICT-FaceKit neutral head (whose 68 landmark vertices ICT publishes) the default
+template's FDP, adapted there, lies within 1.5 mm of the scheme's point (:data:`IBUG68_FDP_OFFSET_MM`
+gives each distance; brows, jaw line, lids and nostrils differ by 5-10 mm between the two schemes'
+definitions and are left out).
 """
 
 from __future__ import annotations
@@ -29,15 +39,43 @@ __all__ = [
     "FDP",
     "FDP_CATALOGUE",
     "FDP_IDS",
+    "IBUG68_FDP_OFFSET_MM",
+    "IBUG68_TO_FDP",
+    "LANDMARK_SCHEMES",
     "LANDMARK_SUFFIXES",
     "fapu",
+    "landmarks_from_scheme",
+    "load_scheme_points",
     "fdp_sort_key",
     "load_landmarks",
     "save_landmarks_json",
 ]
 
-LANDMARK_SUFFIXES: tuple[str, ...] = (".json", ".pp")
-"""File suffixes :func:`load_landmarks` reads: JSON and MeshLab picked points."""
+LANDMARK_SUFFIXES: tuple[str, ...] = (".json", ".pp", ".pts")
+"""File suffixes :func:`load_landmarks` reads: JSON, MeshLab picked points and iBUG ``.pts``."""
+
+LANDMARK_SCHEMES: dict[str, int] = {"fdp": 0, "ibug68": 68, "ibug51": 51}
+"""Landmark schemes :func:`load_landmarks` reads -> their point count (0: named FDPs)."""
+
+IBUG68_TO_FDP: dict[int, str] = {
+    8: "2.1",  # menton: bottom of the chin
+    30: "9.3",  # nose tip
+    33: "9.15",  # subnasale: bottom middle edge of the nose
+    36: "3.12", 39: "3.8",  # subject's right eye: outer, inner corner
+    42: "3.11", 45: "3.7",  # subject's left eye: inner, outer corner
+    48: "8.4", 54: "8.3",  # outer lip corners: right, left
+    51: "8.1", 57: "8.2",  # outer lip contour: upper, lower middle
+    62: "2.2", 66: "2.3",  # inner lip contour: upper, lower middle
+}  # fmt: skip
+"""0-based point of the 68-point scheme -> the MPEG-4 FDP at the same place (see the module
+docstring). The 51-point scheme's point ``i`` is the 68-point scheme's ``i + 17``."""
+
+IBUG68_FDP_OFFSET_MM: dict[int, float] = {8: 1.4, 30: 0.7, 33: 1.1, 36: 1.0, 39: 1.4, 42: 1.4, 45: 1.2, 48: 0.4,
+                                          54: 0.5, 51: 1.3, 57: 1.0, 62: 1.3, 66: 1.2}
+"""Distance [mm] between each tabled 68-point landmark of the ICT-FaceKit neutral head (ICT's own
+vertex) and the default template's FDP adapted to that head with the 12 FDPs of the ICT head:
+how far the two definitions of the point lie apart on one face (an upper bound: it includes the
+adaptation's own error)."""
 
 
 @dataclass(frozen=True)
@@ -277,6 +315,102 @@ def _read_json(path: Path, text: str) -> dict[str, np.ndarray]:
     return out
 
 
+def landmarks_from_scheme(points, scheme: str = "auto", *, what: str = "landmarks") -> dict[str, np.ndarray]:
+    """FDP landmarks from the points of a numbered scheme (:data:`LANDMARK_SCHEMES`).
+
+    Args:
+        points: The scheme's points in order [any length unit], shape (68, 3) or (51, 3), float.
+        scheme: "ibug68", "ibug51" or "auto" (by the point count).
+        what: The name used in error messages.
+
+    Returns:
+        FDP id -> position (the input's unit), shape (3,), float64; the FDPs of
+        :data:`IBUG68_TO_FDP`, in FDP order.
+
+    Raises:
+        InputError: Not an (n, 3) array of finite numbers, a count that fits no scheme, or a
+            count that is not the given scheme's.
+    """
+    try:
+        P = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected a list of [x, y, z] points") from None
+    if P.ndim != 2 or P.shape[1] != 3:
+        cols = P.shape[1] if P.ndim == 2 else None
+        hint = " (2D image landmarks: the adaptation needs 3D points on the scan)" if cols == 2 else ""
+        raise InputError(f"{what}: expected points of shape (n, 3), got {P.shape}{hint}")
+    if scheme == "auto":
+        scheme = {68: "ibug68", 51: "ibug51"}.get(len(P), "")
+        if not scheme:
+            raise InputError(f"{what}: {len(P)} points fit no landmark scheme (expected a JSON object of named "
+                              "FDPs, or a list of the 68 or 51 points of the 68-point scheme)")
+    if scheme not in LANDMARK_SCHEMES or scheme == "fdp":
+        raise InputError(f"{what}: unknown point scheme {scheme!r}, expected ibug68, ibug51 or auto")
+    if len(P) != LANDMARK_SCHEMES[scheme]:
+        raise InputError(f"{what}: the {scheme} scheme has {LANDMARK_SCHEMES[scheme]} points, got {len(P)}")
+    if not np.isfinite(P).all():
+        bad = int(np.flatnonzero(~np.isfinite(P).all(axis=1))[0])
+        raise InputError(f"{what}: point {bad} is not 3 finite numbers")
+    first = 0 if scheme == "ibug68" else 17
+    out = {fdp: P[i - first].copy() for i, fdp in IBUG68_TO_FDP.items() if i >= first}
+    return {k: out[k] for k in sorted(out, key=fdp_sort_key)}
+
+
+def _read_pts(path: Path, text: str) -> np.ndarray:
+    """The points of an iBUG ``.pts`` file (``version: 1``, ``n_points: 68``, ``{``, one point a
+    line, ``}``), shape (n, d)."""
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    try:
+        start, end = lines.index("{"), lines.index("}")
+    except ValueError:
+        raise InputError(f"{path}: expected an iBUG .pts file (n_points: N, then the points between {{ and }})") from None
+    header = dict(ln.split(":", 1) for ln in lines[:start] if ":" in ln)
+    try:
+        rows = [[float(x) for x in ln.split()] for ln in lines[start + 1:end]]
+        P = np.array(rows, dtype=np.float64)
+    except ValueError:
+        raise InputError(f"{path}: a point line is not numbers") from None
+    n = header.get("n_points", "").strip()
+    if n and n.isdigit() and int(n) != len(P):
+        raise InputError(f"{path}: n_points says {n} but the file has {len(P)} points")
+    return P
+
+
+def _read_points(path: Path, text: str, suffix: str):
+    """The list of points of a numbered-scheme file (``.pts``, or a JSON list), or None for named FDPs."""
+    if suffix == ".pts":
+        return _read_pts(path, text)
+    if suffix == ".json" and text.lstrip().startswith("["):
+        try:
+            return json.loads(text)
+        except json.JSONDecodeError as e:
+            raise InputError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    return None
+
+
+def load_scheme_points(path: str | os.PathLike, *, units: str = "m", scheme: str = "auto"):
+    """The points of a 68- or 51-point landmark file in their order, or None for a file of named FDPs.
+
+    Args:
+        path: A file :func:`load_landmarks` reads.
+        units: Unit of the file's coordinates: "mm", "cm" or "m".
+        scheme: As in :func:`load_landmarks`.
+
+    Returns:
+        None, or (scheme "ibug68" / "ibug51", points [m] shape (68, 3) or (51, 3) float64).
+
+    Raises:
+        InputError: As :func:`load_landmarks`.
+    """
+    load_landmarks(path, units=units, scheme=scheme)  # every check, one message
+    path = Path(path)
+    points = _read_points(path, path.read_text(encoding="utf-8"), path.suffix.lower())
+    if points is None:
+        return None
+    P = np.asarray(points, dtype=np.float64) * unit_scale(units)
+    return ("ibug68" if len(P) == 68 else "ibug51"), P
+
+
 def _read_pp(path: Path, text: str) -> dict[str, np.ndarray]:
     try:
         root = ET.fromstring(text)
@@ -303,15 +437,19 @@ def _read_pp(path: Path, text: str) -> dict[str, np.ndarray]:
     return out
 
 
-def load_landmarks(path: str | os.PathLike, *, units: str = "m") -> dict[str, np.ndarray]:
-    """Read FDP landmarks from JSON or a MeshLab picked-points (``.pp``) file.
+def load_landmarks(path: str | os.PathLike, *, units: str = "m", scheme: str = "auto") -> dict[str, np.ndarray]:
+    """Read FDP landmarks from JSON, a MeshLab picked-points (``.pp``) or an iBUG ``.pts`` file.
 
-    JSON: ``{"3.7": [x, y, z], ...}``. ``.pp``: ``<point x=".." y=".." z=".." name="3.7"
-    active="1"/>`` elements; points with ``active="0"`` are skipped.
+    JSON: ``{"3.7": [x, y, z], ...}`` (named FDPs), or a list of 68 or 51 ``[x, y, z]`` points
+    (the 68-point scheme or its 51 inner points, converted by :func:`landmarks_from_scheme`).
+    ``.pp``: ``<point x=".." y=".." z=".." name="3.7" active="1"/>`` elements; points with
+    ``active="0"`` are skipped. ``.pts``: the iBUG point file with 3 numbers a point.
 
     Args:
         path: The file; format chosen by its suffix (:data:`LANDMARK_SUFFIXES`).
         units: Unit of the file's coordinates: "mm", "cm" or "m".
+        scheme: "auto" (by the file's content), "fdp", "ibug68" or "ibug51"
+            (:data:`LANDMARK_SCHEMES`): a file of another scheme is an error.
 
     Returns:
         FDP id -> position [m], shape (3,), float64; in :data:`FDP_IDS` order.
@@ -319,7 +457,8 @@ def load_landmarks(path: str | os.PathLike, *, units: str = "m") -> dict[str, np
     Raises:
         InputError: Missing/empty/unreadable file, malformed JSON or XML, a JSON value that
             is not an object, an unknown FDP id, a position that is not 3 finite numbers, a
-            duplicate id, or no landmarks at all. The one-line message starts with the path.
+            duplicate id, a list of points that fits no scheme (or not the given one), or no
+            landmarks at all. The one-line message starts with the path.
     """
     from ..core.checks import check_path
 
@@ -330,16 +469,26 @@ def load_landmarks(path: str | os.PathLike, *, units: str = "m") -> dict[str, np
         raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, expected a file")
+    if scheme != "auto" and scheme not in LANDMARK_SCHEMES:
+        raise InputError(f"scheme: expected auto, {', '.join(LANDMARK_SCHEMES)}, got {scheme!r}")
     suffix = path.suffix.lower()
     if suffix not in LANDMARK_SUFFIXES:
-        raise InputError(f"{path}: unsupported landmark format {suffix or '(no suffix)'!r}, expected .json or .pp")
+        raise InputError(f"{path}: unsupported landmark format {suffix or '(no suffix)'!r}, expected .json, .pp or .pts")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"{path}: cannot read ({getattr(e, 'strerror', None) or e})") from None
     if not text.strip():
         raise InputError(f"{path}: file is empty")
-    lm = _read_json(path, text) if suffix == ".json" else _read_pp(path, text)
+    points = _read_points(path, text, suffix)
+    if points is not None:
+        if scheme == "fdp":
+            raise InputError(f"{path}: holds a list of points, not named FDPs (scheme 'fdp')")
+        lm = landmarks_from_scheme(points, scheme, what=str(path))
+    else:
+        if scheme not in ("auto", "fdp"):
+            raise InputError(f"{path}: holds named FDPs, not the {scheme} scheme's list of points")
+        lm = _read_json(path, text) if suffix == ".json" else _read_pp(path, text)
     if not lm:
         raise InputError(f"{path}: contains no landmarks")
     return {k: lm[k] * scale for k in sorted(lm, key=fdp_sort_key)}

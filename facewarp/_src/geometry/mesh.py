@@ -420,10 +420,14 @@ def _resolve(path: Path, idx: np.ndarray, seen: np.ndarray, total: int, what: st
 
 
 def _read_trimesh(path: Path, look: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    import warnings
+
     import trimesh
 
     try:
-        loaded = trimesh.load(str(path), process=False, force="mesh")
+        with warnings.catch_warnings():  # NumPy's cast warnings on a damaged file: its values are checked below
+            warnings.simplefilter("ignore", RuntimeWarning)
+            loaded = trimesh.load(str(path), process=False, force="mesh")
     except Exception as e:  # trimesh raises many types for bad files
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         if isinstance(e, ImportError):  # trimesh fell back to a text decoder it cannot import: not this format

@@ -26,7 +26,7 @@ from ..adapt.pipeline import adapt
 from ..core.errors import InputError
 from ..core.fileio import write_json
 from ..geometry.surface import MeshQuery
-from ..geometry.landmarks import load_landmarks, save_landmarks_json
+from ..geometry.landmarks import FDP_CATALOGUE, load_landmarks, save_landmarks_json
 from ..geometry.mesh import load_mesh, save_obj, unit_scale
 from .checks import check_out_dir, make_out_dir
 
@@ -164,8 +164,12 @@ def _naming_calibration(landmarks: str, template: str):
 
 def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, template_landmarks=None,
                 method="multilevel", levels=None, markers=None, units=None, template_units="m", device="cpu",
-                progress=None, texture_size: int = 2048) -> dict:
+                progress=None, texture_size: int = 2048, landmark_scheme: str = "auto") -> dict:
     """Run the adaptation on files and write the outputs; returns the report dict.
+
+    ``landmark_scheme``: the scheme of the ``landmarks`` file (:func:`~facewarp.load_landmarks`'s
+    ``scheme``: "auto", "fdp", "ibug68" or "ibug51"; the 68- and 51-point schemes give the FDPs of
+    :data:`~facewarp.IBUG68_TO_FDP`).
 
     ``levels`` is :func:`~facewarp.adapt`'s: refinement levels after the FDP level (None: its
     default). ``landmarks`` None: the FDPs are found on the scan
@@ -200,7 +204,7 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     auto = units == "auto"
     detected = None
     if landmarks is not None:
-        raw_lm = load_landmarks(landmarks, units="m")
+        raw_lm = load_landmarks(landmarks, units="m", scheme=landmark_scheme)
         _check_units(raw.vertices, raw_lm, landmarks, f"the scan {scan}")
     TV, TF, tlm, groups, tmpl = _load_template(template_dir, template_mesh, template_landmarks, template_units)
     if landmarks is None:
@@ -225,6 +229,10 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     scan_mesh = raw
     scan_mesh.vertices = raw.vertices * scale
     scan_lm = {k: np.asarray(v) * scale for k, v in raw_lm.items()}
+    scheme_report = None
+    if detected is None:
+        scan_lm, tlm, scheme_report = _scheme_pairs(landmarks, landmark_scheme, scan_lm, tlm, scale,
+                                                    default_template=template_dir is None and template_mesh is None)
     if template_mesh is not None:
         _check_units(TV, tlm, template_landmarks, f"the template mesh {template_mesh}")
     mk = None
@@ -264,7 +272,7 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     # landmarks follow the adapted surface (face + barycentric on the template)
     from ..geometry.mesh import closest_surface_points
 
-    ids = list(tlm)
+    ids = [k for k in tlm if k in FDP_CATALOGUE]  # FDPs (a 68-point file's other points are not written)
     sp = closest_surface_points(TV, TF, np.array([tlm[k] for k in ids]), device=device)
     P = sp.positions(res.vertices, TF)
     save_landmarks_json(out / "adapted_landmarks.json", dict(zip(ids, P)))
@@ -284,6 +292,8 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     })
     if detected is not None:
         report["detected_landmarks"] = detected
+    if scheme_report is not None:
+        report["landmark_scheme"] = scheme_report
     if uv:
         from ..template.uv import uv_distortion
 
@@ -298,6 +308,36 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
     step("pictures")
     _pictures(out, res, TF, d_show, device)
     return report
+
+
+def _scheme_pairs(landmarks, scheme: str, scan_lm: dict, tlm: dict, scale: float, *, default_template: bool
+                  ) -> tuple[dict, dict, dict | None]:
+    """A 68- or 51-point landmark file: besides its FDPs, every other point of the scheme becomes a
+    landmark pair (id ``ibug68.N``) with its place on the default template
+    (:data:`~facewarp._src.template.ibug68.IBUG68_TEMPLATE`); other templates have no such places
+    and use the FDPs only. Returns (scan landmarks [m], template landmarks [m], report or None)."""
+    from ..geometry.landmarks import IBUG68_TO_FDP, load_scheme_points
+
+    got = load_scheme_points(landmarks, units="m", scheme=scheme)
+    if got is None:
+        return scan_lm, tlm, None
+    name, P = got
+    first = 0 if name == "ibug68" else 17
+    rep = {"scheme": name, "fdps": sorted(k for k in scan_lm if k in FDP_CATALOGUE), "other_points": 0,
+           "other_points_used": default_template}
+    if not default_template:
+        return scan_lm, tlm, rep
+    from ..template.ibug68 import IBUG68_KEY, IBUG68_TEMPLATE
+
+    scan_lm, tlm = dict(scan_lm), dict(tlm)
+    for j in range(first, 68):
+        if j in IBUG68_TO_FDP:
+            continue
+        key = IBUG68_KEY.format(j)
+        scan_lm[key] = P[j - first] * scale
+        tlm[key] = IBUG68_TEMPLATE[j]
+        rep["other_points"] += 1
+    return scan_lm, tlm, rep
 
 
 def _bake(out: Path, V_scan_frame, TF, tmpl, scan_mesh, size: int, device):

@@ -22,6 +22,7 @@ from ..core.errors import InputError
 from ..coupling.drivers import JAWS, jaw_driver, load_mjcf
 from ..expressions import Timeline
 from ..sim.play import Sink, play
+from ..sim.readout import eye_transforms
 
 __all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "FdpMotion", "UsdAnimation", "check_usd_path", "load_mjcf",
            "load_usd_export", "part_points",
@@ -55,13 +56,14 @@ def _rigid_matrix(f) -> np.ndarray:
     return M
 
 
-def part_transforms(fr, jaw_angles) -> dict:
+def part_transforms(fr, jaw_angles, gaze=None) -> dict:
     """Rest-to-current transform of every rigid part of ``fr`` at ``jaw_angles`` (u, v) [rad].
 
     Returns:
         name -> 4x4 float64 matrix in USD's row-vector convention (``p' = p @ M``): identity for
         parts with jaw amount 0 (eyes, upper teeth), the jaw rotation about ``fr.jaw_pivot``
-        scaled by the part's amount for the others (lower teeth and tongue: 1).
+        scaled by the part's amount for the others (lower teeth and tongue: 1); the eyeballs turned by
+        ``gaze`` ((2, 2) [rad], :func:`~facewarp._src.sim.readout.eye_transforms`) when given.
     """
     jaw = fr.jaw
     u, v = float(jaw_angles[0]), float(jaw_angles[1])
@@ -72,6 +74,10 @@ def part_transforms(fr, jaw_angles) -> dict:
             out[name] = np.eye(4)
         else:
             out[name] = _rigid_matrix(lambda P, a=a: jaw.apply(P, np.full(len(P), a), u, v))
+    for name, (R, c) in eye_transforms(fr, gaze).items():  # eyes turned about their centres: p' = R (p - c) + c
+        M = np.eye(4)
+        M[:3, :3], M[3, :3] = R.T, c - c @ R.T
+        out[name] = M
     return out
 
 
@@ -180,7 +186,7 @@ class UsdAnimation(Sink):
         """Write the simulator's current state as the frame at ``time_s`` [s]."""
         a, j = sim_controls(sim)
         try:
-            self.writer.add_frame(time_s, sim.surface(), part_transforms=part_transforms(self.fr, j),
+            self.writer.add_frame(time_s, sim.surface(), part_transforms=part_transforms(self.fr, j, sim.eye_gaze),
                                   muscle_points=muscle_curves(sim, self.samples), activations=a,
                                   tet_points=sim.positions() if self.tets else None)
         except self._error as e:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -21,9 +22,11 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..core.fileio import write_json
-from ..core.limits import MAX_FPS, MAX_SECONDS
+from ..core.limits import MAX_FPS, MAX_SECONDS, check_work, estimate_frames_bytes
+from ..core.outputs import destination
 from ..expressions import timeline_from_spec
 from ..physics.face_rig import load_face_rig
+from .checks import check_apart, check_some_frames
 
 __all__ = ["MAX_CLI_HEADS", "batch_simulate_files", "read_per_head", "simulate_group_files"]
 
@@ -43,19 +46,19 @@ def read_per_head(path, count: int) -> list[str]:
     try:
         doc = json.loads(p.read_text())
     except OSError as e:
-        raise InputError(f"{p}: cannot be read ({e.strerror or e})") from None
+        raise InputError(f"per_head {p}: cannot be read ({e.strerror or e})") from None
     except ValueError as e:
-        raise InputError(f"{p}: not valid JSON ({e})") from None
+        raise InputError(f"per_head {p}: not valid JSON ({' '.join(str(e).split())})") from None
     heads = doc.get("heads") if isinstance(doc, dict) else None
     if not isinstance(heads, list):
-        raise InputError(f'{p}: expected {{"heads": [expression, ...]}} with one entry per head')
+        raise InputError(f'per_head {p}: expected {{"heads": [expression, ...]}} with one entry per head')
     if len(heads) != count:
-        raise InputError(f"{p}: {len(heads)} entries for {count} heads (one per BUILD_DIR, in order)")
+        raise InputError(f"per_head {p}: {len(heads)} entries for {count} heads (one per BUILD_DIR, in order)")
     out = []
     for i, h in enumerate(heads):
         spec = h.get("expression") if isinstance(h, dict) else h
         if not isinstance(spec, str) or not spec.strip():
-            raise InputError(f'{p}: heads[{i}]: expected an expression name or {{"expression": NAME}}, got {h!r:.60}')
+            raise InputError(f'per_head {p}: heads[{i}]: expected an expression name or {{"expression": NAME}}, got {h!r:.60}')
         if spec.lower().endswith(".json") and not Path(spec).is_absolute():
             spec = str(p.parent / spec)
         out.append(spec)
@@ -116,22 +119,53 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
     from ..sim.batch import FaceBatch
     from .animation import UsdAnimation
 
+    if isinstance(heads, (str, bytes, os.PathLike)) or not hasattr(heads, "__iter__"):
+        raise InputError(f"heads: expected a list of `facewarp build` folders, got {type(heads).__name__} {heads!r:.60}")
+    heads = list(heads)
+    bad = next((h for h in heads if not isinstance(h, (str, os.PathLike)) or not str(h).strip()), None)
+    if bad is not None:
+        raise InputError(f"heads: expected `facewarp build` folder paths, got {type(bad).__name__} {bad!r:.40}")
     heads = [Path(h) for h in heads]
     if not heads:
         raise InputError("BUILD_DIR: give at least one `facewarp build` folder")
+    if not isinstance(expression, (str, os.PathLike)) or not str(expression).strip():
+        raise InputError(f"expression: expected a preset, 'sequence', a sequence file or 'muscle=value,...', "
+                         f"got {expression!r:.60}")
+    if per_head is not None and (not isinstance(per_head, (str, os.PathLike)) or not str(per_head).strip()):
+        raise InputError(f"per_head: expected a file path or None, got {per_head!r:.60}")
+    if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
+        raise InputError(f"out: expected a folder path, got {out!r:.60}")
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(k, frame_count) or None, got {type(progress).__name__}")
     if len(heads) > MAX_CLI_HEADS:
         raise InputError(f"BUILD_DIR: at most {MAX_CLI_HEADS} heads, got {len(heads)}")
     for key, v, high in (("seconds", seconds, MAX_SECONDS), ("fps", fps, MAX_FPS)):
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and 0 < v <= high):
             raise InputError(f"{key}: expected a finite number > 0 and <= {high:g}, got {v!r}")
-    if stage is not None and (Path(stage).name != str(stage) or Path(stage).suffix not in (".usda", ".usdc")):
-        raise InputError(f"stage: expected a file name ending in .usda or .usdc (written in the output folder), got {stage!r}")
+    check_some_frames(float(seconds), float(fps))
+    nf = int(round(seconds * fps)) + 1
+    width = max(2, len(str(len(heads) - 1)))
+    names = [f"head_{i:0{width}d}.usdc" for i in range(len(heads))]
+    if stage is not None:
+        if not isinstance(stage, str) or Path(stage).name != stage or Path(stage).suffix not in (".usda", ".usdc"):
+            raise InputError(f"stage: expected a file name ending in .usda or .usdc (written in the output folder), "
+                             f"got {stage!r}")
+        taken = {n.lower() for n in names} | {"report.json"}
+        if stage.lower() in taken:
+            raise InputError(f"stage: {stage!r} is the name of a head's animation file in the output folder "
+                             f"(head_00.usdc .. {names[-1]}); choose another name, e.g. crowd.usda")
     if jaw not in ("kinematic", "mujoco"):
         raise InputError(f"jaw: expected kinematic or mujoco, got {jaw!r}")
     if jaw == "mujoco":
         for h in heads:
             if not (h / "head.xml").is_file():
                 raise InputError(f"{h}: no head.xml for the MuJoCo jaw (rebuild with `facewarp build`, or use --jaw kinematic)")
+    out = Path(out)
+    outputs = [("out", out, "dir")] + [("out", out / n, "file") for n in names + ["report.json"]]
+    if stage is not None:
+        outputs.append(("stage", out / stage, "file"))
+    expr_file = Path(str(expression)) if str(expression).lower().endswith(".json") else None
+    check_apart(outputs, [("BUILD_DIR", h) for h in heads] + [("per_head", per_head), ("expression", expr_file)])
     specs = read_per_head(per_head, len(heads)) if per_head is not None else [str(expression)] * len(heads)
     timelines = {s: timeline_from_spec(s, float(seconds)) for s in dict.fromkeys(specs)}
     rigs, loaded = [], {}
@@ -140,7 +174,9 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
         if key not in loaded:
             loaded[key] = load_face_rig(h)
         rigs.append(loaded[key])
-    out = Path(out)
+    V = max(len(fr.head_vertices) for fr in rigs)
+    check_work(f"seconds, fps: {len(heads)} heads x {nf} frames", head_frames=len(heads) * (nf - 1), vertex_count=V,
+               device=str(device), disk_bytes=len(heads) * estimate_frames_bytes(nf, V), folder=destination(out))
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     batch = FaceBatch(rigs, device=device, fps=fps, backend="heads")  # its heads stream USD
@@ -148,9 +184,6 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
         batch.use_mujoco_jaws([h / "head.xml" for h in heads])
     build_s = time.perf_counter() - t0
     per = [timelines[s].for_head(fr) for s, fr in zip(specs, rigs)]
-    nf = int(round(seconds * fps)) + 1
-    width = max(2, len(str(len(heads) - 1)))
-    names = [f"head_{i:0{width}d}.usdc" for i in range(len(heads))]
     anims = [UsdAnimation(out / n, sim) for n, sim in zip(names, batch.heads)]
     try:
         # a frozen head's animation ends at its last good frame

@@ -7,7 +7,8 @@ from pathlib import Path
 
 from ..core.errors import InputError
 
-__all__ = ["MAX_FRAMES", "check_kept_frames", "check_some_frames", "check_out_dir", "load_simulated_head", "make_out_dir"]
+__all__ = ["MAX_FRAMES", "check_apart", "check_kept_frames", "check_some_frames", "check_out_dir", "load_simulated_head",
+           "make_out_dir"]
 
 MAX_FRAMES = 100_000
 """Most frames one ``simulate`` run keeps in memory (about 1 h at 30 fps; a level-0 head takes
@@ -78,3 +79,42 @@ def load_simulated_head(head_path, seconds: float, fps: float, jaw: str):
     if jaw == "mujoco":
         load_mjcf(mjcf)  # a broken head.xml fails before the simulator is made
     return fr, mjcf
+
+
+def _real(p, parents: dict) -> Path:
+    """Where ``p`` ends up, its folder's links resolved (the file itself is replaced, not its link's
+    target); ``parents`` caches the folders (10,000 files of one folder resolve it once)."""
+    from ..core.outputs import destination
+
+    d = Path(destination(p))
+    if d.parent not in parents:
+        parents[d.parent] = d.parent.resolve()
+    return parents[d.parent] / d.name
+
+
+def check_apart(outputs, inputs) -> None:
+    """Outputs that would replace or write into an input, refused before any work.
+
+    ``outputs``: ``[(name, path, "dir" | "file")]`` what the job writes (a staged path is taken
+    where it ends up, :func:`~facewarp._src.core.outputs.destination`); ``inputs``: ``[(name,
+    path)]`` the files and folders it reads. Refused: an output that is an input or lies inside an
+    input folder (``batch simulate --out BUILD`` would replace the build's ``report.json``), and an
+    output folder inside which an input lies where the job writes a file (checked by the file
+    outputs). Two outputs that are one path are refused too. One line naming both.
+    """
+    ins: dict[Path, tuple[str, bool]] = {}
+    for q, m in {str(q): m for m, q in reversed(list(inputs)) if q is not None}.items():  # a folder named twice once
+        if Path(q).exists():
+            ins.setdefault(Path(q).resolve(), (m, Path(q).is_dir()))
+    seen: dict[Path, str] = {}
+    parents: dict = {}
+    for n, p, _ in outputs:  # a set lookup per output and per parent: 10,000 heads' files check at once
+        p = _real(p, parents)
+        for q in (p, *p.parents):
+            if q in ins and (q == p or ins[q][1]):
+                m = ins[q][0]
+                raise InputError(f"{n} {p}: would {'replace' if q == p else 'write into'} the input {m} {q}; "
+                                 "choose an output apart from the inputs")
+        if p in seen:
+            raise InputError(f"{n} {p}: is also {seen[p]}; choose outputs of their own")
+        seen[p] = n

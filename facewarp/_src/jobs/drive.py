@@ -200,7 +200,8 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         from ..drive.arkit import arkit_table
 
         step = table_progress or (lambda done, total, name: None)
-        table = arkit_table(sim, cache=fr_dir, progress=step)
+        used = [n for n, w in zip(track.names, np.asarray(track.weights).max(axis=0)) if w > 0]
+        table = arkit_table(sim, cache=fr_dir, progress=step, solve=used)  # the shapes the take uses, added to the cache
     from ..drive.inverse import drive
 
     keep = None if usd_out else FrameRecorder()
@@ -237,7 +238,10 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     if isinstance(track, ArkitTrack):
         rep["error_is"] = "distance of each head FDP from its blended ARKit target (the table's shapes, head frame)"
         rep["out_of_reach"] = table.out_of_reach()
-        rep["table"] = {"file": str(fr_dir / ARKIT_TABLE_FILE), "from_cache": bool(table.info.get("from_cache"))}
+        rep["warnings"] = list(result.warnings)
+        rep["reach"] = [r for r in table.reach() if r["name"] in track.names and np.max(track.curve(r["name"])) > 0]
+        rep["table"] = {"file": str(fr_dir / ARKIT_TABLE_FILE), "from_cache": bool(table.info.get("from_cache")),
+                        "cached": not table.info.get("cache_note"), "source": table.info.get("source")}
     report_full = dict(rep)
     report_full["error_per_frame_mm"] = [[None if not np.isfinite(v) else round(float(v) * 1e3, 4) for v in row]
                                          for row in err]

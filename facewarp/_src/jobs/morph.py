@@ -19,6 +19,7 @@ rebuilt (skin layer, muscles, face rig, ``head.xml``), so each in-between head c
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -26,14 +27,15 @@ import numpy as np
 
 from ..adapt.transfer import load_head
 from ..core.errors import InputError
-from ..core.limits import MAX_MORPH_STEPS, check_memory, estimate_frames_bytes
+from ..core.limits import MAX_FPS, MAX_MORPH_STEPS, check_memory, check_work, estimate_frames_bytes
+from ..core.outputs import destination
 from ..geometry.similarity import Similarity, fit_similarity
 from ..present.animation import label_grid
 from ..present.render import render_mesh, save_png
 from ..present.template import colored_scene
 from ..template.files import save_template
 from .animation import check_usd_path
-from .checks import check_out_dir, make_out_dir
+from .checks import check_apart, check_out_dir, make_out_dir
 from .face import build_head_files
 
 __all__ = ["PART_SIMILARITY_TOLERANCE", "blend_heads", "check_same_topology", "morph_files", "part_motion"]
@@ -42,6 +44,10 @@ PART_SIMILARITY_TOLERANCE = 1e-4
 """Largest residual [m] of a part's similarity fit for the part to be morphed rigidly."""
 
 MAX_STEPS = MAX_MORPH_STEPS
+
+BUILD_FOLDER_BYTES = 4_000_000
+"""Disk of one in-between head of ``--build`` (its template folder and its build; measured 1.4 MB a
+level-0 build folder, about 2x rounded up) [bytes]."""
 
 
 def check_same_topology(a, b, names=("A", "B")) -> None:
@@ -175,11 +181,31 @@ def morph_files(head_a, head_b, out, *, steps: int = 8, fps: float = 30.0, build
     step = progress or (lambda msg: None)
     if not (isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and 1 <= steps <= MAX_STEPS):
         raise InputError(f"steps: expected a whole number 1..{MAX_STEPS}, got {steps!r}")
-    if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
-        raise InputError(f"fps: expected a finite number > 0, got {fps!r}")
+    if not (isinstance(fps, (int, float, np.integer, np.floating)) and not isinstance(fps, bool)
+            and math.isfinite(fps) and 0 < fps <= MAX_FPS):
+        raise InputError(f"fps: expected a finite number > 0 and <= {MAX_FPS:g}, got {fps!r}")
+    for name, h in (("head_a", head_a), ("head_b", head_b)):
+        if not isinstance(h, (str, os.PathLike)) and not hasattr(h, "vertices"):
+            raise InputError(f"{name}: expected a head folder, 'default[:LEVEL]' or a Template, got {type(h).__name__}")
+    if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
+        raise InputError(f"out: expected a .usda, .usdc or .usdz file path, got {out!r}")
     path = check_usd_path(out)
     if build is not None:
+        if not isinstance(build, (str, os.PathLike)) or not str(build).strip():
+            raise InputError(f"build: expected a folder path, got {build!r}")
         build = check_out_dir(build)
+    inputs = [(n, h) for n, h in (("A", head_a), ("B", head_b))
+              if isinstance(h, (str, os.PathLike)) and not str(h).startswith("default")]
+    outputs = [("out", path, "file"), ("out", path.with_suffix(".png"), "file")]
+    if build is not None:
+        outputs.append(("build", build, "dir"))
+        real_out, real_build = (Path(destination(p)).resolve() for p in (path, build))
+        if real_build in real_out.parents:
+            raise InputError(f"out {out}: lies inside --build {build}, whose head_KK folders it would sit among; "
+                             "choose outputs apart")
+        check_work(f"steps: {steps + 2} heads built", head_frames=0, vertex_count=1, device=str(device),
+                   disk_bytes=(steps + 2) * BUILD_FOLDER_BYTES, folder=destination(build))
+    check_apart(outputs, inputs)
     step("loading heads")
     a, b = load_head(head_a), load_head(head_b)
     check_same_topology(a, b, names=(str(head_a), str(head_b)))

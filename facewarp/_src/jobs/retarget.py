@@ -15,6 +15,7 @@ in memory.
 from __future__ import annotations
 
 import math
+import os
 import re
 from pathlib import Path
 
@@ -22,7 +23,8 @@ import numpy as np
 
 from ..adapt.transfer import load_head
 from ..core.errors import InputError
-from ..core.limits import MAX_FPS, MAX_HEADS, MAX_SECONDS, check_amount
+from ..core.limits import MAX_FPS, MAX_HEADS, MAX_SECONDS, check_amount, check_work, estimate_frames_bytes
+from ..core.outputs import destination
 from ..core.fileio import write_json
 from ..expressions import PRESETS, load_sequence, timeline_from_spec
 from ..anatomy.rig import build_face
@@ -32,7 +34,7 @@ from ..present.render import save_png
 from ..sim.play import _play
 from ..sim.simulator import FaceSimulator
 from .animation import FdpMotion, UsdAnimation, part_transforms, sim_controls
-from .checks import check_out_dir, check_some_frames, make_out_dir
+from .checks import check_apart, check_out_dir, check_some_frames, make_out_dir
 
 __all__ = ["RELAX_SECONDS", "TRACKED_FDPS", "load_rig", "retarget_files"]
 
@@ -108,8 +110,25 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
         InputError: a missing or bad sequence file or head, a bad number.
     """
     step = progress or (lambda msg: None)
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(message) or None, got {type(progress).__name__}")
+    if frame_progress is not None and not callable(frame_progress):
+        raise InputError(f"frame_progress: expected a callable frame_progress(k, frame_count) or None, got "
+                         f"{type(frame_progress).__name__}")
+    if not isinstance(expression, (str, os.PathLike)) or not str(expression).strip():
+        raise InputError(f"expression: expected a sequence file, a preset name or 'sequence', got {expression!r:.60}")
+    if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
+        raise InputError(f"out: expected a folder path, got {out!r:.60}")
+    if isinstance(heads, (str, bytes, os.PathLike)) or not hasattr(heads, "__iter__"):
+        raise InputError(f"heads: expected a list of heads (build folders, template folders, 'default[:LEVEL]'), "
+                         f"got {type(heads).__name__} {heads!r:.60}")
+    if not (isinstance(size, int) and not isinstance(size, bool) and 32 <= size <= 4096):
+        raise InputError(f"size: expected a whole number of pixels 32..4096, got {size!r}")
     out = check_out_dir(out)
     heads = list(heads)
+    bad = next((h for h in heads if not isinstance(h, (str, os.PathLike))), None)
+    if bad is not None:
+        raise InputError(f"heads: expected head paths or 'default[:LEVEL]', got {type(bad).__name__} {bad!r:.40}")
     if not heads:
         raise InputError("heads: expected at least one head")
     if len(heads) > MAX_HEADS:
@@ -128,10 +147,18 @@ def retarget_files(expression, heads, out, *, seconds: float | None = None, fps:
         p = Path(str(h))
         if not (str(h) == "default" or str(h).startswith("default:")) and not p.exists():
             raise InputError(f"{h}: no such head folder")
+    names = _names(heads)
+    expr_file = Path(expression) if expression.lower().endswith(".json") else None
+    check_apart([("out", out, "dir")] + [("out", out / f"{n}.usdc", "file") for n in names]
+                + [("out", out / "retarget.png", "file"), ("out", out / "report.json", "file")],
+                [("HEAD", h) for h in heads if not str(h).startswith("default")] + [("SEQUENCE", expr_file)])
+    nf = int(round(seconds * fps)) + 1
+    V = 3415  # the level-0 head's surface: the least a head has (its rig is read later)
+    check_work(f"seconds, fps: {len(heads)} heads x {nf} frames", head_frames=len(heads) * (nf - 1), vertex_count=V,
+               device=str(device), disk_bytes=len(heads) * estimate_frames_bytes(nf, V), folder=destination(out))
     labels = [("rest", 0)] + [(s.expression.name, int(round((s.start + s.attack + 0.5 * s.hold) * fps)))
                               for s in timeline.segments if s.start + s.attack + 0.5 * s.hold <= seconds][:6]
     make_out_dir(out)
-    names = _names(heads)
     rows, per_head = [], []
     for i, (head, name) in enumerate(zip(heads, names)):
         step(f"{name} ({i + 1}/{len(heads)}): anatomy")

@@ -54,7 +54,8 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
         out: The rig file, or a list of them (one bake written in each format); their folders must exist.
         shapes: One of :data:`RIG_SHAPES`.
         inbetweens: In-between shapes per muscle (0..8).
-        muscles: Optional muscle names to bake (default all).
+        muscles: Optional muscle names to bake (default all): instance names (``corrugator_L``) or Table 6.2
+            names, each meaning both sides.
         device: Warp device.
         progress: Optional ``progress(done, total, name)`` per baked shape.
         iris_color: Optional iris RGB (3,) in 0..1, linear, of the files' looks (``present.looks``).
@@ -82,6 +83,11 @@ def rig_files(build, out, *, shapes: str = "muscles", inbetweens: int = 0, muscl
     if not (build / "face_rig.npz").is_file():
         raise InputError(f"{build}: no face_rig.npz (expected a `facewarp build` output folder)")
     fr = load_face_rig(build)
+    if muscles is not None:  # a bare name means both sides (expressions.muscle_instances)
+        from ..expressions import muscle_instances
+
+        names = [muscles] if isinstance(muscles, str) else list(muscles)
+        muscles = list(dict.fromkeys(m for name in names for m in muscle_instances(name, fr.muscle_names)))
     rig = bake_blendshapes(fr, muscles=muscles, inbetweens=inbetweens, device=device, progress=progress)
     frames = demo_frames(fr, rig)
     looks = head_looks(fr, iris_color=iris_color)

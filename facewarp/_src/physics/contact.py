@@ -2,7 +2,7 @@
 
 The upper and lower lip may touch but never cross; lips and cheeks stay outside the teeth; lids
 stay outside the eyeball. :class:`ContactStage` keeps these with one-sided penalty springs
-(:class:`~facewarp._src.physics.model.Springs` with ``one_sided``; their energy, gradient and
+(:class:`~facewarp._src.physics.springs.Springs` with ``one_sided``; their energy, gradient and
 Hessian are in the solvers' kernels and in :mod:`.potential`):
 
 * lip on lip: every node of one lip (:mod:`facewarp._src.anatomy.lips`: the skin within
@@ -62,7 +62,7 @@ captured in a CUDA graph. (Not run on a GPU yet: every kernel and the ``newton-p
 contact were run on the CPU device.)
 
 Stiffness (physical units): a node's spring is ``CONTACT_MODULUS * area + CONTACT_MUSCLE_RATIO *
-k_m`` [N/m], with the node's sheet area (:func:`~facewarp._src.physics.model.sheet_areas`; the
+k_m`` [N/m], with the node's sheet area (:func:`~facewarp._src.physics.tissue.sheet_areas`; the
 median of its set for a node on no sheet) and k_m the muscle springs on the node (Eq. 6.4.1).
 The area term (2e9 N/m^3, 50 times the muscles' modulus 4e7; ~2e4 N/m on a level-0 lip node,
 about 20 times its edges' ``k0 / D0^2``) holds the skin that tissue pushes into contact (a lid
@@ -94,10 +94,11 @@ from ..core.warp import get_warp
 from .materials import CONTACT_MODULUS, CONTACT_MUSCLE_RATIO
 from ..geometry.surface import winding_numbers
 from ..geometry.tets import lip_crossings
-from .model import ContactArrays
+from .arrays import head_ids, jaw_axes
+from .springs import Springs
 
-__all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "LIP_REACH_M", "TEETH_REACH_M", "ContactGeometry",
-           "ContactStage", "contact_crossings", "contact_from_arrays", "contact_to_arrays"]
+__all__ = ["CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "LIP_REACH_M", "TEETH_REACH_M", "ContactArrays",
+           "ContactGeometry", "ContactStage", "ContactSurface", "contact_crossings", "contact_from_arrays", "contact_to_arrays"]
 
 CONTACT_GAP = 2.5e-4
 """Distance [m] outside the other surface at which a half-space contact spring starts to push."""
@@ -290,7 +291,7 @@ class ContactStage:
             ``node_stiffness``.
 
     Attributes:
-        springs: The spring sets (a tuple of :class:`~facewarp._src.physics.model.Springs`, all
+        springs: The spring sets (a tuple of :class:`~facewarp._src.physics.springs.Springs`, all
             one-sided but the gliding lid sheet's and the ties): lower lip on upper, upper lip on
             lower, each dental arch, the eyeballs, the inner lid sheet gliding on them (two-sided)
             and its floor, the lids at their fissure planes, the lid ties along the fissures
@@ -320,8 +321,8 @@ class ContactStage:
 
     @classmethod
     def from_model(cls, model) -> ContactStage:
-        """The contact of ``model.contact`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_contacts`): references
-        to the arrays :meth:`~facewarp._src.physics.model.ModelBuilder.finalize` made."""
+        """The contact of ``model.contact`` (:meth:`~facewarp._src.physics.builder.ModelBuilder.add_contacts`): references
+        to the arrays :meth:`~facewarp._src.physics.builder.ModelBuilder.finalize` made."""
         from . import kernels_contact as kc
 
         st = cls.__new__(cls)
@@ -402,3 +403,291 @@ class ContactStage:
                 wp.launch(self.kc._half_space_forces, dim=count,
                           inputs=[sp.node, sp.point, sp.axis, sp.stiffness, one, state_in.positions],
                           outputs=[forces], device=self.device)
+
+
+# ---------------------------------------------------------------------------------------- device arrays
+# The contact's host-side assembly (each head's candidates and springs, then every head's rows in one set)
+# and its device arrays, made once by ModelBuilder.finalize; ContactStage keeps references to them.
+
+
+class ContactSurface:
+    """Candidate nodes against one closed surface: its ``wp.Mesh`` and the nodes' springs (contact scratch).
+
+    With several heads the surface of every head is one mesh: head h's points are moved by its
+    query shift ``head_shift[h]`` (``kernels_contact._gather_points``), so a node (moved by its
+    head's shift for the query) finds only its own head's surface; head 0's shift is 0."""
+
+    def __init__(self, wp, nodes, k, surface_points, faces, device, reach, gap, *, follows=None, rigid=None,
+                 node_head=None, point_head=None, head_shift=None):
+        self.count = len(nodes)
+        self.reach, self.gap = float(reach), float(gap)
+        self.follows = follows  # node indices the surface points are (a lip), or None
+        self.rigid = rigid  # (rest points, jaw amount per point) of a rigid part, or None
+        self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
+        self.k = wp.array(np.asarray(k, np.float32), dtype=float, device=device)
+        npt = len(surface_points)
+        ph = np.zeros(npt, np.int32) if point_head is None else np.asarray(point_head, np.int32)
+        shift = np.zeros((1, 3), np.float64) if head_shift is None else np.asarray(head_shift, np.float64)
+        self.node_head = head_ids(wp, node_head, self.count, device)
+        self.point_head = head_ids(wp, ph, npt, device)
+        self.head_shift = wp.array(shift.astype(np.float32), dtype=wp.vec3, device=device)
+        P = np.asarray(surface_points, np.float32)
+        if head_shift is not None and np.any(shift):  # the points in the query space (as the kernels move them)
+            P = (P + shift.astype(np.float32)[ph]).astype(np.float32)
+        self.points = wp.array(P, dtype=wp.vec3, device=device)
+        if rigid is not None:
+            self.rest = wp.array(np.asarray(rigid[0], np.float32), dtype=wp.vec3, device=device)
+            amt = np.broadcast_to(np.asarray(rigid[1], np.float64), (npt,))
+            self.amount = float(np.abs(amt).max(initial=0.0))  # 0: the part never moves
+            self.amounts = wp.array(amt.astype(np.float32), dtype=float, device=device)
+        if follows is not None:
+            self.follow = wp.array(np.asarray(follows, np.int32), dtype=wp.int32, device=device)
+        self.mesh = wp.Mesh(points=self.points, indices=wp.array(np.asarray(faces, np.int32).ravel(), dtype=wp.int32,
+                                                                   device=device))
+        self.springs = Springs(node=self.nodes, point=wp.zeros(self.count, dtype=wp.vec3, device=device),
+                               stiffness=wp.zeros(self.count, dtype=float, device=device),
+                               axis=wp.zeros(self.count, dtype=wp.vec3, device=device), one_sided=True)
+
+
+def _contact_head(g, X, kn, kg, gap, *, lips, teeth, eyes, lids, ties) -> dict:
+    """One head's contact on the host (float64, its own node indices): the surfaces' candidates,
+    the eyeball, glide, floor, lid and tie springs (:class:`ContactArrays`)."""
+    def stiff(nodes):
+        k = kn[nodes]
+        pos = k[k > 0]
+        return np.where(k > 0, k, np.median(pos) if len(pos) else 0.0)
+
+    out = {"surfaces": []}
+    if lips:
+        for S, nodes in zip(g.lip_faces, g.lip_nodes):
+            if len(S) == 0 or len(nodes) == 0:
+                continue
+            used, local = np.unique(S, return_inverse=True)
+            out["surfaces"].append(dict(kind="lip", nodes=np.asarray(nodes, np.int64), k=stiff(nodes), points=X[used],
+                                        faces=local.reshape(-1, 3), reach=LIP_REACH_M, follows=used))
+    if teeth:
+        for name, TV, TF, amount, nodes in g.teeth:
+            if len(nodes):
+                out["surfaces"].append(dict(kind=f"teeth:{name}", nodes=np.asarray(nodes, np.int64), k=stiff(nodes),
+                                            points=np.asarray(TV, np.float64), faces=np.asarray(TF),
+                                            reach=TEETH_REACH_M, amount=float(amount)))
+    glide = np.asarray(g.eye_glide, bool)
+    if len(glide) != len(g.eye_nodes):
+        glide = np.zeros(len(g.eye_nodes), bool)
+    en = np.asarray(g.eye_nodes, np.int64)
+    d_rest = np.linalg.norm(X[en] - g.eye_centers[g.eye_of_node], axis=1) if len(en) else np.zeros(0)
+    if eyes and len(en):
+        # a node inside the ball (or within the gap) at rest gets its rest distance less
+        # EYE_REST_SLACK_M: no force at rest, and it may not sink deeper
+        r = np.minimum(g.eye_radii[g.eye_of_node] + gap, d_rest - EYE_REST_SLACK_M)
+        out["eye"] = (en, g.eye_centers[g.eye_of_node], stiff(en), r)
+    if eyes and glide.any():
+        # the inner lid sheet glides on the eyeball: on its glide sphere (glide_spheres; about
+        # the eyeball's centre through its rest position where none is given), two-sided at
+        # the sliding support's stiffness, and it may not sink below that sphere (one-sided at
+        # its contact stiffness, EYE_REST_SLACK_M short of it); the contact above keeps it out
+        # of the ball
+        if len(g.glide_centers) == len(en) and len(g.glide_radii) == len(en):
+            gc, gr = np.asarray(g.glide_centers, np.float64), np.asarray(g.glide_radii, np.float64)
+        else:
+            gc, gr = g.eye_centers[g.eye_of_node], d_rest
+        out["glide"] = (en[glide], gc[glide], kg[en[glide]], gr[glide])
+        out["floor"] = (en[glide], gc[glide], stiff(en)[glide], (gr - EYE_REST_SLACK_M)[glide])
+    if lids and len(g.lid_nodes):
+        ln = np.asarray(g.lid_nodes, np.int64)
+        c, n = g.lid_planes[g.lid_plane, 0], g.lid_planes[g.lid_plane, 1]
+        a = g.lid_side[:, None] * n  # toward the node's own side
+        # the plane gap / 2 short of the fissure plane (the two margins stop gap apart; a
+        # node nearer at rest, with a geometry made for a smaller gap, keeps its rest distance)
+        r = np.minimum(0.5 * gap, np.einsum("ij,ij->i", X[ln] - c, a))
+        out["lid"] = (ln, c + r[:, None] * a, LID_STIFFNESS_RATIO * stiff(ln), a)
+        partner = np.asarray(g.lid_partner, np.int64)
+        if ties and len(partner) == len(ln) and len(g.lid_tangent) == len(ln) and (partner >= 0).any():
+            # margins that close meet point to point along the fissure (kernels_contact._lid_ties),
+            # held as firmly as the inner sheet on its support (the glide stiffness: the
+            # contact's stiffness there stalled the CPU L-BFGS on the level-1 head)
+            mate = np.maximum(partner, 0)
+            off = 0.5 * (X[ln] - X[ln[mate]])
+            above = np.einsum("ij,ij->i", X[ln] - c, a) - r  # from the node's spring plane at rest
+            out["ties"] = (partner, above + above[mate], off, kg[ln], np.asarray(g.lid_tangent, np.float64))
+    return out
+
+
+def _query_shifts(points: list, reach: float) -> np.ndarray:
+    """Each head's shift into its own cell of the contact query space [m], (H, 3), float64:
+    head h at cell (i, j, k) of a cube grid (head 0 at the origin, unshifted), the cells wider
+    than every head's contact points and twice the reach, so no head's query reaches another's."""
+    H = len(points)
+    if H == 1:
+        return np.zeros((1, 3))
+    allp = np.concatenate([np.asarray(p, np.float64).reshape(-1, 3) for p in points if len(p)] or [np.zeros((1, 3))])
+    lo, hi = allp.min(0), allp.max(0)
+    cell = float((hi - lo).max()) + 2.0 * reach + 0.01
+    side = int(np.ceil(H ** (1.0 / 3.0) - 1e-9))
+    h = np.arange(H)
+    return np.stack([h % side, (h // side) % side, h // (side * side)], 1) * cell
+
+
+class ContactArrays:
+    """The contact on the device (:class:`~facewarp._src.physics.contact.ContactStage`'s arrays;
+    the arguments are the stage's, with ``nodes`` the rest positions [m], (p, 3), and ``jaw`` the
+    joint the lower teeth turn with, or None). Several heads: ``nodes``, ``node_stiffness``,
+    ``geometry``, ``glide_stiffness`` and ``jaw`` lists of one per head, ``node_offsets`` (H,)
+    each head's first node in the Model (the heads' surfaces must be alike: the same lips and
+    teeth in the same order, e.g. heads of one template).
+
+    Model: ``geometry`` (the :class:`~facewarp._src.physics.contact.ContactGeometry`; the first
+    head's), ``pivot``, ``u``, ``v`` (wp.array (H,) of wp.vec3: the jaws); per obstacle surface a
+    :class:`ContactSurface` in ``surfaces`` (its candidate nodes, stiffness [N/m], points [m] and
+    ``wp.Mesh``, every head's in one); counts ``eye_count``, ``glide_count``, ``lid_count``,
+    ``tie_count``; the lid ties' ``tie_rest`` [m], ``tie_partner``, ``tie_offset`` [m],
+    ``tie_stiffness`` [N/m]. The spring sets (``eye_springs``, ``glide_springs``,
+    ``floor_springs``, ``lid_springs``, ``tie_springs``; all in ``springs``): fixed nodes and
+    stiffness, their points, axes and stiffness the detection's scratch.
+    """
+
+    def __init__(self, wp, nodes, node_stiffness, device, *, gap=None, lips=True, teeth=True, eyes=True, lids=True,
+                 ties=True, geometry=None, glide_stiffness=None, jaw=None, node_offsets=None):
+        gap = CONTACT_GAP if gap is None else gap
+        self.device = device
+        if not (np.isfinite(gap) and gap >= 0.0):
+            raise InputError(f"gap: expected a finite distance >= 0 [m], got {gap!r}")
+        multi = isinstance(geometry, (list, tuple))
+        geos = list(geometry) if multi else [geometry]
+        H = len(geos)
+        Xs = list(nodes) if multi else [nodes]
+        kns = list(node_stiffness) if multi else [node_stiffness]
+        kgs = list(glide_stiffness) if multi else [glide_stiffness]
+        jaws = list(jaw) if multi else [jaw]
+        offs = np.zeros(1, np.int64) if node_offsets is None else np.asarray(node_offsets, np.int64)
+        heads, seen = [], {}
+        for h in range(H):
+            key = (id(geos[h]), id(Xs[h]), id(kns[h]), id(kgs[h]))  # heads of one rig: computed once
+            if key in seen:
+                heads.append(seen[key])
+                continue
+            X = np.asarray(Xs[h], np.float64)
+            kn = np.asarray(kns[h], np.float64)
+            if kn.shape != (len(X),) or not (np.isfinite(kn).all() and (kn >= 0).all()):
+                raise InputError(f"node_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
+            kg = kn if kgs[h] is None else np.asarray(kgs[h], np.float64)
+            if kg.shape != (len(X),) or not (np.isfinite(kg).all() and (kg >= 0).all()):
+                raise InputError(f"glide_stiffness: expected finite values >= 0 of shape ({len(X)},) [N/m]")
+            heads.append(_contact_head(geos[h], X, kn, kg, gap, lips=lips, teeth=teeth, eyes=eyes, lids=lids,
+                                       ties=ties))
+            seen[key] = heads[-1]
+        g = geos[0]
+        self.geometry = g
+        self.geometries = geos
+        self.pivot, self.u, self.v = jaw_axes(wp, jaws if multi else jaw, device)
+
+        # the surfaces: the k-th of every head in one mesh (the heads shifted apart for the queries)
+        kinds = [tuple(s["kind"] for s in hd["surfaces"]) for hd in heads]
+        if any(k != kinds[0] for k in kinds):
+            bad = next(h for h, k in enumerate(kinds) if k != kinds[0])
+            raise InputError(f"contact of head {bad}: its lip and teeth surfaces {list(kinds[bad])} differ from head "
+                             f"0's {list(kinds[0])}; heads of one Model need alike contact surfaces")
+        reach = max([s["reach"] for hd in heads for s in hd["surfaces"]] or [0.0])
+        shift = _query_shifts([np.concatenate([s["points"] for s in hd["surfaces"]] or [np.zeros((0, 3))])
+                               for hd in heads], reach)
+        self.head_shift = shift
+        self.surfaces: list[ContactSurface] = []
+        for j in range(len(kinds[0])):
+            parts = [hd["surfaces"][j] for hd in heads]
+            s0 = parts[0]
+            pts, fcs, nds, ks, nh, ph, fol, amt = [], [], [], [], [], [], [], []
+            p0 = 0
+            for h, s in enumerate(parts):
+                npt = len(s["points"])
+                pts.append(s["points"])
+                fcs.append(np.asarray(s["faces"], np.int64) + p0)
+                nds.append(s["nodes"] + offs[h])
+                ks.append(s["k"])
+                nh.append(np.full(len(s["nodes"]), h))
+                ph.append(np.full(npt, h))
+                if s0["kind"] == "lip":
+                    fol.append(s["follows"] + offs[h])
+                else:
+                    amt.append(np.full(npt, s["amount"]))
+                p0 += npt
+            cat = np.concatenate
+            lip = s0["kind"] == "lip"
+            self.surfaces.append(ContactSurface(
+                wp, cat(nds), cat(ks), cat(pts), cat(fcs), device, s0["reach"], gap,
+                follows=cat(fol) if lip else None, rigid=None if lip else (cat(pts), cat(amt)),
+                node_head=cat(nh), point_head=cat(ph), head_shift=shift))
+        sets = [s.springs for s in self.surfaces]
+
+        def gather(key, n_items):
+            """The heads' rows of one set, node indices shifted; None when no head has it."""
+            rows = [(h, hd[key]) for h, hd in enumerate(heads) if key in hd]
+            if not rows:
+                return None
+            out = []
+            for i in range(n_items):
+                out.append(np.concatenate([r[i] + (offs[h] if i == 0 else 0) for h, r in rows]))
+            return out
+
+        def sphere_set(parts, one_sided):
+            en, c, k, r = parts
+            return Springs(node=wp.array(en.astype(np.int32), dtype=wp.int32, device=device),
+                           point=wp.array(c.astype(np.float32), dtype=wp.vec3, device=device),
+                           stiffness=wp.array(k.astype(np.float32), dtype=float, device=device),
+                           rest_length=wp.array(r.astype(np.float32), dtype=float, device=device),
+                           one_sided=one_sided)
+
+        eye, glide, floor = gather("eye", 4), gather("glide", 4), gather("floor", 4)
+        self.eye_count = 0 if eye is None else len(eye[0])
+        self.glide_count = 0 if glide is None else len(glide[0])
+        if self.eye_count:
+            self.eye_springs = sphere_set(eye, True)
+            sets.append(self.eye_springs)
+        if self.glide_count:
+            self.glide_springs = sphere_set(glide, False)
+            self.floor_springs = sphere_set(floor, True)
+            sets += [self.glide_springs, self.floor_springs]
+        lid = gather("lid", 4)
+        self.lid_count = 0 if lid is None else len(lid[0])
+        self.tie_count = 0
+        if self.lid_count:
+            ln, point, k, a = lid
+            self.lid_springs = Springs(
+                node=wp.array(ln.astype(np.int32), dtype=wp.int32, device=device),
+                point=wp.array(point.astype(np.float32), dtype=wp.vec3, device=device),
+                stiffness=wp.array(k.astype(np.float32), dtype=float, device=device),
+                axis=wp.array(a.astype(np.float32), dtype=wp.vec3, device=device), one_sided=True)
+            sets.append(self.lid_springs)
+            if any("ties" in hd for hd in heads):
+                # every head's lid rows, its partners shifted by its first lid row (none: no partner)
+                partner, rest, off, kt, tan = [], [], [], [], []
+                l0 = 0
+                for hd in heads:
+                    if "lid" not in hd:
+                        continue
+                    m = len(hd["lid"][0])
+                    if "ties" in hd:
+                        p, r, o, k_, t = hd["ties"]
+                        partner.append(np.where(p >= 0, p + l0, -1))
+                        rest += [r]
+                        off += [o]
+                        kt += [k_]
+                        tan += [t]
+                    else:
+                        partner.append(np.full(m, -1))
+                        rest += [np.zeros(m)]
+                        off += [np.zeros((m, 3))]
+                        kt += [np.zeros(m)]
+                        tan += [np.zeros((m, 3))]
+                    l0 += m
+                cat = np.concatenate
+                self.tie_count = self.lid_count
+                self.tie_rest = wp.array(cat(rest).astype(np.float32), dtype=float, device=device)
+                self.tie_partner = wp.array(cat(partner).astype(np.int32), dtype=wp.int32, device=device)
+                self.tie_offset = wp.array(cat(off).astype(np.float32), dtype=wp.vec3, device=device)
+                self.tie_stiffness = wp.array(cat(kt).astype(np.float32), dtype=float, device=device)
+                self.tie_springs = Springs(
+                    node=self.lid_springs.node, point=wp.zeros(self.lid_count, dtype=wp.vec3, device=device),
+                    stiffness=wp.zeros(self.lid_count, dtype=float, device=device),
+                    axis=wp.array(cat(tan).astype(np.float32), dtype=wp.vec3, device=device))
+                sets.append(self.tie_springs)
+        self.springs = tuple(sets)

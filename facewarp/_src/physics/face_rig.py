@@ -3,7 +3,7 @@
 
 The rig is made at build time by :func:`facewarp._src.anatomy.rig.face_rig_from_anatomy`
 (boundary conditions, jaw amounts, muscles, contact geometry); the physics only reads it
-(:meth:`~facewarp._src.physics.model.ModelBuilder.add_face`).
+(:meth:`~facewarp._src.physics.builder.ModelBuilder.add_face`).
 """
 
 from __future__ import annotations
@@ -17,15 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.checks import check_face_rig
+from ..core.checks import check_array, check_indices
 from ..core.errors import InputError
 from ..core.fileio import atomic_write
 from ..geometry.jaw import JawKinematic
 from .contact import ContactGeometry, contact_from_arrays, contact_to_arrays
-from .model import node_jaw_amounts
 from .muscle_rig import MuscleRig
 
-__all__ = ["FaceRig", "load_face_rig", "node_jaw_amounts", "save_face_rig"]
+__all__ = ["FaceRig", "check_face_rig", "load_face_rig", "node_jaw_amounts", "save_face_rig"]
 
 
 @dataclass
@@ -198,3 +197,56 @@ def load_face_rig(path) -> FaceRig:
 def _first_line(e: BaseException) -> str:
     text = str(e).strip()
     return text.splitlines()[0] if text else type(e).__name__
+
+
+def node_jaw_amounts(fr) -> np.ndarray:
+    """Eq. 6.4.9 jaw amount of every tet node of a face rig (:class:`~facewarp.FaceRig`), shape (p,), float64: that of the head vertex the
+    node lies on or under (sheets are stored one after another, node ``l * q + i`` below outer
+    node ``i``). Rigs without ``vertex_jaw`` give the held and supported nodes' amounts only."""
+    n = len(fr.nodes)
+    out = np.zeros(n)
+    q = int((fr.layer == 0).sum())
+    if fr.vertex_jaw is not None and q and n % q == 0 and (fr.surface_vertex[:q] >= 0).all():
+        out = np.asarray(fr.vertex_jaw, np.float64)[fr.surface_vertex[np.arange(n) % q]]
+    else:
+        out[fr.jaw_nodes] = fr.jaw_amount
+        out[fr.support_nodes] = fr.support_amount
+    return out
+
+
+def check_face_rig(fr, source: str) -> None:
+    """The arrays of a face rig agree with each other: shapes, finite positions, indices in
+    range. ``source`` (the file) starts the message of the :class:`InputError`."""
+    try:
+        nodes = check_array("nodes", fr.nodes, shape=(None, 3))
+        p = len(nodes)
+        check_indices("tets", fr.tets, p, shape=(None, 4))
+        hv = check_array("head_vertices", fr.head_vertices, shape=(None, 3))
+        check_indices("head_faces", fr.head_faces, len(hv), shape=(None, 3))
+        check_indices("surface_vertex", fr.surface_vertex, len(hv), allow=-1)
+        for nm in ("layer", "surface_vertex"):
+            if len(getattr(fr, nm)) != p:
+                raise InputError(f"{nm}: {len(getattr(fr, nm))} entries for {p} nodes")
+        for nm in ("fixed", "held"):
+            a = check_array(nm, getattr(fr, nm), shape=(p,), kind="b")
+            del a
+        check_indices("jaw_nodes", fr.jaw_nodes, p)
+        check_array("jaw_amount", fr.jaw_amount, shape=(len(fr.jaw_nodes),))
+        check_indices("support_nodes", fr.support_nodes, p)
+        check_array("support_normal", fr.support_normal, shape=(len(fr.support_nodes), 3))
+        check_array("support_amount", fr.support_amount, shape=(len(fr.support_nodes),))
+        for nm in ("jaw_pivot", "jaw_u", "jaw_v"):
+            check_array(nm, getattr(fr, nm), shape=(3,))
+        check_indices("fdp_face", fr.fdp_face, len(fr.head_faces))
+        check_array("fdp_bary", fr.fdp_bary, shape=(len(fr.fdp_face), 3))
+        rig = fr.rig
+        check_indices("rig att_node", rig.att_node, p)
+        for nm in ("ctrl_rest", "att_rest_length", "att_stiffness", "att_weight", "contraction"):
+            a = getattr(rig, nm, None)
+            if a is not None:
+                check_array(f"rig {nm}", a, shape=(None,) * np.ndim(a))
+        for k, (V, F) in fr.parts.items():
+            Vp = check_array(f"part {k} vertices", V, shape=(None, 3))
+            check_indices(f"part {k} faces", F, len(Vp), shape=(None, 3))
+    except InputError as e:
+        raise InputError(f"{source}: corrupt face rig ({e})") from None

@@ -2,7 +2,7 @@
 contact detection against closed surfaces (``wp.Mesh`` queries) and the one-sided spring forces
 of the explicit solver. One module (Warp compiles a module at a time; the CPU compile is slow).
 
-Contact springs (:class:`~facewarp._src.physics.model.Springs` with ``one_sided``):
+Contact springs (:class:`~facewarp._src.physics.springs.Springs` with ``one_sided``):
 
 * against a closed surface (the other lip's tet region, a dental arch): the node's closest
   surface point p and the outward unit direction a there give the half-space energy

@@ -13,13 +13,10 @@ from __future__ import annotations
 
 import warp as wp
 
+from .elements import face_area_gradient, finite3, mat_columns, tet_volume_gradient
+
 GUARD_NONE = 2147483647
 """Sentinel of the guard array: no failure recorded (int32 max)."""
-
-
-@wp.func
-def _finite3(x: wp.vec3) -> bool:
-    return wp.isfinite(x[0]) and wp.isfinite(x[1]) and wp.isfinite(x[2])
 
 
 # Distance energy per unique tet edge (i, j), Eq. 6.4.4 with the stiffness of Eq. 6.4.6.
@@ -112,9 +109,7 @@ def _face_forces(
     m = nn / nl
     a0 = face_rest_area[t]
     c = (0.5 * nl - a0) / a0
-    gj = 0.5 * wp.cross(e2, m)
-    gk = 0.5 * wp.cross(m, e1)
-    gi = -(gj + gk)
+    gi, gj, gk = face_area_gradient(e1, e2, m)  # elements.py: dA/dx
     s = face_k[t] * c
     dmp = face_damping[t]
     if dmp > 0.0:
@@ -166,10 +161,7 @@ def _tet_forces(
     v = wp.dot(e1, wp.cross(e2, e3)) / 6.0
     v0 = tet_rest_volume[t]
     c = (v - v0) / v0
-    gj = wp.cross(e2, e3) / 6.0
-    gk = wp.cross(e3, e1) / 6.0
-    gl = wp.cross(e1, e2) / 6.0
-    gi = -(gj + gk + gl)
+    gi, gj, gk, gl = tet_volume_gradient(e1, e2, e3)  # elements.py: dV/dx
     s = tet_k[t] * c
     dmp = tet_damping[t]
     if dmp > 0.0:
@@ -200,9 +192,7 @@ def _tet_forces(
             ftd = wp.transpose(f) * fd
             sm = sm + ds * 0.5 * (ftd + wp.transpose(ftd))
         pm = f * sm * wp.transpose(dmi)
-        pj = wp.vec3(pm[0, 0], pm[1, 0], pm[2, 0])
-        pk = wp.vec3(pm[0, 1], pm[1, 1], pm[2, 1])
-        pl = wp.vec3(pm[0, 2], pm[1, 2], pm[2, 2])
+        pj, pk, pl = mat_columns(pm)
         fi = fi + (pj + pk + pl)
         fj = fj - pj
         fk = fk - pk
@@ -314,7 +304,7 @@ def _check_tets(
     x2 = positions_in[tet_indices[t][2]]
     x3 = positions_in[tet_indices[t][3]]
     code = int(-1)
-    if not (_finite3(x0) and _finite3(x1) and _finite3(x2) and _finite3(x3)):
+    if not (finite3(x0) and finite3(x1) and finite3(x2) and finite3(x3)):
         code = 2 * t
     else:
         v = wp.dot(x1 - x0, wp.cross(x2 - x0, x3 - x0))

@@ -77,7 +77,7 @@ __all__ = [
 
 EDGE_DAMPING = 500.0
 """Dashpot along every tet edge [N s/m] of the face's thesis profile (Eq. 6.4.5 on the relative
-velocity; :meth:`~facewarp._src.physics.model.ModelBuilder.add_face`). Table 6.3's per-substep damping alone leaves the stiff skin ringing for many periods when the jaw moves the
+velocity; :meth:`~facewarp._src.physics.builder.ModelBuilder.add_face`). Table 6.3's per-substep damping alone leaves the stiff skin ringing for many periods when the jaw moves the
 held nodes; about a quarter of the edges' critical damping 2 sqrt(k0 / D0^2 m) calms it without
 slowing rigid motion (and stays far below the explicit limit 2 m / dt)."""
 
@@ -272,7 +272,7 @@ def linear_stiffness(builder, frames=None) -> np.ndarray:
     element directions, which a thin layer of flat tets is not.
 
     Args:
-        builder: A :class:`~facewarp._src.physics.model.ModelBuilder` (its rest geometry and
+        builder: A :class:`~facewarp._src.physics.builder.ModelBuilder` (its rest geometry and
             per-element coefficients).
         frames: Optional local axes per tet, shape (k, 3, 3), float, rows orthonormal
             (e.g. two tangents and the layer's thickness direction): the tensors are then given
@@ -318,4 +318,16 @@ def linear_stiffness(builder, frames=None) -> np.ndarray:
     return C / vol[:, None, None]
 
 
-__all__ += ["TISSUE_DENSITY"]
+__all__ += ["TABLE_6_3", "TISSUE_DENSITY"]
+
+
+TABLE_6_3 = {
+    "mass": 0.5,  # kg per node
+    "damping": 0.002,  # per-substep velocity loss of the Verlet reference (dimensionless)
+    "k0_outer": 15.0,  # J
+    "k0_inner": 10.0,  # J
+    "k0_cross": 5.0,  # J
+    "k_area": 7.5,  # J
+    "k_volume": 7.5,  # J
+}
+"""Table 6.3 of the thesis in SI as it stands (the ``thesis`` material profile)."""

@@ -1,5 +1,5 @@
 """The packed muscles of a face (:class:`MuscleRig`, host NumPy, SI): what the builder reads to
-make the muscles' device arrays (:meth:`~facewarp._src.physics.model.ModelBuilder.add_muscles`)
+make the muscles' device arrays (:meth:`~facewarp._src.physics.builder.ModelBuilder.add_muscles`)
 and the stage's NumPy references use (:mod:`.muscle_stage`)."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 
 from ..core.errors import InputError
 
-__all__ = ["PIVOT_CENTER", "PIVOT_FIXED", "MuscleRig"]
+__all__ = ["PIVOT_CENTER", "PIVOT_FIXED", "MuscleRig", "merge_rigs"]
 
 PIVOT_CENTER = -1  # a sphincter point contracts toward its ring centre
 PIVOT_FIXED = -2  # a linear muscle's attachment on the bone does not contract
@@ -190,3 +190,52 @@ class MuscleRig:
             raise InputError("muscle rig: ctrl_pivot out of range")
         if not np.all(np.isfinite(self.ctrl_rest)):
             raise InputError("muscle rig: non-finite control point")
+
+
+def merge_rigs(heads: list, node_offsets) -> tuple:
+    """The muscle rigs of several heads as one (:class:`MuscleRig`): ``heads`` a list of ``(rig or
+    None, node jaw amount (n_h,) or None)`` per head, ``node_offsets`` each head's first node. Rows concatenated,
+    indices shifted by the heads' counts (control points, muscles and activations, curves,
+    segments, anchors, nodes). Returns ``(rig or None, {"ctrl_head" (P,), "att_head" (K,),
+    "att_jaw_shift" (K,)})`` (each control point's and attachment's head; the attachments' jaw
+    shift, node amount less the muscle's, as one head's :class:`MuscleArrays` computes it)."""
+    rigs = [(h, r, amount) for h, (r, amount) in enumerate(heads) if r is not None]
+    if not rigs:
+        return None, {}
+    cols = {k: [] for k in ("names", "activation_index", "contraction", "center", "center_jaw", "ctrl_rest",
+                            "ctrl_muscle", "ctrl_pivot", "ctrl_jaw", "curve_ctrl", "curve_weight", "seg_curve", "seg_t",
+                            "seg_rest_radii", "anchor_ctrl", "anchor_group", "anchor_passive", "att_node", "att_seg",
+                            "att_uv", "att_rest_length", "att_stiffness", "att_weight", "saturation", "center_normal",
+                            "glide", "glide_center")}
+    ctrl_head, att_head, shift = [], [], []
+    P0 = M0 = A0 = C0 = S0 = G0 = 0
+    for h, r, amount in rigs:
+        P, M, C, S, K = len(r.ctrl_rest), len(r.names), len(r.curve_ctrl), len(r.seg_curve), len(r.att_node)
+        cols["names"] += list(r.names)
+        cols["activation_index"].append(np.asarray(r.activation_index, np.int64) + A0)
+        for k in ("contraction", "center", "center_jaw", "ctrl_rest", "ctrl_jaw", "curve_weight", "seg_t",
+                  "seg_rest_radii", "anchor_passive", "att_uv", "att_rest_length", "att_stiffness", "saturation",
+                  "center_normal", "glide", "glide_center"):
+            cols[k].append(np.asarray(getattr(r, k)))
+        cols["att_weight"].append(np.asarray(r.att_weight, np.float64) if len(r.att_weight) else np.ones(K))
+        cols["ctrl_muscle"].append(np.asarray(r.ctrl_muscle, np.int64) + M0)
+        piv = np.asarray(r.ctrl_pivot, np.int64)
+        cols["ctrl_pivot"].append(np.where(piv >= 0, piv + P0, piv))
+        cols["curve_ctrl"].append(np.asarray(r.curve_ctrl, np.int64).reshape(-1, 3) + P0)
+        cols["seg_curve"].append(np.asarray(r.seg_curve, np.int64) + C0)
+        cols["anchor_ctrl"].append(np.asarray(r.anchor_ctrl, np.int64) + P0)
+        ag = np.asarray(r.anchor_group, np.int64)
+        cols["anchor_group"].append(ag + G0)
+        cols["att_node"].append(np.asarray(r.att_node, np.int64) + int(node_offsets[h]))
+        cols["att_seg"].append(np.asarray(r.att_seg, np.int64) + S0)
+        ctrl_head.append(np.full(P, h))
+        att_head.append(np.full(K, h))
+        shift.append(np.asarray(amount, np.float64)[r.att_node] - r.attachment_jaw() if amount is not None and K
+                     else np.zeros(K))
+        P0, M0, C0, S0 = P0 + P, M0 + M, C0 + C, S0 + S
+        A0 += M  # one activation per muscle (ModelBuilder.add_muscles' muscle_count)
+        G0 += int(ag.max()) + 1 if len(ag) else 0
+    cat = {k: (v if k == "names" else np.concatenate(v, axis=0)) for k, v in cols.items()}
+    rig = MuscleRig(**cat)
+    return rig, {"ctrl_head": np.concatenate(ctrl_head), "att_head": np.concatenate(att_head),
+                 "att_jaw_shift": np.concatenate(shift)}

@@ -3,9 +3,9 @@
 :class:`~.muscle_rig.MuscleRig` (:mod:`.muscle_rig`) is the host-side (NumPy, SI) packing of any
 set of muscles: control points, (rational) quadratic Bezier curves, ellipsoid segments, anchors
 and skin attachments. The anatomy module fills it (:func:`facewarp._src.anatomy.muscle_rig`);
-tests build small rigs by hand. :meth:`~facewarp._src.physics.model.ModelBuilder.finalize` puts
-its arrays on the device (:class:`~facewarp._src.physics.model.MuscleArrays`,
-:class:`~facewarp._src.physics.model.SupportArrays`); :class:`MuscleStage` and
+tests build small rigs by hand. :meth:`~facewarp._src.physics.builder.ModelBuilder.finalize` puts
+its arrays on the device (:class:`~facewarp._src.physics.muscle_stage.MuscleArrays`,
+:class:`~facewarp._src.physics.muscle_stage.SupportArrays`); :class:`MuscleStage` and
 :class:`SupportStage` keep references to them (``from_model``; their constructors make the arrays
 of a hand-made stage) and follow the solver's stage protocol: each substep they only launch
 kernels (no allocation, no host read), so a frame can be captured.
@@ -17,10 +17,131 @@ import numpy as np
 
 from ..core.warp import get_warp
 from ..core.errors import InputError
-from .model import Model, MuscleArrays, SupportArrays
+from .arrays import group_indices, head_ids, jaw_axes
+from .model import Model
+from .springs import Springs
 from .muscle_rig import PIVOT_CENTER, PIVOT_FIXED, MuscleRig
 
-__all__ = ["MuscleRig", "MuscleStage", "SupportStage", "contraction_curve", "ellipsoid_uv", "rig_reference"]
+__all__ = ["MuscleArrays", "MuscleRig", "MuscleStage", "SupportArrays", "SupportStage", "contraction_curve",
+           "ellipsoid_uv", "rig_reference"]
+
+# ---------------------------------------------------------------------------------------- device arrays
+# What the stages' kernels read and write, made once by ModelBuilder.finalize (or by a stage's own
+# constructor for a hand-made stage); a stage keeps references to them only.
+
+
+class MuscleArrays:
+    """The muscles on the device (:class:`~facewarp._src.physics.muscle_stage.MuscleStage`'s arrays).
+
+    Model (read only), float32 / int32 copies of the rig's fields (:class:`~facewarp.MuscleRig`,
+    same names and units): ``ctrl_rest`` (P,) vec3 [m], ``ctrl_muscle``, ``ctrl_pivot`` (P,),
+    ``ctrl_jaw`` (P,), ``muscle_activation``, ``muscle_contraction``, ``muscle_saturation``,
+    ``muscle_center`` (M,) vec3 [m], ``muscle_center_jaw``, ``muscle_center_normal`` (M,) vec3,
+    ``muscle_glide``, ``muscle_glide_center`` (M,) vec3 [m], ``curve_ctrl`` (C,) vec3i,
+    ``curve_weight`` (C,) vec3, ``curve_normal`` (C,) vec3 (rest plane normals), ``seg_curve``
+    (S,), ``seg_t`` (S,) vec2, ``seg_rest_radii`` (S,) vec3 [m]; anchors grouped (``anchor_count``,
+    ``anchor_start`` (A + 1,), ``anchor_ctrl``, ``anchor_passive``); attachments ``att_node``,
+    ``att_seg``, ``att_uv`` (K,) vec2, ``att_rest_length`` [m], ``att_stiffness`` [N/m] (after the
+    area weights), ``att_jaw_shift`` (node amount less the muscle's), ``att_across`` (K,) int32,
+    grouped per node (``att_nodes_unique``, ``att_node_start``, ``att_order``); ``jaw_pivot`` [m],
+    ``jaw_u``, ``jaw_v`` (wp.vec3).
+
+    Scratch (rewritten every step): ``ctrl_jawed``, ``ctrl_contracted`` (P,) vec3 [m];
+    ``seg_center`` (S,) vec3 [m], ``seg_frame`` (S,) mat33, ``seg_radii`` (S,) vec3 [m];
+    ``att_point`` (K,) vec3 [m], ``spring_stiffness`` (K,) [N/m], ``att_force`` (K,) vec3 [N];
+    ``springs`` (:class:`Springs` over them).
+    """
+
+    def __init__(self, wp, rig, jaw, device, node_amount, weighted_stiffness, attachment_jaw, attachment_across,
+                 curve_normals, *, ctrl_head=None, att_head=None, att_jaw_shift=None):
+        f32 = lambda a, dt=float: wp.array(np.ascontiguousarray(a, dtype=np.float32), dtype=dt, device=device)  # noqa: E731
+        i32 = lambda a, dt=wp.int32: wp.array(np.ascontiguousarray(a, dtype=np.int32), dtype=dt, device=device)  # noqa: E731
+        self.rig = rig
+        self.device = device
+        self.ctrl_rest = f32(rig.ctrl_rest, wp.vec3)
+        self.ctrl_muscle = i32(rig.ctrl_muscle)
+        self.ctrl_pivot = i32(rig.ctrl_pivot)
+        self.ctrl_jaw = f32(rig.ctrl_jaw)
+        self.muscle_activation = i32(rig.activation_index)
+        self.muscle_contraction = f32(rig.contraction)
+        self.muscle_saturation = f32(rig.saturation)
+        self.muscle_center_normal = f32(rig.center_normal, wp.vec3)
+        self.muscle_glide = i32(rig.glide)
+        self.muscle_glide_center = f32(rig.glide_center, wp.vec3)
+        self.muscle_center = f32(rig.center, wp.vec3)
+        self.muscle_center_jaw = f32(rig.center_jaw)
+        self.curve_ctrl = i32(rig.curve_ctrl, wp.vec3i)
+        self.curve_weight = f32(rig.curve_weight, wp.vec3)
+        self.curve_normal = f32(curve_normals, wp.vec3)
+        self.seg_curve = i32(rig.seg_curve)
+        self.seg_t = f32(rig.seg_t, wp.vec2)
+        self.seg_rest_radii = f32(rig.seg_rest_radii, wp.vec3)
+        groups, a_start, a_order = group_indices(rig.anchor_group)
+        self.anchor_count = len(groups)
+        self.anchor_start = i32(a_start)
+        self.anchor_ctrl = i32(np.asarray(rig.anchor_ctrl)[a_order])
+        self.anchor_passive = f32(np.asarray(rig.anchor_passive)[a_order])
+        self.att_node = i32(rig.att_node)
+        self.att_seg = i32(rig.att_seg)
+        self.att_uv = f32(rig.att_uv, wp.vec2)
+        self.att_rest_length = f32(rig.att_rest_length)
+        self.att_stiffness = f32(weighted_stiffness)
+        shift = np.zeros(len(rig.att_node))
+        if att_jaw_shift is not None:
+            shift = np.asarray(att_jaw_shift, np.float64)
+        elif node_amount is not None and len(rig.att_node):
+            shift = np.asarray(node_amount, np.float64)[rig.att_node] - attachment_jaw
+        self.att_jaw_shift = f32(shift)
+        self.ctrl_head = head_ids(wp, ctrl_head, len(rig.ctrl_rest), device)
+        self.att_head = head_ids(wp, att_head, len(rig.att_node), device)
+        self.att_across = i32(attachment_across)
+        nodes_u, n_start, order = group_indices(rig.att_node)
+        self.att_nodes_unique = i32(nodes_u)
+        self.att_node_start = i32(n_start)
+        self.att_order = i32(order)
+        self.att_force = wp.zeros(len(order), dtype=wp.vec3, device=device)
+        P, S, K = len(rig.ctrl_rest), len(rig.seg_curve), len(rig.att_node)
+        self.ctrl_jawed = wp.zeros(P, dtype=wp.vec3, device=device)
+        self.ctrl_contracted = wp.zeros(P, dtype=wp.vec3, device=device)
+        self.seg_center = wp.zeros(S, dtype=wp.vec3, device=device)
+        self.seg_frame = wp.zeros(S, dtype=wp.mat33, device=device)
+        self.seg_radii = wp.zeros(S, dtype=wp.vec3, device=device)
+        self.att_point = wp.zeros(K, dtype=wp.vec3, device=device)
+        self.spring_stiffness = wp.zeros(K, dtype=float, device=device)
+        self.springs = Springs(node=self.att_node, point=self.att_point, stiffness=self.spring_stiffness,
+                               rest_length=self.att_rest_length)
+        self.jaw_pivot, self.jaw_u, self.jaw_v = jaw_axes(wp, jaw, device)
+
+
+class SupportArrays:
+    """The sliding supports on the device (:class:`~facewarp._src.physics.muscle_stage.SupportStage`'s arrays).
+
+    Model: ``count``; ``nodes`` (s,) int32; ``normals`` (s,) vec3 (unit rest normals); ``amounts``
+    (s,) float32 (jaw amounts); ``stiffness`` (s,) float32 [N/m]; ``rest`` (vertex_count,) vec3 [m]
+    (the Model's rest positions); ``pivot``, ``u``, ``v`` (wp.vec3: the jaw). Scratch: ``point``,
+    ``axis`` (s,) vec3 (the step's anchors [m] and axes) and ``springs`` over them.
+    """
+
+    def __init__(self, wp, jaw, nodes, normals, amounts, stiffness, rest_positions, device, head=None):
+        self.device = device
+        self.count = len(nodes)
+        self.head = head_ids(wp, head, self.count, device)
+        self.nodes = wp.array(np.asarray(nodes, np.int32), dtype=wp.int32, device=device)
+        n = np.asarray(normals, np.float64).reshape(-1, 3)
+        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        self.normals = wp.array(n.astype(np.float32), dtype=wp.vec3, device=device)
+        self.amounts = wp.array(np.asarray(amounts, np.float32), dtype=float, device=device)
+        k = np.broadcast_to(np.asarray(stiffness, np.float64), (self.count,))
+        if not (np.isfinite(k).all() and (k >= 0).all()):
+            raise InputError(f"support stiffness must be finite and >= 0 [N/m], got min {k.min() if len(k) else 0}")
+        self.stiffness = wp.array(k.astype(np.float32), dtype=float, device=device)
+        self.rest = rest_positions
+        self.pivot, self.u, self.v = jaw_axes(wp, jaw, device)
+        self.point = wp.zeros(self.count, dtype=wp.vec3, device=device)
+        self.axis = wp.zeros(self.count, dtype=wp.vec3, device=device)
+        self.springs = Springs(node=self.nodes, point=self.point, stiffness=self.stiffness, axis=self.axis)
+
+
 
 # ---------------------------------------------------------------------------------------- host math
 def _bezier_np(c, w, t):
@@ -140,7 +261,7 @@ class MuscleStage:
     Attributes (device scratch, written every substep, readable between frames):
         seg_center, seg_frame, seg_radii: Current ellipsoids.
         att_point: Current attachment points on the ellipsoids [m], shape (K,), wp.vec3.
-        springs: The springs of the current implicit step (:class:`~facewarp._src.physics.model.Springs`).
+        springs: The springs of the current implicit step (:class:`~facewarp._src.physics.springs.Springs`).
     """
 
     def __init__(self, rig: MuscleRig, jaw, device, node_amount=None):
@@ -161,8 +282,8 @@ class MuscleStage:
 
     @classmethod
     def from_model(cls, model: Model) -> MuscleStage:
-        """The stage of ``model.muscles`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_muscles`): references to
-        the arrays :meth:`~facewarp._src.physics.model.ModelBuilder.finalize` made."""
+        """The stage of ``model.muscles`` (:meth:`~facewarp._src.physics.builder.ModelBuilder.add_muscles`): references to
+        the arrays :meth:`~facewarp._src.physics.builder.ModelBuilder.finalize` made."""
         st = cls.__new__(cls)
         st._bind(model.muscles.arrays)
         return st
@@ -247,8 +368,8 @@ class SupportStage:
 
     @classmethod
     def from_model(cls, model: Model) -> SupportStage:
-        """The stage of ``model.supports`` (:meth:`~facewarp._src.physics.model.ModelBuilder.add_supports`):
-        references to the arrays :meth:`~facewarp._src.physics.model.ModelBuilder.finalize` made."""
+        """The stage of ``model.supports`` (:meth:`~facewarp._src.physics.builder.ModelBuilder.add_supports`):
+        references to the arrays :meth:`~facewarp._src.physics.builder.ModelBuilder.finalize` made."""
         st = cls.__new__(cls)
         st._bind(model.supports.arrays)
         return st

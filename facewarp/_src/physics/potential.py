@@ -21,7 +21,7 @@ Energies per element (C dimensionless, see :mod:`.model`):
 * area (Eq. 6.4.7): ``k / 2 C^2``, C = A / A0 - 1;
 * volume (Eq. 6.4.8): ``k / 2 C^2``, C = V / V0 - 1 (signed volume), plus the volume barrier
   ``kappa k phi(C + 1)`` below a twentieth of the rest volume (:mod:`..volume_barrier`);
-* springs (:class:`~facewarp._src.physics.model.Springs`): ``k / 2 (|p - x| - l0)^2`` (muscles,
+* springs (:class:`~facewarp._src.physics.springs.Springs`): ``k / 2 (|p - x| - l0)^2`` (muscles,
   Eq. 6.4.1 with the fibre cosine frozen over the step) or ``k / 2 ((x - p) . a)^2`` (supports);
   one-sided (contact): ``k / 2 min(0, |x - p| - l0)^2`` (out of a ball) or
   ``k / 2 min(0, (x - p) . a)^2`` (a half-space).
@@ -40,9 +40,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from .model import Model
-from .volume_barrier import VOLUME_BARRIER_STIFFNESS, barrier, barrier_d, barrier_dd
+from .volume_barrier import INVERTED_ENERGY, VOLUME_BARRIER_STIFFNESS, barrier, barrier_d, barrier_dd
 
-__all__ = ["StepPotential", "StepData"]
+__all__ = ["StepData", "StepPotential", "deformation_gradient", "edge_energy", "edge_strain", "face_area_gradient",
+           "face_energy", "face_strain", "green_strain", "node_energy", "shear_energy", "spring_energy_grad",
+           "tet_edges", "tet_energy", "tet_strain", "tet_volume", "tet_volume_gradient"]
 
 
 def _host(a, dtype=np.float64) -> np.ndarray:
@@ -240,15 +242,14 @@ class StepPotential:
         e1, e2 = X[F[:, 1]] - xf0, X[F[:, 2]] - xf0
         N = np.cross(e1, e2)
         nl = _rows3(N)
-        cf = 0.5 * nl / self.A0 - 1.0
+        cf = face_strain(xf0, X[F[:, 1]], X[F[:, 2]], self.A0)
         dcf = cf - data.face_c
         e_sum += 0.5 * np.sum(self.kf * cf * cf) + 0.5 * ih * np.sum(self.df * dcf * dcf)
         # volume
         xt0 = X[T[:, 0]]
-        t1, t2, t3 = X[T[:, 1]] - xt0, X[T[:, 2]] - xt0, X[T[:, 3]] - xt0
+        t1, t2, t3 = tet_edges(xt0, X[T[:, 1]], X[T[:, 2]], X[T[:, 3]])
         c23 = np.cross(t2, t3)
-        v = np.einsum("ij,ij->i", t1, c23) / 6.0
-        ct = v / self.V0 - 1.0
+        ct = tet_volume(t1, t2, t3) / self.V0 - 1.0
         dct = ct - data.tet_c
         e_sum += 0.5 * np.sum(self.kt * ct * ct) + 0.5 * ih * np.sum(self.dt_ * dct * dct)
         e_sum += VOLUME_BARRIER_STIFFNESS * np.sum(self.kt * barrier(ct + 1.0))
@@ -267,7 +268,7 @@ class StepPotential:
         ge[:, 0] = s_e[:, None] * n_e
         ge[:, 1] = -ge[:, 0]
         m = N / np.maximum(nl, 1e-300)[:, None]
-        gj, gk = 0.5 * np.cross(e2, m), 0.5 * np.cross(m, e1)
+        _, gj, gk = face_area_gradient(e1, e2, m)
         s_f = (self.kf * cf + ih * self.df * dcf) / self.A0
         gf = np.empty((len(F), 3, 3))
         gf[:, 1] = s_f[:, None] * gj
@@ -412,3 +413,100 @@ class StepPotential:
         Y = X.copy()
         Y[self.free_index] += dv.reshape(-1, 3)
         return Y
+
+
+# ---------------------------------------------------------------------------------------- elements
+# The float64 oracle of the element library (facewarp._src.physics.elements), under its names and
+# vectorised over elements: rows (m, 3) of positions or edge vectors, (m,) of rest measures and
+# coefficients. tests/test_elements.py pairs each with its wp.func.
+def tet_edges(x0, x1, x2, x3) -> tuple:
+    """Edge vectors from corner 0 [m], three (m, 3)."""
+    return x1 - x0, x2 - x0, x3 - x0
+
+
+def tet_volume(e1, e2, e3) -> np.ndarray:
+    """Signed volume [m^3] 1/6 e1 . (e2 x e3), (m,)."""
+    return np.einsum("ij,ij->i", e1, np.cross(e2, e3)) / 6.0
+
+
+def tet_volume_gradient(e1, e2, e3) -> tuple:
+    """dV/dx_a [m^2] of the four corners, four (m, 3)."""
+    g1, g2, g3 = np.cross(e2, e3) / 6.0, np.cross(e3, e1) / 6.0, np.cross(e1, e2) / 6.0
+    return -(g1 + g2 + g3), g1, g2, g3
+
+
+def face_area_gradient(e1, e2, m) -> tuple:
+    """dA/dx_a [m] of the three corners for the unit normal m, three (m, 3)."""
+    g1, g2 = 0.5 * np.cross(e2, m), 0.5 * np.cross(m, e1)
+    return -(g1 + g2), g1, g2
+
+
+def edge_strain(xi, xj, d0) -> np.ndarray:
+    """C = |xi - xj| / D0 - 1, (m,)."""
+    return _rows3(xi - xj) / d0 - 1.0
+
+
+def face_strain(xi, xj, xk, a0) -> np.ndarray:
+    """C = A / A0 - 1, (m,)."""
+    return 0.5 * _rows3(np.cross(xj - xi, xk - xi)) / a0 - 1.0
+
+
+def tet_strain(xi, xj, xk, xl, v0) -> np.ndarray:
+    """C = V / V0 - 1, (m,)."""
+    return tet_volume(*tet_edges(xi, xj, xk, xl)) / v0 - 1.0
+
+
+def deformation_gradient(xi, xj, xk, xl, rest_inverse) -> np.ndarray:
+    """F = D_s D_m^-1, (m, 3, 3)."""
+    return np.stack(tet_edges(xi, xj, xk, xl), axis=2) @ rest_inverse
+
+
+def green_strain(F) -> np.ndarray:
+    """G = (F^T F - I) / 2, (m, 3, 3)."""
+    return 0.5 * (np.einsum("kji,kjl->kil", F, F) - np.eye(3))
+
+
+def shear_energy(G, k, dmp, G_start) -> np.ndarray:
+    """k / 2 |G|^2 + dmp / 2 |G - G_n|^2 [J], (m,)."""
+    dG = G - G_start
+    return 0.5 * k * np.einsum("kij,kij->k", G, G) + 0.5 * dmp * np.einsum("kij,kij->k", dG, dG)
+
+
+def edge_energy(xi, xj, d0, k0, dmp, c_start) -> np.ndarray:
+    """k0 (C^2 / 2 + C^4 / 4) + dmp / 2 (C - C_n)^2 [J] (Eq. 6.4.4, 6.4.6), (m,)."""
+    c = edge_strain(xi, xj, d0)
+    return k0 * c * c * (0.5 + 0.25 * c * c) + 0.5 * dmp * (c - c_start) ** 2
+
+
+def face_energy(xi, xj, xk, a0, k, dmp, c_start) -> np.ndarray:
+    """k / 2 C^2 + dmp / 2 (C - C_n)^2 [J] (Eq. 6.4.7), (m,)."""
+    c = face_strain(xi, xj, xk, a0)
+    return 0.5 * k * c * c + 0.5 * dmp * (c - c_start) ** 2
+
+
+def tet_energy(c, k, dmp, c_start) -> np.ndarray:
+    """k / 2 C^2 + dmp / 2 (C - C_n)^2 + kappa k phi(C + 1) [J] (Eq. 6.4.8 and the volume barrier), (m,)."""
+    quad = 0.5 * k * c * c + 0.5 * dmp * (c - c_start) ** 2
+    return np.where(c + 1.0 <= 0.0, INVERTED_ENERGY, quad + VOLUME_BARRIER_STIFFNESS * k * barrier(c + 1.0))
+
+
+def node_energy(x, mu, z, kh, target, f) -> np.ndarray:
+    """mu / 2 |x - z|^2 + kh / 2 |x - target|^2 - f . x [J], (m,)."""
+    dz, dh = x - z, x - target
+    return 0.5 * mu * np.einsum("ij,ij->i", dz, dz) + 0.5 * kh * np.einsum("ij,ij->i", dh, dh) - np.einsum("ij,ij->i", f, x)
+
+
+def spring_energy_grad(x, point, stiffness, rest_length=None, axis=None, one_sided=False) -> tuple:
+    """A spring set's energy [J] (m,) and gradient [N] (m, 3) (:class:`~.springs.Springs`: distance
+    springs with ``rest_length``, axis springs with ``axis``; ``one_sided`` only push)."""
+    r = x - point
+    if axis is not None:
+        s = np.einsum("ij,ij->i", r, axis)
+        if one_sided:
+            s = np.minimum(s, 0.0)
+        return 0.5 * stiffness * s * s, (stiffness * s)[:, None] * axis
+    l = _rows3(r)
+    s = l - rest_length
+    if one_sided:
+        s = np.minimum(s, 0.0)
+    return 0.5 * stiffness * s * s, (stiffness * s / np.maximum(l, 1e-300))[:, None] * r

@@ -24,7 +24,7 @@ the tolerance allows (the same-answer test bounds it). After the frame every hea
 volume ratio is read (one kernel, one read; a NaN counts as inverted): a frame in which any head
 fails is rolled back (the whole Model) and taken again with 2, 4, ... times the substeps
 (:data:`~facewarp._src.sim.rollback.MAX_REFINEMENT`); a head that still has a NaN or an inverted
-tet at the bound is reported in :attr:`FaceBatchModel.status` with its index and frozen at its last
+tet at the bound is reported in :attr:`BatchModel.status` with its index and frozen at its last
 good frame (its read-outs give that frame). It stays in the Model (its rows are still stepped):
 a NaN in one head can reach the others through the global dot products of the solver, which a
 per-head convergence test (not built yet) would keep apart.
@@ -40,17 +40,17 @@ import time
 
 import numpy as np
 
-from ..core.checks import check_array, check_choice, check_int, check_simulator_args, describe
+from ..core.checks import check_choice
 from ..core.errors import InputError, SimulationError
 from ..core.warp import get_warp
 from ..physics.volume_barrier import VOLUME_FLOOR
-from .batch import _SIM_KEYS, FaceBatch, _poses, _rig_list, activation_rows, muscle_count
-from .readout import activation_vector, fdp_points, head_surface, jaw_vector, parts_at, surface_index
+from .batch_common import _SIM_KEYS, BatchBase, _poses, activation_rows, jaw_rows, muscle_count
+from .readout import activation_vector, fdp_points, head_surface, parts_at, surface_index
 from .rollback import MAX_REFINEMENT, FrameGuard, FrameStats
-from .simulator import FaceSimulator
-from .stepper import SOLVERS, FrameStepper, face_stages
+from .simulator import FaceSimulator, check_simulator_args
+from .stepper import FrameStepper, face_stages
 
-__all__ = ["FaceBatchModel", "model_backend_reason"]
+__all__ = ["BatchModel", "model_backend_reason"]
 
 
 def model_backend_reason(options: dict) -> str | None:
@@ -60,9 +60,9 @@ def model_backend_reason(options: dict) -> str | None:
     return None
 
 
-class FaceBatchModel(FaceBatch):
-    """N faces in one Model stepped by one solver (module doc); made by
-    ``FaceBatch(..., backend="model")``, with :class:`~facewarp.FaceBatch`'s API and arguments.
+class BatchModel(BatchBase):
+    """The ``"model"`` backend of :class:`~facewarp.FaceBatch`: N faces in one Model stepped by one
+    solver (module doc), with FaceBatch's API and arguments (less ``backend``).
 
     Attributes:
         model: The one :class:`~facewarp.physics.Model` of every head (its ``head_*_start`` ranges
@@ -75,38 +75,23 @@ class FaceBatchModel(FaceBatch):
     backend = "model"
 
     def __init__(self, rigs, count: int | None = None, *, device: str = "cpu", fps: float = 30.0,
-                 placements=None, streams: int = 1, backend: str = "model", **options):
+                 placements=None, streams: int = 1, **options):
         from ..physics.materials import material_profile
-        from ..physics.model import ModelBuilder
-        from ..physics.solvers.implicit import SolverImplicit
+        from ..physics.builder import ModelBuilder
+        from ..physics.solvers.select import select_solver
 
-        bad = sorted(set(options) - set(_SIM_KEYS))
-        if bad:
-            raise InputError(f"{bad[0]}: not an option of FaceBatch (options: {', '.join(_SIM_KEYS)})")
-        rigs = _rig_list(rigs, count)
-        check_int("streams", streams, low=1, high=1024)
+        rigs = self._start(rigs, count, placements, streams, options)
         why = model_backend_reason(options)
         if why is not None:
             raise InputError(f"backend: 'model' cannot step {why}; use backend='heads'")
         n = len(rigs)
-        if placements is None:
-            self._place_R, self._place_t = np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3))
-        else:
-            if not (isinstance(placements, (tuple, list)) and len(placements) == 2):
-                raise InputError(f"placements: expected (R, t), got {describe(placements)}")
-            self._place_R, self._place_t = _poses("placements", placements[0], placements[1], n)
         o = {k: options.get(k) for k in _SIM_KEYS}
         o["solver"] = "implicit"
         for k, v in (("material", "physical"), ("mass_scaling", True), ("contact", True)):
             o[k] = v if o[k] is None else o[k]
         for fr in {id(fr): fr for fr in rigs}.values():
-            device = check_simulator_args(fr, device=device, solver="implicit", solvers=SOLVERS, dt=o["dt"],
-                                          substeps=o["substeps"], fps=fps, iterations=o["iterations"],
-                                          tolerance=o["tolerance"], method=o["method"],
-                                          solver_options=o["solver_options"],
-                                          support_stiffness=o["support_stiffness"], edge_damping=o["edge_damping"],
-                                          mass_scaling=o["mass_scaling"], contact=o["contact"],
-                                          contact_modulus=o["contact_modulus"])
+            device = check_simulator_args(fr, device=device, solver="implicit", fps=fps,
+                                          options={k: v for k, v in o.items() if k not in ("solver", "material")})
         self._wp = wp = get_warp()
         t0 = time.perf_counter()
         self.material = mat = material_profile(o["material"])
@@ -123,7 +108,7 @@ class FaceBatchModel(FaceBatch):
         self.control, self.rest_state, self.state, self.scratch = m.control(), m.state(), m.state(), m.state()
         self.stages = face_stages(m)
         opts = {"tolerance": 3e-5 if o["tolerance"] is None else o["tolerance"], **(o["solver_options"] or {})}
-        self.solver = SolverImplicit(m, stages=[s for s in self.stages.values() if s is not None],
+        self.solver = select_solver(m, stages=[s for s in self.stages.values() if s is not None],
                                      method=o["method"], iterations=o["iterations"], **opts)
         self.stages["muscles"].update_geometry(self.control, self.rest_state)  # rest fibres of zero control
         self.stepper = FrameStepper(self.solver, self.state, self.scratch, self.control, self.dt,
@@ -162,7 +147,7 @@ class FaceBatchModel(FaceBatch):
 
     def activation_vector(self, head: int, activations) -> np.ndarray:
         """Head ``head``'s activations as the (M,) float32 array its rows of the Control take
-        (:meth:`FaceSimulator.activation_vector <facewarp.FaceSimulator.activation_vector>`)."""
+        (:meth:`~facewarp.FaceSimulator.activation_vector`)."""
         return activation_vector(self.rigs[self._head(head)].rig.names, activations)
 
     def use_mujoco_jaws(self, mjcf) -> None:
@@ -174,24 +159,7 @@ class FaceBatchModel(FaceBatch):
 
     def set_jaw(self, angles) -> None:
         """As :meth:`FaceBatch.set_jaw <facewarp.FaceBatch.set_jaw>`: (N, 2) or (N,) openings [rad]."""
-        a = check_array("angles", angles, shape=(self.count,)) if np.ndim(angles) == 1 else check_array(
-            "angles", angles, shape=(self.count, 2))
-        a = np.asarray(a, np.float64).reshape(self.count, -1)
-        if a.shape[1] == 1:
-            a = np.concatenate([a, np.zeros_like(a)], axis=1)
-        from ..expressions import JAW_U_MAX, JAW_V_MAX
-
-        ok = (a[:, 0] >= -1e-9) & (a[:, 0] <= JAW_U_MAX + 1e-9) & (np.abs(a[:, 1]) <= JAW_V_MAX + 1e-9)
-        if ok.all():  # every head in range: jaw_vector's conversion for all at once (row by row below otherwise)
-            self._target_j = np.stack([np.maximum(a[:, 0], 0.0), a[:, 1]], 1).astype(np.float32)
-            return
-        out = np.zeros((self.count, 2), np.float32)
-        for i in range(self.count):
-            try:
-                out[i] = jaw_vector(float(a[i, 0]), float(a[i, 1]) if a.shape[1] > 1 else 0.0)
-            except InputError as e:
-                raise InputError(f"angles of head {i}: {e}") from None
-        self._target_j = out
+        _, self._target_j = jaw_rows(angles, self.count)
 
     def set_head_pose(self, R, t) -> None:
         """Only the rest pose (R = I, t = 0) in this backend: moving heads need ``backend='heads'``."""

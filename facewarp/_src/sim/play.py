@@ -186,10 +186,47 @@ def play(sim, timeline: Timeline, seconds: float, *, sinks=(), jaw=None, progres
     Raises:
         InputError: ``seconds`` not a finite number > 0, ``timeline`` not a Timeline, a bad sink.
     """
+    check_play_arguments(sim, jaw, progress)
     seconds = check_seconds(seconds)
     if not isinstance(timeline, Timeline):
         raise InputError(f"timeline: expected a facewarp Timeline, got {type(timeline).__name__}")
-    return _play(sim, timeline, seconds, [_as_sink(s) for s in sinks], jaw, progress)
+    if isinstance(sinks, (str, bytes)) or not hasattr(sinks, "__iter__"):
+        raise InputError(f"sinks: expected a list of Sink objects or callables f(sim, k, t), got {type(sinks).__name__}")
+    sinks = [_as_sink(s) for s in sinks]
+    check_play_length(sim, seconds, sinks)
+    return _play(sim, timeline, seconds, sinks, jaw, progress)
+
+
+def check_play_arguments(sim, jaw, progress) -> None:
+    """The types of :func:`play`'s ``sim``, ``jaw`` and ``progress``: :class:`InputError` naming the argument."""
+    from .simulator import FaceSimulator
+
+    if not isinstance(sim, FaceSimulator):
+        raise InputError(f"sim: expected a FaceSimulator, got {type(sim).__name__}")
+    if jaw is not None and not (callable(getattr(jaw, "step", None)) and not isinstance(jaw, (str, bytes))):
+        raise InputError(f"jaw: expected a jaw driver (facewarp.coupling.KinematicJawDriver or MujocoJawDriver) or "
+                         f"None, got {type(jaw).__name__} {jaw!r:.40}")
+    if jaw is not None and getattr(jaw, "sim", sim) is not sim:
+        raise InputError("jaw: the jaw driver drives another simulator than sim")
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a callable progress(k, frame_count) or None, got {type(progress).__name__}")
+
+
+def check_play_length(sim, seconds: float, sinks=()) -> None:
+    """A run of ``seconds`` at ``sim.fps`` within :data:`~facewarp._src.core.limits.MAX_ADVANCE_FRAMES`
+    frames and this machine's time; a :class:`FrameRecorder` among ``sinks`` keeps every frame,
+    so its memory is checked too. The refusal states the estimates."""
+    from ..core.limits import MAX_ADVANCE_FRAMES, check_work, describe_seconds, estimate_frames_bytes, estimate_seconds
+
+    frames = seconds * sim.fps
+    V = len(sim.fr.head_vertices)
+    if not frames <= MAX_ADVANCE_FRAMES:
+        t = estimate_seconds(frames, str(sim.device), V)
+        raise InputError(f"seconds: {seconds:g} s at {sim.fps:g} fps is {frames:.3g} frames (about "
+                         f"{describe_seconds(t)} on {sim.device}), more than {MAX_ADVANCE_FRAMES:,} per run")
+    keep = sum(isinstance(s, FrameRecorder) for s in sinks)
+    check_work(f"seconds: {seconds:g} s at {sim.fps:g} fps", head_frames=frames, vertex_count=V,
+               device=str(sim.device), memory_bytes=keep * estimate_frames_bytes(frames + 1, V))
 
 
 def _play(sim, timeline: Timeline, seconds: float, sinks: list, jaw, progress) -> PlayStats:

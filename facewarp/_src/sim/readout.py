@@ -49,9 +49,41 @@ def head_surface(fr, X, jaw_angles, index=None) -> np.ndarray:
     return V
 
 
-def parts_at(fr, jaw_angles) -> dict:
-    """The rigid parts (eyes, teeth, tongue) at ``jaw_angles``: name -> vertices [m], (k, 3), head frame."""
-    return {name: fr.part_at(name, jaw_angles) for name in fr.parts}
+EYES = ("eye_L", "eye_R")
+"""The eyeball parts, in the order of a gaze array's rows (left at +x, right)."""
+
+
+def eye_gaze_rotation(yaw: float, pitch: float) -> np.ndarray:
+    """An eyeball's rotation (3, 3) float64 for a gaze ``yaw`` (about +y, > 0 towards +x) and ``pitch``
+    [rad] (> 0 up) in the head frame (y up, +z forward): ``R = Ry(yaw) Rx(-pitch)``, so the rest gaze
+    +z goes to (sin yaw cos pitch, sin pitch, cos yaw cos pitch)."""
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    Ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, sp], [0.0, -sp, cp]])
+    return Ry @ Rx
+
+
+def eye_transforms(fr, gaze) -> dict:
+    """Rest-to-current rigid maps of the eyeballs turned by ``gaze`` ((2, 2) [rad], per eye of :data:`EYES`
+    its yaw and pitch; None: none turned): name -> (R (3, 3), c (3,) [m]) with ``p' = R (p - c) + c``,
+    ``c`` the eyeball's centre (the mean of its rest vertices, as the lid contact's sphere)."""
+    out = {}
+    if gaze is None:
+        return out
+    g = np.asarray(gaze, np.float64).reshape(2, 2)
+    for e, name in enumerate(EYES):
+        if name in fr.parts and (g[e, 0] or g[e, 1]):
+            out[name] = (eye_gaze_rotation(g[e, 0], g[e, 1]), np.asarray(fr.parts[name][0], np.float64).mean(axis=0))
+    return out
+
+
+def parts_at(fr, jaw_angles, gaze=None) -> dict:
+    """The rigid parts (eyes, teeth, tongue) at ``jaw_angles`` and eye ``gaze`` (:func:`eye_transforms`):
+    name -> vertices [m], (k, 3), head frame."""
+    out = {name: fr.part_at(name, jaw_angles) for name in fr.parts}
+    for name, (R, c) in eye_transforms(fr, gaze).items():
+        out[name] = (out[name] - c) @ R.T + c
+    return out
 
 
 def fdp_points(fr, points, parts) -> np.ndarray:
@@ -128,12 +160,12 @@ def activation_vector(names: list[str], activations) -> np.ndarray:
     if hasattr(activations, "activation") and hasattr(activations, "jaw_u"):
         return expression_activations(names, activations)
     if isinstance(activations, dict):
+        from ..expressions import muscle_instances
+
         out = np.zeros(len(names), np.float32)
         for key, value in activations.items():
-            hit = [i for i, n in enumerate(names) if n == key or (n.endswith(("_L", "_R")) and n[:-2] == key)]
-            if not hit:
-                raise InputError(f"activations: unknown muscle {key!r} (known: {', '.join(sorted(set(names)))})")
-            out[hit] = _unit_value(f"activations[{key!r}]", value)
+            hit = set(muscle_instances(key, names, what="activations"))
+            out[[i for i, n in enumerate(names) if n in hit]] = _unit_value(f"activations[{key!r}]", value)
         return out
     a = np.asarray(activations, dtype=np.float64)
     if a.shape != (len(names),):

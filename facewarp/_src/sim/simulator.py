@@ -1,5 +1,5 @@
 """The face simulator: a :class:`~facewarp._src.physics.face_rig.FaceRig` made into a Model
-(:meth:`~facewarp._src.physics.model.ModelBuilder.add_face`: what is simulated, every stiffness)
+(:meth:`~facewarp._src.physics.builder.ModelBuilder.add_face`: what is simulated, every stiffness)
 and stepped on a device by a user's loop or a timeline. What a step changes is the State's, so
 :meth:`FaceSimulator.reset` is a copy of the rest State; the read-outs are functions of the rig
 and the positions (:mod:`.readout`), the frame loop is :class:`.stepper.FrameStepper`'s.
@@ -11,8 +11,8 @@ import time
 
 import numpy as np
 
-from ..core.checks import (check_array, check_choice, check_int, check_name, check_positions, check_run_args,
-                           check_simulator_args, check_step_count)
+from ..core.checks import (check_array, check_bool, check_choice, check_device, check_int, check_mapping,
+                           check_name, check_number, check_positions, check_step_count, describe)
 from ..core.errors import InputError
 from ..core.limits import MAX_ADVANCE_FRAMES
 from ..coupling.head_pose import HeadPose
@@ -24,7 +24,7 @@ from .readout import activation_vector, fdp_points, head_surface, jaw_vector, mu
 from .rollback import MAX_REFINEMENT, FrameGuard, FrameStats, step_frame
 from .stepper import SOLVERS, FrameStepper, build_face, face_stages
 
-__all__ = ["SOLVERS", "FaceSimulator", "Frames", "face_stages", "save_frames_npz"]
+__all__ = ["SOLVERS", "FaceSimulator", "Frames", "check_run_args", "check_simulator_args", "face_stages", "save_frames_npz"]
 
 
 class FaceSimulator:
@@ -63,11 +63,10 @@ class FaceSimulator:
                  solver_options: dict | None = None, support_stiffness: float | None = None,
                  edge_damping: float | None = None, mass_scaling: bool = True, contact: bool = True,
                  contact_modulus: float | None = None, _builder=None):
-        device = check_simulator_args(fr, device=device, solver=solver, solvers=SOLVERS, dt=dt, substeps=substeps,
-                                      fps=fps, iterations=iterations, tolerance=tolerance, method=method,
-                                      solver_options=solver_options, support_stiffness=support_stiffness,
-                                      edge_damping=edge_damping, mass_scaling=mass_scaling, contact=contact,
-                                      contact_modulus=contact_modulus)
+        device = check_simulator_args(fr, device=device, solver=solver, fps=fps, options=dict(
+            dt=dt, substeps=substeps, iterations=iterations, tolerance=tolerance, method=method,
+            solver_options=solver_options, support_stiffness=support_stiffness, edge_damping=edge_damping,
+            mass_scaling=mass_scaling, contact=contact, contact_modulus=contact_modulus))
         b = build_face(fr, device=device, solver=solver, material=material, fps=fps, dt=dt, substeps=substeps,
                        iterations=iterations, tolerance=tolerance, method=method, solver_options=solver_options,
                        support_stiffness=support_stiffness, edge_damping=edge_damping, mass_scaling=mass_scaling,
@@ -114,6 +113,31 @@ class FaceSimulator:
         (:func:`.readout.jaw_vector`: ``opening`` 0..60 deg, ``side`` +-5 deg)."""
         self._target_j = jaw_vector(opening, side)
 
+    def set_eye_gaze(self, gaze) -> None:
+        """Turn the eyeballs (rigid parts about their centres) at the end of the next :meth:`step`:
+        ``gaze`` (2, 2) [rad], per eye (left at +x, right) its yaw (> 0 towards +x) and pitch (> 0 up),
+        each within +-90 deg (:func:`.readout.eye_gaze_rotation`). The lids rest on the eyeball's
+        sphere, which turning leaves in place: the gaze changes what is drawn and the eyes' FDPs."""
+        g = check_array("gaze", gaze, shape=(2, 2)).astype(np.float32)
+        if np.abs(g).max() > np.pi / 2:
+            raise InputError(f"gaze: eye angles lie within +-90 deg, got {np.degrees(np.abs(g).max()):.1f} deg")
+        self._target_g = g
+
+    @property
+    def eye_gaze(self) -> np.ndarray:
+        """The eyes' (yaw, pitch) [rad] reached by the last step, (2, 2) float32 (left, right)."""
+        return getattr(self, "_g", np.zeros((2, 2), np.float32)).copy()
+
+    def set_activation_vector(self, a) -> None:
+        """Set the activations reached at the end of the next :meth:`step` from an (M,) float32 array
+        already checked (:meth:`activation_vector`'s; :class:`~facewarp.FaceBatch` checks every head's at once)."""
+        self._target_a = np.asarray(a, np.float32)
+
+    def set_jaw_vector(self, j) -> None:
+        """Set the jaw angles [rad] reached at the end of the next :meth:`step` from a (2,) float32 array
+        already checked (:func:`.readout.jaw_vector`'s)."""
+        self._target_j = np.asarray(j, np.float32)
+
     def set_head_pose(self, R, t) -> None:
         """Set the cranium's pose (R (3, 3) rotation, t (3,) [m]) reached at the end of the next
         step; the face, simulated in the head's frame, feels the loads of the accelerating frame
@@ -132,6 +156,7 @@ class FaceSimulator:
         self.solver.reset()
         self._a, self._j = np.zeros(len(self.fr.rig.names), np.float32), np.zeros(2, np.float32)
         self._target_a, self._target_j = self._a.copy(), self._j.copy()
+        self._g, self._target_g = np.zeros((2, 2), np.float32), np.zeros((2, 2), np.float32)
         self._steps_taken = 0
         self.stats = FrameStats()
 
@@ -165,6 +190,7 @@ class FaceSimulator:
     def _frame_done(self, n: int) -> None:
         """After a frame of ``n`` substeps was taken: the controls reached, the pose and the clock advanced."""
         self._a, self._j = self._target_a.copy(), self._target_j.copy()
+        self._g = getattr(self, "_target_g", self.eye_gaze).copy()
         self._pose.advance()
         self._steps_taken += n
 
@@ -248,7 +274,7 @@ class FaceSimulator:
         return self._pose.to_world(C.reshape(-1, 3)).reshape(C.shape)
 
     def _parts_now(self, j, *, frame: str = "world") -> dict:
-        out = parts_at(self.fr, j)
+        out = parts_at(self.fr, j, getattr(self, "_g", None))
         return {k: self._pose.to_world(P) for k, P in out.items()} if frame == "world" else out
 
     def _curves(self, samples: int) -> np.ndarray:
@@ -263,3 +289,54 @@ class FaceSimulator:
         play(self, timeline, seconds, sinks=(rec,), jaw=jaw, progress=progress)
         return rec.frames
 
+
+# ------------------------------------------------------------------------------ checks of the arguments
+def check_simulator_args(fr, *, device, solver: str, fps, options: dict) -> str:
+    """The arguments of :class:`FaceSimulator` (see its docstring): the rig, ``device``, ``solver``
+    (one of :data:`SOLVERS`), ``fps`` and ``options`` (its other keywords by name: ``dt``,
+    ``substeps``, ``iterations``, ``tolerance``, ``method``, ``solver_options``, ``support_stiffness``,
+    ``edge_damping``, ``mass_scaling``, ``contact``, ``contact_modulus``; absent ones as None /
+    their defaults); returns the device name. Sizes are bounded by :mod:`facewarp._src.core.limits`."""
+    from ..core.limits import MAX_FPS, MAX_SUBSTEPS
+
+    o = {"mass_scaling": True, "contact": True, **options}
+    if not all(hasattr(fr, k) for k in ("nodes", "tets", "rig", "head_vertices")):
+        raise InputError(f"fr: expected a FaceRig (build_face or load_face_rig), got {describe(fr)}")
+    device = check_device(device)
+    check_choice("solver", solver, SOLVERS)
+    check_number("dt", o.get("dt"), low=0.0, low_open=True, high=1.0, allow_none=True)
+    check_int("substeps", o.get("substeps"), low=1, high=MAX_SUBSTEPS, allow_none=True)
+    check_number("fps", fps, low=0.0, low_open=True, high=MAX_FPS)
+    check_int("iterations", o.get("iterations"), low=1, high=100_000, allow_none=True)
+    check_number("tolerance", o.get("tolerance"), low=0.0, low_open=True, allow_none=True)
+    method = o.get("method")
+    if method is not None and not isinstance(method, str):
+        raise InputError(f"method: expected a method name or None, got {describe(method)}")
+    if o.get("solver_options") is not None:
+        opts = check_mapping("solver_options", o["solver_options"])
+        bad = [k for k in opts if not isinstance(k, str)]
+        if bad:
+            raise InputError(f"solver_options: keys must be option names, got {bad[0]!r}")
+    check_number("support_stiffness", o.get("support_stiffness"), low=0.0, allow_none=True)
+    check_number("edge_damping", o.get("edge_damping"), low=0.0, allow_none=True)
+    check_bool("mass_scaling", o["mass_scaling"])
+    check_bool("contact", o["contact"])
+    check_number("contact_modulus", o.get("contact_modulus"), low=0.0, low_open=True, allow_none=True)
+    return device
+
+
+def check_run_args(timeline, seconds, progress, curve_samples, *, fps: float, vertex_count: int) -> float:
+    """The arguments of :meth:`~facewarp.FaceSimulator.run`; the memory of the kept frames is
+    checked against the machine's. Returns ``seconds`` as a float."""
+    from ..core.limits import MAX_SECONDS, check_memory, estimate_frames_bytes
+
+    if not (hasattr(timeline, "sample") and hasattr(timeline, "for_head")):
+        raise InputError(f"timeline: expected a Timeline (preset(...), load_sequence(...)), got {describe(timeline)}")
+    seconds = check_number("seconds", seconds, low=0.0, low_open=True, high=MAX_SECONDS)
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a function progress(k, frame_count) or None, got {describe(progress)}")
+    check_int("curve_samples", curve_samples, low=2, high=10_000)
+    frames = round(seconds * fps) + 1
+    check_memory(estimate_frames_bytes(frames, vertex_count) + frames * curve_samples * 12 * 64,
+                 f"seconds: {frames} frames of {vertex_count} vertices")
+    return seconds

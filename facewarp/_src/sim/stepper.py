@@ -35,18 +35,18 @@ def build_face(fr, *, device, solver: str, material, fps: float, dt=None, subste
                tolerance=None, method=None, solver_options=None, support_stiffness=None, edge_damping=None,
                mass_scaling: bool = True, contact: bool = True, contact_modulus=None, builder=None) -> dict:
     """A face rig made into a simulation, one way down (the arguments checked by the simulator first): one
-    :class:`~facewarp._src.physics.model.ModelBuilder` (``add_face``: every stiffness), its
+    :class:`~facewarp._src.physics.builder.ModelBuilder` (``add_face``: every stiffness), its
     ``finalize`` (every device array of what is simulated, the rest State and the Control), the
     stages (:func:`face_stages`: kernel groups on the Model's arrays) and the solver (the Verlet
-    reference, or :class:`~facewarp._src.physics.solvers.implicit.SolverImplicit` with
+    reference, or the implicit solver of ``method`` (:func:`~facewarp._src.physics.solvers.select.select_solver`) with
     ``tolerance`` default 3e-5 m and ``solver_options`` its further keywords). The arguments are
     :class:`~facewarp.FaceSimulator`'s.
 
     Frame timing: the implicit solver one step per frame (or ``substeps``, or as many as ``dt``
     needs), the Verlet reference its stable step
-    (:meth:`~facewarp._src.physics.model.ModelBuilder.explicit_step`, which may scale masses).
+    (:meth:`~facewarp._src.physics.builder.ModelBuilder.explicit_step`, which may scale masses).
 
-    ``builder``: a :class:`~facewarp._src.physics.model.ModelBuilder` already made by ``add_face``
+    ``builder``: a :class:`~facewarp._src.physics.builder.ModelBuilder` already made by ``add_face``
     of ``fr`` with these arguments, shared (read only) by the heads of a
     :class:`~facewarp.FaceBatch` that play one rig (the implicit solver only: the Verlet
     reference scales the builder's masses); default a new one.
@@ -60,9 +60,8 @@ def build_face(fr, *, device, solver: str, material, fps: float, dt=None, subste
         InputError: an unknown solver, material or method, or bad numbers.
     """
     from ..physics.materials import material_profile
-    from ..physics.model import ModelBuilder
-    from ..physics.solvers.implicit import SolverImplicit
-    from ..physics.solvers.verlet import SolverVerlet
+    from ..physics.builder import ModelBuilder
+    from ..physics.solvers.select import select_solver
 
     mat = material_profile(material)
     if builder is None or solver == "verlet":
@@ -85,10 +84,10 @@ def build_face(fr, *, device, solver: str, material, fps: float, dt=None, subste
         if st is not None:
             listed.append(st)
     if solver == "verlet":
-        out["solver"] = SolverVerlet(model, stages=listed)
+        out["solver"] = select_solver(model, solver="verlet", stages=listed)
     else:
         opts = {"tolerance": 3e-5 if tolerance is None else tolerance, **(solver_options or {})}
-        out["solver"] = SolverImplicit(model, stages=listed, method=method, iterations=iterations, **opts)
+        out["solver"] = select_solver(model, stages=listed, method=method, iterations=iterations, **opts)
     return out
 
 
@@ -105,7 +104,7 @@ class FrameStepper:
         solver: Anything with ``step(state_in, state_out, control, dt)``.
         state, scratch: The State stepped and its partner (both stay where they are: graphs
             captured on them stay valid).
-        control: The :class:`~facewarp._src.physics.model.Control` the solver reads.
+        control: The :class:`~facewarp._src.physics.state.Control` the solver reads.
         dt: Substep [s].
         chunks: Largest number of ramp pieces per frame.
     """

@@ -18,7 +18,8 @@ import numpy as np
 from ...core.errors import InputError, SimulationError
 from ...core.warp import get_warp
 from .. import kernels_tissue as kt
-from ..model import Control, Model, State
+from ..model import Model
+from ..state import Control, State
 
 wp = get_warp()  # the kernels of this package import Warp already
 
@@ -60,7 +61,7 @@ def _check_fields(obj, device, name: str) -> None:
 
 
 def check_model_devices(model: Model) -> None:
-    """The device arrays :meth:`~facewarp._src.physics.model.ModelBuilder.finalize` made for the
+    """The device arrays :meth:`~facewarp._src.physics.builder.ModelBuilder.finalize` made for the
     model's parts (``MuscleArrays``, ``SupportArrays``, ``JawNodeArrays``, ``ContactArrays``) on
     the model's device; an :class:`InputError` naming the part and field otherwise."""
     for part, fields in (("muscles", ("arrays",)), ("supports", ("arrays",)), ("contact", ("arrays",)),
@@ -84,7 +85,7 @@ def check_stage_devices(stages, device) -> None:
 
 
 def stage_springs(stages) -> list:
-    """The :class:`~facewarp._src.physics.model.Springs` of ``stages``, in stage order: a stage's
+    """The :class:`~facewarp._src.physics.springs.Springs` of ``stages``, in stage order: a stage's
     ``springs`` attribute is None, one ``Springs`` or a tuple / list of them (a contact stage has
     one set per obstacle kind)."""
     out = []
@@ -105,7 +106,7 @@ class SolverStage(Protocol):
     nodes kinematically, in place in ``state_in`` (both position buffers, before any force is
     computed). Implicit solvers (:class:`~.implicit.SolverImplicit`) call :meth:`prepare` once per
     step instead: the same targets and carry, and the stage's energy terms written into its
-    ``springs`` (:class:`~facewarp._src.physics.model.Springs`, a tuple of them, or None for a
+    ``springs`` (:class:`~facewarp._src.physics.springs.Springs`, a tuple of them, or None for a
     stage without any). A stage may also have ``refresh(model, positions, control)``, which the
     implicit solver calls between iterations to re-evaluate its springs at the current iterate
     (the muscles' fibre cosine, the contacts' active set). All may only launch kernels: no

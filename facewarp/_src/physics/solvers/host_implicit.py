@@ -41,8 +41,9 @@ import numpy as np
 
 from ...core.errors import InputError, SimulationError
 from ...core.warp import get_warp
-from ..model import Control, Model, State
-from .implicit import SolverImplicit, _COMMON_OPTIONS
+from ..model import Model
+from ..state import Control, State
+from .implicit import _COMMON_OPTIONS, SolverImplicit, refuse_options
 
 __all__ = ["HOST_METHODS", "SolverHostImplicit", "factorization_backend"]
 
@@ -141,7 +142,8 @@ class SolverHostImplicit(SolverImplicit):
     def __init__(self, model: Model, *, method: str | None = None, stages=(), tolerance: float = 1e-5,
                  max_iterations: int | None = None, iterations: int | None = None, extrapolate: float | None = None,
                  history: int = 8, refactor_after: int = 20, spring_updates: int = 4, spring_tolerance: float = 0.01,
-                 backend: str | None = None):
+                 backend: str | None = None, **options):
+        refuse_options(type(self), options)
         method = "lbfgs" if method is None else method
         if method not in HOST_METHODS:
             raise InputError(f"method: {type(self).__name__} runs {' or '.join(HOST_METHODS)}, got {method!r}"

@@ -1,7 +1,7 @@
 """Implicit (backward) Euler solvers of the skin model: the thesis's energies at frame-sized steps.
 
-``SolverImplicit(model, stages=..., method=...).step(state_in, state_out, control, dt)`` has the
-contract of :class:`~.verlet.SolverVerlet` (:mod:`.base`) and integrates the same :class:`Model`
+``select_solver(model, stages=..., method=...).step(state_in, state_out, control, dt)``
+(:func:`~.select.select_solver`) has the contract of :class:`~.verlet.SolverVerlet` (:mod:`.base`) and integrates the same :class:`Model`
 (energies of Eq. 6.4.4-6.4.8, muscle springs of Eq. 6.4.1, holds, supports, damping): one step
 minimises the incremental potential Phi of backward Euler
 (:class:`~.incremental.IncrementalPotential`, kernels in :mod:`.kernels_potential` and
@@ -16,9 +16,10 @@ Two algorithms, one class each, sharing that potential:
   on the CPU too): Newton iterations with block-Jacobi preconditioned conjugate gradients and a
   line search decided on the device, a whole adaptive step one CUDA graph.
 
-``SolverImplicit(model, method=None, ...)`` makes the one ``method`` names (default: L-BFGS on
-the CPU, Newton-PCG on CUDA); both are :class:`SolverImplicit` instances. Each takes its own
-options; one it lacks is an :class:`~facewarp.InputError` naming it.
+:class:`SolverImplicit` is their base (what both share: the stages, the potential, the step's
+frame); :func:`~.select.select_solver` makes the class ``method`` names (default: L-BFGS on the
+CPU, Newton-PCG on CUDA). Each class takes its own options; one it lacks is an
+:class:`~facewarp.InputError` naming it (and the class it belongs to).
 
 Why these methods (measured on the 2-core CPU box, default head level 0: 2,448 nodes, 6,738
 tets, presets with muscles and a 30 degree jaw; ``benchmarks/solver_accuracy.py``, ``physics_steps.py``)
@@ -62,12 +63,13 @@ import numpy as np
 
 from ...core.errors import InputError
 from ...core.warp import get_warp
-from ..model import Control, Model, State
+from ..model import Model
+from ..state import Control, State
 from . import kernels_potential as kp
 from .base import SolverBase, check_step_args, stage_springs
 from .incremental import IncrementalPotential
 
-__all__ = ["IMPLICIT_METHODS", "SolverImplicit"]
+__all__ = ["IMPLICIT_METHODS", "SolverImplicit", "refuse_options"]
 
 IMPLICIT_METHODS = ("lbfgs", "newton", "newton-pcg")
 """The methods of :class:`SolverImplicit`: ``"lbfgs"`` and ``"newton"``
@@ -77,26 +79,23 @@ IMPLICIT_METHODS = ("lbfgs", "newton", "newton-pcg")
 _COMMON_OPTIONS = ("stages", "tolerance", "max_iterations", "iterations", "extrapolate")
 
 
-def implicit_solver_class(method: str | None, device=None) -> type:
-    """The class of the implicit ``method`` (None: the default of ``device``, a Warp device)."""
-    from .host_implicit import SolverHostImplicit
-    from .newton_pcg import SolverDeviceNewtonPCG
-
-    if method is None:
-        method = "newton-pcg" if getattr(device, "is_cuda", False) else "lbfgs"
-    if method not in IMPLICIT_METHODS:
-        raise InputError(f"method: expected one of {', '.join(IMPLICIT_METHODS)}, got {method!r}")
-    return SolverDeviceNewtonPCG if method == "newton-pcg" else SolverHostImplicit
+def refuse_options(cls: type, options: dict) -> None:
+    """An :class:`InputError` naming the first of ``options`` (keyword -> value) that ``cls`` (an
+    implicit solver class) does not take, and the classes that do."""
+    for name in options:
+        if name not in cls._OPTIONS:
+            owners = [c.__name__ for c in SolverImplicit.__subclasses__() if name in c._OPTIONS]
+            where = f" (an option of {' and '.join(owners)})" if owners else ""
+            raise InputError(f"{name}: not an option of {cls.__name__}{where}")
 
 
 class SolverImplicit(SolverBase):
-    """Backward Euler of the skin model, one minimisation of the step's potential per step.
-
-    ``SolverImplicit(model, stages=..., method=None, **options)`` returns the solver of
-    ``method`` (module doc): a :class:`~.host_implicit.SolverHostImplicit` for ``"lbfgs"`` (the
-    CPU default) and ``"newton"``, a :class:`~.newton_pcg.SolverDeviceNewtonPCG` for
-    ``"newton-pcg"`` (the CUDA default). The options every implicit solver takes are below; the
-    others belong to one class (its doc).
+    """Backward Euler of the skin model, one minimisation of the step's potential per step: the base
+    of the implicit solvers (module doc), made through a class of its own:
+    :class:`~.host_implicit.SolverHostImplicit` (``"lbfgs"``, the CPU default, and ``"newton"``) or
+    :class:`~.newton_pcg.SolverDeviceNewtonPCG` (``"newton-pcg"``, the CUDA default), or by
+    :func:`~.select.select_solver` from a method name. The options every implicit solver takes are
+    below; the others belong to one class (its doc).
 
     Args:
         model: the tissue :class:`Model`.
@@ -132,18 +131,11 @@ class SolverImplicit(SolverBase):
     _OPTIONS: tuple = _COMMON_OPTIONS
     method: str = ""
 
-    def __new__(cls, model=None, *args, method: str | None = None, **options):
-        if cls is SolverImplicit:
-            cls = implicit_solver_class(method, getattr(model, "device", None))
-        for name in options:
-            if name not in cls._OPTIONS:
-                owners = [c.__name__ for c in _implicit_classes() if name in c._OPTIONS]
-                where = f" (an option of {' and '.join(owners)})" if owners else ""
-                raise InputError(f"{name}: not an option of {cls.__name__}{where}")
-        return super().__new__(cls)
-
     def __init__(self, model: Model, *, stages=(), tolerance: float = 1e-5, max_iterations: int = 50,
                  iterations: int | None = None, extrapolate: float = 0.0):
+        if type(self) is SolverImplicit:
+            raise InputError("SolverImplicit is the base of the implicit solvers: make one with "
+                             "select_solver(model, method=...), SolverHostImplicit or SolverDeviceNewtonPCG")
         for name, val in (("tolerance", tolerance), ("extrapolate", extrapolate)):
             if not (np.isfinite(val) and val >= 0):
                 raise InputError(f"{name}: expected a finite number >= 0, got {val!r}")
@@ -266,10 +258,3 @@ class SolverImplicit(SolverBase):
 
     def _advice(self) -> str:
         return "lower the activation or jaw speed, or take smaller steps"
-
-
-def _implicit_classes() -> tuple:
-    from .host_implicit import SolverHostImplicit
-    from .newton_pcg import SolverDeviceNewtonPCG
-
-    return SolverHostImplicit, SolverDeviceNewtonPCG

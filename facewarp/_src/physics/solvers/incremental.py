@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.warp import get_warp
-from ..model import Control, Model, State
+from ..model import Model
+from ..state import Control, State
 from . import kernels_hessian as kh
 from . import kernels_line_search as kl
 from . import kernels_potential as kp
@@ -53,7 +54,7 @@ def _block_pattern(code, n: int):
 
 
 def _group_indices(keys, groups=None):
-    """:func:`~facewarp._src.physics.model.group_indices` (the same CSR grouping), here so that the
+    """:func:`~facewarp._src.physics.arrays.group_indices` (the same CSR grouping), here so that the
     solver's construction reads the Model without calling back into it."""
     keys = np.asarray(keys, dtype=np.int64)
     groups = np.unique(keys) if groups is None else np.asarray(groups, dtype=np.int64)
@@ -121,7 +122,7 @@ class IncrementalPotential:
 
     Args:
         model: the tissue :class:`Model`.
-        springs: the stages' :class:`~facewarp._src.physics.model.Springs` (empty sets dropped).
+        springs: the stages' :class:`~facewarp._src.physics.springs.Springs` (empty sets dropped).
         targets: the solver's targets of fixed / held nodes [m], shape (vertex_count,), wp.vec3
             (read, not copied).
 

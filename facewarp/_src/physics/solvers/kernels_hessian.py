@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .kernels_potential import SpringSet, _barrier_dd, _outer, _pick4, _row
+from ..elements import SpringSet, barrier_dd, face_area_gradient, mat_row, outer, pick4, tet_volume_gradient
 
 # PSD Hessian blocks (the same approximations as potential.StepPotential.hessian):
 #   distance: a n n^T + b (I - n n^T) with a = (k0 (1 + 3 C^2) + d/h) / D0^2 and
@@ -43,7 +43,7 @@ def _edge_hessian(
     n = wp.vec3(0.0)
     if l > 0.0:
         n = d / l
-    nn = _outer(n, n)
+    nn = outer(n, n)
     a = (k0 * (1.0 + 3.0 * c * c) + dmp) / (d0 * d0)
     b = float(0.0)
     if l > 0.0:
@@ -78,24 +78,22 @@ def _face_hessian(
     e2 = positions[face_indices[t][2]] - xi
     nn = wp.cross(e1, e2)
     nl = wp.length(nn)
+    g0 = wp.vec3(0.0)
     g1 = wp.vec3(0.0)
     g2 = wp.vec3(0.0)
     if nl > 0.0:
-        m = nn / nl
-        g1 = 0.5 * wp.cross(e2, m)
-        g2 = 0.5 * wp.cross(m, e1)
-    g0 = -(g1 + g2)
+        g0, g1, g2 = face_area_gradient(e1, e2, nn / nl)  # elements.py: dA/dx
     a0 = face_rest_area[t]
     s = (face_k[t] + face_damping[t] * inv_h) / (a0 * a0)
-    blocks_out[o] = s * _outer(g0, g0)
-    blocks_out[o + nf] = s * _outer(g0, g1)
-    blocks_out[o + 2 * nf] = s * _outer(g0, g2)
-    blocks_out[o + 3 * nf] = s * _outer(g1, g0)
-    blocks_out[o + 4 * nf] = s * _outer(g1, g1)
-    blocks_out[o + 5 * nf] = s * _outer(g1, g2)
-    blocks_out[o + 6 * nf] = s * _outer(g2, g0)
-    blocks_out[o + 7 * nf] = s * _outer(g2, g1)
-    blocks_out[o + 8 * nf] = s * _outer(g2, g2)
+    blocks_out[o] = s * outer(g0, g0)
+    blocks_out[o + nf] = s * outer(g0, g1)
+    blocks_out[o + 2 * nf] = s * outer(g0, g2)
+    blocks_out[o + 3 * nf] = s * outer(g1, g0)
+    blocks_out[o + 4 * nf] = s * outer(g1, g1)
+    blocks_out[o + 5 * nf] = s * outer(g1, g2)
+    blocks_out[o + 6 * nf] = s * outer(g2, g0)
+    blocks_out[o + 7 * nf] = s * outer(g2, g1)
+    blocks_out[o + 8 * nf] = s * outer(g2, g2)
 
 
 @wp.kernel
@@ -122,13 +120,10 @@ def _tet_hessian(
     e1 = positions[tet_indices[t][1]] - xi
     e2 = positions[tet_indices[t][2]] - xi
     e3 = positions[tet_indices[t][3]] - xi
-    g1 = wp.cross(e2, e3) / 6.0
-    g2 = wp.cross(e3, e1) / 6.0
-    g3 = wp.cross(e1, e2) / 6.0
-    g0 = -(g1 + g2 + g3)
+    g0, g1, g2, g3 = tet_volume_gradient(e1, e2, e3)  # elements.py: dV/dx
     v0 = tet_rest_volume[t]
     r = wp.dot(e1, wp.cross(e2, e3)) / 6.0 / v0  # the volume ratio (the barrier's Gauss-Newton term)
-    s = (tet_k[t] * (1.0 + _barrier_dd(r)) + tet_damping[t] * inv_h) / (v0 * v0)
+    s = (tet_k[t] * (1.0 + barrier_dd(r)) + tet_damping[t] * inv_h) / (v0 * v0)
     # shear term, Gauss-Newton: (k_s + d_s / h) dG/dx_a : dG/dx_b, block (c, d) =
     # (k_s + d_s / h) / 2 ((F F^T)_cd (b_a . b_b) + (F b_b)_c (F b_a)_d)
     ss = 0.5 * (tet_shear_k[t] + tet_shear_damping[t] * inv_h)
@@ -136,22 +131,22 @@ def _tet_hessian(
         dmi = tet_rest_inverse[t]
         f = wp.matrix_from_cols(e1, e2, e3) * dmi
         ff = f * wp.transpose(f)
-        b1 = _row(dmi, 0)
-        b2 = _row(dmi, 1)
-        b3 = _row(dmi, 2)
+        b1 = mat_row(dmi, 0)
+        b2 = mat_row(dmi, 1)
+        b3 = mat_row(dmi, 2)
         b0 = -(b1 + b2 + b3)
         for a in range(4):
-            ga = _pick4(g0, g1, g2, g3, a)
-            ba = _pick4(b0, b1, b2, b3, a)
+            ga = pick4(g0, g1, g2, g3, a)
+            ba = pick4(b0, b1, b2, b3, a)
             for b in range(4):
-                bb = _pick4(b0, b1, b2, b3, b)
-                blocks_out[o + (4 * a + b) * nt] = s * _outer(ga, _pick4(g0, g1, g2, g3, b)) + ss * (
-                    wp.dot(ba, bb) * ff + _outer(f * bb, f * ba))
+                bb = pick4(b0, b1, b2, b3, b)
+                blocks_out[o + (4 * a + b) * nt] = s * outer(ga, pick4(g0, g1, g2, g3, b)) + ss * (
+                    wp.dot(ba, bb) * ff + outer(f * bb, f * ba))
     else:
         for a in range(4):
-            ga = _pick4(g0, g1, g2, g3, a)
+            ga = pick4(g0, g1, g2, g3, a)
             for b in range(4):
-                blocks_out[o + (4 * a + b) * nt] = s * _outer(ga, _pick4(g0, g1, g2, g3, b))
+                blocks_out[o + (4 * a + b) * nt] = s * outer(ga, pick4(g0, g1, g2, g3, b))
 
 
 # Diagonal blocks of every node: (mu + k_h) I; fixed nodes: the identity (their DOFs are not
@@ -199,14 +194,14 @@ def _spring_hessian(
     gap = float(0.0)  # how far a one-sided spring is from closing [m]
     if s.is_axis != 0:
         a = s.axis[j]
-        H = kj * _outer(a, a)
+        H = kj * outer(a, a)
         gap = wp.dot(r, a)
     else:
         l = wp.length(r)
         H = kj * wp.identity(n=3, dtype=float)
         if l > 0.0:
             n = r / l
-            nn = _outer(n, n)
+            nn = outer(n, n)
             H = kj * (nn + wp.max(1.0 - s.rest_length[j] / l, 0.0) * (wp.identity(n=3, dtype=float) - nn))
             if s.one_sided != 0:
                 H = kj * nn

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from .kernels_potential import (SpringSet, _deformation, _edge_e, _face_e, _green, _node_e, _shear_e, _spring_e_grad,
-                                 _tet_c, _tet_constraint, _tet_e)
+from ..elements import (SpringSet, deformation_gradient, edge_energy, face_energy, green_strain, node_energy,
+                        shear_energy, spring_energy_grad, tet_constraint_at, tet_energy, tet_strain)
 
 
 # ---------------------------------------------------------------------------- the model's terms, grouped
@@ -84,7 +84,7 @@ def _guess_inverted(
     flag: wp.array(dtype=wp.int32),
 ):
     t = wp.tid()
-    if _tet_constraint(tet_indices, tet_rest_volume, x, t) <= -1.0:  # the line search's test
+    if tet_constraint_at(tet_indices, tet_rest_volume, x, t) <= -1.0:  # the line search's test
         flag[0] = 1
 
 
@@ -196,7 +196,7 @@ def _trial_energies(
         b = edges.indices[i][1]
         dmp = edges.damping[i] * inv_h
         for j in range(trials):
-            energy_out[j, i] = _edge_e(_trial_x(x, d, fixed, a, t), _trial_x(x, d, fixed, b, t),
+            energy_out[j, i] = edge_energy(_trial_x(x, d, fixed, a, t), _trial_x(x, d, fixed, b, t),
                                        edges.rest_length[i], edges.k0[i], dmp, edge_c_start[i])
             t = t * 0.5
     elif i < ne + nf:
@@ -206,7 +206,7 @@ def _trial_energies(
         fc = faces.indices[f][2]
         dmp = faces.damping[f] * inv_h
         for j in range(trials):
-            energy_out[j, i] = _face_e(_trial_x(x, d, fixed, a, t), _trial_x(x, d, fixed, b, t),
+            energy_out[j, i] = face_energy(_trial_x(x, d, fixed, a, t), _trial_x(x, d, fixed, b, t),
                                        _trial_x(x, d, fixed, fc, t), faces.rest_area[f], faces.k[f], dmp,
                                        face_c_start[f])
             t = t * 0.5
@@ -221,10 +221,10 @@ def _trial_energies(
             xb = _trial_x(x, d, fixed, tet[1], t)
             xc = _trial_x(x, d, fixed, tet[2], t)
             xd = _trial_x(x, d, fixed, tet[3], t)
-            c = _tet_c(xa, xb, xc, xd, tets.rest_volume[q])
-            e = _tet_e(c, tets.k[q], dmp, tet_c_start[q])
+            c = tet_strain(xa, xb, xc, xd, tets.rest_volume[q])
+            e = tet_energy(c, tets.k[q], dmp, tet_c_start[q])
             if ks > 0.0 or ds > 0.0:
-                e = e + _shear_e(_green(_deformation(xa, xb, xc, xd, tets.rest_inverse[q])), ks, ds, tet_g_start[q])
+                e = e + shear_energy(green_strain(deformation_gradient(xa, xb, xc, xd, tets.rest_inverse[q])), ks, ds, tet_g_start[q])
             if c <= -1.0:
                 e = 1.0e30
             energy_out[j, i] = e
@@ -234,7 +234,7 @@ def _trial_energies(
         for j in range(trials):
             e = float(0.0)
             if fixed[v] == 0:
-                e = _node_e(_trial_x(x, d, fixed, v, t), nodes.mass[v] * mass_scale, z[v],
+                e = node_energy(_trial_x(x, d, fixed, v, t), nodes.mass[v] * mass_scale, z[v],
                             nodes.hold_stiffness[v], targets[v], external_force[v])
             energy_out[j, i] = e
             t = t * 0.5
@@ -243,7 +243,7 @@ def _trial_energies(
         s = springs.sets[springs.set_index[k]]
         l = springs.local[k]
         for j in range(trials):
-            e, g = _spring_e_grad(s, l, _trial_x(x, d, fixed, s.node[l], t))
+            e, g = spring_energy_grad(s, l, _trial_x(x, d, fixed, s.node[l], t))
             energy_out[j, i] = e
             t = t * 0.5
 

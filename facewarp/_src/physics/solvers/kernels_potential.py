@@ -26,53 +26,9 @@ from __future__ import annotations
 
 import warp as wp
 
-from ..volume_barrier import _R_MIN, INVERTED_ENERGY, VOLUME_BARRIER_ONSET, VOLUME_BARRIER_STIFFNESS
-
-_BARRIER_ONSET = wp.constant(VOLUME_BARRIER_ONSET)
-_BARRIER_STIFFNESS = wp.constant(VOLUME_BARRIER_STIFFNESS)
-_INVERTED_ENERGY = wp.constant(INVERTED_ENERGY)
-_BARRIER_R_MIN = wp.constant(_R_MIN)
-
-@wp.func
-def _outer(a: wp.vec3, b: wp.vec3):
-    return wp.outer(a, b)
-
-
-@wp.func
-def _pick4(g0: wp.vec3, g1: wp.vec3, g2: wp.vec3, g3: wp.vec3, a: int):
-    if a == 0:
-        return g0
-    if a == 1:
-        return g1
-    if a == 2:
-        return g2
-    return g3
-
-
-# Shear term (model doc, "Shear term"): F = D_s D_m^-1, G = (F^T F - I) / 2,
-# E = k_s / 2 |G|^2 + d_s / (2h) |G - G_n|^2, dE/dx_a = F S b_a with S = k_s G + d_s / h (G - G_n) and
-# b_a the gradient of corner a's shape function (rows of D_m^-1; b_0 = -(b_1 + b_2 + b_3)).
-@wp.func
-def _deformation(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3, rest_inverse: wp.mat33):
-    return wp.matrix_from_cols(xj - xi, xk - xi, xl - xi) * rest_inverse
-
-
-@wp.func
-def _green(f: wp.mat33):
-    return 0.5 * (wp.transpose(f) * f - wp.identity(n=3, dtype=float))
-
-
-@wp.func
-def _shear_e(g: wp.mat33, k: float, dmp: float, g_start: wp.mat33):
-    dg = g - g_start
-    return 0.5 * k * wp.ddot(g, g) + 0.5 * dmp * wp.ddot(dg, dg)
-
-
-@wp.func
-def _row(m: wp.mat33, r: int):
-    return wp.vec3(m[r, 0], m[r, 1], m[r, 2])
-
-
+from ..elements import (SpringSet, barrier_d, deformation_gradient, edge_energy, face_energy,  # noqa: F401
+                        green_strain, node_energy, shear_energy, spring_energy_grad, tet_constraint_at,
+                        mat_columns, tet_energy, tet_strain)
 # ---------------------------------------------------------------------------- step start
 # The constraints of every element at the step's start (the dashpots' C_n), and the inertial
 # target z = (2 x_n - x_prev + alpha h (x_n + h v_c(x_n))) / (1 + alpha h): backward Euler's
@@ -108,16 +64,6 @@ def _face_constraints(
     c_out[t] = 0.5 * wp.length(nn) / face_rest_area[t] - 1.0
 
 
-# Volume constraint of tet t at x: C = V / V0 - 1 (C <= -1: inverted).
-@wp.func
-def _tet_constraint(tet_indices: wp.array(dtype=wp.vec4i), tet_rest_volume: wp.array(dtype=float),
-                    x: wp.array(dtype=wp.vec3), t: int):
-    xi = x[tet_indices[t][0]]
-    e1 = x[tet_indices[t][1]] - xi
-    e2 = x[tet_indices[t][2]] - xi
-    e3 = x[tet_indices[t][3]] - xi
-    return wp.dot(e1, wp.cross(e2, e3)) / 6.0 / tet_rest_volume[t] - 1.0
-
 
 @wp.kernel
 def _tet_constraints(
@@ -132,8 +78,8 @@ def _tet_constraints(
     g_out: wp.array(dtype=wp.mat33),
 ):
     t = wp.tid()
-    c_out[t] = _tet_constraint(tet_indices, tet_rest_volume, positions_in, t)
-    g_out[t] = _green(_deformation(positions_in[tet_indices[t][0]], positions_in[tet_indices[t][1]],
+    c_out[t] = tet_constraint_at(tet_indices, tet_rest_volume, positions_in, t)
+    g_out[t] = green_strain(deformation_gradient(positions_in[tet_indices[t][0]], positions_in[tet_indices[t][1]],
                                    positions_in[tet_indices[t][2]], positions_in[tet_indices[t][3]],
                                    tet_rest_inverse[t]))
 
@@ -179,110 +125,6 @@ def _initial_guess(
         x_out[i] = x + extrapolate * (x - prev_positions_in[i])
 
 
-# ---------------------------------------------------------------------------- element energies
-# One definition of every term's energy, shared by the energy kernels and the device line
-# search's trial kernel (so a trial at t = 0 would sum to the same total, bit for bit).
-@wp.func
-def _edge_e(xi: wp.vec3, xj: wp.vec3, d0: float, k0: float, dmp: float, c_start: float):
-    c = wp.length(xi - xj) / d0 - 1.0
-    dc = c - c_start
-    return k0 * c * c * (0.5 + 0.25 * c * c) + 0.5 * dmp * dc * dc
-
-
-@wp.func
-def _face_e(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, a0: float, k: float, dmp: float, c_start: float):
-    c = 0.5 * wp.length(wp.cross(xj - xi, xk - xi)) / a0 - 1.0
-    dc = c - c_start
-    return 0.5 * k * c * c + 0.5 * dmp * dc * dc
-
-
-@wp.func
-def _tet_c(xi: wp.vec3, xj: wp.vec3, xk: wp.vec3, xl: wp.vec3, v0: float):
-    return wp.dot(xj - xi, wp.cross(xk - xi, xl - xi)) / 6.0 / v0 - 1.0
-
-
-# The volume barrier kappa phi(r), r = C + 1 (module doc of facewarp._src.physics.volume_barrier):
-# phi = -(r - r_b)^2 ln(r / r_b) below r_b, 0 above; phi' and phi'' for the gradient and the
-# Gauss-Newton Hessian (derivatives at r_min where r <= 0).
-@wp.func
-def _barrier_d(r: float):
-    if r >= _BARRIER_ONSET:
-        return 0.0
-    rc = wp.max(r, _BARRIER_R_MIN)
-    s = rc - _BARRIER_ONSET
-    return _BARRIER_STIFFNESS * (-2.0 * s * wp.log(rc / _BARRIER_ONSET) - s * s / rc)
-
-
-@wp.func
-def _barrier_dd(r: float):
-    if r >= _BARRIER_ONSET:
-        return 0.0
-    rc = wp.max(r, _BARRIER_R_MIN)
-    s = rc - _BARRIER_ONSET
-    return _BARRIER_STIFFNESS * (-2.0 * wp.log(rc / _BARRIER_ONSET) - 4.0 * s / rc + s * s / (rc * rc))
-
-
-@wp.func
-def _tet_e(c: float, k: float, dmp: float, c_start: float):
-    dc = c - c_start
-    e = 0.5 * k * c * c + 0.5 * dmp * dc * dc
-    r = c + 1.0
-    if r < _BARRIER_ONSET:
-        if r <= 0.0:
-            return _INVERTED_ENERGY
-        s = r - _BARRIER_ONSET
-        e = e - _BARRIER_STIFFNESS * k * s * s * wp.log(r / _BARRIER_ONSET)
-    return e
-
-
-@wp.func
-def _node_e(x: wp.vec3, mu: float, z: wp.vec3, kh: float, target: wp.vec3, f: wp.vec3):
-    dz = x - z
-    dh = x - target
-    return 0.5 * mu * wp.dot(dz, dz) + 0.5 * kh * wp.dot(dh, dh) - wp.dot(f, x)
-
-
-# Every stage's springs in one launch: a SpringSet per stage set (its arrays, read in place, so the
-# stages keep filling their own buffers), spring k of the pool being spring spring_local[k] of set
-# spring_set[k]. Unused arrays (rest_length of axis springs, axis of distance springs) are dummies.
-@wp.struct
-class SpringSet:
-    node: wp.array(dtype=wp.int32)
-    point: wp.array(dtype=wp.vec3)
-    stiffness: wp.array(dtype=float)
-    rest_length: wp.array(dtype=float)
-    axis: wp.array(dtype=wp.vec3)
-    is_axis: int
-    one_sided: int
-
-
-# Distance springs (muscles): E = k/2 (|p - x| - l0)^2, dE/dx = k (l - l0) (x - p) / l.
-# One-sided (contact, pushing out of the ball of radius l0 about p): the same with
-# s = min(0, l - l0), E = k/2 s^2, dE/dx = k s (x - p) / l.
-# Axis springs (sliding supports): E = k/2 ((x - p) . a)^2, dE/dx = k ((x - p) . a) a.
-# One-sided (contact, the half-space (x - p) . a >= 0): s = min(0, (x - p) . a), E = k/2 s^2,
-# dE/dx = k s a.
-@wp.func
-def _spring_e_grad(s: SpringSet, k: int, x: wp.vec3):
-    r = x - s.point[k]
-    g = wp.vec3(0.0)
-    st = float(0.0)
-    if s.is_axis != 0:
-        a = s.axis[k]
-        st = wp.dot(r, a)
-        if s.one_sided != 0:
-            st = wp.min(st, 0.0)
-        g = s.stiffness[k] * st * a
-    else:
-        l = wp.length(r)
-        st = l - s.rest_length[k]
-        if s.one_sided != 0:
-            st = wp.min(st, 0.0)
-        if l > 0.0:
-            g = s.stiffness[k] * st / l * r
-    return 0.5 * s.stiffness[k] * st * st, g
-
-
 # ---------------------------------------------------------------------------- energy, gradient
 # Distance (Eq. 6.4.4 with k(C) of Eq. 6.4.6): E = k0 (C^2/2 + C^4/4) + d/(2h) (C - C_n)^2,
 # dE/dC = k0 (C + C^3) + d/h (C - C_n), dC/dx_i = n / D0 = -dC/dx_j.
@@ -309,7 +151,7 @@ def _edge_energy(
     dc = c - edge_c_start[e]
     k0 = edge_k0[e]
     dmp = edge_damping[e] * inv_h
-    energy_out[e] = _edge_e(positions[edge_indices[e][0]], positions[edge_indices[e][1]], d0, k0, dmp,
+    energy_out[e] = edge_energy(positions[edge_indices[e][0]], positions[edge_indices[e][1]], d0, k0, dmp,
                             edge_c_start[e])
     g = wp.vec3(0.0)
     if l > 0.0:
@@ -347,7 +189,7 @@ def _face_energy(
     c = 0.5 * nl / a0 - 1.0
     dc = c - face_c_start[t]
     dmp = face_damping[t] * inv_h
-    energy_out[t] = _face_e(xi, positions[face_indices[t][1]], positions[face_indices[t][2]], a0, face_k[t], dmp,
+    energy_out[t] = face_energy(xi, positions[face_indices[t][1]], positions[face_indices[t][2]], a0, face_k[t], dmp,
                             face_c_start[t])
     gj = wp.vec3(0.0)
     gk = wp.vec3(0.0)
@@ -390,12 +232,12 @@ def _tet_energy(
     e2 = positions[tet_indices[t][2]] - xi
     e3 = positions[tet_indices[t][3]] - xi
     v0 = tet_rest_volume[t]
-    c = _tet_c(xi, positions[tet_indices[t][1]], positions[tet_indices[t][2]], positions[tet_indices[t][3]], v0)
+    c = tet_strain(xi, positions[tet_indices[t][1]], positions[tet_indices[t][2]], positions[tet_indices[t][3]], v0)
     c_out[t] = c  # C <= -1: inverted (the host line search rejects such a step)
     dc = c - tet_c_start[t]
     dmp = tet_damping[t] * inv_h
-    e = _tet_e(c, tet_k[t], dmp, tet_c_start[t])
-    s = (tet_k[t] * (c + _barrier_d(c + 1.0)) + dmp * dc) / (6.0 * v0)
+    e = tet_energy(c, tet_k[t], dmp, tet_c_start[t])
+    s = (tet_k[t] * (c + barrier_d(c + 1.0)) + dmp * dc) / (6.0 * v0)
     gj = s * wp.cross(e2, e3)
     gk = s * wp.cross(e3, e1)
     gl = s * wp.cross(e1, e2)
@@ -404,13 +246,14 @@ def _tet_energy(
     if ks > 0.0 or ds > 0.0:
         dmi = tet_rest_inverse[t]
         f = wp.matrix_from_cols(e1, e2, e3) * dmi
-        g = _green(f)
+        g = green_strain(f)
         g0 = tet_g_start[t]
-        e = e + _shear_e(g, ks, ds, g0)
+        e = e + shear_energy(g, ks, ds, g0)
         pm = f * (ks * g + ds * (g - g0)) * wp.transpose(dmi)  # columns: dE/dx_j, dE/dx_k, dE/dx_l
-        gj = gj + wp.vec3(pm[0, 0], pm[1, 0], pm[2, 0])
-        gk = gk + wp.vec3(pm[0, 1], pm[1, 1], pm[2, 1])
-        gl = gl + wp.vec3(pm[0, 2], pm[1, 2], pm[2, 2])
+        pj, pk, pl = mat_columns(pm)
+        gj = gj + pj
+        gk = gk + pk
+        gl = gl + pl
     energy_out[t] = e
     slots_out[o] = -(gj + gk + gl)
     slots_out[o + 1] = gj
@@ -449,7 +292,7 @@ def _node_energy(
     kh = vertex_hold_stiffness[i]
     dh = x - targets[i]
     f = external_force[i]
-    energy_out[i] = _node_e(x, mu, z[i], kh, targets[i], f)
+    energy_out[i] = node_energy(x, mu, z[i], kh, targets[i], f)
     grad_out[i] = mu * dz + kh * dh - f
 
 
@@ -469,7 +312,7 @@ def _spring_energy(
     k = wp.tid()
     s = springs[spring_set[k]]
     j = spring_local[k]
-    e, g = _spring_e_grad(s, j, positions[s.node[j]])
+    e, g = spring_energy_grad(s, j, positions[s.node[j]])
     energy_out[k] = e
     grad_out[k] = g
 

@@ -38,10 +38,11 @@ import numpy as np
 
 from ...core.errors import InputError, SimulationError
 from ...core.warp import get_warp
-from ..model import Control, Model, State
+from ..model import Model
+from ..state import Control, State
 from . import kernels_line_search as kl
 from . import kernels_linear as kli
-from .implicit import SolverImplicit, _COMMON_OPTIONS
+from .implicit import _COMMON_OPTIONS, SolverImplicit, refuse_options
 
 __all__ = ["SolverDeviceNewtonPCG", "default_linear_iterations"]
 
@@ -102,7 +103,8 @@ class SolverDeviceNewtonPCG(SolverImplicit):
 
     def __init__(self, model: Model, *, method: str | None = None, stages=(), tolerance: float = 1e-5,
                  max_iterations: int = 12, iterations: int | None = None, extrapolate: float = 0.5,
-                 linear_iterations: int | None = None, rounds: int = 2):
+                 linear_iterations: int | None = None, rounds: int = 2, **options):
+        refuse_options(type(self), options)
         if method not in (None, "newton-pcg"):
             raise InputError(f"method: {type(self).__name__} runs 'newton-pcg', got {method!r}"
                              " (SolverHostImplicit runs 'lbfgs' and 'newton')")
