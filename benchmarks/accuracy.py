@@ -196,7 +196,7 @@ def main(argv=None) -> dict:
     from facewarp.physics import factorization_backend
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="short streams (about 3 minutes on a quiet 2-core box)")
+    ap.add_argument("--quick", action="store_true", help="short streams (estimated 5 minutes of one core: the Newton references run at about 1 frame/s)")
     ap.add_argument("--streams", nargs="+", default=["presets", "sequence", "switching", "drive"],
                     choices=["presets", "sequence", "switching", "drive"])
     ap.add_argument("--modes", nargs="+", default=list(MODES),
