@@ -45,7 +45,7 @@ FDP_MAX_M = 5.0e-4
 """The contract: every FDP within this distance [m] of the reference frame."""
 SKIN_RMS_M = 2.0e-4
 """The contract: the skin's RMS distance [m] to the reference frame at most this."""
-REFERENCE = dict(method="newton", tolerance=1e-7, solver_options={"max_iterations": 500, "spring_tolerance": 1e-4})
+REFERENCE = {"method": "newton", "tolerance": 1e-7, "solver_options": {"max_iterations": 500, "spring_tolerance": 1e-4}}
 """The reference solver's :class:`facewarp.FaceSimulator` keywords: Newton to 1e-7 m."""
 PRESETS = ("smile", "laugh", "surprise", "angry", "sad")
 MODES = ("default", "interactive:3", "newton")
@@ -57,7 +57,7 @@ def mode_options(spec: str) -> dict:
     if name == "default" and not arg:
         return {}
     if name == "reference" and not arg:
-        return dict(REFERENCE)
+        return {**REFERENCE}
     if name == "interactive" and arg.isdigit() and int(arg) >= 1:
         return {"iterations": int(arg)}
     if name == "newton" and not arg:
@@ -72,7 +72,7 @@ def timeline_controls(sim, timeline, seconds: float):
     """Per-frame controls of ``seconds`` of a Timeline at ``sim.fps`` (frame 0, the rest, left out):
     ``(A (F, M) activations, J (F, 2) jaw [rad], None)``, as :func:`facewarp.play` sets them."""
     tl = timeline.for_head(sim.fr)
-    nf = int(round(seconds * sim.fps))
+    nf = round(seconds * sim.fps)
     A, J = [], []
     for k in range(1, nf + 1):
         e = tl.sample(k / sim.fps)
@@ -114,11 +114,11 @@ def stream_controls(sim, stream: str, *, quick: bool, seconds: float | None, see
                                                                       start=0.1), length) for n in names}
     if stream == "sequence":
         return {"sequence": timeline_controls(sim, fw.thesis_sequence(), seconds or (1.0 if quick else 8.0))}
-    frames = int(round((seconds or (0.3 if quick else 1.0)) * sim.fps))
+    frames = round((seconds or (0.3 if quick else 1.0)) * sim.fps)
     if stream == "switching":
         return {"switching": switching_controls(sim, frames, seed)}
     if stream == "drive":
-        return {"drive": drive_controls(sim, int(round((seconds or (0.7 if quick else 3.0)) * sim.fps)), seed)}
+        return {"drive": drive_controls(sim, round((seconds or (0.7 if quick else 3.0)) * sim.fps), seed)}
     raise ValueError(stream)
 
 
@@ -196,7 +196,8 @@ def main(argv=None) -> dict:
     from facewarp.physics import factorization_backend
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="short streams (estimated 5 minutes of one core: the Newton references run at about 1 frame/s)")
+    ap.add_argument("--quick", action="store_true", 
+                    help="short streams (estimated 5 minutes of one core: the references run at about 1 frame/s)")
     ap.add_argument("--streams", nargs="+", default=["presets", "sequence", "switching", "drive"],
                     choices=["presets", "sequence", "switching", "drive"])
     ap.add_argument("--modes", nargs="+", default=list(MODES),
@@ -215,7 +216,7 @@ def main(argv=None) -> dict:
     name = args.name or ("accuracy_cpu_quick" if args.quick else "accuracy_cpu")
     rig = fw.build_face(fw.default_template(0))
     sims = {m: simulator(rig, m) for m in ["reference", *args.modes]}
-    result = {"head": "default_level0", "nodes": int(len(rig.nodes)), "tets": int(len(rig.tets)),
+    result = {"head": "default_level0", "nodes": len(rig.nodes), "tets": len(rig.tets),
               "factorization_backend": factorization_backend(), "seed": args.seed,
               "contract": {"fdp_max_mm": FDP_MAX_M * 1e3, "skin_rms_max_mm": SKIN_RMS_M * 1e3,
                            "reference": {k: v for k, v in REFERENCE.items()}},
@@ -225,7 +226,7 @@ def main(argv=None) -> dict:
         for label, controls in stream_controls(sims["reference"], stream, quick=args.quick, seconds=args.seconds,
                                                seed=args.seed).items():
             ref = play(sims["reference"], controls)
-            entry = {"frames": int(len(controls[0])),
+            entry = {"frames": len(controls[0]),
                      "reference": {k: v for k, v in figures(ref, ref).items()
                                    if k.startswith(("frames_per", "per_frame", "timings", "retries"))}}
             for m in args.modes:

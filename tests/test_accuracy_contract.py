@@ -15,7 +15,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from benchmarks import accuracy  # noqa: E402
+from benchmarks import accuracy
 
 FRAMES = 10
 
