@@ -14,8 +14,8 @@ head, level 0, CPU, 30 frames/s, from rest):
 * ``sequence``: the Fig. 6.16 sequence (``facewarp.thesis_sequence()``; ``--seconds`` of it).
 * ``switching``: the soak's stream, new random activations, jaw and head spin every frame
   (``benchmarks/_streams.py``, the stream of ``benchmarks/switching.py``).
-* ``drive``: the smooth random performance that ``benchmarks/drive.py`` simulates and drives
-  (activations and jaw through random knots every 0.5 s).
+* ``drive``: a smooth random performance like the one ``benchmarks/drive.py`` simulates and drives
+  (activations and jaw through random knots every 0.5 s; ``benchmarks/_streams.py``).
 
 Modes: ``default`` (``FaceSimulator()``: L-BFGS on a reused factorisation to its convergence step),
 ``interactive:K`` (``iterations=K``: K L-BFGS iterations a frame whatever the residual, a mode
@@ -96,10 +96,10 @@ def switching_controls(sim, frames: int, seed: int):
 
 
 def drive_controls(sim, frames: int, seed: int):
-    """``frames`` frames of the smooth random performance of ``benchmarks/drive.py``."""
-    from benchmarks.drive import random_performance
+    """``frames`` frames of a smooth random performance like the one ``benchmarks/drive.py`` drives."""
+    from benchmarks._streams import smooth_performance
 
-    A, J = random_performance(np.random.default_rng(seed), frames + 1, sim.fps, len(sim.muscle_names))
+    A, J = smooth_performance(np.random.default_rng(seed), frames + 1, sim.fps, len(sim.muscle_names))
     return A[1:], J[1:], None
 
 
