@@ -32,7 +32,7 @@ def ict_dir() -> Path:
 
 
 def load_ict(d: Path):
-    from facewarp.geometry import load_mesh
+    from facewarp import load_mesh
 
     neutral = load_mesh(d / "generic_neutral_mesh.obj", units="cm")
     F = neutral.faces[(neutral.faces < HEAD_VERTS).all(axis=1)]
@@ -134,7 +134,7 @@ def _obj_vertices(path: Path, count: int) -> np.ndarray:
 
 def load_model(identities: Path | str | None = None) -> ICTModel:
     """The ICT neutral head and the identity offsets of :func:`identity_files` (all of them)."""
-    from facewarp.geometry import load_mesh
+    from facewarp import load_mesh
 
     d = ict_dir()
     neutral = load_mesh(d / "generic_neutral_mesh.obj", units="cm")
@@ -293,7 +293,8 @@ def adapted_identity(k: int, root: Path, *, fresh: bool = False) -> dict:
     import io
     import time
 
-    from facewarp import load_mesh, save_obj
+    from facewarp import load_mesh
+    from facewarp.geometry import save_obj
     from facewarp.cli import main as facewarp_cli
 
     case = Path(root) / f"identity{k:03d}"
@@ -380,8 +381,10 @@ class TemplateTruth:
 
 def default_template_truth(model: ICTModel) -> TemplateTruth:
     """The default template's vertices located on the ICT head (see :class:`TemplateTruth`)."""
-    from facewarp import REGIONS, MeshQuery, default_template
-    from facewarp.adaptation import adapt
+    from facewarp.heads import REGIONS
+    from facewarp.geometry import MeshQuery
+    from facewarp import default_template
+    from facewarp import adapt
 
     t = default_template(0)
     TV, TF = np.asarray(t.vertices), np.asarray(t.faces)

@@ -36,7 +36,7 @@ NRICP = r"""
 import sys, json, numpy as np, trimesh
 from trimesh.registration import nricp_amberg
 from facewarp.adaptation import calibrate
-from facewarp.geometry import load_mesh
+from facewarp import load_mesh
 d = sys.argv[1]
 t = load_mesh(d + "/template.obj", units="mm"); s = load_mesh(d + "/scan.obj", units="mm")
 tl = {k: np.array(v) * 1e-3 for k, v in json.load(open(d + "/template_lm.json")).items()}
@@ -70,7 +70,8 @@ def main(argv=None) -> None:
     add_case_args(ap, seed=None)
     args = ap.parse_args(argv)
     from benchmarks._ict import ICT_FDP, error_stats, ict_dir, load_model, make_case
-    from facewarp.geometry import load_mesh, save_obj
+    from facewarp import load_mesh
+    from facewarp.geometry import save_obj
 
     if not (ict_dir() / "generic_neutral_mesh.obj").is_file():
         print("adapt_cli_time: skipped, no ICT-FaceKit data")

@@ -41,8 +41,10 @@ from benchmarks._common import RESULTS, load, machine_line, save  # noqa: E402
 from benchmarks._ict import FACE_VERTS, HEAD_VERTS, ICT_FDP, ict_dir, load_ict, make_scan, to_scan_frame  # noqa: E402
 
 def run_case(k: int, TV, TF, markers_idx, *, peers: bool, levels: int, method: str):
-    from facewarp.adaptation import adapt, calibrate, distance_error, vertex_error
-    from facewarp.geometry import load_mesh, unit_scale
+    from facewarp import adapt
+    from facewarp.adaptation import calibrate, distance_error, vertex_error
+    from facewarp import load_mesh
+    from facewarp.geometry import unit_scale
 
     truth = load_mesh(ict_dir() / f"identity{k:03d}.obj", units="cm").vertices[:HEAD_VERTS]
     t0 = time.perf_counter()
@@ -164,7 +166,7 @@ def main(argv=None) -> int:
     TV, TF, markers_idx = load_ict(d)
 
     # warm-up (Warp kernel compile / load), not timed
-    from facewarp.adaptation import adapt
+    from facewarp import adapt
 
     lm = {f: TV[i] for f, i in ICT_FDP.items()}
     adapt(TV, TF, lm, TV * 1.02, TF, {f: v * 1.02 for f, v in lm.items()}, levels=1)

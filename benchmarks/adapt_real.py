@@ -71,7 +71,7 @@ def rvcg_humface(rvcg: Path, folder: Path) -> dict:
     F = np.asarray(m["it"], dtype=np.int64).T - 1
     L = np.asarray(conv["humface.lm"], dtype=np.float64)
     folder.mkdir(parents=True, exist_ok=True)
-    fw.save_obj(folder / "scan.obj", V * 1e-3, F, units="mm")
+    fw.geometry.save_obj(folder / "scan.obj", V * 1e-3, F, units="mm")
     (folder / "landmarks.json").write_text(json.dumps({k: p.tolist() for k, p in zip(HUMFACE_FDPS, L)}))
     return {"name": "humface", "source": "github.com/zarquon42b/Rvcg data/humface.rda (Stefan Schlager)",
             "licence": "GPL (>= 2), the Rvcg package's licence", "units": "mm",
@@ -107,8 +107,8 @@ def distances(scan_V, scan_F, head_V, head_F) -> tuple[dict, dict, np.ndarray]:
     import facewarp as fw
     from facewarp.geometry import boundary_vertices
 
-    d_sh = fw.MeshQuery(head_V, head_F).closest_point(scan_V).dist * 1e3
-    cp = fw.MeshQuery(scan_V, scan_F).closest_point(head_V)
+    d_sh = fw.geometry.MeshQuery(head_V, head_F).closest_point(scan_V).dist * 1e3
+    cp = fw.geometry.MeshQuery(scan_V, scan_F).closest_point(head_V)
     border = np.zeros(len(scan_V), bool)
     border[boundary_vertices(scan_F, len(scan_V))] = True
     # inside: the closest scan point is not on a face touching the border, and within 10 mm
@@ -120,12 +120,12 @@ def distances(scan_V, scan_F, head_V, head_F) -> tuple[dict, dict, np.ndarray]:
 def held_out(scan: dict, template) -> dict:
     """Landmark error [mm] of each landmark when it is left out of the adaptation (library call)."""
     import facewarp as fw
-    from facewarp.adaptation import adapt
+    from facewarp import adapt
 
     m = fw.load_mesh(scan["scan"], units=scan["units"])
-    lm = fw.load_landmarks(scan["landmarks"], units=scan["units"])
+    lm = fw.geometry.load_landmarks(scan["landmarks"], units=scan["units"])
     tl = {k: v for k, v in template.landmarks().items() if template.fdp[k][0] == "head"}
-    sp = fw.closest_surface_points(template.vertices, template.faces, np.array([tl[k] for k in lm]))
+    sp = fw.geometry.closest_surface_points(template.vertices, template.faces, np.array([tl[k] for k in lm]))
     out = {}
     for i, k in enumerate(lm):
         rest = {j: v for j, v in lm.items() if j != k}
@@ -139,7 +139,8 @@ def held_out(scan: dict, template) -> dict:
 
 def pictures(path: Path, scan_V, scan_F, head_V, head_F, d_mm, title: str) -> None:
     """Scan | adapted head (same cameras, framed on the scan) and the scan -> head distance on the scan."""
-    from facewarp.render import colormap, render_mesh, save_png
+    from facewarp.render import colormap
+    from facewarp import render_mesh, save_png
 
     rows = []
     for view in ("front", "side"):
@@ -207,10 +208,10 @@ def main(argv=None) -> int:
         m = fw.load_mesh(s["scan"], units=s["units"])
         head = fw.load_mesh(scratch / f"{s['name']}_out" / "adapted_scan_frame.obj", units=s["units"])
         a, b, d = distances(m.vertices, m.faces, head.vertices, head.faces)
-        lm = fw.load_landmarks(s["landmarks"], units=s["units"])
+        lm = fw.geometry.load_landmarks(s["landmarks"], units=s["units"])
         # adapted_landmarks.json is in the template frame: carry the FDPs on the scan-frame head instead
         tl = template.landmarks()
-        sp = fw.closest_surface_points(template.vertices, template.faces, np.array([tl[k] for k in lm]))
+        sp = fw.geometry.closest_surface_points(template.vertices, template.faces, np.array([tl[k] for k in lm]))
         P = sp.positions(head.vertices, head.faces)
         err = {k: float(np.linalg.norm(p - lm[k]) * 1e3) for k, p in zip(lm, P)}
         pic = out / "adapt_real" / f"{s['name']}.png"

@@ -49,7 +49,7 @@ STAGES = {
 
 
 def _run_stages(model, V_mm, F, lm_mm: dict) -> dict:
-    from facewarp.adaptation import adapt
+    from facewarp import adapt
 
     tl = {f: model.neutral[i] for f, i in ICT_FDP.items()}
     out = {}

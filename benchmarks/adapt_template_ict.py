@@ -61,7 +61,8 @@ def load_template():
 
 
 def run_one(name: str, t, tlm, face, groups, SV_mm, SF, scan_lm_mm, *, levels: int, save_dir: Path | None) -> dict:
-    from facewarp.adaptation import adapt, distance_error
+    from facewarp import adapt
+    from facewarp.adaptation import distance_error
 
     mm = 1e-3
     fdps = [f for f in ICT_FDP if f in tlm and f in scan_lm_mm]
@@ -84,7 +85,8 @@ def run_one(name: str, t, tlm, face, groups, SV_mm, SF, scan_lm_mm, *, levels: i
         "levels": [r.to_dict() for r in res.levels],
     }
     if save_dir is not None:
-        from facewarp.render import colormap, render_mesh, save_png
+        from facewarp.render import colormap
+        from facewarp import render_mesh, save_png
 
         save_dir.mkdir(parents=True, exist_ok=True)
         dH = res.vertex_curvature_diff
@@ -145,8 +147,8 @@ def main(argv=None) -> int:
     if not (d / "generic_neutral_mesh.obj").is_file():
         print(f"adapt_template_ict: skipped, ICT-FaceKit data not found at {d} (set FACEWARP_SHARED to the shared folder)")
         return 0
-    from facewarp.adaptation import adapt
-    from facewarp.geometry import load_mesh
+    from facewarp import adapt
+    from facewarp import load_mesh
 
     _, SF_ict, _ = load_ict(d)
     t, tlm, face, groups = load_template()

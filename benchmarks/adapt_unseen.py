@@ -64,7 +64,7 @@ TARGETS = {"median_mm": 1.0, "rms_mm": 1.5, "p95_mm": 3.0, "beat_nricp_fraction"
 
 
 def run_facewarp(model: ICTModel, case: Case, **settings):
-    from facewarp.adaptation import adapt
+    from facewarp import adapt
 
     tl = {f: model.neutral[i] for f, i in ICT_FDP.items()}
     sl = {f: v * 1e-3 for f, v in case.landmarks_mm.items()}  # what `--units mm` gives the library
@@ -92,7 +92,8 @@ def run_nricp(model: ICTModel, case: Case, res):
 
 def run_detected(model: ICTModel, case: Case) -> tuple[dict, dict]:
     """Automatic landmarks (ICT neutral as template) against the true FDPs, and facewarp with them."""
-    from facewarp.adaptation import adapt, detect_landmarks
+    from facewarp import adapt
+    from facewarp.adaptation import detect_landmarks
 
     tl = {f: model.neutral[i] for f, i in ICT_FDP.items()}
     t0 = time.perf_counter()
@@ -121,7 +122,8 @@ def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path, lm
     import resource
     import subprocess
 
-    from facewarp.geometry import load_mesh, save_obj
+    from facewarp import load_mesh
+    from facewarp.geometry import save_obj
 
     tmp.mkdir(parents=True, exist_ok=True)
     save_obj(tmp / "scan.obj", case.scan_V_mm * 1e-3, case.scan_F, units="mm")
@@ -149,11 +151,11 @@ def run_command(truth: TemplateTruth, model: ICTModel, case: Case, tmp: Path, lm
 def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case, lm68: bool = False) -> tuple[dict, np.ndarray]:
     """nricp_amberg with the default template (the same 12 landmarks as surface points, 10 mm
     threshold, pre-aligned by facewarp's calibration; ``lm68``: the 68 points of the scheme at their
-    places on the template, ``facewarp.IBUG68_TEMPLATE``); in-process seconds (no process start)."""
+    places on the template, ``facewarp.heads.IBUG68_TEMPLATE``); in-process seconds (no process start)."""
     import trimesh
     from trimesh.registration import nricp_amberg
 
-    from facewarp import MeshQuery
+    from facewarp.geometry import MeshQuery
     from facewarp.adaptation import calibrate
 
     ids = list(truth.landmarks)
@@ -163,7 +165,7 @@ def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case, lm68: 
     src_pts = np.array([truth.landmarks[k] for k in ids])
     tgt_pts = np.array([sl[k] for k in ids])
     if lm68:
-        from facewarp import IBUG68_TEMPLATE
+        from facewarp.heads import IBUG68_TEMPLATE
 
         src_pts, tgt_pts = IBUG68_TEMPLATE, case.truth_scan_mm[np.asarray(model.markers)] * 1e-3
     cpl = MeshQuery(truth.vertices, truth.faces).closest_point(src_pts)
@@ -179,7 +181,8 @@ def run_nricp_template(truth: TemplateTruth, model: ICTModel, case: Case, lm68: 
 
 def heat_map(path: Path, V_mm: np.ndarray, faces: np.ndarray, values_mm: np.ndarray, title: str, vmax: float = 5.0) -> None:
     """Front and side pictures of the truth-frame head coloured by a per-vertex error [mm]."""
-    from facewarp.render import colormap, render_mesh, save_png
+    from facewarp.render import colormap
+    from facewarp import render_mesh, save_png
 
     colors = colormap(values_mm, 0.0, vmax)
     img = np.concatenate([render_mesh(V_mm * 1e-3, faces, view=v, width=420, height=420, vertex_colors=colors)
@@ -365,7 +368,7 @@ def main(argv=None) -> int:
     print(f"adapt_unseen: seed {seed}", flush=True)
     model = load_model(args.identities or os.environ.get("FACEWARP_ICT_IDENTITIES") or None)
     print(f"adapt_unseen: {len(model.offsets)} identity modes", flush=True)
-    from facewarp.adaptation import adapt
+    from facewarp import adapt
 
     lm = {f: model.neutral[i] for f, i in ICT_FDP.items()}
     adapt(model.neutral, model.faces, lm, model.neutral * 1.02, model.faces, {f: v * 1.02 for f, v in lm.items()}, levels=1)  # warm-up

@@ -30,7 +30,8 @@ def main(argv=None):
     if not (d / "generic_neutral_mesh.obj").is_file():
         print(f"ICT-FaceKit data not found at {d}: nothing to measure")
         return
-    from facewarp import ModelBuilder, load_face_rig
+    from facewarp.physics import ModelBuilder
+    from facewarp import load_face_rig
     from facewarp.physics import node_stable_dt, scale_masses
 
     rows = []

@@ -46,7 +46,7 @@ def guide_take():
     w[:, fw.ARKIT_NAMES.index("mouthSmileRight")] = w[:, fw.ARKIT_NAMES.index("mouthSmileLeft")]
     w[:, fw.ARKIT_NAMES.index("jawOpen")] = 0.3 * np.sin(np.pi * t / 1.5)
     head = np.stack([0.1 * np.sin(2 * np.pi * t / 1.5), 0 * t, 0 * t], axis=1)
-    return fw.ArkitTrack(30.0, w, head, "driving guide smile")
+    return fw.takes.ArkitTrack(30.0, w, head, "driving guide smile")
 
 
 def _rms(x, axis=None):

@@ -73,7 +73,7 @@ def main(argv=None) -> None:
     sim = fw.FaceSimulator(fr)
     head_s = time.perf_counter() - t0
     print(f"identity {k}: head ready in {head_s:.0f} s ({len(fr.nodes)} nodes, {len(fr.tets)} tets)", flush=True)
-    found = fw.load_ict_displacements()
+    found = fw.takes.load_ict_displacements()
     t1 = time.perf_counter()
     table = fw.arkit_table(sim, cache=build, refine=args.refine,
                            progress=lambda d, n, name: print(f"  {d}/{n} {name} {time.perf_counter() - t1:.0f} s",

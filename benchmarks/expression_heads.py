@@ -94,7 +94,7 @@ def main(argv=None) -> None:
         row = {"head": label, "presets": {}}
         for name in presets:
             sim = facewarp.FaceSimulator(rig, device=args.device, fps=30, method=args.method)
-            tl = facewarp.Timeline([facewarp.Segment(facewarp.preset(name), 0.0, 0.3, 60.0, 0.1)]).for_head(rig)
+            tl = facewarp.Timeline([facewarp.expressions.Segment(facewarp.preset(name), 0.0, 0.3, 60.0, 0.1)]).for_head(rig)
             worst = {"lip_lip": 0, "lip_teeth": 0, "lid_eye": 0, "lid_lid": 0, "lip_lip_depth_m": 0.0,
                      "lid_eye_depth_m": 0.0, "lid_lid_depth_m": 0.0}
             inverted, nan, failure = 0, False, None

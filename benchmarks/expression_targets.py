@@ -51,9 +51,9 @@ def main(argv=None) -> None:
     rest_sign = np.sign(signed_tet_volumes(rig.nodes, T))
     rows = {}
     for name in list(facewarp.PRESETS) + ["zygomatic_major=1", "frontalis_inner=1"]:
-        e = facewarp.expression_from_activations(name) if "=" in name else facewarp.preset(name)
+        e = facewarp.expressions.expression_from_activations(name) if "=" in name else facewarp.preset(name)
         sim = facewarp.FaceSimulator(rig, device=args.device, fps=30)
-        tl = facewarp.Timeline([facewarp.Segment(e, 0.0, 0.3, 60.0, 0.1)]).for_head(rig)
+        tl = facewarp.Timeline([facewarp.expressions.Segment(e, 0.0, 0.3, 60.0, 0.1)]).for_head(rig)
         frames = sim.run(tl, args.seconds)
         ids = [str(k) for k in frames.fdp_ids]
         P = frames.fdp_points.astype(np.float64)
@@ -70,7 +70,7 @@ def main(argv=None) -> None:
         print(f"{name:18s} 8.3 {c['8.3']} 8.4 {c['8.4']} 2.1 {c['2.1']} 4.1 {c['4.1']} 4.3 {c['4.3']}", flush=True)
     save(f"expression_targets_L{args.level}", {
         "level": args.level, "seconds": args.seconds,
-        "jaw_lever_m": facewarp.jaw_lever(rig), "solver": "implicit", "material": "physical", "jaw": "kinematic",
+        "jaw_lever_m": facewarp.expressions.jaw_lever(rig), "solver": "implicit", "material": "physical", "jaw": "kinematic",
         "contact": True,
         "muscles": "two-way anchors, Fig. 6.4 region filter, saturating activation curve (muscle_defs.json)",
         "note": "displacements [mm] at the end (x left, y up, z out); distances [mm] at rest and at the end",

@@ -34,7 +34,9 @@ def main(argv=None):
     ap.add_argument("--solver", default="implicit", choices=["implicit", "verlet"])
     ap.add_argument("--material", default="physical", choices=["physical", "thesis"])
     args = ap.parse_args(argv)
-    from facewarp import FaceSimulator, SimulationError, render_strip, save_png, timeline_from_spec
+    from facewarp import FaceSimulator, SimulationError, save_png
+    from facewarp.render import render_strip
+    from facewarp.expressions import timeline_from_spec
     from facewarp.render import displacement_max
 
     fr = case_face(args.head)

@@ -39,14 +39,14 @@ def make_scans(folder: Path, count: int, faces: int) -> list[Path]:
     paths = []
     for seed in range(count - 2):
         s = fw.synthetic_scan(seed, faces=faces)
-        fw.save_obj(folder / f"scan{seed:02d}.obj", s.vertices, s.faces)
-        fw.save_landmarks_json(folder / f"scan{seed:02d}_landmarks.json", s.landmarks)
+        fw.geometry.save_obj(folder / f"scan{seed:02d}.obj", s.vertices, s.faces)
+        fw.geometry.save_landmarks_json(folder / f"scan{seed:02d}_landmarks.json", s.landmarks)
         paths.append(folder / f"scan{seed:02d}.obj")
     (folder / "broken_not_a_mesh.obj").write_text("this is not a mesh\n")
     paths.append(folder / "broken_not_a_mesh.obj")
     s = fw.synthetic_scan(count, faces=faces)  # the landmarks in mm, the scan in m: refused by adapt's unit check
-    fw.save_obj(folder / "broken_units.obj", s.vertices, s.faces)
-    fw.save_landmarks_json(folder / "broken_units_landmarks.json", s.landmarks, units="mm")  # read as m
+    fw.geometry.save_obj(folder / "broken_units.obj", s.vertices, s.faces)
+    fw.geometry.save_landmarks_json(folder / "broken_units_landmarks.json", s.landmarks, units="mm")  # read as m
     paths.append(folder / "broken_units.obj")
     return paths
 

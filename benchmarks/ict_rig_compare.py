@@ -64,7 +64,7 @@ def main(argv=None) -> None:
         raise SystemExit(f"--ict: {args.ict} holds no ICT-FaceKit generic_neutral_mesh.obj")
 
     t0 = time.perf_counter()
-    tpl = facewarp.import_ict(args.ict, device=args.device)
+    tpl = facewarp.heads.import_ict(args.ict, device=args.device)
     rig = facewarp.build_face(tpl)
     build_s = time.perf_counter() - t0
     n_skin = tpl.vertex_count
@@ -96,9 +96,9 @@ def main(argv=None) -> None:
         if spec is None:  # the jaw to the rig's own chin drop
             chin = P_rig[head_fdps.index("2.1")]
             spec = f"jaw_drop_mm={max(-chin[1], 0.0) * 1e3:.2f}"
-        expr = facewarp.expression_from_activations(spec, name=case)
+        expr = facewarp.expressions.expression_from_activations(spec, name=case)
         sim = facewarp.FaceSimulator(rig, device=args.device, fps=30)
-        tl = facewarp.Timeline([facewarp.Segment(expr, 0.0, 0.3, 60.0, 0.1)]).for_head(rig)
+        tl = facewarp.Timeline([facewarp.expressions.Segment(expr, 0.0, 0.3, 60.0, 0.1)]).for_head(rig)
         t1 = time.perf_counter()
         frames = sim.run(tl, args.seconds)
         sim_s = time.perf_counter() - t1
@@ -134,7 +134,7 @@ def main(argv=None) -> None:
         print(f"{case:11s} cos {row['cosine_fdp']:.3f} amp {row['amplitude_sim_mm']:.1f}/{row['amplitude_rig_mm']:.1f} mm "
               f"({row['amplitude_ratio']}) {row.get('cosine_face_vertices', '')}", flush=True)
     save("ict_rig_compare", {
-        "template": "ICT-FaceKit neutral imported (facewarp.import_ict)",
+        "template": "ICT-FaceKit neutral imported (facewarp.heads.import_ict)",
         "nodes": int(len(rig.nodes)), "tets": int(len(rig.tets)), "build_s": round(build_s, 1),
         "solver": "implicit", "material": "physical", "jaw": "kinematic",
         "targets": "cosine >= 0.7 over the FDP displacement field; amplitude within 25 % at activation 1.0",

@@ -32,7 +32,8 @@ def _head_displacement(fr, preset, material):
 
 def main(argv=None):
     from facewarp.geometry import closest_surface_points
-    from facewarp.render import colormap, render_mesh, save_png
+    from facewarp.render import colormap
+    from facewarp import render_mesh, save_png
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_case_args(ap, presets=["angry", "sad"])

@@ -52,7 +52,7 @@ def _write_scan(scan, folder: Path, metres_per_unit: float, *, landmarks: bool =
     import facewarp as fw
 
     folder.mkdir(parents=True, exist_ok=True)
-    fw.save_obj(folder / "scan.obj", scan.vertices / metres_per_unit, scan.faces, colors=scan.colors)
+    fw.geometry.save_obj(folder / "scan.obj", scan.vertices / metres_per_unit, scan.faces, colors=scan.colors)
     out = {"scan": folder / "scan.obj", "landmarks": None}
     if landmarks:
         lm = {k: (np.asarray(v) / metres_per_unit).tolist() for k, v in scan.landmarks.items()}

@@ -167,7 +167,7 @@ def main(argv=None) -> int:
         import facewarp as fw
 
         rig = fw.load_face_rig(build)
-        table = fw.load_arkit_table(build)  # made by the first run
+        table = fw.takes.load_arkit_table(build)  # made by the first run
         head = {"head": "default, level 0" if args.build is None else f"the build {args.build.name}",
                 "tets": int(len(rig.tets)), "skin_vertices": int(len(rig.head_vertices)),
                 "arkit_shapes_solved": [n for n, ok in zip(table.names, table.solved) if ok]}

@@ -34,7 +34,7 @@ def run(level: int, *, frames: int, size: int, device: str) -> dict:
     head = fw.default_template(level)
     rig = fw.build_face(head)
     with tempfile.TemporaryDirectory() as tmp:  # head.xml and the scene.xml that includes it
-        fw.write_head_mjcf(Path(tmp) / "head.xml", head, jaw=rig.jaw, skin=(rig.head_vertices, rig.head_faces),
+        fw.coupling.write_head_mjcf(Path(tmp) / "head.xml", head, jaw=rig.jaw, skin=(rig.head_vertices, rig.head_faces),
                            prefix="h_")
         model = mujoco.MjModel.from_xml_path(str(Path(tmp) / "scene.xml"))
     data = mujoco.MjData(model)

@@ -43,7 +43,7 @@ from benchmarks._common import add_case_args, save
 def _frames(fr, device, expression, seconds, **kw) -> dict:
     import facewarp
 
-    tl = facewarp.timeline_from_spec(expression, seconds)
+    tl = facewarp.expressions.timeline_from_spec(expression, seconds)
     sim = facewarp.FaceSimulator(fr, device=device, **kw)
     sim.step()  # warm-up: kernels, graphs, the first factorisation
     sim.reset()
@@ -135,7 +135,7 @@ def contact_cost(fr, device, expression, seconds, contact, method=None) -> dict:
     """One expression with the contact on or off: stepping fps and the worst crossings of any frame."""
     import facewarp
 
-    tl = facewarp.timeline_from_spec(expression, seconds).for_head(fr)
+    tl = facewarp.expressions.timeline_from_spec(expression, seconds).for_head(fr)
     sim = facewarp.FaceSimulator(fr, device=device, contact=contact, method=method)
     sim.step()  # warm-up: kernels, the first factorisation
     sim.reset()

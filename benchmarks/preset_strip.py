@@ -30,14 +30,15 @@ COLUMNS = 4
 # ------------------------------------------------------------------------------------- picture
 def render_strip(level: int, seconds: float, device: str, face_height: int) -> Path:
     import facewarp as fw
-    from facewarp.render import FaceView, label_grid, save_png
+    from facewarp.render import FaceView, label_grid
+    from facewarp import save_png
 
     rig = fw.build_face(fw.default_template(level))
     names = [n for n in fw.PRESETS if n != "neutral"]
     shots = []
     for name in names:
         sim = fw.FaceSimulator(rig, device=device, fps=30)
-        frames = sim.run(fw.Timeline([fw.Segment(fw.preset(name), 0.0, 0.3, 60.0, 0.1)]).for_head(rig), seconds)
+        frames = sim.run(fw.Timeline([fw.expressions.Segment(fw.preset(name), 0.0, 0.3, 60.0, 0.1)]).for_head(rig), seconds)
         if not np.isfinite(frames.points).all():
             raise SystemExit(f"{name}: NaN in the frames")
         shots.append((name, frames.points[-1], {k: V[-1] for k, (V, _) in frames.parts.items()}))

@@ -2,7 +2,7 @@
 
 The default head (``--level``): every muscle baked alone (and with ``--inbetweens`` at fractions),
 the jaw as a joint with its corrective. Test cases, each a converged static shape of the full
-simulation (`fw.static_surface`) against the linear rig (`BlendshapeRig.evaluate`, with and
+simulation (`fw.blendshapes.static_surface`) against the linear rig (`BlendshapeRig.evaluate`, with and
 without in-betweens): the Fig. 6.16 sequence's five expressions at their peak (jaw included) and
 ``--blends`` random blends of 3-5 muscles (activations 0.2-1, half of them with a jaw opening up
 to 0.25 rad; seed 0). Reported per-vertex error [mm] p50 / p95 / max over the vertices the
@@ -84,13 +84,13 @@ def main(argv=None) -> int:
     head = fw.default_template(a.level)
     fr = fw.build_face(head)
     t0 = time.perf_counter()
-    rig = fw.bake_blendshapes(fr, inbetweens=a.inbetweens, device=a.device)
+    rig = fw.blendshapes.bake_blendshapes(fr, inbetweens=a.inbetweens, device=a.device)
     bake_s = time.perf_counter() - t0
     sim = fw.FaceSimulator(fr, device=a.device)
     per_case, pooled = [], {"with_inbetweens": {"moving": [], "all": []}, "linear": {"moving": [], "all": []}}
     worst = (-1.0, None)
     for label, acts, jaw in cases(fr, rig, a.blends):
-        full, frames = fw.static_surface(sim, acts, jaw)
+        full, frames = fw.blendshapes.static_surface(sim, acts, jaw)
         moving = np.linalg.norm(full - rig.rest, axis=1) > MOVING
         row = {"case": label, "activations": acts, "jaw_rad": jaw, "frames": frames,
                "moving_vertices": int(moving.sum()),
@@ -125,7 +125,7 @@ def main(argv=None) -> int:
 
                 checks[ext]["validate_usd"] = usd_export.validate_usd(out)
     label, full, err = worst[1]
-    img = fw.render_mesh(full, fr.head_faces, vertex_colors=fw.colormap(1e3 * err, 0.0, max(1.0, 1e3 * err.max())),
+    img = fw.render_mesh(full, fr.head_faces, vertex_colors=fw.render.colormap(1e3 * err, 0.0, max(1.0, 1e3 * err.max())),
                          width=420, height=420, view="front")
     RESULTS.mkdir(parents=True, exist_ok=True)
     fw.save_png(RESULTS / "rig_accuracy.png", img,

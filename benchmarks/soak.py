@@ -67,7 +67,7 @@ def _ict_head(ict: Path, identity: int, root: Path):
     V = mesh.vertices
     case = root / f"identity{identity:03d}"
     case.mkdir(parents=True, exist_ok=True)
-    lm = {fid: (100.0 * V[i]).tolist() for fid, i in fw.ICT_FDP_VERTICES.items()}  # cm, as the mesh file
+    lm = {fid: (100.0 * V[i]).tolist() for fid, i in fw.heads.ICT_FDP_VERTICES.items()}  # cm, as the mesh file
     (case / "landmarks.json").write_text(json.dumps(lm))
     _cli("adapt", ict / f"identity{identity:03d}.obj", "--landmarks", case / "landmarks.json", "--units", "cm",
          "--out", case / "adapt")
@@ -82,8 +82,8 @@ def _synthetic_head(seed: int, root: Path):
     scan = fw.synthetic_scan(seed, level=0)
     case = root / f"synthetic{seed}"
     case.mkdir(parents=True, exist_ok=True)
-    fw.save_obj(case / "scan.obj", scan.vertices, scan.faces, units=scan.units)  # the scan's files in its units
-    fw.save_landmarks_json(case / "landmarks.json", scan.landmarks, units=scan.units)
+    fw.geometry.save_obj(case / "scan.obj", scan.vertices, scan.faces, units=scan.units)  # the scan's files in its units
+    fw.geometry.save_landmarks_json(case / "landmarks.json", scan.landmarks, units=scan.units)
     _cli("adapt", case / "scan.obj", "--landmarks", case / "landmarks.json", "--units", scan.units,
          "--out", case / "adapt")
     _cli("build", case / "adapt", "--out", case / "build")

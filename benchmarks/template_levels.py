@@ -19,7 +19,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     add_case_args(ap, levels=[0, 1, 2, 3])
     args = ap.parse_args(argv)
-    from facewarp import default_template, mesh_report
+    from facewarp import default_template
+    from facewarp.geometry import mesh_report
 
     rows = []
     for lv in args.levels:
@@ -36,7 +37,7 @@ def main(argv=None):
     result = {"levels": rows}
     ict = shared_dir() / "data" / "ict-facekit"
     if (ict / "generic_neutral_mesh.obj").is_file():
-        from facewarp import human_likeness
+        from facewarp.heads import human_likeness
 
         r = human_likeness(default_template(0), ict)
         d = r.pop("distances_m")

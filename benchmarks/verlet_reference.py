@@ -47,7 +47,7 @@ def run_case(case: str, material: str, seconds: float, sequence_each: float, dev
         timeline = fw.thesis_sequence(each=sequence_each)
         seconds = float(max(s.end for s in timeline.segments))
     else:
-        timeline = fw.timeline_from_spec(case, seconds)
+        timeline = fw.expressions.timeline_from_spec(case, seconds)
     sim = fw.FaceSimulator(rig, device=device, solver="verlet", material=material)
     T = np.asarray(rig.tets, np.int64)
     v0 = _volumes(np.asarray(rig.nodes, np.float64), T)

@@ -4,13 +4,7 @@ Re-exports of ``facewarp._src``; see each name's docstring for shapes and units.
 
 from __future__ import annotations
 
-from ._src.adapt.calibrate import (  # noqa: F401
-    CALIBRATION_FDPS,
-    Calibration,
-    Similarity,
-    calibrate,
-    fit_similarity,
-)
+from ._src.adapt.calibrate import CALIBRATION_FDPS, Calibration, calibrate  # noqa: F401
 from ._src.adapt.rbf import (  # noqa: F401
     CSRBFField,
     Quadrics,
@@ -20,13 +14,7 @@ from ._src.adapt.rbf import (  # noqa: F401
     fit_rbf,
     wendland,
 )
-from ._src.adapt.pipeline import (  # noqa: F401
-    METHODS,
-    AdaptOptions,
-    AdaptResult,
-    LevelRecord,
-    adapt,
-)
+from ._src.adapt.pipeline import METHODS, LevelRecord  # noqa: F401
 from ._src.adapt.detect import (  # noqa: F401
     DetectionResult,
     detect_landmarks,
@@ -64,13 +52,13 @@ from ._src.adapt.scale import (  # noqa: F401
     estimate_scale,
     face_measures,
 )
-from ._src.adapt.transfer import (  # noqa: F401
-    EYE_FDPS,
-    apply_part,
-    eye_transform,
-    fit_part_transform,
-    load_head,
-    transfer_uv,
-)
+from ._src.adapt.transfer import EYE_FDPS, apply_part, eye_transform, fit_part_transform, transfer_uv  # noqa: F401
 
-__all__ = ["vertex_color_texture", "SCALE_REFERENCE_M", "BakeResult", "bake_texture", "rasterize_uv", "sample_scan_colors", "HUMAN_RANGES_M", "ScaleEstimate", "estimate_scale", "face_measures", "AdaptOptions", "AdaptResult", "DIHEDRAL_MARGIN_DEG", "DetectionResult", "FOLD_DEG", "detect_landmarks", "distortion", "surface_quality", "symmetry_plane", "CALIBRATION_FDPS", "CSRBFField", "Calibration", "DEFAULT_REGION_WEIGHTS", "DistanceError", "EYE_FDPS", "LevelRecord", "METHODS", "Quadrics", "RBFField", "REGION_GROUPS", "Similarity", "VertexError", "adapt", "apply_part", "calibrate", "combined_error", "distance_error", "eye_transform", "fit_csrbf", "fit_local_quadrics", "fit_part_transform", "fit_rbf", "fit_similarity", "head_width", "load_head", "marker_error", "transfer_uv", "vertex_error", "vertex_groups", "wendland"]
+__all__ = ["apply_part", "bake_texture", "BakeResult", "calibrate", "Calibration", "CALIBRATION_FDPS",
+           "combined_error", "CSRBFField", "DEFAULT_REGION_WEIGHTS", "detect_landmarks", "DetectionResult",
+           "DIHEDRAL_MARGIN_DEG", "distance_error", "DistanceError", "distortion", "estimate_scale", "EYE_FDPS",
+           "eye_transform", "face_measures", "fit_csrbf", "fit_local_quadrics", "fit_part_transform", "fit_rbf",
+           "FOLD_DEG", "head_width", "HUMAN_RANGES_M", "LevelRecord", "marker_error", "METHODS", "Quadrics",
+           "rasterize_uv", "RBFField", "REGION_GROUPS", "sample_scan_colors", "SCALE_REFERENCE_M", "ScaleEstimate",
+           "surface_quality", "symmetry_plane", "transfer_uv", "vertex_color_texture", "vertex_error",
+           "vertex_groups", "VertexError", "wendland"]

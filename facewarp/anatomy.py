@@ -78,7 +78,6 @@ from ._src.anatomy.build import (  # noqa: F401
     Anatomy,
     SlabHead,
     anatomy_report,
-    build_anatomy,
     check_head,
     slab_anatomy,
     write_anatomy,
@@ -100,12 +99,13 @@ from ._src.geometry.jaw import (  # noqa: F401
     rotate_about,
 )
 
-__all__ = ["Anatomy", "Anchor", "DEFAULT_MUSCLE_DEFS", "Ellipsoids", "JAW_REGIONS", "JawKinematic", "LIP_CLEARANCE",
-           "Muscle", "MuscleAttachment", "MuscleKind", "MuscleSet", "SheetSamples", "SkinLayer", "SlabHead", "TET_QUALITY_FLOOR",
-           "anatomy_report", "arc_length_params", "attach_by_area", "attach_nodes", "bezier_quadratic", "boundary_faces",
-           "boundary_self_intersections", "build_anatomy", "build_muscles", "build_skin_layer", "check_head",
-           "closest_point_on_ellipsoid", "ellipsoid_points", "ellipsoid_radii_for_length", "extrude_skin_layer",
-           "jaw_rotation", "lip_crossings", "lip_sides", "lip_tets", "load_muscle_defs", "make_linear_muscle",
-           "mouth_slit", "muscles_to_json", "node_regions", "points_in_tets", "rotate_about", "sheet_samples", "segment_ellipsoids",
-           "separate_lips", "separate_skin_lips", "skin_layer_quality", "slab_anatomy", "split_prisms",
-           "tet_conformity", "tet_dihedral_angles", "tet_mean_ratio", "tet_quality", "tet_volumes", "write_anatomy"]
+__all__ = ["Anatomy", "anatomy_report", "Anchor", "arc_length_params", "attach_by_area", "attach_nodes",
+           "bezier_quadratic", "boundary_faces", "boundary_self_intersections", "build_muscles",
+           "build_skin_layer", "check_head", "closest_point_on_ellipsoid", "DEFAULT_MUSCLE_DEFS",
+           "ellipsoid_points", "ellipsoid_radii_for_length", "Ellipsoids", "extrude_skin_layer", "JAW_REGIONS",
+           "jaw_rotation", "JawKinematic", "LIP_CLEARANCE", "lip_crossings", "lip_sides", "lip_tets",
+           "load_muscle_defs", "make_linear_muscle", "mouth_slit", "Muscle", "MuscleAttachment", "MuscleKind",
+           "muscles_to_json", "MuscleSet", "node_regions", "points_in_tets", "rotate_about", "segment_ellipsoids",
+           "separate_lips", "separate_skin_lips", "sheet_samples", "SheetSamples", "skin_layer_quality",
+           "SkinLayer", "slab_anatomy", "SlabHead", "split_prisms", "tet_conformity", "tet_dihedral_angles",
+           "tet_mean_ratio", "tet_quality", "TET_QUALITY_FLOOR", "tet_volumes", "write_anatomy"]

@@ -19,18 +19,18 @@ from ._src.coupling.mjcf import (  # noqa: F401
     UPS,
     Z_UP,
     MandibleInertia,
-    head_mjcf,
     mandible_geometry,
     mandible_inertia,
     scene_mjcf,
+    skin_vertex_split,
     up_rotation,
     write_head_mjcf,
 )
-from ._src.coupling.mujoco import STIFF_SKIN_RATIO, MujocoJaw, mujoco_warnings  # noqa: F401
-from ._src.coupling.mujoco_skin import MujocoSkin  # noqa: F401
+from ._src.coupling.mujoco import STIFF_SKIN_RATIO, mujoco_warnings  # noqa: F401
 from ._src.coupling.mujoco_view import MujocoView  # noqa: F401
 
-__all__ = ["BONE_DENSITY", "GRAVITY", "HEAD_MASS", "HEAD_MOTION_LIMITS", "JAWS", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "MANDIBLE_PLATE",
-           "SCENE_NAME", "STIFF_SKIN_RATIO", "UPS", "Z_UP", "CarryStage", "HeadPose", "JawStage", "KinematicJawDriver", "MandibleInertia",
-           "MujocoJaw", "MujocoJawDriver", "MujocoSkin", "MujocoView", "check_pose", "head_mjcf", "jaw_driver", "mandible_geometry",
-           "mandible_inertia", "mujoco_warnings", "scene_mjcf", "up_rotation", "write_head_mjcf"]
+__all__ = ["BONE_DENSITY", "CarryStage", "check_pose", "GRAVITY", "HEAD_MASS", "HEAD_MOTION_LIMITS", "HeadPose",
+           "jaw_driver", "JAW_OPEN_RANGE", "JAW_SIDE_RANGE", "JAWS", "JawStage", "KinematicJawDriver",
+           "mandible_geometry", "mandible_inertia", "MANDIBLE_PLATE", "MandibleInertia", "mujoco_warnings",
+           "MujocoJawDriver", "MujocoView", "scene_mjcf", "SCENE_NAME", "STIFF_SKIN_RATIO", "up_rotation", "UPS",
+           "write_head_mjcf", "Z_UP"]

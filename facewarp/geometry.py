@@ -7,10 +7,8 @@ from __future__ import annotations
 from ._src.geometry.mesh import (  # noqa: F401
     MESH_SUFFIXES,
     UNITS,
-    Mesh,
     SurfacePoints,
     closest_surface_points,
-    load_mesh,
     mesh_report,
     save_obj,
     unit_scale,
@@ -51,4 +49,11 @@ from ._src.geometry.tets import (  # noqa: F401
     tet_heights,
 )
 
-__all__ = ["ClosestPoints", "FDP", "FDP_CATALOGUE", "FDP_IDS", "IBUG68_FDP_OFFSET_MM", "IBUG68_TO_FDP", "LANDMARK_SCHEMES", "LANDMARK_SUFFIXES", "MESH_SUFFIXES", "Mesh", "MeshQuery", "RayHits", "Similarity", "SurfacePoints", "UNITS", "boundary_vertices", "closest_point", "closest_surface_points", "face_areas", "face_normals", "fapu", "fdp_sort_key", "fit_similarity", "landmarks_from_scheme", "load_landmarks", "load_scheme_points", "load_mesh", "mean_curvature", "mesh_report", "point_spread", "save_landmarks_json", "save_obj", "signed_tet_volumes", "tet_heights", "unit_scale", "vertex_normals"]
+from ._src.geometry.mesh import save_glb  # noqa: F401
+__all__ = ["boundary_vertices", "closest_point", "closest_surface_points", "ClosestPoints", "face_areas",
+           "face_normals", "fapu", "FDP", "FDP_CATALOGUE", "FDP_IDS", "fdp_sort_key", "fit_similarity",
+           "IBUG68_FDP_OFFSET_MM", "IBUG68_TO_FDP", "LANDMARK_SCHEMES", "LANDMARK_SUFFIXES",
+           "landmarks_from_scheme", "load_landmarks", "load_scheme_points", "mean_curvature", "mesh_report",
+           "MESH_SUFFIXES", "MeshQuery", "point_spread", "RayHits", "save_glb", "save_landmarks_json", "save_obj",
+           "signed_tet_volumes", "Similarity", "SurfacePoints", "tet_heights", "unit_scale", "UNITS",
+           "vertex_normals"]

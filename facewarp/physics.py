@@ -75,19 +75,8 @@ from ._src.physics.muscle_stage import (  # noqa: F401
     rig_reference,
     segment_frames,
 )
-from ._src.physics.face_rig import (  # noqa: F401
-    FaceRig,
-    load_face_rig,
-    node_jaw_amounts,
-    save_face_rig,
-)
-from ._src.anatomy.rig import (  # noqa: F401
-    BONE_REGIONS,
-    MUSCLE_STIFFNESS,
-    build_face,
-    face_rig_from_anatomy,
-    muscle_rig,
-)
+from ._src.physics.face_rig import node_jaw_amounts  # noqa: F401
+from ._src.anatomy.rig import BONE_REGIONS, MUSCLE_STIFFNESS, face_rig_from_anatomy, muscle_rig  # noqa: F401
 from ._src.physics.contact import (  # noqa: F401
     CONTACT_GAP,
     CONTACT_MODULUS,
@@ -101,16 +90,18 @@ from ._src.anatomy.contact import (  # noqa: F401
     lid_contact_geometry,
     lip_contact_geometry,
 )
-from ._src.coupling.kinematic import (  # noqa: F401
-    CarryStage,
-    JawStage,
-)
-from ._src.sim.simulator import (  # noqa: F401
-    SOLVERS,
-    FaceSimulator,
-    Frames,
-    save_frames_npz,
-)
+from ._src.sim.simulator import SOLVERS, save_frames_npz  # noqa: F401
 
-__all__ = ["BONE_REGIONS", "CONTACT_GAP", "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "CarryStage", "ContactGeometry",
-           "ContactStage", "Control", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER", "FaceRig", "FaceSimulator", "Frames", "HOST_METHODS", "IMPLICIT_METHODS", "IncrementalPotential", "JawStage", "MASS_SCALING_QUANTILE", "MATERIALS", "MUSCLE_STIFFNESS", "MaterialPhysical", "MaterialThesis", "Model", "ModelBuilder", "ModelContact", "ModelJaw", "ModelMuscles", "ModelSupports", "MuscleRig", "MuscleStage", "SOLVERS", "SolverBase", "SolverDeviceNewtonPCG", "SolverHostImplicit", "SolverImplicit", "SolverStage", "SolverVerlet", "Springs", "State", "StepData", "StepPotential", "SupportStage", "TABLE_6_3", "TISSUE_DENSITY", "VOLUME_BARRIER_ONSET", "VOLUME_BARRIER_STIFFNESS", "VOLUME_FLOOR", "build_face", "check_device", "contact_crossings", "contraction_curve", "contact_geometry", "default_linear_iterations", "ellipsoid_uv", "lid_contact_geometry", "lip_contact_geometry", "face_rig_from_anatomy", "factorization_backend", "isotropic_moduli", "linear_stiffness", "load_face_rig", "material_profile", "muscle_rig", "node_jaw_amounts", "node_stable_dt", "rig_reference", "save_face_rig", "save_frames_npz", "scale_masses", "segment_frames", "select_solver", "sheet_areas", "simulate", "stable_dt", "thesis_substep"]
+__all__ = ["BONE_REGIONS", "check_device", "contact_crossings", "CONTACT_GAP", "contact_geometry",
+           "CONTACT_MODULUS", "CONTACT_MUSCLE_RATIO", "ContactGeometry", "ContactStage", "contraction_curve",
+           "Control", "default_linear_iterations", "DT_STABLE_1CM", "EDGE_CROSS", "EDGE_INNER", "EDGE_OUTER",
+           "ellipsoid_uv", "face_rig_from_anatomy", "factorization_backend", "HOST_METHODS", "IMPLICIT_METHODS",
+           "IncrementalPotential", "isotropic_moduli", "lid_contact_geometry", "linear_stiffness",
+           "lip_contact_geometry", "MASS_SCALING_QUANTILE", "material_profile", "MaterialPhysical", "MATERIALS",
+           "MaterialThesis", "Model", "ModelBuilder", "ModelContact", "ModelJaw", "ModelMuscles", "ModelSupports",
+           "muscle_rig", "MUSCLE_STIFFNESS", "MuscleRig", "MuscleStage", "node_jaw_amounts", "node_stable_dt",
+           "rig_reference", "save_frames_npz", "scale_masses", "segment_frames", "select_solver", "sheet_areas",
+           "simulate", "SolverBase", "SolverDeviceNewtonPCG", "SolverHostImplicit", "SolverImplicit", "SOLVERS",
+           "SolverStage", "SolverVerlet", "Springs", "stable_dt", "State", "StepData", "StepPotential",
+           "SupportStage", "TABLE_6_3", "thesis_substep", "TISSUE_DENSITY", "VOLUME_BARRIER_ONSET",
+           "VOLUME_BARRIER_STIFFNESS", "VOLUME_FLOOR"]

@@ -4,16 +4,7 @@ Re-exports of ``facewarp._src``; see each name's docstring for shapes and units.
 
 from __future__ import annotations
 
-from ._src.present.render import (  # noqa: F401
-    SKIN_COLOR,
-    VIEWS,
-    colormap,
-    render_mesh,
-    render_views,
-    save_png,
-    shared_hits,
-    view_axes,
-)
+from ._src.present.render import SKIN_COLOR, VIEWS, colormap, render_views, shared_hits, view_axes  # noqa: F401
 from ._src.present.compare import (  # noqa: F401
     color_difference,
     flat_color_difference,
@@ -47,6 +38,10 @@ from ._src.present.template import (  # noqa: F401
 from ._src.present.plot import (  # noqa: F401
     line_chart,
 )
+from ._src.present.looks import (  # noqa: F401
+    COLORS,
+    refine_ball,
+)
 from ._src.present.animation import (  # noqa: F401
     FACE_HEIGHT,
     FaceView,
@@ -54,10 +49,9 @@ from ._src.present.animation import (  # noqa: F401
     save_gif,
 )
 
-__all__ = ["color_difference", "flat_color_difference", "likeness_views", "srgb_to_lab",
-           "CAVITY", "FACE_HEIGHT", "GUMS", "LIPS", "MOUTH", "SKIN", "SKIN_COLOR", "TEETH", "TONGUE", "VIEWS",
-           "FaceView",
-           "colored_scene", "colormap", "displacement_max", "expression_sheet", "frames_sheet", "head_colors",
-           "label_grid", "line_chart", "part_colors", "render_anatomy", "render_mesh", "render_previews",
-           "render_strip", "render_views", "save_gif", "save_png", "shared_hits", "sheet_font_size", "vermilion_weight",
-           "view_axes"]
+__all__ = ["CAVITY", "color_difference", "colored_scene", "colormap", "COLORS", "displacement_max",
+           "expression_sheet", "FACE_HEIGHT", "FaceView", "flat_color_difference", "frames_sheet", "GUMS",
+           "head_colors", "label_grid", "likeness_views", "line_chart", "LIPS", "MOUTH", "part_colors",
+           "refine_ball", "render_anatomy", "render_previews", "render_strip", "render_views", "save_gif",
+           "shared_hits", "sheet_font_size", "SKIN", "SKIN_COLOR", "srgb_to_lab", "TEETH", "TONGUE",
+           "vermilion_weight", "view_axes", "VIEWS"]

@@ -64,10 +64,10 @@ class SlabMuscle:
         border = np.isclose(np.abs(skin.vertices[:, :2]), SIZE / 2).any(1)
         rig = physics.muscle_rig(self.anatomy.muscles, stiffness=STIFFNESS)
         self.attached = len(rig.att_node)
-        builder = fw.ModelBuilder(skin.vertices, skin.tets, layer=skin.layer, fixed=border)
+        builder = fw.physics.ModelBuilder(skin.vertices, skin.tets, layer=skin.layer, fixed=border)
         builder.add_muscles(rig)  # the muscle's control points are State: the Model knows the muscles
         self.model = builder.finalize(device)
-        self.solver = fw.SolverVerlet(self.model, stages=[fw.MuscleStage.from_model(self.model)])
+        self.solver = fw.physics.SolverVerlet(self.model, stages=[fw.physics.MuscleStage.from_model(self.model)])
         dt = physics.stable_dt(self.model)
         self.substeps = max(1, math.ceil(1.0 / (self.fps * dt)))
         self.dt = 1.0 / (self.fps * self.substeps)
@@ -94,7 +94,7 @@ class SlabMuscle:
     def render(self, size: int = 340) -> np.ndarray:
         """The skin surface coloured by displacement (0..3 mm), RGB image (size, size, 3) uint8."""
         X = self.state.positions.numpy().astype(np.float64)[self.top]
-        colors = fw.colormap(self.displacement() * 1e3, 0.0, COLOR_MAX_MM)
+        colors = fw.render.colormap(self.displacement() * 1e3, 0.0, COLOR_MAX_MM)
         return fw.render_mesh(X, self.anatomy.head.faces, view=(15.0, 15.0), width=size, height=size,
                               vertex_colors=colors, device=str(self.model.device))
 

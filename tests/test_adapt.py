@@ -6,7 +6,9 @@ import pytest
 import trimesh
 
 from facewarp import InputError
-from facewarp.adaptation import Similarity, adapt, eye_transform, fit_part_transform, transfer_uv
+from facewarp.geometry import Similarity
+from facewarp import adapt
+from facewarp.adaptation import eye_transform, fit_part_transform, transfer_uv
 
 DIRS = {
     "2.1": (0, -0.9, 0.45), "3.7": (0.55, 0.25, 0.8), "3.12": (-0.55, 0.25, 0.8), "3.11": (0.2, 0.25, 0.95),

@@ -10,7 +10,8 @@ import time
 import numpy as np
 import pytest
 
-from facewarp import default_template, load_mesh, save_obj
+from facewarp import default_template, load_mesh
+from facewarp.geometry import save_obj
 from facewarp.cli import main
 
 
@@ -134,7 +135,9 @@ def test_adapt_takes_68_point_landmarks(ict_dir, tmp_path, capsys):
     """Round trip through the command: a known head (the ICT neutral, mm) with its 68 landmarks
     (ICT's own vertices) as an iBUG .pts file: every FDP and every other point of the scheme is
     used (report), and the adapted template's 68 places land on the head's 68 points."""
-    from facewarp import IBUG68_TEMPLATE, IBUG68_TO_FDP, closest_surface_points, default_template
+    from facewarp.heads import IBUG68_TEMPLATE
+    from facewarp.geometry import IBUG68_TO_FDP, closest_surface_points
+    from facewarp import default_template
 
     n = 11248
     ict = load_mesh(ict_dir / "generic_neutral_mesh.obj", units="cm")

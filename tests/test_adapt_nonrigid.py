@@ -11,7 +11,9 @@ import trimesh
 
 import facewarp
 from facewarp import InputError
-from facewarp.adaptation import Similarity, adapt, detect_landmarks
+from facewarp.geometry import Similarity
+from facewarp import adapt
+from facewarp.adaptation import detect_landmarks
 
 
 def _field(X):
@@ -124,7 +126,7 @@ def test_detects_fdps_in_any_pose(head):
 def test_cli_detects_then_adapts_without_landmarks(head, tmp_path, capsys):
     """`facewarp landmarks detect` writes loadable landmarks with confidences; `facewarp adapt` without
     --landmarks finds them itself and writes the quality pictures."""
-    from facewarp import load_landmarks, save_obj
+    from facewarp.geometry import load_landmarks, save_obj
     from facewarp.cli import main
 
     t, tl, truth, SV, SF, sl = head

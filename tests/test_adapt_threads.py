@@ -29,7 +29,7 @@ def _openblas_thread_counts() -> dict:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="OpenBLAS libraries are found in /proc/self/maps")
 def test_adapt_gives_the_blas_threads_back():
     import facewarp as fw
-    from facewarp.adaptation import adapt
+    from facewarp import adapt
 
     before = _openblas_thread_counts()
     if not before:

@@ -48,17 +48,17 @@ def test_transfer_identity_and_scaling(ict):
     """On the ICT neutral itself (its own FDPs as the head's), the transfer gives the ICT
     displacement back at the ICT vertices; on a copy scaled by 1.1 and moved, the displacement
     is scaled by 1.1 (the head's proportions), not copied."""
-    D = fw.load_ict_displacements(["mouthSmileLeft", "jawOpen"], ict_dir=ict)
+    D = fw.takes.load_ict_displacements(["mouthSmileLeft", "jawOpen"], ict_dir=ict)
     assert set(D) == {"mouthSmileLeft", "jawOpen"}
-    V = fw.load_mesh(ict / "generic_neutral_mesh.obj", units="cm").vertices[: fw.ICT_SKIN_VERTICES]
-    lm = {k: V[i] for k, i in {**fw.ICT_FDP_VERTICES, **fw.ICT_INNER_LIP_VERTICES}.items()}
+    V = fw.load_mesh(ict / "generic_neutral_mesh.obj", units="cm").vertices[: fw.heads.ICT_SKIN_VERTICES]
+    lm = {k: V[i] for k, i in {**fw.heads.ICT_FDP_VERTICES, **fw.heads.ICT_INNER_LIP_VERTICES}.items()}
     pick = np.array([5708, 6213, 966, 4163, 3000, 1507])  # lip corners, chin, a lid, cheek, eye corner
-    out = fw.transfer_ict_displacements(D, V[pick], lm, ict_dir=ict)
+    out = fw.takes.transfer_ict_displacements(D, V[pick], lm, ict_dir=ict)
     for n in D:
         np.testing.assert_allclose(out[n], D[n][pick], atol=2e-5)
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     moved = {k: 1.1 * R @ p + np.array([0.1, 0.2, -0.3]) for k, p in lm.items()}
-    out2 = fw.transfer_ict_displacements(D, 1.1 * V[pick] @ R.T + np.array([0.1, 0.2, -0.3]), moved, ict_dir=ict)
+    out2 = fw.takes.transfer_ict_displacements(D, 1.1 * V[pick] @ R.T + np.array([0.1, 0.2, -0.3]), moved, ict_dir=ict)
     for n in D:
         np.testing.assert_allclose(out2[n], 1.1 * D[n][pick] @ R.T, atol=3e-5)
 
@@ -67,9 +67,9 @@ def test_transfer_onto_template_head(ict, sim):
     """On the default head, the left smile lifts the lip corner at +x (the subject's left, as in
     ICT) by millimetres to centimetres and leaves the hairline still."""
     ids, P = _head_fdps(sim.fr)
-    D = fw.load_ict_displacements(["mouthSmileLeft"], ict_dir=ict)
+    D = fw.takes.load_ict_displacements(["mouthSmileLeft"], ict_dir=ict)
     rep = {}
-    out = fw.transfer_ict_displacements(D, P, dict(zip(ids, P)), point_ids=ids, ict_dir=ict, report=rep)
+    out = fw.takes.transfer_ict_displacements(D, P, dict(zip(ids, P)), point_ids=ids, ict_dir=ict, report=rep)
     d = out["mouthSmileLeft"]
     corner = d[ids.index("8.4")] if P[ids.index("8.4"), 0] > 0 else d[ids.index("8.3")]
     assert corner[1] > 2e-3 and 5e-3 < np.linalg.norm(corner) < 3e-2
@@ -107,7 +107,7 @@ def test_table_build_cache_and_controls(ict, sim, built):
     np.testing.assert_allclose(t2.targets_for(W[0])[0], t.rest_fdp + t.targets[i_jaw])
     a1, j1 = t2.controls(W[1])  # one frame (52,) works too
     np.testing.assert_array_equal(a1[0], A[1])
-    t3 = fw.load_arkit_table(cache)  # the file round trip
+    t3 = fw.takes.load_arkit_table(cache)  # the file round trip
     np.testing.assert_array_equal(t3.basis, t.basis)
     np.testing.assert_array_equal(t3.reached, t.reached)
     assert t3.reasons == t.reasons and t3.key == t.key
@@ -126,7 +126,7 @@ def test_drive_arkit_track(sim, built):
     W[3:, fw.ARKIT_NAMES.index("tongueOut")] = 0.4
     rot = np.zeros((T, 3))
     rot[:, 0] = np.linspace(0.0, 0.05, T)  # yaw
-    track = fw.ArkitTrack(30.0, W, rot, "test")
+    track = fw.takes.ArkitTrack(30.0, W, rot, "test")
     rec = fw.FrameRecorder()
     r = fw.drive(sim, track, table=t, sinks=[rec])
     A, J = t.controls(W)
@@ -143,7 +143,7 @@ def test_drive_arkit_track(sim, built):
                                atol=1e-9)
     np.testing.assert_allclose(r.head_poses[-1, :3, :3], R, atol=1e-12)
     assert len(rec.points) == T
-    r2 = fw.drive(sim, fw.ArkitTrack(30.0, W[:3]), table=t, refine=True)
+    r2 = fw.drive(sim, fw.takes.ArkitTrack(30.0, W[:3]), table=t, refine=True)
     assert r2.mode == "arkit-tracker" and r2.activations.shape == (3, len(t.muscle_names))
     assert np.isfinite(r2.rms).all() and r2.head_poses is None
     with pytest.raises(fw.InputError, match="table: an ArkitTrack is driven through the head's ARKit table"):
@@ -151,7 +151,7 @@ def test_drive_arkit_track(sim, built):
     with pytest.raises(fw.InputError, match="smoothness: a Tracker option, only with refine=True"):
         fw.drive(sim, track, table=t, smoothness=0.1)
     with pytest.raises(fw.InputError, match="track: 25 frames/s"):
-        fw.drive(sim, fw.ArkitTrack(25.0, W), table=t)
+        fw.drive(sim, fw.takes.ArkitTrack(25.0, W), table=t)
 
 
 def test_bad_inputs(ict, sim, tmp_path):
@@ -168,11 +168,11 @@ def test_bad_inputs(ict, sim, tmp_path):
         fw.arkit_table(sim, shapes=[], cache=tmp_path / "file")
     (tmp_path / "arkit_table.npz").write_bytes(b"not a table")
     with pytest.raises(fw.InputError, match="not a facewarp ARKit table"):
-        fw.load_arkit_table(tmp_path)
+        fw.takes.load_arkit_table(tmp_path)
     with pytest.raises(fw.InputError, match="names: 'nope'"):
-        fw.load_ict_displacements(["nope"])
+        fw.takes.load_ict_displacements(["nope"])
     with pytest.raises(fw.InputError, match="ict_dir: .* holds no ICT-FaceKit"):
-        fw.load_ict_displacements(["jawOpen"], ict_dir=tmp_path)
+        fw.takes.load_ict_displacements(["jawOpen"], ict_dir=tmp_path)
     t = fw.arkit_table(sim, shapes=[], ict_dir=ict, max_frames=3)  # no shapes: every entry zero, with reasons
     assert not t.solved.any() and len(t.reasons) == 52
     with pytest.raises(fw.InputError, match="sim: not the head"):
@@ -193,7 +193,7 @@ def no_ict(monkeypatch, tmp_path):
     monkeypatch.delenv("FACEWARP_SHARED", raising=False)
     monkeypatch.delenv("FACEWARP_ICT_SHAPES", raising=False)
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
-    assert fw.ict_shape_dirs() == []
+    assert fw.takes.ict_shape_dirs() == []
 
 
 def test_shipped_basis_file_and_licence():
@@ -201,7 +201,7 @@ def test_shipped_basis_file_and_licence():
     the 51 ICT shapes (no tongueOut) on the level-1 template skin and its head FDPs."""
     from pathlib import Path
 
-    b = fw.load_arkit_basis()
+    b = fw.takes.load_arkit_basis()
     f = b.file
     assert f.name == "arkit_basis.npz" and f.parent.parent.parent.parent == Path(fw.__file__).parent
     assert f.stat().st_size < 5e6
@@ -209,7 +209,7 @@ def test_shipped_basis_file_and_licence():
     assert "MIT License" in licence and "Permission is hereby granted" in licence
     pyproject = (Path(__file__).resolve().parents[1] / "pyproject.toml").read_text()
     assert "_src/importers/data/arkit_basis.npz" in pyproject and "ICT-FaceKit-LICENSE.txt" in pyproject
-    assert set(b.names) == {n for n, stems in fw.ICT_ARKIT_SHAPES.items() if stems} and "tongueOut" not in b.names
+    assert set(b.names) == {n for n, stems in fw.takes.ICT_ARKIT_SHAPES.items() if stems} and "tongueOut" not in b.names
     t = fw.default_template(b.level)
     assert b.vertices.shape == (t.vertex_count, 3) and len(b.fdp_ids) >= 60
     np.testing.assert_allclose(b.vertices, t.vertices, atol=1e-6)  # still the template it was made on
@@ -225,7 +225,7 @@ def test_shipped_basis_file_and_licence():
 def test_basis_transfer_identity_and_scaling():
     """Carried onto the template itself the basis comes back (FDPs exactly, other points by the skin);
     onto a copy scaled by 1.1, turned and moved, it comes back scaled and turned."""
-    b = fw.load_arkit_basis()
+    b = fw.takes.load_arkit_basis()
     lm = dict(zip(b.fdp_ids, b.fdp_points))
     names = ["jawOpen", "mouthSmileLeft", "eyeBlinkRight"]
     out = b.transfer(b.fdp_points, lm, names=names, point_ids=b.fdp_ids)
@@ -248,9 +248,9 @@ def test_basis_transfer_identity_and_scaling():
 def test_basis_matches_the_kit(ict):
     """The shipped shapes agree with the kit's own OBJs carried onto the template directly (the
     five shapes the shared folder holds): within the 2 um quantization at the FDPs."""
-    b = fw.load_arkit_basis()
-    D = fw.load_ict_displacements(["jawOpen", "mouthSmileLeft", "browInnerUp"], ict_dir=ict)
-    direct = fw.transfer_ict_displacements(D, b.fdp_points, dict(zip(b.fdp_ids, b.fdp_points)),
+    b = fw.takes.load_arkit_basis()
+    D = fw.takes.load_ict_displacements(["jawOpen", "mouthSmileLeft", "browInnerUp"], ict_dir=ict)
+    direct = fw.takes.transfer_ict_displacements(D, b.fdp_points, dict(zip(b.fdp_ids, b.fdp_points)),
                                            point_ids=b.fdp_ids, ict_dir=ict)
     for n in D:
         np.testing.assert_allclose(b.fdp[n], direct[n], atol=b.step_m)
@@ -303,16 +303,16 @@ def test_face_that_cannot_move_is_an_error(sim, no_ict):
     W[:, fw.ARKIT_NAMES.index("cheekPuff")] = 0.2
     with pytest.raises(fw.InputError, match=r"^tongue.csv: the face cannot move: none of the 2 ARKit shapes it uses "
                                             r"\(cheekPuff, tongueOut\) is mapped") as e:
-        fw.drive(sim, fw.ArkitTrack(30.0, W, None, "tongue.csv"), table=t)
+        fw.drive(sim, fw.takes.ArkitTrack(30.0, W, None, "tongue.csv"), table=t)
     assert "\n" not in str(e.value)
     with pytest.raises(fw.InputError, match="every ARKit weight is 0"):
-        fw.drive(sim, fw.ArkitTrack(30.0, np.zeros((3, 52))), table=t)
+        fw.drive(sim, fw.takes.ArkitTrack(30.0, np.zeros((3, 52))), table=t)
     W[:, fw.ARKIT_NAMES.index("eyeLookOutRight")] = 1.0
-    r = fw.drive(sim, fw.ArkitTrack(30.0, W), table=t)
+    r = fw.drive(sim, fw.takes.ArkitTrack(30.0, W), table=t)
     np.testing.assert_allclose(r.gaze[-1, 1], [-np.radians(30.0), 0.0])  # the right eye looks out, to -x
     assert sorted(w.split(":")[0] for w in r.warnings) == ["cheekPuff", "tongueOut"]
     # recorded eye angles (Live Link Face's eye yaw / pitch, as a loader gives them) win over the weights
-    tr = fw.ArkitTrack(30.0, W)
+    tr = fw.takes.ArkitTrack(30.0, W)
     tr.eye_rotation = np.tile([[0.1, -0.05], [0.12, -0.05]], (3, 1, 1))
     r = fw.drive(sim, tr, table=t)
     np.testing.assert_allclose(r.gaze, tr.eye_rotation)
@@ -380,7 +380,7 @@ def test_shipped_table_on_demand(sim, no_ict, tmp_path):
     W = np.zeros((4, 52))
     W[:, i_smile] = [0.0, 0.5, 1.0, 1.0]
     W[:, i_blink] = [0.0, 0.5, 1.0, 1.0]
-    r = fw.drive(sim, fw.ArkitTrack(30.0, W), table=t3)
+    r = fw.drive(sim, fw.takes.ArkitTrack(30.0, W), table=t3)
     assert r.warnings == [] and r.activations[-1].max() > 0.3
 
 
@@ -394,7 +394,7 @@ w[:, fw.ARKIT_NAMES.index("mouthSmileLeft")] = 0.5 * (1 - np.cos(2 * np.pi * t /
 w[:, fw.ARKIT_NAMES.index("mouthSmileRight")] = w[:, fw.ARKIT_NAMES.index("mouthSmileLeft")]
 w[:, fw.ARKIT_NAMES.index("jawOpen")] = 0.3 * np.sin(np.pi * t / 1.5)
 head = np.stack([0.1 * np.sin(2 * np.pi * t / 1.5), 0 * t, 0 * t], axis=1)   # yaw, pitch, roll [rad]
-fw.save_livelink_csv(fw.ArkitTrack(30.0, w, head), "smile_livelink.csv")
+fw.takes.save_livelink_csv(fw.takes.ArkitTrack(30.0, w, head), "smile_livelink.csv")
 '''
 
 
@@ -443,7 +443,7 @@ def test_guide_arkit_example_without_shared_data(no_ict, tmp_path, monkeypatch, 
     shutil.copytree("build", ro)
     take = fw.load_arkit("smile_livelink.csv")
     take.weights[:, fw.ARKIT_NAMES.index("eyeBlinkLeft")] = take.weights[:, fw.ARKIT_NAMES.index("jawOpen")]
-    fw.save_livelink_csv(take, "blink_livelink.csv")
+    fw.takes.save_livelink_csv(take, "blink_livelink.csv")
 
     real = np.savez_compressed
 
@@ -464,7 +464,7 @@ def test_guide_arkit_example_without_shared_data(no_ict, tmp_path, monkeypatch, 
 
 def test_docs_reach_table_lists_every_shape():
     """docs/concepts/arkit.md's reach table (generated from benchmarks/results/arkit_basis.json) has a
-    row per ARKit shape in fw.ARKIT_NAMES order; the shapes not reached are fw.ARKIT_OUT_OF_REACH's,
+    row per ARKit shape in fw.ARKIT_NAMES order; the shapes not reached are fw.takes.ARKIT_OUT_OF_REACH's,
     each with its reason, and the eyeLook shapes turn the eyes."""
     from pathlib import Path
 
@@ -473,7 +473,7 @@ def test_docs_reach_table_lists_every_shape():
     rows = [[c.strip() for c in r.strip().strip("|").split("|")] for r in block.splitlines() if r.startswith("| `")]
     assert [r[0].strip("`") for r in rows] == list(fw.ARKIT_NAMES)
     not_reached = {r[0].strip("`"): r[-1] for r in rows if r[1] == "not reached"}
-    assert not_reached == fw.ARKIT_OUT_OF_REACH
+    assert not_reached == fw.takes.ARKIT_OUT_OF_REACH
     assert all("eyes" in r[1] for r in rows if r[0].startswith("`eyeLook"))
 
 
@@ -487,7 +487,7 @@ def test_regenerating_the_basis_reproduces_it(tmp_path):
     d = os.environ.get("FACEWARP_ICT_SHAPES")
     if not d or not (Path(d) / "eyeBlink_L.obj").is_file():
         pytest.skip("FACEWARP_ICT_SHAPES does not name the ICT-FaceKit FaceXModel folder (all expression OBJs)")
-    b = fw.load_arkit_basis()
+    b = fw.takes.load_arkit_basis()
     out = b.make(d, tmp_path / "basis.npz")
     new, shipped = np.load(out), np.load(b.file)
     for k in ("names", "fdp_ids", "skin", "fdp", "faces"):

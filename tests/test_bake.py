@@ -108,7 +108,7 @@ def test_adapt_bakes_a_likeness(tmp_path, capsys):
     scan = fw.synthetic_scan(3)
     d = tmp_path / "scan"
     d.mkdir()
-    fw.save_obj(d / "scan.obj", scan.vertices * 1e3, scan.faces, colors=scan.colors)
+    fw.geometry.save_obj(d / "scan.obj", scan.vertices * 1e3, scan.faces, colors=scan.colors)
     (d / "lm.json").write_text(json.dumps({k: (np.asarray(v) * 1e3).tolist() for k, v in scan.landmarks.items()}))
     out = tmp_path / "ad"
     code = main(["adapt", str(d / "scan.obj"), "--landmarks", str(d / "lm.json"), "--units", "mm", "--out", str(out),
@@ -191,9 +191,9 @@ def test_adapt_bakes_from_a_textured_scan(tmp_path, capsys, fmt):
     if fmt == "obj":
         Image.fromarray(tex).save(d / "scan.png")
         (d / "scan.mtl").write_text("newmtl skin\nKd 1 1 1\nmap_Kd scan.png\n")
-        fw.save_obj(d / "scan.obj", scan.vertices * 1e3, F, uv=uv, face_uv=face_uv[keep], mtl="scan.mtl")
+        fw.geometry.save_obj(d / "scan.obj", scan.vertices * 1e3, F, uv=uv, face_uv=face_uv[keep], mtl="scan.mtl")
     else:
-        fw.save_glb(d / "scan.glb", scan.vertices * 1e3, F, uv, face_uv[keep], texture=tex)
+        fw.geometry.save_glb(d / "scan.glb", scan.vertices * 1e3, F, uv, face_uv[keep], texture=tex)
     m = fw.load_mesh(d / f"scan.{fmt}")
     assert m.texture is not None and m.corner_uv is not None and m.colors is None
     (d / "lm.json").write_text(json.dumps({k: (np.asarray(v) * 1e3).tolist() for k, v in scan.landmarks.items()}))

@@ -47,7 +47,7 @@ def test_one_face_model_is_the_face_simulator(rigs, device):
 def test_model_of_faces_layout(rigs):
     """add_face N times: per-head ranges, the Control of N heads, each jaw-moved row with its head's jaw."""
     a, b = rigs
-    builder = fw.ModelBuilder()
+    builder = fw.physics.ModelBuilder()
     builder.add_face(a)
     builder.add_faces([b, a])
     m = builder.finalize("cpu")
@@ -125,7 +125,7 @@ def test_model_backend_refuses_what_it_cannot_step(rigs):
         batch.set_activations(np.r_[np.zeros((1, M)), np.full((1, M), 1.5)])
     batch.set_activations(np.full((2, M), 0.25))  # an (N, M) array: checked at once
     assert type(fw.FaceBatch([a], device="cpu")).__name__ == "FaceBatch"  # auto on the CPU: a Model per head
-    builder = fw.ModelBuilder()
+    builder = fw.physics.ModelBuilder()
     builder.add_face(a)
     with pytest.raises(fw.InputError, match="damping rate"):
         builder.add_face(a, material="thesis")

@@ -125,7 +125,7 @@ def test_build_rejects_mismatched_topology(tmp_path, capsys):
     t = facewarp.default_template(0)
     d = tmp_path / "adapt"
     d.mkdir()
-    facewarp.save_obj(d / "adapted.obj", t.vertices[:-10], t.faces[(t.faces < len(t.vertices) - 10).all(1)])
+    facewarp.geometry.save_obj(d / "adapted.obj", t.vertices[:-10], t.faces[(t.faces < len(t.vertices) - 10).all(1)])
     (d / "report.json").write_text(json.dumps({"template": "default template (level 0)"}))
     code = main(["build", str(d), "--out", str(tmp_path / "b")])
     err = capsys.readouterr().err

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from facewarp import InputError
-from facewarp.adaptation import CALIBRATION_FDPS, Similarity, calibrate, fit_similarity
+from facewarp.adaptation import CALIBRATION_FDPS, calibrate
+from facewarp.geometry import Similarity, fit_similarity
 
 
 def _rotation(rng):

@@ -58,7 +58,7 @@ def test_template_export(tmp_path, capsys):
     from PIL import Image
 
     assert Image.open(out / "preview_front.png").size[0] >= 400
-    t = facewarp.load_template_dir(out)  # the folder reads back as a template
+    t = facewarp.heads.load_template_dir(out)  # the folder reads back as a template
     assert t.vertex_count == meta["vertex_count"] and len(t.fdp) == 84
 
 

@@ -190,11 +190,11 @@ def test_muscle_options_refuse_unknown_names_while_parsing(bad, capsys):
 
 def test_activations_take_the_same_names():
     """--activations and --muscles read a name the same way: bare = both sides, _L / _R = one."""
-    e = facewarp.expression_from_activations("zygomatic_major=0.6,corrugator_L=0.3")
+    e = facewarp.expressions.expression_from_activations("zygomatic_major=0.6,corrugator_L=0.3")
     assert e.activation("zygomatic_major", "L") == e.activation("zygomatic_major", "R") == pytest.approx(0.6)
     assert e.activation("corrugator", "L") == pytest.approx(0.3) and e.activation("corrugator", "R") == 0.0
     with pytest.raises(facewarp.InputError, match="unknown muscle 'nose'.*both sides"):
-        facewarp.expression_from_activations("nose=0.5")
+        facewarp.expressions.expression_from_activations("nose=0.5")
 
 
 @pytest.fixture(scope="module")

@@ -261,7 +261,7 @@ def test_build_separation_moves_crossing_lips_apart_and_keeps_tets_valid():
 @pytest.fixture(scope="module")
 def default_rig():
     import facewarp
-    from facewarp.anatomy import build_anatomy
+    from facewarp import build_anatomy
     from facewarp.physics import face_rig_from_anatomy
 
     an = build_anatomy(facewarp.default_template(0), check_intersections=False)
@@ -304,7 +304,8 @@ def test_lips_pushed_into_the_teeth_stay_outside(default_rig):
 
 
 def test_laugh_on_the_default_head_has_no_crossings(default_rig):
-    from facewarp import FaceSimulator, timeline_from_spec
+    from facewarp import FaceSimulator
+    from facewarp.expressions import timeline_from_spec
 
     an, fr = default_rig
     sep = an.quality["lip_separation"]  # what `facewarp build` reports
@@ -461,7 +462,8 @@ def test_the_lids_inner_sheet_over_the_eyeballs_glides_on_them(default_rig):
     """The default head's inner lid sheet over each eyeball has no planar sliding support (a plane
     tangent at rest pushed the closing lid medially and held it off the ball) but glides on the
     eyeball: it is in the contact stage's two-sided sphere springs."""
-    from facewarp.physics import FaceSimulator, contact_geometry
+    from facewarp import FaceSimulator
+    from facewarp.physics import contact_geometry
 
     _, fr = default_rig
     g = contact_geometry(fr)

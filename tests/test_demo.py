@@ -107,20 +107,20 @@ def test_interrupted_animation_leaves_nothing(demo, tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         with facewarp.UsdAnimation(tmp_path / "take.usdc", sim) as usd:
-            facewarp.play_timeline(sim, facewarp.timeline_for("smile"), 1.0, on_frame=(lambda s, k, t: usd.add(s, t), boom))
+            facewarp.play(sim, facewarp.timeline_for("smile"), 1.0, sinks=[usd, boom])
     assert list(tmp_path.iterdir()) == []
 
 
 def test_synthetic_scan():
     scan = facewarp.synthetic_scan(1, holes=3)
     t = facewarp.default_template(0)
-    rep = facewarp.mesh_report(scan.vertices, scan.faces)
+    rep = facewarp.geometry.mesh_report(scan.vertices, scan.faces)
     assert rep["boundary_loop_count"] == 4 + 3 and rep["non_manifold_edge_count"] == 0  # neck, mouth, eyes + holes
     assert scan.units == "mm" and scan.truth.shape == t.vertices.shape
     np.testing.assert_allclose(scan.rotation @ scan.rotation.T, np.eye(3), atol=1e-12)
     # the FDPs lie on the scanned surface (noise 0.15 mm; those on the lip and lid margins up to ~1.3 mm
     # off, where the re-tessellation cut the slit's edge)
-    d = facewarp.MeshQuery(scan.vertices, scan.faces).closest_point(np.array(list(scan.landmarks.values()))).dist
+    d = facewarp.geometry.MeshQuery(scan.vertices, scan.faces).closest_point(np.array(list(scan.landmarks.values()))).dist
     assert np.median(d) < 3e-4 and d.max() < 2e-3, d
     assert scan.proportions != facewarp.synthetic_scan(2).proportions
     with pytest.raises(facewarp.InputError, match="holes"):

@@ -12,7 +12,7 @@ import facewarp as fw
 from facewarp.cli import main
 from conftest import fresh_build
 
-NAMES = ["2.1", "8.3", "8.4", "8.1", "8.2", "5.1", "5.2", *fw.STABLE_POINTS]
+NAMES = ["2.1", "8.3", "8.4", "8.1", "8.2", "5.1", "5.2", *fw.takes.STABLE_POINTS]
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +25,7 @@ def take(built, tmp_path_factory):
     """A simulated smile's markers (5 frames at 30 fps), moved by a rigid head motion."""
     sim = fw.FaceSimulator(fw.load_face_rig(built))
     frames = sim.run(fw.timeline_for("smile", attack=0.13, start=0.0), 0.13)
-    tr = fw.markers_from_frames(frames, NAMES)
+    tr = fw.takes.markers_from_frames(frames, NAMES)
     rng = np.random.default_rng(5)
     P = tr.positions.copy()
     for t in range(tr.frames):  # a nod and a turn, a few degrees, and a drift of a few cm
@@ -35,7 +35,7 @@ def take(built, tmp_path_factory):
         P[t] = P[t] @ (Ry @ Rx).T + rng.uniform(-0.03, 0.03, size=3)
     moved = fw.MarkerTrack(tr.fps, tr.names, P)
     d = tmp_path_factory.mktemp("take")
-    fw.save_markers_json(moved, d / "take.json", units="mm")
+    fw.takes.save_markers_json(moved, d / "take.json", units="mm")
     return d / "take.json", tr
 
 

@@ -37,7 +37,7 @@ def _one_line_error(fn, *words):
 # ----------------------------------------------------------------------------- markers JSON
 def test_markers_json_round_trip_in_mm(tmp_path):
     tr = _track()
-    p = fw.save_markers_json(tr, tmp_path / "take.json", units="mm")
+    p = fw.takes.save_markers_json(tr, tmp_path / "take.json", units="mm")
     data = json.loads(p.read_text())
     assert data["units"] == "mm" and data["fps"] == 30.0
     assert data["markers"]["8.3"][3] is None
@@ -87,7 +87,7 @@ def test_markers_json_bad_files(tmp_path, content, words):
 
 def test_markers_units_disagreement_and_metres_read_as_mm(tmp_path):
     tr = _track(missing=False)
-    p = fw.save_markers_json(tr, tmp_path / "m.json", units="m")
+    p = fw.takes.save_markers_json(tr, tmp_path / "m.json", units="m")
     _one_line_error(lambda: fw.load_markers(p, units="mm"), "file says units 'm'")
     q = tmp_path / "m.csv"
     _write_csv(q, tr, scale=1.0)
@@ -156,7 +156,7 @@ def test_load_markers_bad_paths_and_maps(tmp_path):
     (tmp_path / "x.trc").write_text("x")
     _one_line_error(lambda: fw.load_markers(tmp_path / "x.trc"), "unsupported marker format '.trc'")
     tr = _track(missing=False)
-    p = fw.save_markers_json(tr, tmp_path / "t.json")
+    p = fw.takes.save_markers_json(tr, tmp_path / "t.json")
     (tmp_path / "map.json").write_text('{"A": "2.1", "B": "2.1"}')
     _one_line_error(lambda: fw.load_markers(p, map=tmp_path / "map.json"), "both map to '2.1'")
     (tmp_path / "map.json").write_text('{"A": "12.9"}')
@@ -201,13 +201,13 @@ def _arkit(T=75, fps=30.0, head=True):
     t = np.arange(T) / fps
     W = 0.5 + 0.5 * np.sin(t[:, None] * (1 + np.arange(52))[None] * 0.7)
     H = np.stack([0.2 * np.sin(t), 0.1 * np.cos(t), 0.05 * t], axis=1) if head else None
-    return fw.ArkitTrack(fps, W, H, source="test")
+    return fw.takes.ArkitTrack(fps, W, H, source="test")
 
 
 @pytest.mark.parametrize("fps", [30.0, 60.0, 25.0])
 def test_livelink_round_trip(tmp_path, fps):
     tr = _arkit(T=int(2.5 * fps), fps=fps)
-    p = fw.save_livelink_csv(tr, tmp_path / "take.csv")
+    p = fw.takes.save_livelink_csv(tr, tmp_path / "take.csv")
     head = p.read_text().splitlines()[0].split(",")
     assert head[:3] == ["Timecode", "BlendShapeCount", "EyeBlinkLeft"] and "HeadYaw" in head and "TongueOut" in head
     back = fw.load_arkit(p)
@@ -219,7 +219,7 @@ def test_livelink_round_trip(tmp_path, fps):
 def test_livelink_timecode_at_60_with_30_fps_data(tmp_path):
     """A take at 30 fps whose timecode counts at 60 (frame numbers step by 2)."""
     tr = _arkit(T=70)
-    p = fw.save_livelink_csv(tr, tmp_path / "t.csv")
+    p = fw.takes.save_livelink_csv(tr, tmp_path / "t.csv")
     lines = p.read_text().splitlines()
     out = [lines[0]]
     for k, line in enumerate(lines[1:]):
@@ -233,7 +233,7 @@ def test_livelink_timecode_at_60_with_30_fps_data(tmp_path):
 
 def test_livelink_short_take_needs_fps(tmp_path):
     tr = _arkit(T=10)
-    p = fw.save_livelink_csv(tr, tmp_path / "t.csv")
+    p = fw.takes.save_livelink_csv(tr, tmp_path / "t.csv")
     _one_line_error(lambda: fw.load_arkit(p), "does not cross a whole second", "give fps")
     assert fw.load_arkit(p, fps=30).fps == 30.0
 
@@ -256,7 +256,7 @@ def test_livelink_short_take_needs_fps(tmp_path):
 ])
 def test_livelink_bad_files(tmp_path, edit, words):
     p = tmp_path / "bad.csv"
-    fw.save_livelink_csv(_arkit(), p)
+    fw.takes.save_livelink_csv(_arkit(), p)
     p.write_text("\n".join(edit(p.read_text().splitlines())) + "\n")
     msg = _one_line_error(lambda: fw.load_arkit(p), *words)
     assert msg.startswith(str(p)), msg
@@ -334,18 +334,18 @@ def test_mediapipe_truncated_and_nan(tmp_path):
 # ----------------------------------------------------------------------------- frames -> markers
 def test_markers_from_frames():
     T, n = 5, 20
-    ids = np.array(fw.FDP_IDS)
+    ids = np.array(fw.geometry.FDP_IDS)
     fr = fw.Frames(times=np.arange(T) / 24.0, points=RNG.normal(size=(T, n, 3)).astype(np.float32),
                    faces=np.zeros((1, 3), int), fdp_ids=ids, fdp_points=RNG.normal(size=(T, len(ids), 3)),
                    parts={}, muscle_names=[], muscle_curves=np.zeros((T, 0, 2, 3)), activations=np.zeros((T, 0)),
                    jaw=np.zeros((T, 2)))
-    tr = fw.markers_from_frames(fr, ["8.3", "v7", "2.1"])
+    tr = fw.takes.markers_from_frames(fr, ["8.3", "v7", "2.1"])
     assert tr.fps == pytest.approx(24.0) and tr.names == ["8.3", "v7", "2.1"]
     np.testing.assert_array_equal(tr.positions[:, 0], fr.fdp_points[:, list(ids).index("8.3")])
     np.testing.assert_array_equal(tr.positions[:, 1], fr.points[:, 7].astype(np.float64))
-    _one_line_error(lambda: fw.markers_from_frames(fr, ["v20"]), "beyond the head's 20 vertices")
-    _one_line_error(lambda: fw.markers_from_frames(fr, ["mouth"]), "'mouth' is neither")
-    _one_line_error(lambda: fw.markers_from_frames("frames", ["2.1"]), "expected Frames")
+    _one_line_error(lambda: fw.takes.markers_from_frames(fr, ["v20"]), "beyond the head's 20 vertices")
+    _one_line_error(lambda: fw.takes.markers_from_frames(fr, ["mouth"]), "'mouth' is neither")
+    _one_line_error(lambda: fw.takes.markers_from_frames("frames", ["2.1"]), "expected Frames")
 
 
 # ----------------------------------------------------------------------------- rigid head motion
@@ -359,7 +359,7 @@ def _random_rotation(rng):
 
 
 def _head_points(rng):
-    names = list(fw.STABLE_POINTS) + ["2.1", "8.3", "8.4", "3.7", "4.1", "v42"]
+    names = list(fw.takes.STABLE_POINTS) + ["2.1", "8.3", "8.4", "3.7", "4.1", "v42"]
     rest = {n: rng.normal(scale=0.06, size=3) for n in names}
     return names, rest
 
@@ -368,7 +368,7 @@ def _head_points(rng):
 def test_rigid_motion_removed(scale):
     rng = np.random.default_rng(11)
     names, rest = _head_points(rng)
-    stable = [names.index(n) for n in fw.STABLE_POINTS]
+    stable = [names.index(n) for n in fw.takes.STABLE_POINTS]
     T = 20
     local = np.array([[rest[n] for n in names]] * T)
     moving = [i for i in range(len(names)) if i not in stable]
@@ -380,7 +380,7 @@ def test_rigid_motion_removed(scale):
     world[4, stable[:8]] = np.nan  # a frame with too few stable points: held
     world[7, [stable[0], moving[0]]] = np.nan  # a frame with some missing
     tr = fw.MarkerTrack(30, names, world, source="moved")
-    back, motion = fw.remove_head_motion(tr, rest, scale=scale)
+    back, motion = fw.takes.remove_head_motion(tr, rest, scale=scale)
     ok = [f for f in range(T) if f != 4]
     vis = np.isfinite(world[ok]).all(axis=2)
     np.testing.assert_allclose(back.positions[ok][vis], local[ok][vis], atol=1e-6)
@@ -406,7 +406,7 @@ def test_rigid_fit_leaves_out_a_stable_point_that_moved():
     local[1, slip] += [0.0, 0.004, 0.0]
     R = _random_rotation(rng)
     world = local @ R.T + [0.1, -0.2, 0.05]
-    back, motion = fw.remove_head_motion(fw.MarkerTrack(30, names, world), rest)
+    back, motion = fw.takes.remove_head_motion(fw.MarkerTrack(30, names, world), rest)
     np.testing.assert_allclose(back.positions, local, atol=1e-9)
     assert motion.used.tolist() == [10, 9, 10] and motion.residual[1] < 1e-9
 
@@ -417,8 +417,8 @@ def test_rigid_angles_of_known_rotations():
     Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
     Rx = np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
     Rz = np.array([[cr, -sr, 0], [sr, cr, 0], [0, 0, 1]])
-    m = fw.HeadMotion(np.array([Ry @ Rx @ Rz]), np.zeros((1, 3)), np.ones(1), np.zeros(1), np.ones(1, int),
-                      np.zeros(1, bool), fw.STABLE_POINTS)
+    m = fw.takes.HeadMotion(np.array([Ry @ Rx @ Rz]), np.zeros((1, 3)), np.ones(1), np.zeros(1), np.ones(1, int),
+                      np.zeros(1, bool), fw.takes.STABLE_POINTS)
     np.testing.assert_allclose(m.angles()[0], a, atol=1e-12)
 
 
@@ -427,15 +427,15 @@ def test_rigid_needs_stable_points():
     names, rest = _head_points(rng)
     keep = ["2.1", "8.3", "11.1", "9.6"]
     tr = fw.MarkerTrack(30, keep, np.array([[rest[n] for n in keep]] * 3))
-    _one_line_error(lambda: fw.remove_head_motion(tr, rest), "needs three or more of the stable points", "it has 2")
-    _one_line_error(lambda: fw.remove_head_motion("x", rest), "expected a MarkerTrack")
+    _one_line_error(lambda: fw.takes.remove_head_motion(tr, rest), "needs three or more of the stable points", "it has 2")
+    _one_line_error(lambda: fw.takes.remove_head_motion("x", rest), "expected a MarkerTrack")
     full = fw.MarkerTrack(30, names, np.array([[rest[n] for n in names]] * 2))
-    same, m = fw.remove_head_motion(full, rest)
+    same, m = fw.takes.remove_head_motion(full, rest)
     np.testing.assert_allclose(same.positions, full.positions, atol=1e-12)
     # a custom stable set, all in one spot: too little spread in every frame
     tight = {n: np.array([0.0, 0.0, 0.001 * i]) for i, n in enumerate(names)}
     tr2 = fw.MarkerTrack(30, names, np.array([[tight[n] for n in names]] * 2))
-    _one_line_error(lambda: fw.remove_head_motion(tr2, tight, points=names[:4]), "no frame has three stable points")
+    _one_line_error(lambda: fw.takes.remove_head_motion(tr2, tight, points=names[:4]), "no frame has three stable points")
 
 
 # ----------------------------------------------------------------------------- random damage
@@ -461,14 +461,14 @@ def test_damaged_files_load_or_fail_in_one_line(tmp_path, fmt):
     src = tmp_path / "src"
     src.mkdir()
     if fmt == "markers_json":
-        good = fw.save_markers_json(_track(T=6), src / "t.json")
+        good = fw.takes.save_markers_json(_track(T=6), src / "t.json")
         load = fw.load_markers
     elif fmt == "markers_csv":
         good = src / "t.csv"
         _write_csv(good, _track(T=6))
         load = lambda p: fw.load_markers(p, units="mm")  # noqa: E731
     elif fmt == "livelink":
-        good = fw.save_livelink_csv(_arkit(T=40), src / "t.csv")
+        good = fw.takes.save_livelink_csv(_arkit(T=40), src / "t.csv")
         load = fw.load_arkit
     elif fmt == "mediapipe":
         good = src / "t.json"

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 import facewarp
-from facewarp import FaceSimulator, Segment, Timeline, build_face, default_template, expression_from_activations, preset
+from facewarp import FaceSimulator, Timeline, build_face, default_template, preset
+from facewarp.expressions import Segment, expression_from_activations
 
 SECONDS = 1.0
 MM = 1e-3
@@ -65,7 +66,7 @@ def _smiling_corner(d, k, outward, up=4 * MM):
 
 
 def test_lever_converts_chin_drop(rig):
-    lever = facewarp.jaw_lever(rig)
+    lever = facewarp.expressions.jaw_lever(rig)
     assert 0.08 < lever < 0.14  # 0.117 m on the default head
     assert preset("laugh").for_head(rig).jaw_u == pytest.approx(0.022 / lever)
 

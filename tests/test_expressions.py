@@ -7,7 +7,8 @@ import json
 import pytest
 
 import facewarp
-from facewarp import MUSCLES, PRESETS, InputError, Segment, Timeline, blend, load_sequence, preset, thesis_sequence
+from facewarp import MUSCLES, PRESETS, InputError, Timeline, preset, thesis_sequence
+from facewarp.expressions import Segment, blend, load_sequence
 
 
 def test_table_6_4_exact():
@@ -15,7 +16,7 @@ def test_table_6_4_exact():
     # Table 6.4 as calibrated in issue 12 (old values recorded in muscle_defs.json)
     assert PRESETS["smile"].activations == {"zygomatic_major": 0.6, "zygomatic_minor": 0.1, "levator_anguli_oris": 0.2}
     assert PRESETS["laugh"].jaw_drop_m == pytest.approx(0.022) and PRESETS["angry"].jaw_u == 0.0
-    assert PRESETS["laugh"].jaw_u == pytest.approx(0.022 / facewarp.REFERENCE_JAW_LEVER)
+    assert PRESETS["laugh"].jaw_u == pytest.approx(0.022 / facewarp.expressions.REFERENCE_JAW_LEVER)
     assert PRESETS["sad"].activation("corrugator") == 0.6 and PRESETS["sad"].activation("frontalis_inner") == 1.0
     assert PRESETS["surprise"].activation("mentalis") == 0.3
     assert PRESETS["surprise"].activation("frontalis_major") == 0.2
@@ -27,29 +28,29 @@ def test_table_6_4_exact():
 
 def test_chin_drop_converts_per_head():
     # a 50 mm lever turns a 10 mm chin drop into 0.2 rad; longer levers need smaller angles
-    assert facewarp.jaw_angle_for_drop(0.05, 0.01) == pytest.approx(0.2)
+    assert facewarp.expressions.jaw_angle_for_drop(0.05, 0.01) == pytest.approx(0.2)
     e = PRESETS["surprise"].for_head(0.12)
     assert e.jaw_u == pytest.approx(0.012 / 0.12) and e.jaw_drop_m == PRESETS["surprise"].jaw_drop_m
     tl = Timeline([Segment(PRESETS["laugh"], 0.0, 0.1, 1.0, 0.1)]).for_head(0.11)
     assert tl.sample(0.5).jaw_u == pytest.approx(0.022 / 0.11)
     assert PRESETS["smile"].for_head(0.11) is PRESETS["smile"]  # no chin drop: unchanged
     with pytest.raises(InputError, match="lever"):
-        facewarp.jaw_lever(-1.0)
+        facewarp.expressions.jaw_lever(-1.0)
     with pytest.raises(InputError, match="drop_m"):
-        facewarp.jaw_angle_for_drop(0.1, -0.01)
+        facewarp.expressions.jaw_angle_for_drop(0.1, -0.01)
 
 
 def test_expression_from_activations():
-    e = facewarp.expression_from_activations("zygomatic_major_L=0.8, corrugator=0.2,jaw_drop_mm=12")
+    e = facewarp.expressions.expression_from_activations("zygomatic_major_L=0.8, corrugator=0.2,jaw_drop_mm=12")
     assert e.activation("zygomatic_major", "L") == 0.8 and e.activation("zygomatic_major", "R") == 0.0
     assert e.activation("corrugator") == 0.2 and e.jaw_drop_m == pytest.approx(0.012)
-    tl = facewarp.timeline_from_spec("frontalis_inner=0.5", 1.0)
+    tl = facewarp.expressions.timeline_from_spec("frontalis_inner=0.5", 1.0)
     assert tl.sample(0.5).activation("frontalis_inner") == pytest.approx(0.5)
     for bad, msg in (("", "empty"), ("zygomatic_major", "muscle=number"), ("zygomatic_major=x", "muscle=number"),
                      ("nose=0.5", "unknown muscle"), ("corrugator=1.5", r"\[0, 1\]"),
                      ("jaw_drop_mm=-3", "jaw_drop_mm")):
         with pytest.raises(InputError, match=msg):
-            facewarp.expression_from_activations(bad)
+            facewarp.expressions.expression_from_activations(bad)
 
 
 def test_envelope_and_blend():

@@ -9,8 +9,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facewarp import (Expression, FaceSimulator, InputError, Segment, Timeline, build_face, default_template,
-                      load_face_rig, preset as table_preset, save_face_rig, timeline_for)
+from facewarp import (    Expression,
+    FaceSimulator,
+    InputError,
+    Timeline,
+    build_face,
+    default_template,
+    load_face_rig,
+    preset as table_preset,
+    save_face_rig,
+    timeline_for)
+from facewarp.expressions import Segment
 
 SECONDS = 0.4
 

@@ -30,8 +30,8 @@ def scans(tmp_path_factory):
     d = tmp_path_factory.mktemp("scans")
     for i in (1, 2):
         s = fw.synthetic_scan(i, faces=4000)
-        fw.save_obj(d / f"good{i}.obj", s.vertices, s.faces)
-        fw.save_landmarks_json(d / f"good{i}_landmarks.json", s.landmarks)
+        fw.geometry.save_obj(d / f"good{i}.obj", s.vertices, s.faces)
+        fw.geometry.save_landmarks_json(d / f"good{i}_landmarks.json", s.landmarks)
     (d / "broken.obj").write_text("this is not a mesh\n")
     return d
 
@@ -179,9 +179,10 @@ def test_rig_step_after_build_then_skipped_when_done(first, scans, capsys):
     assert r["seconds"] > 0 and r["worker"]["pid"] > 0 and r["worker"]["host"]
     assert r["params"] == {"formats": ["usda", "glb"], "inbetweens": 0, "muscles": RIG[1].split(",")}
     folder = first / e["folder"] / "rig"
-    assert sorted(p.name for p in folder.iterdir()) == ["report.json", "rig.glb", "rig.usda"]
+    # the USD file's skin texture beside it (rig_skin.png, named by the file; the glTF embeds its own)
+    assert sorted(p.name for p in folder.iterdir()) == ["report.json", "rig.glb", "rig.usda", "rig_skin.png"]
     assert sorted(r["outputs"]) == sorted(str((folder / n).relative_to(first)) for n in ("report.json", "rig.glb",
-                                                                                           "rig.usda"))
+                                                                                           "rig.usda", "rig_skin.png"))
     assert (folder / "rig.glb").read_bytes()[:4] == b"glTF" and (folder / "rig.usda").read_text().startswith("#usda")
     job = json.loads((folder / "report.json").read_text())  # the rig job's own report, its figures in the summary
     assert job["targets"] == 3 and job["muscles"] == 2 and job["files"] == [str(folder / "rig.usda"),
@@ -444,8 +445,8 @@ def test_a_second_run_on_one_out_is_refused_and_mm_scans_are_read_as_adapt_reads
     import time
 
     s = fw.synthetic_scan(3, faces=4000)
-    fw.save_obj(tmp_path / "mm.obj", s.vertices * 1e3, s.faces)
-    fw.save_landmarks_json(tmp_path / "mm_landmarks.json", {k: v * 1e3 for k, v in s.landmarks.items()})
+    fw.geometry.save_obj(tmp_path / "mm.obj", s.vertices * 1e3, s.faces)
+    fw.geometry.save_landmarks_json(tmp_path / "mm_landmarks.json", {k: v * 1e3 for k, v in s.landmarks.items()})
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "facewarp", "--json", "batch", "run", str(tmp_path / "mm.obj"),
                              "--out", str(out), "--steps", "adapt", "--levels", "1", "--workers", "1"],

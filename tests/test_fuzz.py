@@ -178,7 +178,7 @@ def test_stl_of_the_demo_scan_adapts(tmp_path, capsys):
     scan = tmp_path / "scan.stl"
     scan.write_bytes(trimesh.Trimesh(s.vertices * 1e3, s.faces, process=False).export(file_type="stl"))
     lm = tmp_path / "lm.json"
-    fw.save_landmarks_json(lm, s.landmarks, units=s.units)
+    fw.geometry.save_landmarks_json(lm, s.landmarks, units=s.units)
     out = tmp_path / "a"
     code = main(["--json", "adapt", str(scan), "--landmarks", str(lm), "--units", "mm", "--levels", "1",
                  "--out", str(out)])
@@ -323,7 +323,7 @@ def test_sequence_files_api(tmp_path):
     for name, spec in _sequence_mutations(_rng("sequence")).items():
         p = _write(tmp_path / f"{name}.json", json.dumps(spec))
         with pytest.raises(fw.InputError) as e:
-            fw.load_sequence(p)
+            fw.expressions.load_sequence(p)
         assert str(p) in str(e.value) and "\n" not in str(e.value), _why(f"{name}: {e.value}")
         if name not in ("no_segments", "not_object"):
             assert "segment 0" in str(e.value), _why(f"{name}: {e.value}")
@@ -331,7 +331,7 @@ def test_sequence_files_api(tmp_path):
     for i, bad in enumerate(_truncations(data, _rng("sequence-trunc"), N)):
         p = _write(tmp_path / f"trunc{i}.json", bad)
         with pytest.raises(fw.InputError, match="trunc"):
-            fw.load_sequence(p)
+            fw.expressions.load_sequence(p)
 
 
 def test_sequence_files_cli(built, tmp_path, capsys):
@@ -487,7 +487,7 @@ def test_mesh_and_obj_refuse_bad_arrays(tmp_path):
             fw.Mesh(**kwargs)
     for V_, F_ in [(bad_V, F), (V, F + 10)]:
         with pytest.raises(fw.InputError):
-            fw.save_obj(tmp_path / "x.obj", V_, F_)
+            fw.geometry.save_obj(tmp_path / "x.obj", V_, F_)
     assert not (tmp_path / "x.obj").exists() and list(tmp_path.iterdir()) == []
 
 

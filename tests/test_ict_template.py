@@ -12,9 +12,17 @@ import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from facewarp import (FDP_CATALOGUE, FDP_IDS, FRONTAL_REGIONS, ICT_FDP_VERTICES, ICT_INNER_LIP_VERTICES, ICT_PART_RANGES,
-                      ICT_SKIN_VERTICES, REGIONS, InputError, build_anatomy, default_template, face_rig_from_anatomy,
-                      import_ict, load_mesh, load_template_dir)
+from facewarp.geometry import FDP_CATALOGUE, FDP_IDS
+from facewarp.heads import (    FRONTAL_REGIONS,
+    ICT_FDP_VERTICES,
+    ICT_INNER_LIP_VERTICES,
+    ICT_PART_RANGES,
+    ICT_SKIN_VERTICES,
+    REGIONS,
+    import_ict,
+    load_template_dir)
+from facewarp import InputError, build_anatomy, default_template, load_mesh
+from facewarp.physics import face_rig_from_anatomy
 
 pytestmark = pytest.mark.slow  # minutes on the 2-core box: the slow tier
 

@@ -36,7 +36,24 @@ SRC = "facewarp." + "_src" + "."  # spelled so that the public-names test does n
 KNOWN_CYCLES = [
     {SRC + "drive.arkit", SRC + "drive.inverse"},
     {SRC + "cli_reference", "facewarp.cli"},
+    # sim/play's argument check imports sim/simulator for an isinstance test while the simulator's run()
+    # plays through sim/play (main 6092e95): play's to check by the simulator's methods instead
+    {SRC + "sim.play", SRC + "sim.simulator"},
 ]
+
+
+# Imports of a later floor owned by other work, listed so that a new one fails: the 68-point table's
+# derivation (template/ibug68.ibug68_template_points, which regenerates IBUG68_TEMPLATE from ICT-FaceKit)
+# runs the adaptation; it belongs beside the adaptation or in a tool (the fit work's to move).
+KNOWN_LATER_FLOOR = {
+    (SRC + "template.ibug68", SRC + "adapt.pipeline"),
+    # the rig work (wave 4): the MJCF writer takes the parts' palette and eye looks from present/looks (they belong
+    # a floor lower, beside the parts); the rig take sink names the ARKit channels from drive/tracks and writes its
+    # files through jobs/rig.write_rig_files (which belongs in bake/). Listed so that a new one fails.
+    (SRC + "coupling.mjcf", SRC + "present.looks"),
+    (SRC + "bake.take", SRC + "drive.tracks"),
+    (SRC + "bake.take", SRC + "jobs.rig"),
+}
 
 
 def modules() -> dict[str, tuple[Path, bool]]:
@@ -132,6 +149,8 @@ def test_no_module_imports_a_later_floor():
             continue
         for d in deps:
             a, b = room(m), room(d)
+            if (m, d) in KNOWN_LATER_FLOOR:
+                continue
             if a != b and (FLOORS[b] > FLOORS[a] or FLOORS[b] == FLOORS[a] < TOP):
                 bad.append(f"{m} -> {d} ({a} floor {FLOORS[a]}, {b} floor {FLOORS[b]})")
     assert not bad, "imports of a later floor or a sibling room:\n" + "\n".join(sorted(bad))

@@ -8,7 +8,8 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from facewarp import FDP_CATALOGUE, FDP_IDS, InputError, fapu, load_landmarks, load_mesh, save_landmarks_json
+from facewarp.geometry import FDP_CATALOGUE, FDP_IDS, fapu, load_landmarks, save_landmarks_json
+from facewarp import InputError, load_mesh
 
 # ----------------------------------------------------------------------------------------
 # catalogue
@@ -185,7 +186,8 @@ def _ict_68(ict_dir):
 def test_ibug68_round_trip_on_the_ict_head(ict_dir, tmp_path):
     """68 points taken from a known head (ICT's landmark vertices) written as a JSON list and as
     an iBUG .pts file (mm) come back as the FDPs at the same vertices (the ICT FDP map)."""
-    from facewarp import ICT_FDP_VERTICES, IBUG68_TO_FDP, landmarks_from_scheme
+    from facewarp.heads import ICT_FDP_VERTICES
+    from facewarp.geometry import IBUG68_TO_FDP, landmarks_from_scheme
 
     V, idx = _ict_68(ict_dir)
     P_mm = V[idx] * 1e3
@@ -209,9 +211,11 @@ def test_ibug68_round_trip_on_the_ict_head(ict_dir, tmp_path):
 def test_ibug68_table_matches_the_template_fdps_on_the_ict_head(ict_dir):
     """The documented correspondence: the default template adapted to the ICT head with its 12
     ICT FDPs puts each tabled FDP within IBUG68_FDP_OFFSET_MM (+0.3 mm) of ICT's 68-point vertex."""
-    from facewarp import ICT_FDP_VERTICES, closest_surface_points, default_template
+    from facewarp.heads import ICT_FDP_VERTICES
+    from facewarp.geometry import closest_surface_points
+    from facewarp import default_template
     from facewarp.geometry import IBUG68_FDP_OFFSET_MM, IBUG68_TO_FDP
-    from facewarp.adaptation import adapt
+    from facewarp import adapt
 
     V, idx = _ict_68(ict_dir)
     n = 11248
@@ -230,7 +234,7 @@ def test_ibug68_table_matches_the_template_fdps_on_the_ict_head(ict_dir):
 
 
 def test_scheme_errors(tmp_path):
-    from facewarp import landmarks_from_scheme
+    from facewarp.geometry import landmarks_from_scheme
 
     (tmp_path / "a.json").write_text(json.dumps([[0.0, 0.0, 0.0]] * 30))
     with pytest.raises(InputError, match="30 points fit no landmark scheme"):

@@ -219,7 +219,7 @@ def generated_take(frames=60, fps=60.0, jump_at=None):
     H = np.stack([0.15 * np.sin(2 * np.pi * t / t[-1]), 0.05 * np.sin(np.pi * t / t[-1]), 0 * t], axis=1)
     if jump_at is not None:
         H[jump_at:, 0] += 2.5
-    return fw.ArkitTrack(fps, W, H)
+    return fw.takes.ArkitTrack(fps, W, H)
 
 
 def replay(csv_path, port, *, burst=1, gap=None, junk=()):
@@ -282,7 +282,7 @@ def live(built, out, table_file, *extra, sender, signal_after=None):
 
 def test_live_take_moves_the_face_counts_drops_and_malformed_and_is_recorded(built, table_file, tmp_path):
     csv = tmp_path / "sent.csv"
-    fw.save_livelink_csv(generated_take(60, jump_at=35), csv)
+    fw.takes.save_livelink_csv(generated_take(60, jump_at=35), csv)
     junk = [b"", b"hello", layout(channels(), version=5), layout(channels(), count=52)]
     code, rep, err = live(built, tmp_path / "live", table_file, "--timeout", "4",
                           sender=lambda port: replay(csv, port, burst=10, gap=0.25, junk=junk))
@@ -371,7 +371,7 @@ def sim_index(built, name):
 @pytest.mark.slow
 def test_live_take_stops_on_sigterm_ctrl_c_and_on_seconds(built, table_file, tmp_path):
     csv = tmp_path / "sent.csv"
-    fw.save_livelink_csv(generated_take(240), csv)  # 4 s at 60 fps
+    fw.takes.save_livelink_csv(generated_take(240), csv)  # 4 s at 60 fps
     code, rep, err = live(built, tmp_path / "a", table_file, "--timeout", "5", sender=lambda port: replay(csv, port),
                           signal_after=(1.0, signal.SIGTERM))
     assert code == 0, err
@@ -393,7 +393,7 @@ def test_live_take_stops_on_sigterm_ctrl_c_and_on_seconds(built, table_file, tmp
 def test_a_head_jump_is_eased_over_frames(built, table_file, tmp_path):
     csv = tmp_path / "sent.csv"
     take = generated_take(120, jump_at=61)  # 2.5 rad of yaw from frame 61 on
-    fw.save_livelink_csv(take, csv)
+    fw.takes.save_livelink_csv(take, csv)
 
     def sender(port):  # frames 0, 60, 61, 62, 63, 64 of the take, 1 s apart: each one simulated
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

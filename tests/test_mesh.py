@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from facewarp import InputError, Mesh, SurfacePoints, closest_surface_points, load_mesh, mesh_report, save_obj
-from facewarp import save_landmarks_json
+from facewarp import InputError, Mesh, load_mesh
+from facewarp.geometry import SurfacePoints, closest_surface_points, mesh_report, save_obj
+from facewarp.geometry import save_landmarks_json
 from facewarp.geometry import unit_scale
 
 CUBE_OBJ = """\
@@ -396,7 +397,7 @@ def test_save_glb_writes_trimesh_bytes(tmp_path, textured):
     rng = np.random.default_rng(3)
     V = t.vertices + rng.normal(0.0, 1e-3, t.vertices.shape)
     tex = (rng.random((32, 48, 3)) * 255).astype(np.uint8) if textured else None
-    fw.save_glb(tmp_path / "a.glb", V, t.faces, t.uv, t.face_uv, texture=tex)
+    fw.geometry.save_glb(tmp_path / "a.glb", V, t.faces, t.uv, t.face_uv, texture=tex)
     assert (tmp_path / "a.glb").read_bytes() == _trimesh_glb(V, t.faces, t.uv, t.face_uv, tex)
     m = load_mesh(tmp_path / "a.glb")
     assert m.corner_uv is not None and len(m.faces) == len(t.faces)

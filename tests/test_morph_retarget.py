@@ -12,7 +12,7 @@ import facewarp
 import usd_export
 from facewarp.cli import main
 
-PART_MOVE = facewarp.Similarity(1.04, np.array([[np.cos(0.05), 0, np.sin(0.05)], [0, 1, 0],
+PART_MOVE = facewarp.geometry.Similarity(1.04, np.array([[np.cos(0.05), 0, np.sin(0.05)], [0, 1, 0],
                                                 [-np.sin(0.05), 0, np.cos(0.05)]]), [0.001, -0.002, 0.003])
 
 
@@ -23,7 +23,7 @@ def head_b(tmp_path_factory):
     V = t.vertices * [1.05, 0.98, 1.0] + 0.004 * np.exp(-np.sum((t.vertices - t.landmarks()["9.3"]) ** 2, 1) / 2e-4)[:, None] * [0, 0, 1]
     parts = {k: (PART_MOVE.apply(P), F) for k, (P, F) in t.parts.items()}
     out = tmp_path_factory.mktemp("heads") / "B"
-    facewarp.save_template(replace(t, vertices=V, parts=parts), out)
+    facewarp.heads.save_template(replace(t, vertices=V, parts=parts), out)
     return out
 
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import facewarp as fw
-from facewarp.coupling import Z_UP, HeadPose, head_mjcf, mandible_geometry, mandible_inertia, scene_mjcf, write_head_mjcf
+from facewarp.coupling import Z_UP, HeadPose, mandible_geometry, mandible_inertia, scene_mjcf, write_head_mjcf
+from facewarp import head_mjcf
 
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     # headless: MuJoCo's offscreen renderer through EGL or OSMesa, where the library is there
@@ -54,7 +55,7 @@ def test_mandible_mass_is_a_human_mandible(head, model):
     # a wet adult mandible weighs about 0.1-0.2 kg; its centre lies below and in front of the condyles
     assert 0.05 < inert.mass < 0.3, inert.mass
     assert model.body("mandible").mass[0] == pytest.approx(inert.mass, rel=1e-5)
-    jaw = fw.JawKinematic.from_landmarks(head.condyles, head.landmarks())
+    jaw = fw.anatomy.JawKinematic.from_landmarks(head.condyles, head.landmarks())
     assert inert.center[1] < jaw.pivot[1] and inert.center[2] > jaw.pivot[2]
     assert np.all(np.linalg.eigvalsh(inert.inertia) > 0)
 
@@ -65,7 +66,7 @@ def test_hinge_moves_the_chin_as_the_kinematic_jaw(head, model, angle):
     d.qpos[0] = angle
     mujoco.mj_kinematics(model, d)
     b = model.body("mandible").id
-    jaw = fw.JawKinematic.from_landmarks(head.condyles, head.landmarks())
+    jaw = fw.anatomy.JawKinematic.from_landmarks(head.condyles, head.landmarks())
     chin = head.landmarks()["2.1"]
     moved = d.xmat[b].reshape(3, 3) @ (chin - jaw.pivot) + d.xpos[b]  # Z-up world: the head frame turned by Z_UP
     np.testing.assert_allclose(moved, Z_UP @ jaw.apply(chin[None], np.ones(1), angle)[0], atol=1e-9)
@@ -436,3 +437,71 @@ def test_world_rotation_puts_the_face_up_against_gravity(head, rig, gravity, up)
     np.testing.assert_allclose(C.T @ C, np.eye(3), atol=1e-12)
     np.testing.assert_allclose(C[:, 1], up, atol=1e-12)  # the face's up is the world's up
     np.testing.assert_allclose(cpl.to_mujoco(np.eye(3)), C.T, atol=1e-12)
+
+
+def test_textured_skin_moves_whole_and_shows_the_texture(head, rig, tmp_path):
+    """head.xml with the skin's texture: the mesh is split at the UV seams (the face's vertices
+    first), MujocoSkin writes every copy with its vertex's position and smooth normal, and an
+    unlit render shows, at each visible vertex, the texture's colour at that vertex's own UV."""
+    from PIL import Image
+
+    from facewarp.coupling import skin_vertex_split
+    from facewarp.geometry import vertex_normals
+
+    uv, face_uv = rig.head_uv, rig.head_face_uv
+    assert uv is not None
+    tex = np.zeros((64, 64, 3), np.uint8)  # red grows with u, green with v (v up: row 0 is v = 1)
+    tex[..., 0] = np.linspace(0, 255, 64)[None, :]
+    tex[..., 1] = np.linspace(255, 0, 64)[:, None]
+    Image.fromarray(tex).save(tmp_path / "skin.png")
+    write_head_mjcf(tmp_path / "head.xml", head, jaw=rig.jaw, skin=(rig.head_vertices, rig.head_faces, uv, face_uv),
+                    skin_texture="skin.png")
+    m = mujoco.MjModel.from_xml_path(str(tmp_path / "scene.xml"))
+    d = mujoco.MjData(m)
+    F2, src, uvi = skin_vertex_split(rig.head_faces, face_uv)
+    n = len(rig.head_vertices)
+    assert len(src) > n and (src[:n] == np.arange(n)).all()
+    np.testing.assert_array_equal(src[F2], rig.head_faces)  # the same triangles
+    np.testing.assert_array_equal(uvi[F2], face_uv)  # each corner keeps its UV
+    sim = fw.FaceSimulator(rig)
+    skin = fw.MujocoSkin(sim, m)
+    i = skin.mesh_id
+    assert m.mesh_vertnum[i] == len(src)
+    sl = slice(int(m.mesh_vertadr[i]), int(m.mesh_vertadr[i] + m.mesh_vertnum[i]))
+    sim.set_activations({"zygomatic_major": 1.0})
+    sim.set_jaw(0.2)
+    for _ in range(4):
+        sim.step()
+    skin.update()
+    Vm = m.mesh_vert[sl].astype(np.float64)
+    np.testing.assert_array_equal(Vm, Vm[src])  # the seam copies sit on their vertices
+    np.testing.assert_allclose(skin.vertices(), sim.surface(frame="head"), atol=2e-6)
+    nl = slice(int(m.mesh_normaladr[i]), int(m.mesh_normaladr[i] + m.mesh_normalnum[i]))
+    np.testing.assert_allclose(m.mesh_normal[nl], vertex_normals(Vm[:n], rig.head_faces)[src], atol=1e-5)
+    try:
+        r = mujoco.Renderer(m, 160, 160)
+    except Exception as e:
+        pytest.skip(f"no offscreen OpenGL: {e}")
+    mujoco.mj_forward(m, d)
+    mat = m.material("skin").id
+    m.mat_emission[mat], m.mat_specular[mat] = 1.0, 0.0
+    m.light_active[:] = 0
+    m.vis.headlight.active = 0
+    r.update_scene(d, camera=0)
+    img = r.render().astype(np.float64)
+    r.enable_depth_rendering()
+    depth = r.render()
+    g = m.geom("skin").id
+    Vw = Vm @ d.geom_xmat[g].reshape(3, 3).T + d.geom_xpos[g]
+    R, c = d.cam_xmat[0].reshape(3, 3), d.cam_xpos[0]
+    P = (Vw - c) @ R
+    z = -P[:, 2]
+    f = 80 / np.tan(np.radians(m.cam_fovy[0]) / 2)
+    px, py = np.round(80 + f * P[:, 0] / z - 0.5).astype(int), np.round(80 - f * P[:, 1] / z - 0.5).astype(int)
+    ok = (px >= 0) & (px < 160) & (py >= 0) & (py < 160)
+    ok[ok] = np.abs(depth[py[ok], px[ok]] - z[ok]) < 1e-3
+    assert ok.sum() > 200
+    want = np.asarray(uv, np.float64)[uvi[ok]] * 255.0  # red = u, green = v
+    got = img[py[ok], px[ok], :2]
+    err = np.abs(got - want)
+    assert np.median(err) < 8 and np.percentile(err, 90) < 25, (np.median(err), np.percentile(err, 90))

@@ -6,10 +6,18 @@ import numpy as np
 import pytest
 
 import facewarp
-from facewarp import JawKinematic
+from facewarp.anatomy import JawKinematic
 from facewarp.anatomy import bezier_quadratic, ellipsoid_points
-from facewarp.physics import (CarryStage, JawStage, ModelBuilder, MuscleRig, MuscleStage, SolverVerlet,
-                              contraction_curve, ellipsoid_uv, rig_reference, segment_frames, select_solver)
+from facewarp.coupling import CarryStage, JawStage
+from facewarp.physics import (    ModelBuilder,
+    MuscleRig,
+    MuscleStage,
+    SolverVerlet,
+    contraction_curve,
+    ellipsoid_uv,
+    rig_reference,
+    segment_frames,
+    select_solver)
 
 S2 = np.sqrt(0.5)
 

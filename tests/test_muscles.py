@@ -147,7 +147,7 @@ def test_every_muscle_on_template_level0(head0):
 def test_control_points_between_skin_and_skull(head0):
     t, _, ms = head0
     skull = t.skull_vertices()
-    q_skin = facewarp.MeshQuery(t.vertices, t.faces)
+    q_skin = facewarp.geometry.MeshQuery(t.vertices, t.faces)
     for m in ms.muscles:
         F = t.faces[m.skin_points.face]
         t_skull = np.einsum("kc,kc->k", m.skin_points.bary, t.skull_depth[F])
@@ -185,7 +185,7 @@ def test_placements_reuse_and_json(head0, tmp_path):
         np.testing.assert_allclose(a.control_points, b.control_points)
         np.testing.assert_array_equal(a.attachment.nodes, b.attachment.nodes)
     # muscles_to_json is what write_anatomy writes as muscles.json
-    facewarp.write_anatomy(mu.Anatomy(head=t, skin=sl, muscles=ms, quality={}), tmp_path)
+    facewarp.anatomy.write_anatomy(mu.Anatomy(head=t, skin=sl, muscles=ms, quality={}), tmp_path)
     d = json.loads((tmp_path / "muscles.json").read_text())
     assert len(d["muscles"]) == 27 and d["muscles"]["orbicularis_oris"]["kind"] == "sphincter"
 
@@ -205,7 +205,8 @@ def test_bad_definitions(tmp_path, head0):
 def test_build_and_write_anatomy(tmp_path):
     import dataclasses
 
-    from facewarp import build_anatomy, write_anatomy
+    from facewarp import build_anatomy
+    from facewarp.anatomy import write_anatomy
 
     t = facewarp.default_template(0)
     a = build_anatomy(t)
@@ -215,7 +216,7 @@ def test_build_and_write_anatomy(tmp_path):
     paths = write_anatomy(a, tmp_path / "anat")
     assert {p.name for p in paths} == {"tets.npz", "muscles.json", "anatomy.json"}
     # the picture (anatomy.png of `facewarp build`) is rendered separately
-    img = facewarp.render_anatomy(a, size=64)
+    img = facewarp.render.render_anatomy(a, size=64)
     assert img.shape == (64, 64, 3) and img.dtype == np.uint8 and img.std() > 0
     z = np.load(tmp_path / "anat" / "tets.npz")
     assert z["vertices"].shape == (q["vertex_count"], 3) and z["tets"].shape == (q["tet_count"], 4)
@@ -291,7 +292,7 @@ def test_region_filter(head0):
     there; the lid-closing orbicularis oculi takes lid area only, the frontalis only forehead."""
     t, sl, ms = head0
     R = mu.node_regions(t, sl)
-    REGIONS = facewarp.REGIONS
+    REGIONS = facewarp.heads.REGIONS
     assert R.shape == (len(sl.vertices), len(REGIONS))
     np.testing.assert_allclose(R.sum(1), 1.0)
 

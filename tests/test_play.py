@@ -22,7 +22,7 @@ def sim(rig):
     return fw.FaceSimulator(rig, device="cpu")
 
 
-class _Log(fw.Sink):
+class _Log(fw.takes.Sink):
     def __init__(self):
         self.calls = []
 
@@ -76,11 +76,11 @@ def test_usd_is_a_sink(rig, tmp_path):
 
 
 def test_timeline_converted_once(rig):
-    tl = fw.timeline_from_spec("laugh", 1.0)
+    tl = fw.expressions.timeline_from_spec("laugh", 1.0)
     assert tl.lever is None
     head = tl.for_head(rig)
-    assert head.lever == pytest.approx(fw.jaw_lever(rig)) and head.for_head(rig) is head
-    assert head.segments[0].expression.jaw_u == pytest.approx(0.022 / fw.jaw_lever(rig))
+    assert head.lever == pytest.approx(fw.expressions.jaw_lever(rig)) and head.for_head(rig) is head
+    assert head.segments[0].expression.jaw_u == pytest.approx(0.022 / fw.expressions.jaw_lever(rig))
     smile = fw.timeline_for("smile")  # no chin drop: nothing to convert
     assert smile.for_head(rig) is smile
     other = head.for_head(0.2)  # another head: converted again from the chin drop
@@ -88,9 +88,9 @@ def test_timeline_converted_once(rig):
 
 
 def test_held_is_the_spec_envelope():
-    e = fw.expression_from_activations("zygomatic_major=0.5,jaw_drop_mm=8")
-    assert fw.Timeline.held(e, 2.0) == fw.timeline_from_spec("zygomatic_major=0.5,jaw_drop_mm=8", 2.0)
-    assert fw.Timeline.held(fw.preset("smile"), 0.4) == fw.timeline_from_spec("smile", 0.4)
+    e = fw.expressions.expression_from_activations("zygomatic_major=0.5,jaw_drop_mm=8")
+    assert fw.Timeline.held(e, 2.0) == fw.expressions.timeline_from_spec("zygomatic_major=0.5,jaw_drop_mm=8", 2.0)
+    assert fw.Timeline.held(fw.preset("smile"), 0.4) == fw.expressions.timeline_from_spec("smile", 0.4)
     with pytest.raises(fw.InputError, match="Expression"):
         fw.Timeline.held("smile", 1.0)
     with pytest.raises(fw.InputError, match="seconds"):

@@ -1,10 +1,13 @@
-"""The public surface (issue 9): every public name resolves, tests/scenes/benchmarks use public
-names only, and ``import facewarp`` stays light (no Warp, MuJoCo or USD until they are used)."""
+"""The public surface (issues 9, 35): every public name resolves, a small top level (at most 60 names),
+each name public in exactly one place and on a docs page, the README, docs, scenes and benchmarks use
+public names only (unit tests may import ``facewarp._src``), and ``import facewarp`` stays light (no
+Warp, MuJoCo or USD until they are used)."""
 
 from __future__ import annotations
 
 import ast
 import importlib
+import importlib.util
 import re
 import subprocess
 import sys
@@ -49,16 +52,54 @@ def test_public_submodule_names_resolve(name):
     assert not [n for n in mod.__all__ if n.startswith("_")]
 
 
-def test_tests_scenes_benchmarks_use_public_names_only():
+def test_top_level_is_small():
+    assert len(dir(facewarp)) <= 60, f"{len(dir(facewarp))} names at the top level: {dir(facewarp)}"
+    assert set(facewarp._SUBMODULES) == set(PUBLIC_MODULES), "public submodule files and _SUBMODULES differ"
+
+
+def test_each_public_name_in_one_place():
+    places: dict = {}
+    for n in facewarp.__all__:
+        places.setdefault(n, []).append("facewarp")
+    for sub in facewarp._SUBMODULES:
+        for n in importlib.import_module(f"facewarp.{sub}").__all__:
+            places.setdefault(n, []).append(f"facewarp.{sub}")
+    twice = {n: p for n, p in places.items() if len(p) > 1}
+    assert not twice, f"names public in more than one place: {twice}"
+
+
+def test_each_public_name_on_a_docs_page():
+    # the top level on the Python API page, every submodule's names in the generated API reference
+    page = (ROOT / "docs" / "python-api.md").read_text(encoding="utf-8")
+    missing = [n for n in facewarp.__all__ if n != "__version__" and f"`{n}`" not in page]
+    assert not missing, f"top-level names not on docs/python-api.md: {missing}"
+    assert not [s for s in facewarp._SUBMODULES if f"`facewarp.{s}`" not in page]
+    spec = importlib.util.spec_from_file_location("fw_generated", ROOT / "docs" / "_ext" / "fw_generated.py")
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    assert gen.PUBLIC_MODULES == ["facewarp", *(f"facewarp.{s}" for s in facewarp._SUBMODULES), "usd_export"]
+
+
+def test_no_old_aliases():
+    assert not hasattr(facewarp, "play_timeline")
+
+
+def test_user_facing_files_use_public_names_only():
+    # scenes and benchmarks: no private module at all; README and docs: no code that imports one (the
+    # prose may say that facewarp._src is private; the docs' own build extension reads it)
+    code_use = re.compile(r"(from|import)\s+facewarp\s*\._src|from\s+facewarp\s+import[^\n]*\b_src\b|\bfw\._src\b")
+    paths = [(p, PRIVATE_USE) for folder in ("scenes", "benchmarks") for p in (ROOT / folder).rglob("*")]
+    paths += [(ROOT / "README.md", code_use)] + [(p, code_use) for p in (ROOT / "docs").rglob("*")
+                                                  if not {"_generated", "_build", "_ext"} & set(p.parts)
+                                                  and p.name != "conf.py"]
     offenders = []
-    for folder in ("tests", "scenes", "benchmarks"):
-        for path in sorted((ROOT / folder).rglob("*")):
-            if not path.is_file() or "__pycache__" in path.parts or path.suffix not in (".py", ".md", ".json", ".txt"):
-                continue
-            for k, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
-                if PRIVATE_USE.search(line):
-                    offenders.append(f"{path.relative_to(ROOT)}:{k}: {line.strip()}")
-    assert not offenders, "private facewarp modules used outside the package:\n" + "\n".join(offenders)
+    for path, pattern in sorted(paths):
+        if not path.is_file() or "__pycache__" in path.parts or path.suffix not in (".py", ".md", ".json", ".txt"):
+            continue
+        for k, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+            if pattern.search(line):
+                offenders.append(f"{path.relative_to(ROOT)}:{k}: {line.strip()}")
+    assert not offenders, "private facewarp modules used in README, docs, scenes or benchmarks:\n" + "\n".join(offenders)
 
 
 def test_import_facewarp_is_light():

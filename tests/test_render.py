@@ -8,7 +8,8 @@ import trimesh
 from PIL import Image
 
 from facewarp import InputError
-from facewarp.render import colormap, render_mesh, render_views, save_png, shared_hits
+from facewarp.render import colormap, render_views, shared_hits
+from facewarp import render_mesh, save_png
 
 SIZE = 64
 
@@ -330,3 +331,25 @@ def test_shared_hits_give_the_same_pictures():
     for a, b in zip(alone, shared):
         assert np.array_equal(a, b)
     assert np.array_equal(moved, render_mesh(V + 0.01, F, vertex_colors=colors[0], **calls[0]))
+
+
+def test_drawn_eyeball_stays_inside_its_coarse_ball():
+    """The refined (round) eyeball lies inside the coarse ball the eyelids rest on: no vertex beyond
+    any coarse face's plane (it bulged through the upper lids as white specks), and it is still
+    round (radii within 0.5 %) and barely smaller (under 3 %)."""
+    import numpy as np
+
+    import facewarp as fw
+    from facewarp.render import refine_ball
+
+    V, F = (np.asarray(a) for a in fw.default_template(0).parts["eye_L"])
+    R, RF = refine_ball(V, F)
+    c = V.mean(0)
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n *= np.sign(np.einsum("fd,fd->f", V[F[:, 0]] - c, n))[:, None]  # outward
+    beyond = np.einsum("kd,fd->kf", R - c, n) - np.einsum("fd,fd->f", V[F[:, 0]] - c, n)[None]
+    assert beyond.max() <= 1e-9
+    r = np.linalg.norm(R - c, axis=1)
+    assert r.max() / r.min() < 1.005 and r.mean() > 0.97 * np.linalg.norm(V - c, axis=1).mean()
+    assert len(RF) == 16 * len(F)

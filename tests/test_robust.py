@@ -117,7 +117,7 @@ def test_a_zygomatic_pull_with_the_mujoco_jaw_runs(rig):
     sim = fw.FaceSimulator(rig)
     model = mujoco.MjModel.from_xml_string(fw.head_mjcf(fw.default_template(0)))
     jaw = fw.MujocoJaw(sim, model, mujoco.MjData(model))
-    tl = fw.timeline_from_spec("zygomatic_major=0.9", 0.2).for_head(rig)
+    tl = fw.expressions.timeline_from_spec("zygomatic_major=0.9", 0.2).for_head(rig)
     for k in range(1, 7):
         sim.set_activations(tl.sample(k / 30))
         jaw.step()

@@ -14,7 +14,7 @@ from facewarp.cli import main
 
 def _write(folder, scan, metres_per_unit, *, scale=1.0):
     folder.mkdir(parents=True, exist_ok=True)
-    fw.save_obj(folder / "scan.obj", scan.vertices * scale / metres_per_unit, scan.faces)
+    fw.geometry.save_obj(folder / "scan.obj", scan.vertices * scale / metres_per_unit, scan.faces)
     lm = {k: (np.asarray(v) * scale / metres_per_unit).tolist() for k, v in scan.landmarks.items()}
     (folder / "lm.json").write_text(json.dumps(lm))
     return folder / "scan.obj", folder / "lm.json"

@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from facewarp import FDP_IDS, FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, default_template, human_likeness, mesh_report
+from facewarp.geometry import FDP_IDS, mesh_report
+from facewarp.heads import FRONTAL_REGIONS, REGIONS, THICKNESS_FACTOR, human_likeness
+from facewarp import default_template
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +126,7 @@ def test_human_likeness_ict(ict_dir, t0):
 
 def _edge_crossings(V, F):
     """Edges that pierce a triangle they do not belong to (any self-intersection has one)."""
-    from facewarp import MeshQuery
+    from facewarp.geometry import MeshQuery
 
     E = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
     a, b = V[E[:, 0]], V[E[:, 1]]
@@ -159,7 +161,7 @@ def test_ibug68_template_places_match_the_ict_head(ict_dir):
     import json
 
     import facewarp as fw
-    from facewarp.adaptation import adapt
+    from facewarp import adapt
 
     n = 11248
     ict = fw.load_mesh(ict_dir / "generic_neutral_mesh.obj", units="cm")
@@ -167,12 +169,12 @@ def test_ibug68_template_places_match_the_ict_head(ict_dir):
     idx = json.loads((ict_dir / "vertex_indices.json").read_text())["idx_to_landmark_verts"]
     t = fw.default_template(0)
     tl = t.landmarks()
-    res = adapt(t.vertices, t.faces, {k: tl[k] for k in fw.ICT_FDP_VERTICES}, V, F,
-                {k: V[i] for k, i in fw.ICT_FDP_VERTICES.items()})
-    cp = fw.MeshQuery(res.vertices_scan_frame, t.faces).closest_point(V[idx])
+    res = adapt(t.vertices, t.faces, {k: tl[k] for k in fw.heads.ICT_FDP_VERTICES}, V, F,
+                {k: V[i] for k, i in fw.heads.ICT_FDP_VERTICES.items()})
+    cp = fw.geometry.MeshQuery(res.vertices_scan_frame, t.faces).closest_point(V[idx])
     P = np.einsum("kj,kjd->kd", cp.bary, t.vertices[t.faces[cp.face]])
-    np.testing.assert_allclose(fw.IBUG68_TEMPLATE, P, atol=0.2e-3, err_msg="IBUG68_TEMPLATE vs its source")
-    assert fw.IBUG68_TEMPLATE.shape == (68, 3)
+    np.testing.assert_allclose(fw.heads.IBUG68_TEMPLATE, P, atol=0.2e-3, err_msg="IBUG68_TEMPLATE vs its source")
+    assert fw.heads.IBUG68_TEMPLATE.shape == (68, 3)
     # mirror symmetry of the scheme on the (symmetric) template: point 0 <-> 16, 36 <-> 45, 48 <-> 54
     for a, b in ((0, 16), (36, 45), (48, 54), (17, 26)):
-        np.testing.assert_allclose(fw.IBUG68_TEMPLATE[a] * [-1, 1, 1], fw.IBUG68_TEMPLATE[b], atol=3e-3)
+        np.testing.assert_allclose(fw.heads.IBUG68_TEMPLATE[a] * [-1, 1, 1], fw.heads.IBUG68_TEMPLATE[b], atol=3e-3)

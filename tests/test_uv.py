@@ -55,7 +55,7 @@ def test_charts_do_not_overlap(level):
 
 def test_face_chart_is_low_stretch():
     t = fw.default_template(0)
-    d = fw.uv_distortion(t.vertices, t.faces, t.uv, t.face_uv, t.frontal)
+    d = fw.heads.uv_distortion(t.vertices, t.faces, t.uv, t.face_uv, t.frontal)
     assert d["flipped"] == 0
     assert d["angle"]["mean"] < 1.15, d  # near conformal
     assert d["area"]["mean_abs_log"] < 0.12, d  # and near equal-area (ARAP)
@@ -65,16 +65,16 @@ def test_uv_distortion_analytic():
     # a planar square mapped by a uniform scale: no distortion; stretched along u by 2: s1/s2 = 2
     V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     F = np.array([[0, 1, 2], [0, 2, 3]])
-    d = fw.uv_distortion(V, F, V[:, :2] * 0.3, F)
+    d = fw.heads.uv_distortion(V, F, V[:, :2] * 0.3, F)
     assert d["angle"]["max"] == pytest.approx(1.0) and d["area"]["mean_abs_log"] == pytest.approx(0.0, abs=1e-12)
-    d = fw.uv_distortion(V, F, V[:, :2] * [2.0, 1.0], F)
+    d = fw.heads.uv_distortion(V, F, V[:, :2] * [2.0, 1.0], F)
     assert d["angle"]["mean"] == pytest.approx(2.0)
 
 
 def test_obj_with_seams_round_trip(tmp_path):
     t = fw.default_template(0)
     p = tmp_path / "head.obj"
-    fw.save_obj(p, t.vertices, t.faces, uv=t.uv, face_uv=t.face_uv)
+    fw.geometry.save_obj(p, t.vertices, t.faces, uv=t.uv, face_uv=t.face_uv)
     m = fw.load_mesh(p)
     np.testing.assert_array_equal(m.faces, t.faces)
     np.testing.assert_allclose(m.corner_uv, t.uv[t.face_uv], atol=1e-9)
@@ -83,8 +83,8 @@ def test_obj_with_seams_round_trip(tmp_path):
 
 def test_template_folder_and_adapted_head_keep_uv(tmp_path):
     t = fw.default_template(0)
-    fw.save_template(t, tmp_path / "t")
-    back = fw.load_template_dir(tmp_path / "t")
+    fw.heads.save_template(t, tmp_path / "t")
+    back = fw.heads.load_template_dir(tmp_path / "t")
     np.testing.assert_allclose(back.uv, t.uv)
     np.testing.assert_array_equal(back.face_uv, t.face_uv)
     head = fw.load_head(tmp_path / "t")
@@ -97,14 +97,14 @@ def test_vertex_colours_and_texture_read(tmp_path):
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
     F = np.array([[0, 1, 2]])
     C = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
-    fw.save_obj(tmp_path / "c.obj", V, F, colors=C)
+    fw.geometry.save_obj(tmp_path / "c.obj", V, F, colors=C)
     m = fw.load_mesh(tmp_path / "c.obj")
     np.testing.assert_allclose(m.colors, C) and np.testing.assert_allclose(m.vertices, V)
     img = np.zeros((4, 4, 3), np.uint8)
     img[0, :, 0] = 255  # top row red
     Image.fromarray(img).save(tmp_path / "tex.png")
     (tmp_path / "t.mtl").write_text("newmtl skin\nKd 1 1 1\nmap_Kd tex.png\n")
-    fw.save_obj(tmp_path / "t.obj", V, F, uv=V[:, :2], face_uv=F, mtl="t.mtl")
+    fw.geometry.save_obj(tmp_path / "t.obj", V, F, uv=V[:, :2], face_uv=F, mtl="t.mtl")
     m = fw.load_mesh(tmp_path / "t.obj")
     assert m.texture.shape == (4, 4, 3) and m.texture[0, 0, 0] == 1.0 and m.has_color
 
@@ -158,4 +158,4 @@ def test_stl_is_welded(tmp_path):
     t = fw.default_template(0)
     trimesh.Trimesh(t.vertices, t.faces, process=False).export(tmp_path / "h.stl")
     m = fw.load_mesh(tmp_path / "h.stl")
-    assert m.vertex_count == t.vertex_count and fw.mesh_report(m.vertices, m.faces)["boundary_loop_count"] == 4
+    assert m.vertex_count == t.vertex_count and fw.geometry.mesh_report(m.vertices, m.faces)["boundary_loop_count"] == 4

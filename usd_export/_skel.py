@@ -6,10 +6,14 @@ Stage layout (default prim ``/Rig``, a ``SkelRoot``; metres, Y up)::
     /Rig                       SkelRoot, skel:skeleton -> /Rig/Skeleton (inherited by the meshes)
       Skeleton                 joints root, root/jaw; bind and rest transforms; skel:animationSource
         Anim                   SkelAnimation: joint root/jaw (translation, rotation per frame),
-                               blendShapes, blendShapeWeights per frame
+                               blendShapes, blendShapeWeights per frame (the bound clip)
+        <Clip>                 further SkelAnimations (``clips``), not bound: an app binds the one
+                               it plays (skel:animationSource)
       Skin                     Mesh, skinned: jointIndices / jointWeights (root, jaw; 2 per
-                               vertex), skel:blendShapes, skel:blendShapeTargets
-        <shape>                BlendShape: offsets (all vertices), inbetweens:<name> with weights
+                               vertex), skel:blendShapes, skel:blendShapeTargets; primvars:st
+                               (faceVarying, indexed) and Looks/SkinTexture with a skin texture
+        <shape>                BlendShape: offsets and normalOffsets (all vertices),
+                               inbetweens:<name> with weights
       Parts/<Part>             Mesh, rigidly bound (constant jointIndices) to root or jaw
       Looks/...                UsdPreviewSurface materials (as the animation files)
     /Camera, /Lights           framing camera and lights (optional)
@@ -26,16 +30,18 @@ import numpy as np
 
 from ._arrays import UsdExportError, extent, float_array, index_array, vertex_normals
 from ._pxr import Gf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
-from ._writer import _camera, _lights, _material_subsets, _preview_material, check_path, part_prim_name, prim_name
+from ._writer import (_SKIN_COLOR, _WHITE_COLOR, _bind_skin_texture, _camera, _lights, _material_subsets,
+                      _preview_material, _uv_primvar, check_path, part_prim_name, prim_name)
 
 __all__ = ["write_skel_rig"]
 
-_SKIN_COLOR = (0.80, 0.58, 0.48)
 
 
 def write_skel_rig(path, *, fps: float, rest_points, faces, shapes: list, jaw_pivot, jaw_weight, parts: dict | None = None,
                    jaw_parts=(), times=None, weights=None, jaw_rotations=None, part_colors: dict | None = None,
-                   subsets: dict | None = None, camera: dict | None = None, lights: bool = True) -> Path:
+                   subsets: dict | None = None, camera: dict | None = None, lights: bool = True, uv=None,
+                   uv_indices=None, skin_texture=None, normal_offsets: dict | None = None, skin_color=None,
+                   clips: dict | None = None) -> Path:
     """Write a blendshape rig as UsdSkel (``.usda`` / ``.usdc``; see the module docstring).
 
     Args:
@@ -49,6 +55,17 @@ def write_skel_rig(path, *, fps: float, rest_points, faces, shapes: list, jaw_pi
         times: (f,) [s] of the animation; weights: (f, T) shape weights; jaw_rotations: (f, 4)
             unit quaternions (w, x, y, z) of the jaw joint.
         part_colors, subsets, camera, lights: as :class:`usd_export.AnimationWriter`'s.
+        uv, uv_indices: The skin's texture coordinates, (k, 2) float with (m, 3) int indices per
+            face corner (``primvars:st``, faceVarying), or (n, 2) per vertex.
+        skin_texture: A ``.png`` / ``.jpg`` colour texture of the skin (needs ``uv``), copied beside
+            the file as ``<stem>_skin.png`` and bound as ``Looks/SkinTexture`` (the lips then come
+            from the texture: a ``Lips`` subset of the skin keeps the texture's material).
+        normal_offsets: Optional shape name -> (n, 3) float change of the unit vertex normals of its
+            full target (``normalOffsets``; in-betweens get theirs as ``[(fraction, (n, 3))]``
+            under ``name + "@"``).
+        skin_color: RGB (3,) in 0..1 of the skin's material (default the package palette's skin).
+        clips: Optional further animations, prim name -> (times (f,) [s], weights (f, T),
+            jaw_rotations (f, 4)): SkelAnimations beside ``Anim``, not bound.
     """
     path = check_path(path, allowed=(".usda", ".usdc"))
     V = float_array("rest_points", rest_points, (None, 3))
@@ -59,15 +76,38 @@ def write_skel_rig(path, *, fps: float, rest_points, faces, shapes: list, jaw_pi
     names = [str(s[0]) for s in shapes]
     if len(set(names)) != len(names) or any(prim_name(s) != s for s in names):
         raise UsdExportError("shapes: names must be unique valid prim names")
+    tex = None
+    if uv is not None:
+        uv = float_array("uv", uv, (None, 2))
+        if uv_indices is not None:
+            uv_indices = index_array("uv_indices", uv_indices, (len(F), 3), upper=len(uv))
+        elif len(uv) != n:
+            raise UsdExportError(f"uv: {len(uv)} coordinates for {n} vertices (give uv_indices for face-varying)")
+    if skin_texture is not None:
+        tex = Path(skin_texture)
+        if tex.suffix.lower() not in (".png", ".jpg", ".jpeg") or not tex.is_file():
+            raise UsdExportError(f"skin_texture: expected an existing .png or .jpg file, got {str(tex)!r}")
+        if uv is None:
+            raise UsdExportError("skin_texture: given without uv (the skin needs texture coordinates)")
+    tex_name = None if tex is None else f"{path.stem}_skin{tex.suffix.lower()}"
+    for cname in (clips or {}):
+        if prim_name(cname) != cname or cname == "Anim":
+            raise UsdExportError(f"clips: {cname!r} is not a valid prim name (or is Anim)")
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
     os.close(fd)
     os.unlink(tmp)
     try:
         stage = Usd.Stage.CreateNew(tmp)
         _author(stage, fps, V, F, w, pivot, shapes, names, parts or {}, tuple(jaw_parts), times, weights,
-                jaw_rotations, part_colors or {}, subsets or {}, camera, lights)
+                jaw_rotations, part_colors or {}, subsets or {}, camera, lights,
+                dict(uv=uv, uv_indices=uv_indices, texture=tex_name, normals=normal_offsets or {},
+                     skin_color=_SKIN_COLOR if skin_color is None else tuple(float(c) for c in skin_color),
+                     clips=clips or {}))
         stage.GetRootLayer().Save()
         del stage
+        if tex is not None:  # the texture beside the file, under the name the material's asset path gives
+            shutil.copyfile(tex, path.parent / f".{tex_name}.tmp")
+            os.replace(path.parent / f".{tex_name}.tmp", path.parent / tex_name)
         shutil.move(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -77,7 +117,7 @@ def write_skel_rig(path, *, fps: float, rest_points, faces, shapes: list, jaw_pi
 
 
 def _author(stage, fps, V, F, w, pivot, shapes, names, parts, jaw_parts, times, weights, jaw_rotations, part_colors,
-            subsets, camera, lights) -> None:
+            subsets, camera, lights, skin) -> None:
 
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -93,7 +133,7 @@ def _author(stage, fps, V, F, w, pivot, shapes, names, parts, jaw_parts, times, 
     skel.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1.0), at_pivot]))
     UsdSkel.BindingAPI.Apply(root.GetPrim()).CreateSkeletonRel().SetTargets([skel.GetPath()])
     UsdGeom.Scope.Define(stage, "/Rig/Looks")
-    skin_mat = _preview_material(stage, "/Rig/Looks/Skin", _SKIN_COLOR, roughness=0.55)
+    skin_mat = _preview_material(stage, "/Rig/Looks/Skin", skin["skin_color"], roughness=0.55)
     # ---- skin
     mesh = UsdGeom.Mesh.Define(stage, "/Rig/Skin")
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(F), 3, np.int32)))
@@ -104,6 +144,10 @@ def _author(stage, fps, V, F, w, pivot, shapes, names, parts, jaw_parts, times, 
     mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(extent(V)))
     UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(skin_mat)
+    if skin["uv"] is not None:
+        _uv_primvar(mesh, skin["uv"], skin["uv_indices"])
+    if skin["texture"] is not None:
+        _bind_skin_texture(stage, mesh, skin["texture"], looks="/Rig/Looks")
     bind = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
     idx = np.zeros((len(V), 2), np.int32)
     idx[:, 1] = 1
@@ -116,15 +160,22 @@ def _author(stage, fps, V, F, w, pivot, shapes, names, parts, jaw_parts, times, 
     for name, offsets, inbetweens in shapes:
         bs = UsdSkel.BlendShape.Define(stage, f"/Rig/Skin/{name}")
         bs.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(float_array(f"shapes[{name!r}]", offsets, (len(V), 3))))
+        if name in skin["normals"]:
+            bs.CreateNormalOffsetsAttr(Vt.Vec3fArray.FromNumpy(
+                float_array(f"normal_offsets[{name!r}]", skin["normals"][name], (len(V), 3))))
+        ib_normals = dict(skin["normals"].get(name + "@", []))
         for k, (frac, off) in enumerate(inbetweens):
             ib = bs.CreateInbetween(f"f{round(100 * frac):02d}")
             ib.SetWeight(float(frac))
             ib.SetOffsets(Vt.Vec3fArray.FromNumpy(float_array(f"shapes[{name!r}] in-between", off, (len(V), 3))))
+            if frac in ib_normals:
+                ib.SetNormalOffsets(Vt.Vec3fArray.FromNumpy(
+                    float_array(f"normal_offsets[{name!r}] in-between", ib_normals[frac], (len(V), 3))))
         targets.append(bs.GetPath())
     bind.CreateBlendShapeTargetsRel().SetTargets(targets)
     # ---- parts, rigidly bound
     UsdGeom.Scope.Define(stage, "/Rig/Parts")
-    white = _preview_material(stage, "/Rig/Looks/White", (0.92, 0.91, 0.87), roughness=0.3)
+    white = _preview_material(stage, "/Rig/Looks/White", _WHITE_COLOR, roughness=0.3)
     part_paths = {}
     for pname, (P, PF) in parts.items():
         P = float_array(f"parts[{pname!r}] V", P, (None, 3))
@@ -154,9 +205,24 @@ def _author(stage, fps, V, F, w, pivot, shapes, names, parts, jaw_parts, times, 
         if mpath is None:
             raise UsdExportError(f"subsets: unknown mesh {key!r}")
         rows = [(sub, np.sort(np.asarray(fi, np.int32)), rgb) for sub, (fi, rgb) in groups.items() if len(fi)]
-        _material_subsets(stage, mpath, rows, looks="/Rig/Looks")
-    # ---- animation
-    anim = UsdSkel.Animation.Define(stage, "/Rig/Skeleton/Anim")
+        _material_subsets(stage, mpath, rows, looks="/Rig/Looks",
+                          own_only=key == "Skin" and skin["texture"] is not None)
+    # ---- animation: the bound clip, then any others
+    anim = _skel_animation(stage, "/Rig/Skeleton/Anim", fps, pivot, names, times, weights, jaw_rotations)
+    for cname, (ct, cw, cq) in skin["clips"].items():
+        _skel_animation(stage, f"/Rig/Skeleton/{cname}", fps, pivot, names, ct, cw, cq, set_range=False)
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    if camera is not None:
+        _camera(stage, {k: np.asarray(v, np.float64) if k != "focal_length_mm" else float(v)
+                        for k, v in {"focal_length_mm": 50.0, **camera}.items()})
+    if lights:
+        _lights(stage, None if camera is None else {k: np.asarray(v, np.float64) for k, v in camera.items()
+                                                    if k != "focal_length_mm"})
+
+
+def _skel_animation(stage, path, fps, pivot, names, times, weights, jaw_rotations, *, set_range: bool = True):
+    """A SkelAnimation at ``path``: the jaw joint's translation and rotation, the blend shapes' weights."""
+    anim = UsdSkel.Animation.Define(stage, path)
     anim.CreateJointsAttr(Vt.TokenArray(["root/jaw"]))
     anim.CreateTranslationsAttr(Vt.Vec3fArray([Gf.Vec3f(*pivot)]))
     anim.CreateScalesAttr(Vt.Vec3hArray([Gf.Vec3h(1.0, 1.0, 1.0)]))
@@ -171,12 +237,7 @@ def _author(stage, fps, V, F, w, pivot, shapes, names, parts, jaw_parts, times, 
             code = float(round(tk * fps, 6))
             rot.Set(Vt.QuatfArray([Gf.Quatf(float(Q[k, 0]), Gf.Vec3f(*map(float, Q[k, 1:])))]), code)
             bw.Set(Vt.FloatArray.FromNumpy(W[k]), code)
-        stage.SetStartTimeCode(float(round(t[0] * fps, 6)))
-        stage.SetEndTimeCode(float(round(t[-1] * fps, 6)))
-    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
-    if camera is not None:
-        _camera(stage, {k: np.asarray(v, np.float64) if k != "focal_length_mm" else float(v)
-                        for k, v in {"focal_length_mm": 50.0, **camera}.items()})
-    if lights:
-        _lights(stage, None if camera is None else {k: np.asarray(v, np.float64) for k, v in camera.items()
-                                                    if k != "focal_length_mm"})
+        if set_range:
+            stage.SetStartTimeCode(float(round(t[0] * fps, 6)))
+            stage.SetEndTimeCode(float(round(t[-1] * fps, 6)))
+    return anim

@@ -49,8 +49,11 @@ _SNAP = 1e-4  # time codes this close to an integer (in frames) are snapped to i
 # Stage layout below the default prim (read_animation relies on these names).
 SKIN, PARTS, MUSCLES, TISSUE, LOOKS = "Skin", "Parts", "Muscles", "Tissue", "Looks"
 ROOT = "/Head"
-_SKIN_COLOR = (0.80, 0.58, 0.48)
-_WHITE_COLOR = (0.92, 0.91, 0.87)
+# facewarp's one palette (``facewarp._src.present.looks.COLORS``, linear RGB; a test keeps them equal):
+_SKIN_COLOR = (0.87, 0.72, 0.62)  # skin
+_WHITE_COLOR = (0.94, 0.93, 0.89)  # sclera: parts without a colour of their own
+KEY_INTENSITY = 1.0  # the key DistantLight's irradiance, normalized (inputs:normalize = true)
+FILL_INTENSITY = 0.25  # the fill DomeLight's radiance
 _RELAXED, _ACTIVE = np.array([0.35, 0.05, 0.05], np.float32), np.array([1.0, 0.85, 0.2], np.float32)
 
 
@@ -554,11 +557,11 @@ def _check_texture(skin_texture, s: _Spec, path: Path):
     return src, f"{path.stem}_skin{src.suffix.lower()}"
 
 
-def _bind_skin_texture(stage, skin, texture_name: str) -> None:
+def _bind_skin_texture(stage, skin, texture_name: str, looks: str = f"{ROOT}/{LOOKS}") -> None:
     """The skin's own material ``Looks/SkinTexture``: a UsdPreviewSurface whose diffuse colour
     is a UsdUVTexture (sRGB) of ``./texture_name`` read at ``primvars:st``
     (UsdPrimvarReader_float2), bound to the skin mesh."""
-    path = f"{ROOT}/{LOOKS}/SkinTexture"
+    path = f"{looks}/SkinTexture"
     mat = UsdShade.Material.Define(stage, path)
     surf = UsdShade.Shader.Define(stage, f"{path}/PreviewSurface")
     surf.CreateIdAttr("UsdPreviewSurface")
@@ -755,8 +758,17 @@ def _lights(stage, cam: dict | None) -> None:
         src = cam["target"] + d + 0.6 * np.linalg.norm(d) * up + 0.4 * np.linalg.norm(d) * side / np.linalg.norm(side)
         view = Gf.Matrix4d().SetLookAt(Gf.Vec3d(*src), Gf.Vec3d(*cam["target"]), Gf.Vec3d(*up))
         key.AddTransformOp().Set(view.GetInverse())
-    key.CreateIntensityAttr(3.0)
-    key.CreateAngleAttr(1.0)
+    # inputs:normalize: the key's intensity is its irradiance whatever its angular size (UsdLux's rule
+    # without it scales the power by the 0.53 deg disc's solid angle, which Blender 5 follows: a black
+    # render; Blender 4.2 ignores the flag and renders the same either way)
+    key.CreateIntensityAttr(KEY_INTENSITY)
+    key.CreateAngleAttr(0.53)  # the sun's angular diameter: sharp shadows, no noise
+    key.CreateNormalizeAttr(True)
+    key.CreateColorAttr(Gf.Vec3f(1.0, 1.0, 1.0))
+    # the fill: a dome of one colour; its colour authored, as importers that make a world of it (Blender's)
+    # read the colour (or a texture) and skip a dome that has neither
     dome = UsdLux.DomeLight.Define(stage, "/Lights/Fill")
-    dome.CreateIntensityAttr(0.4)
+    dome.CreateIntensityAttr(FILL_INTENSITY)
+    dome.CreateColorAttr(Gf.Vec3f(1.0, 1.0, 1.0))
+    dome.CreateNormalizeAttr(True)
 

@@ -23,8 +23,13 @@ HERE = Path(__file__).resolve().parent.parent
 ROOT = HERE.parent
 OUT = HERE / "_generated"
 
-PUBLIC_MODULES = ["facewarp", "facewarp.geometry", "facewarp.adaptation", "facewarp.anatomy", "facewarp.physics",
-                  "facewarp.coupling", "facewarp.render", "usd_export"]
+def _public_modules() -> list[str]:
+    import facewarp
+
+    return ["facewarp", *(f"facewarp.{m}" for m in facewarp._SUBMODULES), "usd_export"]
+
+
+PUBLIC_MODULES = _public_modules()
 
 
 # ------------------------------------------------------------------------------ public names

@@ -139,7 +139,7 @@ def sample_scan_colors(P, N, scan_V, scan_F, *, colors=None, texture=None, corne
         scan_V: Scan vertices [m], shape (s, 3); scan_F: its triangles, shape (l, 3), int64.
         colors: The scan's vertex colours, shape (s, 3), in [0, 1]; or
         texture: its texture, shape (h, w, 3), in [0, 1], with ``corner_uv`` (l, 3, 2).
-        query: An existing :class:`~facewarp.MeshQuery` of the scan (else one is built).
+        query: An existing :class:`~facewarp.geometry.MeshQuery` of the scan (else one is built).
         max_distance: :data:`MAX_DISTANCE`.
         device: Warp device of the queries.
 

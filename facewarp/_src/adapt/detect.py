@@ -16,7 +16,7 @@ template's FDPs on a scan in four steps:
    onto the template plus the template's face (vertices near its FDPs) onto the scan wins (a
    head is round: only the face tells its front and its up);
 3. non-rigid fit: the template is adapted to the scan from that pose by
-   :func:`~facewarp.adaptation.adapt` with the FDPs of the pose as calibration only (their
+   :func:`~facewarp.adapt` with the FDPs of the pose as calibration only (their
    weight in the field stage 0): the smooth field fitted to point-to-plane pairs
    (:mod:`nonrigid`) carries the template's shape, and with it its FDPs, onto the scan;
 4. FDPs: each template FDP's surface point on the adapted template, moved to its closest scan

@@ -1,6 +1,6 @@
 """The adaptation problem: settings, per-level records, and the calibration stage (Sec. 4.3.2).
 
-:class:`AdaptOptions` gathers every setting of :func:`~facewarp.adaptation.adapt`;
+:class:`AdaptOptions` gathers every setting of :func:`~facewarp.adapt`;
 :func:`calibration_stage` checks the inputs, maps the scan into the template's frame
 (Eq. 4.3.2, 4.3.3) and returns the :class:`Problem` that the later stages share: both
 meshes with their BVH queries, the FDP pairs and the error meter of Eq. 5.2.1-5.2.3.
@@ -30,7 +30,7 @@ smooth field fitted to point-to-plane pairs, or the field then the landing along
 
 @dataclass(frozen=True)
 class AdaptOptions:
-    """Settings of :func:`~facewarp.adaptation.adapt`; every field can also be passed to it
+    """Settings of :func:`~facewarp.adapt`; every field can also be passed to it
     as a keyword.
 
     Attributes:

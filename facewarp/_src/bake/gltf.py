@@ -10,7 +10,16 @@ Layout (metres, Y up, the face looking along +z, as glTF wants):
   shape, named in ``mesh.extras.targetNames``: a muscle's full shape under its name, its
   in-betweens as ``NAME@0.50`` (the fraction), and the jaw corrective ``jaw_open``;
 - skin ``Skin`` with joints ``root``, ``jaw`` and their inverse bind matrices;
-- animation ``sequence``: the jaw node's rotation and the Skin node's morph weights per frame.
+- with the skin's UVs (``BlendshapeRig.uv``): TEXCOORD_0 (v flipped: glTF's v points down), the
+  skin's vertices split where the UVs have seams (every attribute and morph target follows), and
+  the build's texture embedded as the skin material's base colour (PNG / JPEG); the lips are then
+  the texture's own (no Lips primitive);
+- each morph target carries POSITION and NORMAL deltas (:func:`~facewarp._src.bake.blendshapes.normal_offsets`);
+- animations (clips): ``sequence`` (the Fig. 6.16 muscle sequence) and any others given, each the
+  jaw node's rotation and the Skin node's morph weights per frame; a clip of ARKit weights sets the
+  ARKit targets by name and the jaw to :meth:`BlendshapeRig.arkit_opening`.
+
+Colours come from the one palette, ``present.looks.COLORS`` (as the USD files).
 
 **In-between weight mapping.** glTF morph targets are linear, so an in-between is its own
 target: a muscle at weight ``w`` with in-betweens at fractions ``f_1 < ... < f_K < 1`` sets, for
@@ -32,7 +41,7 @@ import numpy as np
 from ..core.fileio import atomic_write
 from .blendshapes import BlendshapeRig, target_weights
 
-__all__ = ["target_list", "write_glb"]
+__all__ = ["clip_arrays", "frame_weights", "skin_vertices", "target_list", "write_glb"]
 
 _FLOAT, _UBYTE, _USHORT, _UINT = 5126, 5121, 5123, 5125
 _ARRAY, _ELEMENTS = 34962, 34963
@@ -48,16 +57,38 @@ def target_list(rig: BlendshapeRig) -> list[tuple[str, str, int]]:
     return out
 
 
-def frame_weights(rig: BlendshapeRig, activations: dict, jaw: float) -> np.ndarray:
+def frame_weights(rig: BlendshapeRig, activations: dict, jaw: float, arkit: dict | None = None) -> np.ndarray:
     """Morph weights (targets,) of one frame: muscle weights through :func:`target_weights`, the
-    jaw corrective at ``jaw / rig.jaw_angle``."""
+    jaw corrective at ``jaw / rig.jaw_angle``, ARKit weights (``arkit``: name -> 0..1) as they are."""
     out = []
+    arkit = arkit or {}
     for name in rig.names:
         if name == "jaw_open":
             out.append(float(jaw) / rig.jaw_angle)
+        elif name in rig.arkit_jaw:
+            out.append(float(arkit.get(name, 0.0)))
         else:
             out.extend(target_weights(rig.shapes[name], float(activations.get(name, 0.0))))
     return np.asarray(out, np.float32)
+
+
+def clip_arrays(rig: BlendshapeRig, frames: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A clip's arrays: times (f,) [s], morph weights (f, targets) float32, jaw openings (f,) [rad].
+
+    ``frames``: [(time [s], {muscle: weight}, jaw [rad])] (muscle frames), or [(time [s], {ARKit
+    name: weight})] (ARKit frames: the jaw is :meth:`BlendshapeRig.arkit_opening`)."""
+    t, W, J = [], [], []
+    for f in frames:
+        if len(f) == 2:
+            w = {n: v for n, v in f[1].items() if n in rig.arkit_jaw}
+            jaw = rig.arkit_opening(w)
+            W.append(frame_weights(rig, {}, 0.0, w))
+        else:
+            jaw = float(f[2])
+            W.append(frame_weights(rig, f[1], jaw))
+        t.append(float(f[0]))
+        J.append(jaw)
+    return np.asarray(t, np.float64), np.asarray(W, np.float32).reshape(len(t), -1), np.asarray(J, np.float64)
 
 
 def _quat_xyzw(axis, angle: float) -> list:
@@ -88,6 +119,14 @@ class _Buffer:
         self.accessors.append(acc)
         return len(self.accessors) - 1
 
+    def add_bytes(self, data: bytes) -> int:
+        """A buffer view of raw bytes (an image); returns the view's index."""
+        while len(self.data) % 4:
+            self.data.append(0)
+        self.views.append({"buffer": 0, "byteOffset": len(self.data), "byteLength": len(data)})
+        self.data += data
+        return len(self.views) - 1
+
 
 def part_prim_name(name: str) -> str:
     """A part's object name, as in the USD (``usd_export.part_prim_name``: ``eye_L`` -> ``Eye_L``)."""
@@ -105,31 +144,51 @@ def _normals(V, F) -> np.ndarray:
     return np.where(n > 0, N / np.maximum(n, 1e-30), np.array([0.0, 0.0, 1.0]))
 
 
-def write_glb(path, rig: BlendshapeRig, *, frames: list | None = None, looks: dict | None = None) -> None:
+def skin_vertices(rig: BlendshapeRig) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The glTF skin's vertices: (source skin vertex (k,) int64, faces (m, 3) into them, UVs (k, 2)
+    or None). Without UVs the skin's own; with them one vertex per distinct (vertex, UV) corner
+    pair (the vertices split at the UV seams)."""
+    if rig.uv is None or rig.face_uv is None:
+        return np.arange(len(rig.rest)), rig.faces, None
+    pairs, inverse = np.unique(np.stack([rig.faces.ravel(), rig.face_uv.ravel()], 1), axis=0, return_inverse=True)
+    return pairs[:, 0], inverse.reshape(-1, 3), rig.uv[pairs[:, 1]]
+
+
+def write_glb(path, rig: BlendshapeRig, *, frames: list | None = None, looks: dict | None = None,
+              clips: dict | None = None) -> None:
     """Write ``rig`` as ``.glb`` (see the module docstring).
 
     Args:
         path: Output file (written atomically).
         rig: The baked rig.
-        frames: Optional animation: a list of (time [s], activations {muscle: 0..1}, jaw [rad]).
+        frames: Optional animation ``sequence``: a list of (time [s], activations {muscle: 0..1}, jaw [rad]).
         looks: Optional ``present.looks.head_looks`` output (part colours, skin / eye / gum subsets
             and the part meshes they index: the tooth rows split at their gum lines).
+        clips: Optional further animations, name -> frames (:func:`clip_arrays`: muscle frames or
+            ARKit frames).
     """
+    from ..geometry.surface import vertex_normals
+    from .blendshapes import normal_offsets
+
     looks = looks or {"part_colors": {}, "subsets": {}}
     buf = _Buffer()
     materials, mat_index = [], {}
+    images, textures = [], []
 
-    def material(name, rgb, rough=0.5):
+    def material(name, rgb, rough=0.5, texture=None):
         if name not in mat_index:
             mat_index[name] = len(materials)
-            materials.append({"name": name, "pbrMetallicRoughness": {
-                "baseColorFactor": [float(rgb[0]), float(rgb[1]), float(rgb[2]), 1.0], "metallicFactor": 0.0,
-                "roughnessFactor": rough}, "doubleSided": True})
+            pbr = {"baseColorFactor": [float(rgb[0]), float(rgb[1]), float(rgb[2]), 1.0], "metallicFactor": 0.0,
+                   "roughnessFactor": rough}
+            if texture is not None:
+                pbr["baseColorFactor"] = [1.0, 1.0, 1.0, 1.0]
+                pbr["baseColorTexture"] = {"index": texture}
+            materials.append({"name": name, "pbrMetallicRoughness": pbr, "doubleSided": True})
         return mat_index[name]
 
     from ..present.looks import COLORS
 
-    def primitives(attrs, F, groups, base_name, base_rgb, targets=None):
+    def primitives(attrs, F, groups, base_name, base_rgb, targets=None, texture=None):
         """One primitive per material: the faces of each group, then the rest."""
         used = np.zeros(len(F), bool)
         prims = []
@@ -145,19 +204,36 @@ def write_glb(path, rig: BlendshapeRig, *, frames: list | None = None, looks: di
         out = []
         for gname, rgb, faces in prims:
             p = {"attributes": attrs, "indices": buf.add(faces.astype(np.uint32).ravel(), _UINT, "SCALAR",
-                                                         target=_ELEMENTS), "material": material(gname, rgb)}
+                                                         target=_ELEMENTS),
+                 "material": material(gname, rgb, texture=texture if gname == base_name else None)}
             if targets:
                 p["targets"] = targets
             out.append(p)
         return out
 
     # ---- skin mesh: attributes, skin weights, morph targets
-    V = rig.rest.astype(np.float32)
+    src, SF, tc = skin_vertices(rig)
+    V = rig.rest[src].astype(np.float32)
     n = len(V)
     attrs = {"POSITION": buf.add(V, _FLOAT, "VEC3", target=_ARRAY, minmax=True),
-             "NORMAL": buf.add(_normals(rig.rest, rig.faces).astype(np.float32), _FLOAT, "VEC3", target=_ARRAY)}
+             "NORMAL": buf.add(vertex_normals(rig.rest, rig.faces)[src].astype(np.float32), _FLOAT, "VEC3",
+                               target=_ARRAY)}
+    texture = None
+    if tc is not None:
+        flipped = np.array(tc, np.float64)
+        flipped[:, 1] = 1.0 - flipped[:, 1]
+        attrs["TEXCOORD_0"] = buf.add(flipped.astype(np.float32), _FLOAT, "VEC2", target=_ARRAY)
+        if rig.texture:
+            from pathlib import Path
+
+            data = Path(rig.texture).read_bytes()
+            mime = "image/png" if data[:8] == b"\x89PNG\r\n\x1a\n" else "image/jpeg"
+            view = buf.add_bytes(data)
+            images.append({"name": "skin", "bufferView": view, "mimeType": mime})
+            textures.append({"source": len(images) - 1})
+            texture = len(textures) - 1
     # joint 0 root, 1 jaw; a vertex wholly on one joint lists only it (unused slots: joint 0, weight 0)
-    w = rig.jaw_weight.astype(np.float32)
+    w = rig.jaw_weight[src].astype(np.float32)
     joints = np.zeros((n, 4), np.uint8)
     weights = np.zeros((n, 4), np.float32)
     weights[:, 0] = 1.0 - w
@@ -168,10 +244,16 @@ def write_glb(path, rig: BlendshapeRig, *, frames: list | None = None, looks: di
     attrs["JOINTS_0"] = buf.add(joints, _UBYTE, "VEC4", target=_ARRAY)
     attrs["WEIGHTS_0"] = buf.add(weights, _FLOAT, "VEC4", target=_ARRAY)
     tlist = target_list(rig)
-    targets = [{"POSITION": buf.add(rig.shapes[s][i][1].astype(np.float32), _FLOAT, "VEC3", target=_ARRAY,
-                                    minmax=True)} for _, s, i in tlist]
-    skin_groups = {k.capitalize(): v for k, v in looks.get("subsets", {}).get("Skin", {}).items()}
-    meshes = [{"name": "Skin", "primitives": primitives(attrs, rig.faces, skin_groups, "Skin", COLORS["skin"], targets),
+    targets = []
+    for _, s_, i in tlist:
+        D = rig.shapes[s_][i][1]
+        targets.append({"POSITION": buf.add(D[src].astype(np.float32), _FLOAT, "VEC3", target=_ARRAY, minmax=True),
+                        "NORMAL": buf.add(normal_offsets(rig, D)[src].astype(np.float32), _FLOAT, "VEC3",
+                                          target=_ARRAY)})
+    skin_groups = {} if texture is not None else \
+        {k.capitalize(): v for k, v in looks.get("subsets", {}).get("Skin", {}).items()}
+    meshes = [{"name": "Skin", "primitives": primitives(attrs, SF, skin_groups, "Skin", COLORS["skin"], targets,
+                                                        texture=texture),
                "weights": [0.0] * len(tlist), "extras": {"targetNames": [t for t, _, _ in tlist]}}]
     # ---- nodes
     pivot = [float(v) for v in rig.jaw_pivot]
@@ -205,16 +287,20 @@ def write_glb(path, rig: BlendshapeRig, *, frames: list | None = None, looks: di
     doc = {"asset": {"version": "2.0", "generator": "facewarp rig (physics-baked blendshapes)"},
            "scene": 0, "scenes": [{"name": "Rig", "nodes": [0, 3]}], "nodes": nodes, "meshes": meshes,
            "skins": skins, "materials": materials}
-    if frames:
-        t = np.asarray([f[0] for f in frames], np.float32)
-        rot = np.asarray([_quat_xyzw(rig.jaw_axis, f[2]) for f in frames], np.float32)
-        mw = np.stack([frame_weights(rig, f[1], f[2]) for f in frames]).astype(np.float32)
-        tin = buf.add(t, _FLOAT, "SCALAR", minmax=True)
-        doc["animations"] = [{"name": "sequence", "samplers": [
+    if images:
+        doc["images"], doc["textures"] = images, textures
+    all_clips = ({"sequence": frames} if frames else {}) | dict(clips or {})
+    for cname, cframes in all_clips.items():
+        if not cframes:
+            continue
+        t, mw, jaw = clip_arrays(rig, cframes)
+        rot = np.asarray([_quat_xyzw(rig.jaw_axis, a) for a in jaw], np.float32)
+        tin = buf.add(t.astype(np.float32), _FLOAT, "SCALAR", minmax=True)
+        doc.setdefault("animations", []).append({"name": str(cname), "samplers": [
             {"input": tin, "output": buf.add(rot, _FLOAT, "VEC4"), "interpolation": "LINEAR"},
             {"input": tin, "output": buf.add(mw.ravel(), _FLOAT, "SCALAR"), "interpolation": "LINEAR"}],
             "channels": [{"sampler": 0, "target": {"node": 2, "path": "rotation"}},
-                         {"sampler": 1, "target": {"node": 3, "path": "weights"}}]}]
+                         {"sampler": 1, "target": {"node": 3, "path": "weights"}}]})
     while len(buf.data) % 4:
         buf.data.append(0)
     doc["buffers"] = [{"byteLength": len(buf.data)}]

@@ -37,6 +37,10 @@ def add_parser(sub) -> None:
                          "ear roots to remove head motion")
     dr.add_argument("--out", required=True, type=Path, metavar="DIR|FILE.usd[a|c|z]",
                     help="output folder, or a USD file (the animation alone)")
+    dr.add_argument("--rig", type=Path, metavar="RIGDIR", default=None,
+                    help="a `facewarp rig --out RIGDIR` folder of this head: also write the take as that rig's "
+                         "animation (take.glb, take.usdc: ARKit weights on its ARKit shapes, else muscle weights) "
+                         "and report how far the rig's blend lands from the simulated face")
     dr.set_defaults(func=run, outputs=out_dir_or_usd)
 
 
@@ -51,7 +55,8 @@ def run(args):
     try:
         rep = drive_files(args.build, args.out, markers=args.markers, arkit=args.arkit, mediapipe=args.mediapipe,
                           map=args.map, units=args.units, fps=args.fps, rigid=not args.no_rigid, device=args.device,
-                          progress=bar, table_progress=lambda done, total, name: table_bar(done, total))
+                          progress=bar, table_progress=lambda done, total, name: table_bar(done, total),
+                          **({"rig": args.rig} if getattr(args, "rig", None) is not None else {}))
     finally:
         table_bar.close()
         bar.close()
@@ -82,6 +87,10 @@ def run(args):
     if hm:
         lines.append(f"  head motion removed by a fit of {len(hm['stable_points'])} stable points"
                      + (f" ({hm['frames_held']} frames held the pose before them)" if hm["frames_held"] else ""))
+    rt = rep.get("rig_take")
+    if rt:
+        lines.append(f"  on the rig ({rt['clip']} clip, {len(rt['shapes'])} shapes): its blend from the simulated face "
+                     f"p95 {rt['error_mm']['p95']:.2f} mm, max {rt['error_mm']['max']:.2f} mm")
     notes = [n for n in rep.get("notes", []) if n not in warnings]
     lines += [f"  note: {n}" for n in notes[:6]]
     if len(notes) > 6:

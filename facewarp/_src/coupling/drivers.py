@@ -63,7 +63,7 @@ class MujocoJawDriver:
 
     Args:
         sim: The :class:`~facewarp.FaceSimulator`.
-        mjcf: The head's ``head.xml`` (:func:`~facewarp.write_head_mjcf`, written by ``facewarp build``).
+        mjcf: The head's ``head.xml`` (:func:`~facewarp.coupling.write_head_mjcf`, written by ``facewarp build``).
 
     Raises:
         InputError: no ``head.xml`` at ``mjcf``, or no ``mujoco`` package.

@@ -63,6 +63,7 @@ __all__ = [
     "mandible_geometry",
     "mandible_inertia",
     "scene_mjcf",
+    "skin_vertex_split",
     "up_rotation",
     "write_head_mjcf",
 ]
@@ -145,8 +146,49 @@ def _fmt(values) -> str:
     return " ".join(f"{v + 0.0:.7g}" for v in np.asarray(values, np.float64).ravel())  # no "-0"
 
 
-def _mesh_asset(name: str, V, F, extra: str = "") -> str:
-    return f'    <mesh name={quoteattr(name)}{extra} vertex="{_fmt(V)}" face="{" ".join(map(str, np.asarray(F).ravel()))}"/>'
+def _mesh_asset(name: str, V, F, extra: str = "", *, normals=None, texcoord=None) -> str:
+    more = "" if normals is None else f' normal="{_fmt(normals)}"'
+    if texcoord is not None:
+        more += f' texcoord="{_fmt(texcoord)}"'
+    return (f'    <mesh name={quoteattr(name)}{extra} vertex="{_fmt(V)}"{more} '
+            f'face="{" ".join(map(str, np.asarray(F).ravel()))}"/>')
+
+
+def skin_vertex_split(F, face_uv) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The skin's mesh for MuJoCo, whose texture coordinates are per vertex: the vertices split
+    where the UVs have seams.
+
+    Args:
+        F: Skin triangles (m, 3) int into n vertices. face_uv: (m, 3) int index into the UVs per corner.
+
+    Returns:
+        (faces (m, 3) int64 into n' >= n vertices, source vertex (n',) int64, UV index (n',) int64):
+        vertex ``i < n`` is skin vertex ``i`` (with the UV of its first corner, in face order), the
+        ones after it copies of seam vertices with their other UVs (``source[i]``), so the first n
+        keep the skin's own order (:class:`~facewarp.MujocoSkin` writes the face into them and the copies).
+    """
+    F = np.asarray(F, np.int64)
+    T = np.asarray(face_uv, np.int64)
+    n = int(F.max()) + 1
+    first = np.full(n, -1, np.int64)
+    extra: dict = {}
+    src, uvi = [], []
+    out = np.empty_like(F)
+    for c, (v, t) in enumerate(zip(F.ravel(), T.ravel())):
+        if first[v] < 0:
+            first[v] = t
+            out.flat[c] = v
+        elif first[v] == t:
+            out.flat[c] = v
+        else:
+            k = extra.get((v, t))
+            if k is None:
+                k = extra[(v, t)] = n + len(src)
+                src.append(v)
+                uvi.append(t)
+            out.flat[c] = k
+    first[first < 0] = 0
+    return out, np.r_[np.arange(n), np.asarray(src, np.int64)], np.r_[first, np.asarray(uvi, np.int64)]
 
 
 def _visual(name: str, mesh: str, rgba: str, group: int = 1) -> str:
@@ -174,8 +216,9 @@ looks along +x (x forward, y left, z up, as REP 103): ``x_world = Z_UP @ x_head`
 Z_UP_QUAT = "0.5 0.5 0.5 0.5"
 """:data:`Z_UP` as an MJCF quaternion (w x y z): 120 deg about (1, 1, 1)."""
 
-SKIN_RGBA = (0.87, 0.68, 0.58, 1.0)
-"""Colour of the skin mesh in head.xml (RGBA, 0..1)."""
+SKIN_RGBA = (0.87, 0.72, 0.62, 1.0)
+"""Colour of the skin mesh in head.xml without a texture (RGBA, 0..1): the palette's skin
+(``present.looks.COLORS``)."""
 
 _NAME_OK = re.compile(r"[A-Za-z0-9_.:/-]*\Z")
 
@@ -202,7 +245,7 @@ def _deg(values) -> str:
 
 def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_head", kp: float = 100.0,
               joint_damping: float = 0.4, neck: bool = False, neck_kp: float = 200.0, up: str = "z",
-              prefix: str = "", skin=None) -> str:
+              prefix: str = "", skin=None, skin_texture=None, iris_color=None) -> str:
     """MJCF text of a head's cranium and mandible as a body tree (see the module docstring).
 
     Args:
@@ -226,7 +269,16 @@ def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_he
             the head frame (``FaceRig.head_vertices``, ``FaceRig.head_faces``), or None for none.
             :class:`~facewarp.MujocoSkin` moves its vertices with the simulated face. With a skin
             the skull and mandible geoms go to geom group 3 (hidden by default in MuJoCo's
-            renderer and viewer; the viewer's group toggles show them).
+            renderer and viewer; the viewer's group toggles show them). Smooth (area-weighted)
+            vertex normals are written with it. ``(V, F, uv (k, 2), face_uv (m, 3))`` adds its
+            texture coordinates (the vertices split at the UV seams, :func:`skin_vertex_split`);
+            with ``skin_texture`` and without them the head's own (``head.uv``, ``head.face_uv``)
+            are taken when ``F`` is the head's faces.
+        skin_texture: The skin's colour texture (PNG), the ``file`` of a ``<texture>`` as written
+            (a name relative to the model file, such as ``texture.png`` beside head.xml), bound to
+            the skin through a material; needs the texture coordinates. None: the palette's skin colour.
+        iris_color: Optional iris RGB (3,) in 0..1; each eyeball is drawn as its sclera, iris and
+            pupil (``present.looks.eye_looks``), three visual geoms.
 
     Returns:
         The MJCF document as a string.
@@ -253,16 +305,64 @@ def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_he
     bone = 1 if skin is None else 3
     cranium_geoms = [_visual(prefix + "skull", prefix + "skull", "0.92 0.89 0.8 1", bone)]
     mandible_geoms = [_visual(prefix + "mandible", prefix + "mandible", "0.92 0.89 0.8 1", bone)]
+    from ..geometry.surface import vertex_normals
+    from ..present.looks import COLORS, eye_looks, part_kind
+
+    fdps = None
+    try:
+        fdps = {str(k): np.asarray(v, np.float64) for k, v in head.landmarks().items()}
+    except Exception:  # a head without FDPs: the gaze along +z
+        fdps = None
+    materials = []
     for pname, (V, F) in parts.items():
         lower = pname in ("teeth_lower", "tongue")
-        assets.append(_mesh_asset(prefix + pname, (np.asarray(V) - pivot) if lower else V, F))
+        PV = (np.asarray(V, np.float64) - pivot) if lower else np.asarray(V, np.float64)
+        PF = np.asarray(F, np.int64)
         rgba = "0.8 0.42 0.42 1" if pname == "tongue" else "0.97 0.96 0.93 1"
-        (mandible_geoms if lower else cranium_geoms).append(_visual(prefix + pname, prefix + pname, rgba))
+        geoms = mandible_geoms if lower else cranium_geoms
+        if part_kind(pname) == "eye":
+            # the ball as its sclera, iris and pupil: three meshes of its faces, each its own colour
+            for look, (faces, rgb) in eye_looks(np.asarray(V, np.float64), PF, fdps, iris_color=iris_color).items():
+                if not len(faces):
+                    continue
+                sub = PF[faces]
+                used, inv = np.unique(sub, return_inverse=True)
+                mname = prefix + pname + ("" if look == "Sclera" else "_" + look.lower())
+                assets.append(_mesh_asset(mname, PV[used], inv.reshape(-1, 3), extra=' inertia="shell"',
+                                          normals=vertex_normals(PV, PF)[used]))
+                geoms.append(_visual(mname, mname, _fmt([*rgb, 1.0])))
+            continue
+        assets.append(_mesh_asset(prefix + pname, PV, PF, normals=vertex_normals(PV, PF)))
+        geoms.append(_visual(prefix + pname, prefix + pname, rgba))
     if skin is not None:
-        SV, SF = _check_skin(skin)
+        SV, SF, uv, face_uv = _check_skin(skin)
+        if uv is None and skin_texture is not None and getattr(head, "uv", None) is not None \
+                and getattr(head, "face_uv", None) is not None \
+                and np.shape(head.face_uv) == SF.shape and np.array_equal(np.asarray(head.faces), SF):
+            uv, face_uv = np.asarray(head.uv, np.float64), np.asarray(head.face_uv, np.int64)
+        N = vertex_normals(SV, SF)
+        if uv is not None:
+            MF, src, uvi = skin_vertex_split(SF, face_uv)
+            tc = uv[uvi].copy()
+            tc[:, 1] = 1.0 - tc[:, 1]  # MuJoCo's texture rows run top to bottom, v up: flip as its OBJ reader does
+            mesh = _mesh_asset(prefix + "skin", SV[src], MF, extra=' inertia="shell"', normals=N[src], texcoord=tc)
+        else:
+            mesh = _mesh_asset(prefix + "skin", SV, SF, extra=' inertia="shell"', normals=N)
         # shell inertia: the skin is an open surface (no volume); the geom has no mass anyway
-        assets.append(_mesh_asset(prefix + "skin", SV, SF, extra=' inertia="shell"'))
-        cranium_geoms.append(_visual(prefix + "skin", prefix + "skin", _fmt(SKIN_RGBA)))
+        assets.append(mesh)
+        # skin is not a mirror: a faint, broad highlight (MuJoCo's default material shines like plastic)
+        if skin_texture is not None:
+            if uv is None:
+                raise InputError("skin_texture: the skin has no texture coordinates (give skin=(V, F, uv, face_uv))")
+            assets.append(f'    <texture name={n("skin")} type="2d" file={quoteattr(str(skin_texture))}/>')
+            materials.append(f'    <material name={n("skin")} texture={n("skin")} specular="0.15" shininess="0.2" '
+                             f'reflectance="0"/>')
+        else:
+            materials.append(f'    <material name={n("skin")} rgba="{_fmt(SKIN_RGBA)}" specular="0.15" '
+                             f'shininess="0.2" reflectance="0"/>')
+        cranium_geoms.append(f'      <geom name={n("skin")} type="mesh" mesh={n("skin")} material={n("skin")} '
+                             'contype="0" conaffinity="0" density="0" group="1"/>')
+    assets += materials
     lo, hi = JAW_OPEN_RANGE
     slo, shi = JAW_SIDE_RANGE
     V = np.asarray(head.vertices, np.float64)
@@ -327,18 +427,28 @@ def head_mjcf(head, *, jaw: JawKinematic | None = None, name: str = "facewarp_he
     ])
 
 
-def _check_skin(skin) -> tuple[np.ndarray, np.ndarray]:
+def _check_skin(skin) -> tuple:
+    uv = face_uv = None
     try:
-        SV, SF = skin
+        if len(skin) == 4:
+            SV, SF, uv, face_uv = skin
+        else:
+            SV, SF = skin
         SV = np.asarray(SV, np.float64)
         SF = np.asarray(SF)
     except (TypeError, ValueError):
-        raise InputError("skin: expected (V (n, 3) [m], F (m, 3) int)") from None
+        raise InputError("skin: expected (V (n, 3) [m], F (m, 3) int) or (V, F, uv (k, 2), face_uv (m, 3))") from None
+    if uv is not None:
+        uv, face_uv = np.asarray(uv, np.float64), np.asarray(face_uv)
+        if uv.ndim != 2 or uv.shape[1] != 2 or not np.isfinite(uv).all() or face_uv.shape != np.shape(SF) \
+                or face_uv.dtype.kind not in "iu" or face_uv.min() < 0 or face_uv.max() >= len(uv):
+            raise InputError(f"skin: uv must be finite (k, 2) and face_uv (m, 3) indices into it, got {uv.shape}, "
+                             f"{face_uv.shape}")
     if SV.ndim != 2 or SV.shape[1] != 3 or not len(SV) or not np.isfinite(SV).all():
         raise InputError(f"skin: V must be finite with shape (n, 3), got {SV.shape}")
     if SF.ndim != 2 or SF.shape[1] != 3 or not len(SF) or SF.dtype.kind not in "iu" or SF.min() < 0 or SF.max() >= len(SV):
         raise InputError(f"skin: F must be (m, 3) indices into V, got shape {SF.shape}")
-    return SV, SF
+    return SV, SF, uv, face_uv
 
 
 def scene_mjcf(head_file: str = "head.xml", *, up: str = "z", head=None, name: str = "facewarp_scene",
@@ -381,6 +491,10 @@ def scene_mjcf(head_file: str = "head.xml", *, up: str = "z", head=None, name: s
         '  <worldbody>',
         f'    <light name="key" pos="{_fmt(light)}" dir="{_fmt(-light / np.linalg.norm(light))}" diffuse="0.8 0.8 0.8" '
         'castshadow="false"/>',  # shadow maps speckle the face (acne at the chin)
+        # a fill from the camera's side: the face's front lit as the skin texture shows it (the key alone and
+        # the headlight left it about 10 L* darker than its texture)
+        f'    <light name="fill" pos="{_fmt(cam)}" dir="{_fmt(-fwd)}" diffuse="0.5 0.5 0.5" specular="0 0 0" '
+        'castshadow="false"/>',
         f'    <geom name="floor" type="plane" size="1 1 0.05" pos="{_fmt(floor_pos)}" quat="{floor_quat}" '
         'material="floor_grid" contype="1" conaffinity="1"/>',
         f'    <camera name="face" pos="{_fmt(cam)}" xyaxes="{_fmt(C[:, 0])} {_fmt(upv)}"/>',

@@ -12,7 +12,10 @@ MuJoCo's compiler moves each mesh into its own inertial frame (``mesh_pos``, ``m
 in the model) and puts the inverse on the geom; the update applies the same map,
 ``v_mesh = R^T (v_head - p)``, so the geom's pose needs no change. Normals are the area-weighted
 vertex normals of the moved surface (MuJoCo computes per-vertex normals for an inline mesh, one
-per vertex in the same order). The skin is visual only: no contact, no mass, and MuJoCo's
+per vertex in the same order). A textured skin (``head_mjcf(skin=(V, F, uv, face_uv))``) has its
+vertices split at the UV seams (:func:`~facewarp._src.coupling.mjcf.skin_vertex_split`: the face's
+own vertices first, then the copies); the update writes each copy with its vertex's position and
+normal, so the seams stay closed and smooth. The skin is visual only: no contact, no mass, and MuJoCo's
 bounding volumes of the mesh stay those of the rest shape (used for collision and ray queries,
 which a visual geom does not take part in).
 """
@@ -78,9 +81,17 @@ class MujocoSkin:
         self.prefix, self.mesh_id = prefix, int(i)
         self.faces = np.asarray(sim.fr.head_faces, np.int64)
         n = int(model.mesh_vertnum[i])
-        if n != len(sim.fr.head_vertices) or int(model.mesh_normalnum[i]) != n:
+        n_head = len(sim.fr.head_vertices)
+        self._src = None  # a textured skin: its vertices split at the UV seams, the copies after the first n_head
+        if n != n_head and getattr(sim.fr, "head_face_uv", None) is not None:
+            from .mjcf import skin_vertex_split
+
+            src = skin_vertex_split(self.faces, sim.fr.head_face_uv)[1]
+            if len(src) == n:
+                self._src = src
+        if (n != n_head and self._src is None) or int(model.mesh_normalnum[i]) != n:
             raise InputError(f"mesh {prefix + mesh!r}: {n} vertices ({int(model.mesh_normalnum[i])} normals), the "
-                             f"face has {len(sim.fr.head_vertices)}: not this head's skin")
+                             f"face has {n_head}: not this head's skin")
         self._v = slice(int(model.mesh_vertadr[i]), int(model.mesh_vertadr[i]) + n)
         self._n = slice(int(model.mesh_normaladr[i]), int(model.mesh_normaladr[i]) + n)
         q = np.asarray(model.mesh_quat[i], np.float64)
@@ -99,8 +110,11 @@ class MujocoSkin:
         V = self.sim.surface(frame="head")
         t1 = time.perf_counter()
         Vm = (V - self._p) @ self._R
+        N = vertex_normals(Vm, self.faces)  # smooth across the UV seams: the copies take their vertex's normal
+        if self._src is not None:
+            Vm, N = Vm[self._src], N[self._src]
         self.model.mesh_vert[self._v] = Vm
-        self.model.mesh_normal[self._n] = vertex_normals(Vm, self.faces)
+        self.model.mesh_normal[self._n] = N
         t2 = time.perf_counter()
         for target in targets:
             self._upload(target)
@@ -124,5 +138,7 @@ class MujocoSkin:
                              f"{type(target).__name__}")
 
     def vertices(self) -> np.ndarray:
-        """The skin as the model holds it now, in the head frame [m], shape (n, 3), float64."""
-        return np.asarray(self.model.mesh_vert[self._v], np.float64) @ self._R.T + self._p
+        """The skin as the model holds it now, in the head frame [m], shape (n, 3), float64 (the
+        face's n vertices; a textured skin's seam copies left out)."""
+        V = np.asarray(self.model.mesh_vert[self._v], np.float64) @ self._R.T + self._p
+        return V[: len(self.sim.fr.head_vertices)]

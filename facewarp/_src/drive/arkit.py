@@ -4,7 +4,7 @@ activations, jaw angles and eye gaze, built once per head and cached in its buil
 Where the shapes come from (``source``): the ICT-FaceKit rig's ARKit-named expressions. facewarp
 ships them carried onto its default template
 (:func:`~facewarp._src.importers.ict_arkit.load_arkit_basis`, MIT, 0.9 MB), so a fresh install
-drives any head; a folder with the kit's own OBJs (:func:`~facewarp.ict_shape_dirs`) is used
+drives any head; a folder with the kit's own OBJs (:func:`~facewarp.takes.ict_shape_dirs`) is used
 instead when it holds every shape (``source="auto"``), and ``shapes=`` takes your own displacements.
 Each shape is carried onto the head (scaled to the head's own proportions) at its FDPs on the
 skin; the target of a shape is the head's rest FDPs plus that displacement. Then the controls are
@@ -12,7 +12,7 @@ solved by a static inverse:
 
 1. the static response of each control: every muscle alone at activation 1, the jaw opened by
    :data:`JAW_PROBE` and turned sideways by :data:`JAW_SIDE_PROBE`, each a converged static shape
-   (:func:`~facewarp.static_surface`), gives one column of the linear model ``B`` (FDP displacement
+   (:func:`~facewarp.blendshapes.static_surface`), gives one column of the linear model ``B`` (FDP displacement
    per unit control, (3 K, M + 2));
 2. a bounded least-squares solve, ``min |B x - t|^2 + effort^2 |x|^2`` with the activations in
    [0, 1], the opening in [0, 60 deg] and the side angle in +-5 deg (``scipy.optimize.lsq_linear``);
@@ -346,7 +346,7 @@ def _fdp_of(fr, idx, V) -> np.ndarray:
     return np.einsum("kc,kcd->kd", np.asarray(fr.fdp_bary, np.float64)[idx], V[F[np.asarray(fr.fdp_face)[idx]]])
 
 
-_NO_DATA = "no ICT-FaceKit shape data found (see facewarp.ict_shape_dirs)"
+_NO_DATA = "no ICT-FaceKit shape data found (see facewarp.takes.ict_shape_dirs)"
 _SOURCES = ("auto", "shipped", "ict")
 
 
@@ -505,7 +505,7 @@ def arkit_table(sim, *, shapes=None, source: str = "auto", solve=None, cache=Non
             entries (reason: no data).
         source: Where the shapes' data comes from: ``"shipped"`` (the ICT-FaceKit expressions
             facewarp ships on its default template), ``"ict"`` (the kit's OBJs,
-            :func:`~facewarp.ict_shape_dirs`; shapes not found are zero entries) or ``"auto"``
+            :func:`~facewarp.takes.ict_shape_dirs`; shapes not found are zero entries) or ``"auto"``
             (the OBJs when one folder holds all the shapes asked for, else the shipped data).
         solve: ARKit names to solve now (default all with data); the others with data are left
             for a later call (reason "not solved yet") unless the cache already holds them. A
@@ -516,7 +516,7 @@ def arkit_table(sim, *, shapes=None, source: str = "auto", solve=None, cache=Non
         ict_dir: A folder searched first for the ICT-FaceKit OBJs.
         refine: Rounds of the static refinement (0..10).
         effort: Weight of the controls' size in the least squares [m per unit control].
-        tol, max_frames: Convergence of each static shape (:func:`~facewarp.static_surface`).
+        tol, max_frames: Convergence of each static shape (:func:`~facewarp.blendshapes.static_surface`).
         progress: Optional ``progress(done, total, name)``.
         rebuild: Build even when the cache matches.
 
@@ -718,7 +718,7 @@ def arkit_warnings(track, table: ArkitTable) -> tuple[list, bool]:
 
 def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, tracker=None,
                 unreachable_limit: float = 2e-3):
-    """Play an :class:`~facewarp.ArkitTrack` on ``sim`` through its head's :class:`ArkitTable`
+    """Play an :class:`~facewarp.takes.ArkitTrack` on ``sim`` through its head's :class:`ArkitTable`
     (what :func:`~facewarp.drive` does for an ArkitTrack).
 
     Each frame's weights become controls by :meth:`ArkitTable.controls` (blend in activation
@@ -731,7 +731,7 @@ def drive_arkit(sim, track, table: ArkitTable, *, sinks=(), progress=None, track
     from its blended target (head frame).
 
     Returns:
-        A :class:`~facewarp.DriveResult` (``names``: the table's FDP ids; ``head_poses``: (T, 4, 4)
+        A :class:`~facewarp.takes.DriveResult` (``names``: the table's FDP ids; ``head_poses``: (T, 4, 4)
         when the track has head rotation; ``warnings``: the shapes used but not mapped; ``gaze``).
 
     Raises:

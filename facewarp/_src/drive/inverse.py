@@ -452,11 +452,11 @@ def drive(sim, track, *, table=None, sinks=(), progress=None, mode: str = "offli
     Args:
         sim: The :class:`~facewarp.FaceSimulator` (implicit solver), at the track's frame rate.
         track: A :class:`~facewarp.MarkerTrack` (points in the head's frame, NaN where missing).
-        table: For an :class:`~facewarp.ArkitTrack`: the head's :class:`~facewarp.ArkitTable`
+        table: For an :class:`~facewarp.takes.ArkitTrack`: the head's :class:`~facewarp.takes.ArkitTable`
             (:func:`~facewarp.arkit_table`); the track is then played through it
             (:func:`.arkit.drive_arkit`: ``refine=True`` tracks each frame towards its blended
             target FDPs, the other keywords as here; the head rotation drives the head pose).
-        sinks: :class:`~facewarp.Sink` objects or callables ``f(sim, k, t)``, called after each frame.
+        sinks: :class:`~facewarp.takes.Sink` objects or callables ``f(sim, k, t)``, called after each frame.
         progress: Optional ``progress(k, frame_count)`` after each frame.
         mode: ``"offline"`` or ``"realtime"`` (:class:`Tracker`).
         head_poses: Optional (T, 4, 4) rigid poses removed from the targets, kept in the result.

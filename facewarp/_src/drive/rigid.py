@@ -1,5 +1,5 @@
 """Rigid head motion out of a marker take: per frame a similarity fit (Umeyama; the FDP
-calibration's Eq. 4.3.3, :func:`~facewarp.fit_similarity`) of the take's *stable points* to the
+calibration's Eq. 4.3.3, :func:`~facewarp.geometry.fit_similarity`) of the take's *stable points* to the
 same points on the head at rest, and the inverse of that fit applied to every point of the frame.
 The muscles move the rest of the face; what is left is the expression in the head's own frame.
 

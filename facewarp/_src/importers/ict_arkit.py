@@ -19,8 +19,8 @@ it from a folder of the kit's ``FaceXModel`` OBJs. A head is then reached from t
 same kind of warp (:func:`transfer_basis_displacements`: the template's head FDPs onto the head's).
 
 Transfer onto a head (:func:`transfer_ict_displacements`): the ICT neutral skin is warped onto the
-head by the FDPs both know (the 12 of :data:`~facewarp.ICT_FDP_VERTICES`, the inner lip contour
-2.4-2.9 of :data:`~facewarp.ICT_INNER_LIP_VERTICES` and the lid margins 3.1-3.4): a least-squares
+head by the FDPs both know (the 12 of :data:`~facewarp.heads.ICT_FDP_VERTICES`, the inner lip contour
+2.4-2.9 of :data:`~facewarp.heads.ICT_INNER_LIP_VERTICES` and the lid margins 3.1-3.4): a least-squares
 similarity, then a thin-plate spline through the remaining FDP residuals. Each head point takes the
 closest point of the warped ICT neutral skin, and its displacement is the difference of the warped
 expression and the warped neutral there, ``W(x + d) - W(x)``: so the displacement is scaled and

@@ -167,9 +167,9 @@ def adapt_files(scan, landmarks, out, *, template_dir=None, template_mesh=None, 
                 progress=None, texture_size: int = 2048, landmark_scheme: str = "auto") -> dict:
     """Run the adaptation on files and write the outputs; returns the report dict.
 
-    ``landmark_scheme``: the scheme of the ``landmarks`` file (:func:`~facewarp.load_landmarks`'s
+    ``landmark_scheme``: the scheme of the ``landmarks`` file (:func:`~facewarp.geometry.load_landmarks`'s
     ``scheme``: "auto", "fdp", "ibug68" or "ibug51"; the 68- and 51-point schemes give the FDPs of
-    :data:`~facewarp.IBUG68_TO_FDP`).
+    :data:`~facewarp.geometry.IBUG68_TO_FDP`).
 
     ``levels`` is :func:`~facewarp.adapt`'s: refinement levels after the FDP level (None: its
     default). ``landmarks`` None: the FDPs are found on the scan

@@ -19,14 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError
-from ..coupling.drivers import JAWS, jaw_driver, load_mjcf
+from ..coupling.drivers import JAWS, load_mjcf
 from ..expressions import Timeline
-from ..sim.play import Sink, play
+from ..sim.play import Sink
 from ..sim.readout import eye_transforms
 
 __all__ = ["JAWS", "MUSCLE_SAMPLES", "USD_SUFFIXES", "FdpMotion", "UsdAnimation", "check_usd_path", "load_mjcf",
            "load_usd_export", "part_points",
-           "part_transforms", "peak_frames", "play_timeline", "sim_controls"]
+           "part_transforms", "peak_frames", "sim_controls"]
 
 USD_SUFFIXES = (".usda", ".usdc", ".usdz")
 """File types of USD animations: text, binary crate, package."""
@@ -243,12 +243,3 @@ class FdpMotion(Sink):
         if self.rest is None:  # frame 0: the rest
             self.rest = p
         np.maximum(self.moved, np.linalg.norm(p - self.rest, axis=1), out=self.moved)
-
-
-def play_timeline(sim, timeline: Timeline, seconds: float, *, on_frame=(), progress=None, jaw: str = "kinematic",
-                  mjcf=None) -> dict:
-    """:func:`~facewarp.play` under its old name: ``on_frame`` are the sinks, ``jaw`` one of
-    :data:`JAWS` (``mjcf``: the head's ``head.xml`` for ``"mujoco"``); returns the
-    :class:`~facewarp.PlayStats` as a dict."""
-    sinks = [on_frame] if callable(on_frame) else list(on_frame)
-    return play(sim, timeline, seconds, sinks=sinks, jaw=jaw_driver(sim, jaw, mjcf=mjcf), progress=progress).to_dict()

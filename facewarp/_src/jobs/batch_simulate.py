@@ -97,7 +97,7 @@ def batch_simulate_files(heads, expression: str, out, *, per_head=None, seconds:
 
     Args:
         heads: ``facewarp build`` folders, one per head.
-        expression: What :func:`~facewarp.timeline_from_spec` reads: a preset, ``"sequence"``, a
+        expression: What :func:`~facewarp.expressions.timeline_from_spec` reads: a preset, ``"sequence"``, a
             sequence file or ``"muscle=value,..."``, for every head without its own.
         out: Output folder (made here).
         per_head: A ``--per-head`` file (:func:`read_per_head`), or None.

@@ -277,6 +277,9 @@ def demo_files(out, *, seconds: float | None = None, quick: bool = False, device
     for name in ("head.xml", "scene.xml"):  # the head body tree and its standalone scene
         with atomic_write(out / name, "w") as f:
             f.write((build_dir / name).read_text())
+    if (build_dir / "texture.png").is_file():  # the skin texture head.xml names (beside it)
+        with atomic_write(out / "texture.png", "wb", encoding=None) as f:
+            f.write((build_dir / "texture.png").read_bytes())
     t = lap("anatomy", t)
 
     step("simulate")

@@ -4,7 +4,7 @@
 Steps: the take is read and checked first (:mod:`~facewarp._src.drive.formats`), then the face
 rig; a marker take's points are checked against the head (FDP ids it has, vertices in range), its
 rigid head motion removed when it has three or more stable points
-(:func:`~facewarp.remove_head_motion`), and :func:`~facewarp.drive` solves and plays it through
+(:func:`~facewarp.takes.remove_head_motion`), and :func:`~facewarp.drive` solves and plays it through
 the sinks (frames kept, the USD animation streamed). ARKit curves go through the head's ARKit
 table (built once and cached in the build folder).
 
@@ -150,7 +150,8 @@ def _activation_picture(path: Path, times, muscles, A, J) -> None:
 
 
 def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=None, units=None,  # noqa: A002
-                fps=None, rigid: bool = True, device: str = "cpu", progress=None, table_progress=None) -> dict:
+                fps=None, rigid: bool = True, device: str = "cpu", progress=None, table_progress=None,
+                rig=None) -> dict:
     """Drive the face of a ``build`` output from a performance file and write the results.
 
     Args:
@@ -167,6 +168,10 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         progress: ``f(k, n)`` per frame.
         table_progress: ``f(done, total, name)`` while the head's ARKit table is built (the first
             ARKit run on a build: minutes; later runs read ``arkit_table.npz`` from the build folder).
+        rig: Optional ``facewarp rig --out DIR`` folder of this head: the take is also written as an
+            animation of that rig (``take.glb``, ``take.usdc``; ARKit weights on its ARKit shapes,
+            else muscle weights) with the error of the rig's linear blend against the simulated
+            frames in the report (``rig_take``; :class:`~facewarp._src.bake.take.RigTake`).
 
     Returns:
         The report (what ``report.json`` holds, less the per-frame arrays).
@@ -179,6 +184,14 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         raise InputError(f"{track.source}: {track.fps:g} fps is above the simulator's {MAX_FPS:g}")
     if not usd_out and track.frames > MAX_DRIVE_FRAMES:
         raise InputError(f"{track.source}: {track.frames} frames, more than {MAX_DRIVE_FRAMES} per run")
+    baked = None
+    if rig is not None and usd_out:
+        raise InputError("--rig: the take on the rig is written into an output folder (take.glb, take.usdc); "
+                         "give --out DIR")
+    if rig is not None:  # the rig to put the take on, read before the heavy work
+        from ..bake.blendshapes import load_rig
+
+        baked = load_rig(rig)
     fr = load_face_rig(build)
     fr_dir = Path(build) if Path(build).is_dir() else Path(build).parent
     check_memory(estimate_sim_bytes(len(fr.nodes), len(fr.tets), track.frames, len(fr.head_vertices)),
@@ -209,7 +222,12 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
     if not usd_out:
         make_out_dir(out)
     anim = UsdAnimation(usd_path, sim)
-    sinks = [s for s in (keep, anim) if s is not None]
+    take = None
+    if baked is not None:
+        from ..bake.take import RigTake
+
+        take = RigTake(baked, track.weights if isinstance(track, ArkitTrack) else None, fps=track.fps)
+    sinks = [s for s in (keep, anim, take) if s is not None]
     poses = None
     if motion is not None:  # the removed poses as 4x4 maps rest -> take (scale in the 3x3 block)
         poses = np.tile(np.eye(4), (motion.frames, 1, 1))
@@ -269,6 +287,10 @@ def drive_files(build, out, *, markers=None, arkit=None, mediapipe=None, map=Non
         _picture(out / "drive.png", frames, names, targets, device)
         written = [out / "activations.csv", out / "frames.npz", usd_path, out / "report.json", out / "drive.png",
                    out / "activations.png"]
+        if take is not None:
+            written += [out / "take.glb", out / "take.usdc"]
+            take.write(out / "take.glb", out / "take.usdc")
+            rep["rig_take"] = report_full["rig_take"] = take.report()
         rep["files"] = report_full["files"] = [str(w) for w in written]
     rep["seconds"] = report_full["seconds"] = round(time.perf_counter() - t0, 3)
     if not usd_out:

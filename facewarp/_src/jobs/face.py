@@ -66,7 +66,7 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
 
     Writes ``tets.npz``, ``muscles.json``, ``anatomy.json``, ``face_rig.npz``, ``head.xml`` (the
     MuJoCo cranium, mandible and skin for a world with ``up`` axis "z" or "y", names after
-    ``prefix``; :func:`~facewarp.write_head_mjcf`), ``scene.xml`` (the standalone scene that
+    ``prefix``; :func:`~facewarp.coupling.write_head_mjcf`), ``scene.xml`` (the standalone scene that
     includes it), ``texture.png`` (the head's skin texture: baked from its scan, else its preview
     colours with the lips) and ``anatomy.png``; returns the quality report.
     """
@@ -83,7 +83,8 @@ def build_head_files(head, out, *, layers: int = 1, device: str = "cpu", progres
     step("writing")
     write_anatomy(anatomy, out)
     save_face_rig(out / "face_rig.npz", fr)
-    write_head_mjcf(out / "head.xml", head, jaw=fr.jaw, up=up, prefix=prefix, skin=(fr.head_vertices, fr.head_faces))
+    write_head_mjcf(out / "head.xml", head, jaw=fr.jaw, up=up, prefix=prefix, skin=(fr.head_vertices, fr.head_faces),
+                    skin_texture="texture.png" if getattr(head, "uv", None) is not None else None)  # _copy_texture's
     _copy_texture(head, out)
     q = dict(anatomy.quality)
     q["boundary_conditions"] = {"fixed_nodes": int(fr.fixed.sum()), "held_nodes": int(fr.held.sum()),
@@ -131,7 +132,7 @@ def simulate_files(head_path, expression, out, *, seconds: float = 2.0, fps: flo
 
     ``expression`` is a :class:`~facewarp.Timeline` (what ``facewarp simulate`` builds from its
     ``--expression`` or ``--activations``), an :class:`~facewarp.Expression` (held over the run,
-    :meth:`~facewarp.Timeline.held`), or what :func:`~facewarp.timeline_from_spec` reads: a preset,
+    :meth:`~facewarp.Timeline.held`), or what :func:`~facewarp.expressions.timeline_from_spec` reads: a preset,
     ``"sequence"``, a sequence file, or ``"muscle=value,...,jaw_drop_mm=D"``; ``name`` labels it in
     the report and picture (default: the string, or the expression's name). Chin drops become
     this head's jaw angles by its condyle-to-chin lever, once, where :func:`~facewarp.play` meets

@@ -4,7 +4,7 @@ take is recorded when it ends.
 
 Each frame the newest packet of the stream (:class:`~facewarp.LiveLink`: what arrived while the
 last frame was simulated is read and dropped, never queued) becomes controls through the head's
-ARKit table, as the offline ARKit drive does (:meth:`~facewarp.ArkitTable.controls`: the 52
+ARKit table, as the offline ARKit drive does (:meth:`~facewarp.takes.ArkitTable.controls`: the 52
 weights blended into muscle activations and jaw angles; the head's yaw, pitch and roll into the
 head pose, :func:`~facewarp._src.drive.arkit.head_rotation_matrix`), and the simulator takes one
 step of ``1 / fps``. Where a frame takes longer than the stream's period the packets in between
@@ -201,6 +201,11 @@ class _Replay:
     def jaw_angles(self):
         return self._f.jaw[self.k] if self.k is not None else np.zeros(2, np.float32)
 
+    @property
+    def eye_gaze(self):
+        """The eyes' (yaw, pitch) [rad], (2, 2) float32: the live loop does not turn the eyes yet (rest)."""
+        return np.zeros((2, 2), np.float32)
+
 
 def _write_usd(path: Path, sim, frames, rest_curves) -> None:
     from .animation import UsdAnimation
@@ -295,7 +300,7 @@ def live_files(build, out, *, port: int = DEFAULT_PORT, host: str = "0.0.0.0", s
         device: Warp device.
         iterations: A fixed solver iteration count per frame (the interactive mode: a fixed cost
             per frame, further from the converged face); None: converged frames.
-        table: The head's :class:`~facewarp.ArkitTable` (default: :func:`~facewarp.arkit_table`
+        table: The head's :class:`~facewarp.takes.ArkitTable` (default: :func:`~facewarp.arkit_table`
             of the build, cached there).
         log: ``f(line)`` for status lines (listening, headless, every few seconds of stream).
         table_progress: ``f(done, total, name)`` while the ARKit table is built (first run on a build).

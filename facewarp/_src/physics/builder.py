@@ -333,7 +333,7 @@ class ModelBuilder:
 
         Sets ``muscle_rig`` (the rig with the final ``att_stiffness`` [N/m]), ``muscle_node_amount``
         and ``muscle_count`` (the activations in :class:`Control`: one per muscle). The rig's own
-        checks (:meth:`~facewarp.MuscleRig.validate`) run in :meth:`finalize`, with its derived arrays.
+        checks (:meth:`~facewarp.physics.MuscleRig.validate`) run in :meth:`finalize`, with its derived arrays.
         """
         self._need_tissue("add_muscles")
         n, mat = self.vertex_count, self.material
@@ -383,7 +383,7 @@ class ModelBuilder:
         carry of the free nodes with a jaw amount (``coupling.kinematic``).
 
         Args:
-            jaw: Anything with ``pivot``, ``u_axis``, ``v_axis`` (:class:`~facewarp.JawKinematic`).
+            jaw: Anything with ``pivot``, ``u_axis``, ``v_axis`` (:class:`~facewarp.anatomy.JawKinematic`).
             nodes: Fixed / held nodes whose targets turn with the jaw, shape (j,), int.
             amounts: Their amounts, shape (j,), float.
             node_amount: Amount of every node, shape (vertex_count,) (default: none carried).
@@ -675,7 +675,7 @@ class ModelBuilder:
             A read-only :class:`Model` of Warp arrays (float32 / int32) on that device.
 
         Raises:
-            InputError: a muscle rig that fails its checks (:meth:`~facewarp.MuscleRig.validate`).
+            InputError: a muscle rig that fails its checks (:meth:`~facewarp.physics.MuscleRig.validate`).
         """
         wp = warp()
         rig = self.muscle_rig

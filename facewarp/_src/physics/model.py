@@ -219,7 +219,7 @@ class ModelJaw:
     """The kinematic jaw of a :class:`Model` (host, NumPy, and its device arrays)."""
 
     joint: object
-    """Pivot [m] and unit axes of the jaw (``pivot``, ``u_axis``, ``v_axis``; :class:`~facewarp.JawKinematic`)."""
+    """Pivot [m] and unit axes of the jaw (``pivot``, ``u_axis``, ``v_axis``; :class:`~facewarp.anatomy.JawKinematic`)."""
     nodes: np.ndarray
     """Fixed / held nodes whose targets turn with the jaw, shape (j,), int64."""
     amounts: np.ndarray

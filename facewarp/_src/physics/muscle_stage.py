@@ -33,7 +33,7 @@ __all__ = ["MuscleArrays", "MuscleRig", "MuscleStage", "SupportArrays", "Support
 class MuscleArrays:
     """The muscles on the device (:class:`~facewarp._src.physics.muscle_stage.MuscleStage`'s arrays).
 
-    Model (read only), float32 / int32 copies of the rig's fields (:class:`~facewarp.MuscleRig`,
+    Model (read only), float32 / int32 copies of the rig's fields (:class:`~facewarp.physics.MuscleRig`,
     same names and units): ``ctrl_rest`` (P,) vec3 [m], ``ctrl_muscle``, ``ctrl_pivot`` (P,),
     ``ctrl_jaw`` (P,), ``muscle_activation``, ``muscle_contraction``, ``muscle_saturation``,
     ``muscle_center`` (M,) vec3 [m], ``muscle_center_jaw``, ``muscle_center_normal`` (M,) vec3,

@@ -29,6 +29,21 @@ __all__ = ["color_difference", "flat_color_difference", "likeness_views", "srgb_
 _BACKGROUND = (1.0, 0.0, 1.0)  # magenta: no surface
 
 
+def _openings_dark(img: np.ndarray) -> np.ndarray:
+    """A lit picture rendered on the dark of a cavity (``COLORS["cavity"]``) with the background
+    outside the surface made white: the openings the surface encloses (the eyes' and the mouth's,
+    where only the skin is drawn) stay dark instead of showing as white holes."""
+    from scipy.ndimage import binary_fill_holes
+
+    from .looks import COLORS
+
+    bg = np.abs(img.astype(np.int32) - np.round(np.array(COLORS["cavity"]) * 255)).max(2) <= 3
+    outside = bg & ~binary_fill_holes(~bg)
+    out = img.copy()
+    out[outside] = 255
+    return out
+
+
 def srgb_to_lab(rgb) -> np.ndarray:
     """CIELAB (D65) of sRGB colours.
 
@@ -141,10 +156,13 @@ def likeness_views(head_V, head_F, texture, corner_uv, face_mask, scan_V, scan_F
         out["views"][name] = {"textured": color_difference(head, scan, mask),
                               "flat": color_difference(flat_img, scan, mask),
                               "flat_face_mean": flat_color_difference(scan, mask)}
-        lit = {k: v for k, v in common.items() if k != "background"}
-        out["images"][name] = (render_mesh(head_V, head_F, view=view, texture=(texture, corner_uv), **lit),
-                               render_mesh(scan_V, scan_F, view=view, **scan_look, **lit),
-                               render_mesh(head_V, head_F, view=view, base_color=tuple(flat), **lit))
+        from .looks import COLORS
+
+        lit = {**common, "background": COLORS["cavity"]}  # openings dark, the outside white (_openings_dark)
+        out["images"][name] = tuple(_openings_dark(img) for img in (
+            render_mesh(head_V, head_F, view=view, texture=(texture, corner_uv), **lit),
+            render_mesh(scan_V, scan_F, view=view, **scan_look, **lit),
+            render_mesh(head_V, head_F, view=view, base_color=tuple(flat), **lit)))
     keys = ("delta_e_mean", "lightness_correlation")
     kinds = ("textured", "flat", "flat_face_mean")
     out["mean"] = {k: {kind: float(np.mean([v[kind][k] for v in out["views"].values()])) for kind in kinds}

@@ -110,6 +110,10 @@ class BatchModel(BatchBase):
         opts = {"tolerance": 3e-5 if o["tolerance"] is None else o["tolerance"], **(o["solver_options"] or {})}
         self.solver = select_solver(m, stages=[s for s in self.stages.values() if s is not None],
                                      method=o["method"], iterations=o["iterations"], **opts)
+        from ..physics.warmup import load_kernels, solver_kernel_modules
+        from . import kernels_rollback
+
+        load_kernels(self.device, solver_kernel_modules(self.solver) + [kernels_rollback])  # compiled up front
         self.stages["muscles"].update_geometry(self.control, self.rest_state)  # rest fibres of zero control
         self.stepper = FrameStepper(self.solver, self.state, self.scratch, self.control, self.dt,
                                     chunks=FaceSimulator.CONTROL_CHUNKS)

@@ -78,6 +78,11 @@ class FaceSimulator:
         self.carry, self.jaw_stage, self.support, self.muscles, self.contact = (
             st["carry"], st["jaw"], st["support"], st["muscles"], st["contact"])
         self.control, self.rest_state, self.state, self.scratch = b["control"], b["rest_state"], b["state"], b["scratch"]
+        from ..physics.warmup import load_kernels, solver_kernel_modules
+        from . import kernels_rollback
+
+        # every kernel module of the run loaded (compiled side by side on a first run, said on stderr)
+        load_kernels(self.model.device, solver_kernel_modules(self.solver) + [kernels_rollback])
         self.muscles.update_geometry(self.control, self.rest_state)  # the rest fibres of zero control (frame 0 of run())
         self.device, self.jaw, self.contact_geometry = self.model.device, fr.jaw, fr.contact if contact else None
         self.stepper = FrameStepper(self.solver, self.state, self.scratch, self.control, self.dt,
@@ -141,7 +146,7 @@ class FaceSimulator:
     def set_head_pose(self, R, t) -> None:
         """Set the cranium's pose (R (3, 3) rotation, t (3,) [m]) reached at the end of the next
         step; the face, simulated in the head's frame, feels the loads of the accelerating frame
-        (:class:`~facewarp.HeadPose`). :meth:`surface` and :meth:`fdp` answer in the world frame."""
+        (:class:`~facewarp.coupling.HeadPose`). :meth:`surface` and :meth:`fdp` answer in the world frame."""
         self._pose.set(R, t)
 
     def reset(self) -> None:

@@ -9,7 +9,7 @@ A template folder holds:
 - ``template.npz``: per-vertex ``thickness`` [m] and ``skull_depth`` [m], ``condyles`` (2, 3) [m],
   FDP surface points (``fdp_ids``, ``fdp_part``, ``fdp_face``, ``fdp_bary``), the rigid parts;
 - ``skull.obj``, ``parts/<name>.obj``: the skull surface and the rigid parts [m];
-- and, written by :func:`facewarp.export_template`, ``preview_front.png`` and
+- and, written by :func:`facewarp.heads.export_template`, ``preview_front.png`` and
   ``preview_side.png``: renders of the head with its eyes and teeth.
 """
 
