@@ -34,3 +34,28 @@ def control_stream(rng: np.random.Generator, muscles: int, fps: float):
             omega = 2 * math.pi * rng.uniform(0.0, SPIN_MAX_REV_S)
         yield a, u, v, _rotation(axis, omega / fps)
         k += 1
+
+
+def smooth_performance(rng: np.random.Generator, frames: int, fps: float, muscles: int, *,
+                       active_fraction: float = 0.4, knot_s: float = 0.5, jaw_open_max_deg: float = 30.0,
+                       jaw_side_max_deg: float = 4.0):
+    """A smooth random performance like the one benchmarks/drive.py simulates and drives: about
+    ``active_fraction`` of the muscles follow a monotone cubic (PCHIP) through random values every
+    ``knot_s`` seconds, and so do the jaw's angles; all 0 at frame 0. Returns activations (frames,
+    muscles) float32 in [0, 1] and jaw (frames, 2) [rad]."""
+    from scipy.interpolate import PchipInterpolator
+
+    t = np.arange(frames) / fps
+    knots = np.arange(0.0, t[-1] + knot_s, knot_s)
+
+    def curve(hi, lo=0.0):
+        v = rng.uniform(lo, hi, len(knots))
+        v[0] = 0.0
+        return np.clip(PchipInterpolator(knots, v)(t), min(lo, 0.0), hi)
+
+    A = np.zeros((frames, muscles))
+    for m in np.flatnonzero(rng.uniform(size=muscles) < active_fraction):
+        A[:, m] = curve(rng.uniform(0.3, 1.0))
+    side = math.radians(jaw_side_max_deg)
+    J = np.c_[curve(math.radians(jaw_open_max_deg)), curve(side, -side)]
+    return np.clip(A, 0, 1).astype(np.float32), J
