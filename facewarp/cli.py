@@ -74,7 +74,9 @@ def main(argv=None) -> int:
     except SystemExit as e:  # --help, or a usage error already printed as one line
         return int(e.code or 0) if not isinstance(e.code, str) else EXIT_USAGE
     args.stdout = sys.stdout
-    with _verbose_env(args.verbose):
+    # --json shows no progress (stderr keeps the error line only): the library's own first-run lines
+    # (the kernels' compilation) follow FACEWARP_PROGRESS too
+    with _verbose_env(args.verbose), _env("FACEWARP_PROGRESS", "off", bool(getattr(args, "json", False))):
         return _run(args)
 
 
@@ -96,19 +98,24 @@ def console_main() -> None:
 
 
 @contextlib.contextmanager
-def _verbose_env(on: bool):
-    """``FACEWARP_VERBOSE=1`` (read by facewarp._src.core.warp.get_warp) while a --verbose command runs."""
-    old = os.environ.get("FACEWARP_VERBOSE")
+def _env(name: str, value: str, on: bool):
+    """``name=value`` in the environment while the command runs (when ``on``), the old value after."""
+    old = os.environ.get(name)
     if on:
-        os.environ["FACEWARP_VERBOSE"] = "1"
+        os.environ[name] = value
     try:
         yield
     finally:
         if on:
             if old is None:
-                os.environ.pop("FACEWARP_VERBOSE", None)
+                os.environ.pop(name, None)
             else:
-                os.environ["FACEWARP_VERBOSE"] = old
+                os.environ[name] = old
+
+
+def _verbose_env(on: bool):
+    """``FACEWARP_VERBOSE=1`` (read by facewarp._src.core.warp.get_warp) while a --verbose command runs."""
+    return _env("FACEWARP_VERBOSE", "1", on)
 
 
 def _output_targets(args) -> list:

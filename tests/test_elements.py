@@ -99,8 +99,8 @@ def test_geometry_funcs_match_the_oracle():
         X, base = _random_tets(rng, M, strain)
         Dm = np.stack([base[c] - base[0] for c in (1, 2, 3)], axis=1)
         Dmi = np.broadcast_to(np.linalg.inv(Dm), (M, 3, 3))
-        vol, grad = wp.zeros(M, dtype=float), wp.zeros(4 * M, dtype=wp.vec3)
-        green = wp.zeros(M, dtype=wp.mat33)
+        vol, grad = wp.zeros(M, dtype=float, device="cpu"), wp.zeros(4 * M, dtype=wp.vec3, device="cpu")
+        green = wp.zeros(M, dtype=wp.mat33, device="cpu")
         wp.launch(_tet_geometry, dim=M, inputs=[_arr(X.reshape(-1, 3), wp.vec3), _arr(Dmi, wp.mat33)],
                   outputs=[vol, grad, green], device="cpu")
         x0, x1, x2, x3 = (X[:, c] for c in range(4))
@@ -110,7 +110,7 @@ def test_geometry_funcs_match_the_oracle():
         _close(green.numpy(), po.green_strain(po.deformation_gradient(x0, x1, x2, x3, Dmi)), f"green_strain {strain}",
                scale=1.0)
         a0 = 0.5 * np.linalg.norm(np.cross(base[1] - base[0], base[2] - base[0])) * np.ones(M)
-        strain_out, fgrad = wp.zeros(M, dtype=float), wp.zeros(3 * M, dtype=wp.vec3)
+        strain_out, fgrad = wp.zeros(M, dtype=float, device="cpu"), wp.zeros(3 * M, dtype=wp.vec3, device="cpu")
         wp.launch(_face_geometry, dim=M, inputs=[_arr(X.reshape(-1, 3), wp.vec3), _arr(a0, float)],
                   outputs=[strain_out, fgrad], device="cpu")
         N = np.cross(x1 - x0, x2 - x0)
@@ -134,7 +134,7 @@ def test_energy_funcs_match_the_oracle():
         Dm = np.stack([base[c] - base[0] for c in (1, 2, 3)], axis=1)
         Dmi = np.broadcast_to(np.linalg.inv(Dm), (M, 3, 3))
         g_start = 0.01 * rng.standard_normal((M, 3, 3))
-        out = wp.zeros(9 * M, dtype=float)
+        out = wp.zeros(9 * M, dtype=float, device="cpu")
         wp.launch(_energies, dim=M, inputs=[_arr(X.reshape(-1, 3), wp.vec3), _arr(rest, wp.vec3), _arr(k, float),
                                             _arr(dmp, float), _arr(c_start, float), _arr(g_start, wp.mat33),
                                             _arr(Dmi, wp.mat33)], outputs=[out], device="cpu")
@@ -189,7 +189,7 @@ def test_spring_energy_grad_matches_the_oracle():
         d.rest_length, d.axis = _arr(l0, float), _arr(ax, wp.vec3)
         d.is_axis, d.one_sided = int(is_axis), int(one)
         descs.append(d)
-    e, g = wp.zeros(4 * n, dtype=float), wp.zeros(4 * n, dtype=wp.vec3)
+    e, g = wp.zeros(4 * n, dtype=float, device="cpu"), wp.zeros(4 * n, dtype=wp.vec3, device="cpu")
     wp.launch(_springs, dim=4 * n, inputs=[wp.array(descs, dtype=el.SpringSet, device="cpu"), _arr(x, wp.vec3)],
               outputs=[e, g], device="cpu")
     e, g = e.numpy().reshape(4, n), g.numpy().reshape(4, n, 3)

@@ -58,7 +58,7 @@ def load_kernels(device, modules, *, max_workers: int | None = None, out=None) -
         modules: Python modules holding Warp kernels (e.g. :func:`solver_kernel_modules`).
         max_workers: Threads compiling side by side (default: one per module, at most the CPU count).
         out: Where the first-run lines go (default ``sys.stderr``); nothing is written when every
-            module is cached.
+            module is cached, or when ``FACEWARP_PROGRESS=off`` (tests, ``--json``) and no ``out`` is given.
 
     Returns:
         The seconds the loading took.
@@ -70,14 +70,15 @@ def load_kernels(device, modules, *, max_workers: int | None = None, out=None) -
             seen.add(m.__name__)
             mods.append(wp.get_module(m.__name__))
     cold = [m for m in mods if not _cached(m, dev)]
+    quiet = out is None and os.environ.get("FACEWARP_PROGRESS", "").strip().lower() == "off"
     out = sys.stderr if out is None else out
     workers = max_workers if max_workers is not None else max(1, min(len(mods), os.cpu_count() or 1))
-    if cold:
+    if cold and not quiet:
         print(f"facewarp: compiling {len(cold)} Warp kernel module(s) for {dev} with {workers} thread(s) "
               "(first run only; later runs load them from the kernel cache) ...", file=out, flush=True)
     t0 = time.perf_counter()
     wp.force_load(device=dev, modules=mods, max_workers=workers)
     seconds = time.perf_counter() - t0
-    if cold:
+    if cold and not quiet:
         print(f"facewarp: Warp kernels compiled in {seconds:.0f} s", file=out, flush=True)
     return seconds
