@@ -38,10 +38,10 @@ def control_stream(rng: np.random.Generator, muscles: int, fps: float):
 
 def smooth_performance(rng: np.random.Generator, frames: int, fps: float, muscles: int, *,
                        active_fraction: float = 0.4, knot_s: float = 0.5, jaw_open_max_deg: float = 30.0,
-                       jaw_side_max_deg: float = 4.0):
+                       jaw_side_max_deg: float = 4.0, peak_max: float = 1.0):
     """A smooth random performance like the one benchmarks/drive.py simulates and drives: about
     ``active_fraction`` of the muscles follow a monotone cubic (PCHIP) through random values every
-    ``knot_s`` seconds, and so do the jaw's angles; all 0 at frame 0. Returns activations (frames,
+    ``knot_s`` seconds (each muscle's peak drawn in [0.3, ``peak_max``]), and so do the jaw's angles; all 0 at frame 0. Returns activations (frames,
     muscles) float32 in [0, 1] and jaw (frames, 2) [rad]."""
     from scipy.interpolate import PchipInterpolator
 
@@ -55,7 +55,7 @@ def smooth_performance(rng: np.random.Generator, frames: int, fps: float, muscle
 
     A = np.zeros((frames, muscles))
     for m in np.flatnonzero(rng.uniform(size=muscles) < active_fraction):
-        A[:, m] = curve(rng.uniform(0.3, 1.0))
+        A[:, m] = curve(rng.uniform(0.3, peak_max))
     side = math.radians(jaw_side_max_deg)
     J = np.c_[curve(math.radians(jaw_open_max_deg)), curve(side, -side)]
     return np.clip(A, 0, 1).astype(np.float32), J

@@ -165,22 +165,12 @@ def write_mediapipe(path, W, fps: float, rng, *, layout: str = "tasks", stamps: 
 
 def random_controls(rng, frames: int, fps: float, muscles: int, *, active: float = 0.4, knot_s: float = 0.5,
                     jaw_open_deg: float = 20.0, jaw_side_deg: float = 3.0):
-    """Smooth random activations (frames, M) in [0, 1] and jaw (frames, 2) [rad], 0 at frame 0."""
-    from scipy.interpolate import PchipInterpolator
+    """Smooth random activations (frames, M) in [0, 1] and jaw (frames, 2) [rad], 0 at frame 0
+    (:func:`benchmarks._streams.smooth_performance` with peaks up to 0.9 and this jaw's ranges)."""
+    from benchmarks._streams import smooth_performance
 
-    t = np.arange(frames) / fps
-    knots = np.arange(0.0, t[-1] + knot_s, knot_s)
-
-    def curve(hi, lo=0.0):
-        v = rng.uniform(lo, hi, len(knots))
-        v[0] = 0.0
-        return np.clip(PchipInterpolator(knots, v)(t), min(lo, 0.0), hi)
-
-    A = np.zeros((frames, muscles))
-    for m in np.flatnonzero(rng.uniform(size=muscles) < active):
-        A[:, m] = curve(rng.uniform(0.3, 0.9))
-    J = np.c_[curve(np.radians(jaw_open_deg)), curve(np.radians(jaw_side_deg), -np.radians(jaw_side_deg))]
-    return np.clip(A, 0, 1).astype(np.float32), J
+    return smooth_performance(rng, frames, fps, muscles, active_fraction=active, knot_s=knot_s,
+                              jaw_open_max_deg=jaw_open_deg, jaw_side_max_deg=jaw_side_deg, peak_max=0.9)
 
 
 def simulate_points(rig, A, J, fps: float, names, *, device: str = "cpu") -> np.ndarray:
