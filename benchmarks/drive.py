@@ -60,23 +60,12 @@ JAW_SIDE_MAX_DEG = 4.0
 
 
 def random_performance(rng, frames: int, fps: float, muscles: int):
-    """Smooth random controls: activations (frames, M) in [0, 1] and jaw (frames, 2) [rad], 0 at frame 0."""
-    from scipy.interpolate import PchipInterpolator
+    """Smooth random controls: activations (frames, M) in [0, 1] and jaw (frames, 2) [rad], 0 at frame 0
+    (:func:`benchmarks._streams.smooth_performance` with this benchmark's fraction, knots and jaw ranges)."""
+    from benchmarks._streams import smooth_performance
 
-    t = np.arange(frames) / fps
-    knots = np.arange(0.0, t[-1] + KNOT_S, KNOT_S)
-
-    def curve(hi, lo=0.0):
-        v = rng.uniform(lo, hi, len(knots))
-        v[0] = 0.0
-        return np.clip(PchipInterpolator(knots, v)(t), min(lo, 0.0), hi)
-
-    A = np.zeros((frames, muscles))
-    for m in np.flatnonzero(rng.uniform(size=muscles) < ACTIVE_FRACTION):
-        A[:, m] = curve(rng.uniform(0.3, 1.0))
-    J = np.c_[curve(np.radians(JAW_OPEN_MAX_DEG)),
-              curve(np.radians(JAW_SIDE_MAX_DEG), -np.radians(JAW_SIDE_MAX_DEG))]
-    return np.clip(A, 0, 1).astype(np.float32), J
+    return smooth_performance(rng, frames, fps, muscles, active_fraction=ACTIVE_FRACTION, knot_s=KNOT_S,
+                              jaw_open_max_deg=JAW_OPEN_MAX_DEG, jaw_side_max_deg=JAW_SIDE_MAX_DEG)
 
 
 def ground_truth(fw, rig, A, J, fps: float):
